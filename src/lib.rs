@@ -1,0 +1,3 @@
+//! hushfuse: multi-sensor state estimation under bandwidth limits.
+pub mod link;
+pub mod stats;

@@ -1,0 +1,4 @@
+//! What crosses the network: transmissions, messages and their bit cost, sensor-side
+//! quantizers and the codecs that turn a message into real bits and back.
+pub mod codec802154;
+pub mod quantizer;
