@@ -1,0 +1,139 @@
+//! Small dense linear-algebra helpers shared by every filter: symmetrization, SPD checks and
+//! Cholesky-based inverses with errors instead of panics.
+use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
+
+/// Dense matrix with run-time dimensions (scenarios choose dimensions at run time).
+pub type Matrix = DMatrix<f64>;
+/// Dense vector with run-time dimension.
+pub type Vector = DVector<f64>;
+
+/// Why a matrix was rejected.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LinalgError {
+    #[error("matrix is not square ({rows}x{cols})")]
+    NotSquare { rows: usize, cols: usize },
+    #[error("matrix is not symmetric (|A - A^T| = {asymmetry:.3e} at entry ({row}, {col}))")]
+    NotSymmetric {
+        asymmetry: f64,
+        row: usize,
+        col: usize,
+    },
+    #[error("matrix is not positive definite (Cholesky factorization failed)")]
+    NotPositiveDefinite,
+    #[error("matrix has a non-finite entry")]
+    NonFinite,
+}
+
+/// Replace `a` by `(a + a^T) / 2`; updates lose symmetry to rounding, and a covariance that
+/// drifts from symmetric eventually fails its Cholesky factorization.
+pub fn symmetrize(a: &mut Matrix) {
+    let n = a.nrows();
+    for i in 0..n {
+        for j in (i + 1)..n {
+            let m = 0.5 * (a[(i, j)] + a[(j, i)]);
+            a[(i, j)] = m;
+            a[(j, i)] = m;
+        }
+    }
+}
+
+/// Cholesky factor of a symmetric positive definite matrix, or an error saying why not.
+pub fn cholesky(a: &Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
+    if a.nrows() != a.ncols() {
+        return Err(LinalgError::NotSquare {
+            rows: a.nrows(),
+            cols: a.ncols(),
+        });
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(LinalgError::NonFinite);
+    }
+    Cholesky::new(a.clone()).ok_or(LinalgError::NotPositiveDefinite)
+}
+
+/// Inverse of a symmetric positive definite matrix through its Cholesky factor, symmetrized.
+pub fn spd_inverse(a: &Matrix) -> Result<Matrix, LinalgError> {
+    let mut inv = cholesky(a)?.inverse();
+    symmetrize(&mut inv);
+    Ok(inv)
+}
+
+/// Check that `a` is a covariance: square, finite, symmetric to a relative tolerance of 1e-9,
+/// and positive definite.
+pub fn check_spd(a: &Matrix) -> Result<(), LinalgError> {
+    if a.nrows() != a.ncols() {
+        return Err(LinalgError::NotSquare {
+            rows: a.nrows(),
+            cols: a.ncols(),
+        });
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(LinalgError::NonFinite);
+    }
+    let scale = a.iter().fold(0.0_f64, |m, v| m.max(v.abs())).max(f64::MIN_POSITIVE);
+    for i in 0..a.nrows() {
+        for j in (i + 1)..a.ncols() {
+            let d = (a[(i, j)] - a[(j, i)]).abs();
+            if d > 1e-9 * scale {
+                return Err(LinalgError::NotSymmetric {
+                    asymmetry: d,
+                    row: i,
+                    col: j,
+                });
+            }
+        }
+    }
+    cholesky(a).map(|_| ())
+}
+
+/// Normalized estimation error squared `e^T P^{-1} e` through the Cholesky factor of `P`.
+pub fn mahalanobis_sq(e: &Vector, p: &Matrix) -> Result<f64, LinalgError> {
+    let chol = cholesky(p)?;
+    let y = chol.l().solve_lower_triangular(e).ok_or(LinalgError::NotPositiveDefinite)?;
+    Ok(y.norm_squared())
+}
+
+/// Matrix from rows, as scenario files and tests write them.
+pub fn matrix_from_rows(rows: &[Vec<f64>]) -> Matrix {
+    let r = rows.len();
+    let c = rows.first().map_or(0, Vec::len);
+    Matrix::from_fn(r, c, |i, j| rows[i][j])
+}
+
+/// Largest absolute entry of `a - b` relative to the largest absolute entry of `b` (or 1).
+pub fn relative_difference(a: &Matrix, b: &Matrix) -> f64 {
+    let scale = b.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
+    (a - b).iter().fold(0.0_f64, |m, v| m.max(v.abs())) / scale
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inverse_of_hand_computed_matrix() {
+        // [[4, 2], [2, 3]]^{-1} = 1/8 [[3, -2], [-2, 4]]
+        let a = matrix_from_rows(&[vec![4.0, 2.0], vec![2.0, 3.0]]);
+        let inv = spd_inverse(&a).unwrap();
+        let expected = matrix_from_rows(&[vec![0.375, -0.25], vec![-0.25, 0.5]]);
+        assert!(relative_difference(&inv, &expected) < 1e-15);
+    }
+
+    #[test]
+    fn rejects_non_spd_and_asymmetric() {
+        let indefinite = matrix_from_rows(&[vec![1.0, 2.0], vec![2.0, 1.0]]);
+        assert_eq!(check_spd(&indefinite), Err(LinalgError::NotPositiveDefinite));
+        let asym = matrix_from_rows(&[vec![1.0, 0.5], vec![0.0, 1.0]]);
+        assert!(matches!(check_spd(&asym), Err(LinalgError::NotSymmetric { .. })));
+        let nan = matrix_from_rows(&[vec![f64::NAN, 0.0], vec![0.0, 1.0]]);
+        assert_eq!(check_spd(&nan), Err(LinalgError::NonFinite));
+    }
+
+    #[test]
+    fn mahalanobis_matches_hand_value() {
+        // e = (1, 1), P = diag(1, 4): 1 + 1/4
+        let p = Matrix::from_diagonal(&Vector::from_vec(vec![1.0, 4.0]));
+        let e = Vector::from_vec(vec![1.0, 1.0]);
+        assert!((mahalanobis_sq(&e, &p).unwrap() - 1.25).abs() < 1e-15);
+    }
+}

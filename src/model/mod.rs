@@ -1,0 +1,27 @@
+//! Motion and sensor models, as small capability traits so that each filter asks only for what
+//! it uses: a Kalman filter needs a [`LinearTransition`] and a [`MeasurementModel`]'s Jacobian;
+//! the extended Kalman filter is the same update with the Jacobian evaluated at the prediction.
+pub mod presets;
+pub mod sensor;
+pub mod transition;
+
+pub use sensor::{LinearSensor, MeasurementModel};
+pub use transition::LinearTransition;
+
+/// Why a model could not be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelError {
+    #[error("{what}: expected {expected}, got {got}")]
+    Dimension {
+        what: &'static str,
+        expected: String,
+        got: String,
+    },
+    #[error("{what}: {source}")]
+    Covariance {
+        what: &'static str,
+        source: crate::linalg::LinalgError,
+    },
+    #[error("{what} must be finite and positive, got {value}")]
+    Parameter { what: &'static str, value: f64 },
+}

@@ -1,0 +1,127 @@
+//! Sensor models z = h(x) + v, v ~ N(0, R).
+use super::ModelError;
+use crate::linalg::{cholesky, Matrix, Vector};
+use rand::RngCore;
+use rand_distr::{Distribution, StandardNormal};
+use std::fmt::Debug;
+
+/// What every filter asks of a sensor: the predicted measurement, its Jacobian (the matrix
+/// itself for a linear sensor, which makes the EKF update equal the KF update), and the noise.
+pub trait MeasurementModel: Debug + Send + Sync {
+    /// State dimension the sensor expects.
+    fn state_dim(&self) -> usize;
+    /// Measurement dimension.
+    fn meas_dim(&self) -> usize;
+    /// Noise-free measurement h(x).
+    fn predict(&self, x: &Vector) -> Vector;
+    /// Jacobian of h at x.
+    fn jacobian(&self, x: &Vector) -> Matrix;
+    /// Measurement noise covariance R.
+    fn noise_cov(&self) -> &Matrix;
+    /// Lower Cholesky factor of R, for sampling.
+    fn noise_sqrt(&self) -> &Matrix;
+    /// `Some(H)` when h(x) = H x; schemes that are exact only for linear sensors ask this.
+    fn as_linear(&self) -> Option<&LinearSensor> {
+        None
+    }
+    /// Draw z = h(x) + v.
+    fn sample(&self, x: &Vector, rng: &mut dyn RngCore) -> Vector {
+        let v = Vector::from_fn(self.meas_dim(), |_, _| StandardNormal.sample(rng));
+        self.predict(x) + self.noise_sqrt() * v
+    }
+}
+
+/// Linear sensor z = H x + v, v ~ N(0, R), with R positive definite.
+#[derive(Debug, Clone)]
+pub struct LinearSensor {
+    h: Matrix,
+    r: Matrix,
+    r_sqrt: Matrix,
+    r_inv: Matrix,
+    /// H^T R^{-1}, used by every information-form update.
+    ht_rinv: Matrix,
+    /// H^T R^{-1} H, the information one measurement carries.
+    info: Matrix,
+}
+
+impl LinearSensor {
+    /// Validates `R` (symmetric positive definite) and that it matches `H`'s rows.
+    pub fn new(h: Matrix, r: Matrix) -> Result<Self, ModelError> {
+        if r.nrows() != h.nrows() || r.ncols() != h.nrows() {
+            return Err(ModelError::Dimension {
+                what: "measurement noise R",
+                expected: format!("{m}x{m} (H has {m} rows)", m = h.nrows()),
+                got: format!("{}x{}", r.nrows(), r.ncols()),
+            });
+        }
+        if h.iter().any(|v| !v.is_finite()) {
+            return Err(ModelError::Covariance {
+                what: "measurement matrix H",
+                source: crate::linalg::LinalgError::NonFinite,
+            });
+        }
+        crate::linalg::check_spd(&r).map_err(|source| ModelError::Covariance {
+            what: "measurement noise R",
+            source,
+        })?;
+        let chol = cholesky(&r).map_err(|source| ModelError::Covariance {
+            what: "measurement noise R",
+            source,
+        })?;
+        let r_sqrt = chol.l();
+        let mut r_inv = chol.inverse();
+        crate::linalg::symmetrize(&mut r_inv);
+        let ht_rinv = h.transpose() * &r_inv;
+        let mut info = &ht_rinv * &h;
+        crate::linalg::symmetrize(&mut info);
+        Ok(Self {
+            h,
+            r,
+            r_sqrt,
+            r_inv,
+            ht_rinv,
+            info,
+        })
+    }
+
+    /// The measurement matrix H.
+    pub fn h(&self) -> &Matrix {
+        &self.h
+    }
+    /// R^{-1}.
+    pub fn r_inv(&self) -> &Matrix {
+        &self.r_inv
+    }
+    /// H^T R^{-1}.
+    pub fn ht_rinv(&self) -> &Matrix {
+        &self.ht_rinv
+    }
+    /// H^T R^{-1} H.
+    pub fn information(&self) -> &Matrix {
+        &self.info
+    }
+}
+
+impl MeasurementModel for LinearSensor {
+    fn state_dim(&self) -> usize {
+        self.h.ncols()
+    }
+    fn meas_dim(&self) -> usize {
+        self.h.nrows()
+    }
+    fn predict(&self, x: &Vector) -> Vector {
+        &self.h * x
+    }
+    fn jacobian(&self, _x: &Vector) -> Matrix {
+        self.h.clone()
+    }
+    fn noise_cov(&self) -> &Matrix {
+        &self.r
+    }
+    fn noise_sqrt(&self) -> &Matrix {
+        &self.r_sqrt
+    }
+    fn as_linear(&self) -> Option<&LinearSensor> {
+        Some(self)
+    }
+}
