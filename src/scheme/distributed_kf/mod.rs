@@ -1,0 +1,100 @@
+//! Seed 004 — Dormann, Noack, Hanebeck, "Distributed Kalman Filtering With Reduced
+//! Transmission Rate": the globalized distributed KF (Section II), Algorithm 1 with omitted
+//! estimates (Section III, eq. (10)-(12)) and Algorithm 2 with debiasing and the bound B
+//! (Section IV, eq. (13)-(14)).
+//!
+//! The sensor side ([`DkfSensor`]) and the fusion side ([`DkfCenter`]) are separate pieces;
+//! they share only the data-independent [`GlobalizedPlan`], which each side could compute on
+//! its own.
+pub mod center;
+pub mod plan;
+pub mod sensor;
+
+pub use center::{DkfCenter, Fusion};
+pub use plan::GlobalizedPlan;
+pub use sensor::{DkfSensor, Trigger};
+
+use crate::linalg::Matrix;
+use crate::scheme::{Scheme, SchemeError, SchemeInstance, SensorNode, System};
+use std::sync::Arc;
+
+/// The distributed KF with one trigger for all sensors; the fusion rule follows from it
+/// (Algorithm 2's for [`Trigger::Bounded`], Algorithm 1's otherwise).
+#[derive(Debug, Clone)]
+pub struct DistributedKfScheme {
+    system: Arc<System>,
+    plan: Arc<GlobalizedPlan>,
+    trigger: Trigger,
+    fusion: Fusion,
+}
+
+impl DistributedKfScheme {
+    /// Precomputes the plan for `horizon` steps. Algorithm 2 needs B symmetric positive
+    /// definite (checked by the caller) and an invertible system matrix.
+    pub fn new(
+        system: Arc<System>,
+        horizon: usize,
+        trigger: Trigger,
+        bound: Option<Matrix>,
+    ) -> Result<Self, SchemeError> {
+        let plan = Arc::new(GlobalizedPlan::new(&system, horizon)?);
+        let fusion = match (&trigger, bound) {
+            (Trigger::Bounded { .. }, Some(b)) => {
+                if plan.a_inv().is_none() {
+                    return Err(SchemeError::Unsupported(
+                        "Algorithm 2 debiases with A^{-1}: the system matrix must be invertible"
+                            .into(),
+                    ));
+                }
+                Fusion::Bounded { b }
+            }
+            (Trigger::Bounded { .. }, None) => {
+                return Err(SchemeError::Unsupported(
+                    "Algorithm 2 needs the bound B".into(),
+                ))
+            }
+            _ => Fusion::OmittedEstimates,
+        };
+        Ok(Self {
+            system,
+            plan,
+            trigger,
+            fusion,
+        })
+    }
+
+    /// The shared plan.
+    pub fn plan(&self) -> &Arc<GlobalizedPlan> {
+        &self.plan
+    }
+}
+
+impl Scheme for DistributedKfScheme {
+    fn build(&self) -> Result<SchemeInstance, SchemeError> {
+        let sensors = self
+            .system
+            .sensors
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                Box::new(DkfSensor::new(
+                    self.plan.clone(),
+                    i,
+                    s.clone(),
+                    self.system.prior.mean.clone(),
+                    self.trigger.clone(),
+                )) as Box<dyn SensorNode>
+            })
+            .collect();
+        let center = Box::new(DkfCenter::new(
+            self.plan.clone(),
+            self.system.sensors.clone(),
+            self.system.prior.clone(),
+            self.fusion.clone(),
+        ));
+        Ok(SchemeInstance { sensors, center })
+    }
+}
+
+#[cfg(test)]
+mod tests;

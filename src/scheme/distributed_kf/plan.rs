@@ -1,0 +1,211 @@
+//! The data-independent part of the globalized distributed KF (seed 004): the globalized
+//! covariances, the matrices that turn a globalized prediction and a measurement into the
+//! globalized estimate, the debiasing matrices (eq. (14)) and the gains of the standard KF each
+//! sensor runs beside the globalized one. None of them depends on measurements, so sensors and
+//! fusion center compute them identically; we compute them once and share them.
+use crate::linalg::{relative_difference, spd_inverse, symmetrize, Matrix};
+use crate::scheme::{SchemeError, System};
+
+/// Matrices of one time step k.
+#[derive(Debug, Clone)]
+pub struct StepMatrices {
+    /// Globalized predicted covariance C̄^p_k = A C̄^e_{k-1} A^T + N C^w (eq. (2)).
+    pub cbar_p: Matrix,
+    /// (C̄^p_k)^{-1}.
+    pub cbar_p_inv: Matrix,
+    /// Globalized filtered covariance C̄^e_k = ((C̄^p_k)^{-1} + 1/N Σ_i H_i^T R_i^{-1} H_i)^{-1}.
+    pub cbar_e: Matrix,
+    /// (C̄^e_k)^{-1}.
+    pub cbar_e_inv: Matrix,
+    /// C̄^e_k (C̄^p_k)^{-1}: multiplies the globalized prediction in the local filtering step.
+    pub prediction_weight: Matrix,
+    /// Per sensor: C̄^e_k H_i^T R_i^{-1}, multiplies z_k^i in the local filtering step.
+    pub measurement_weight: Vec<Matrix>,
+    /// Per sensor: debiasing matrix after prediction, Δ^{p,i}_k = A Δ^{e,i}_{k-1} A^{-1} (14).
+    pub delta_p: Vec<Matrix>,
+    /// Per sensor: debiasing matrix after filtering,
+    /// Δ^{e,i}_k = C̄^e_k (C̄^p_k)^{-1} Δ^{p,i}_k + C̄^e_k H_i^T R_i^{-1} H_i (Section IV).
+    pub delta_e: Vec<Matrix>,
+    /// Per sensor: gain K^i_k of the standard (non-globalized) local KF, used by the event
+    /// tests (12) and (13).
+    pub kf_gain: Vec<Matrix>,
+    /// Per sensor: filtered covariance of the standard local KF.
+    pub kf_cov: Vec<Matrix>,
+}
+
+/// The precomputed recursion for steps 0..=horizon. When every recursion has converged before
+/// the horizon (relative change below 1e-14), later steps reuse the converged matrices, so a
+/// deployment can run for ever.
+#[derive(Debug, Clone)]
+pub struct GlobalizedPlan {
+    steps: Vec<StepMatrices>,
+    converged: bool,
+    /// A, A^{-1}.
+    a: Matrix,
+    a_inv: Option<Matrix>,
+    n_sensors: usize,
+}
+
+impl GlobalizedPlan {
+    /// Runs the recursion of seed 004 Section II (and the debiasing of Section IV when A is
+    /// invertible) from the common prior: the initial local estimates all equal the prior
+    /// (x_0, P_0), so C̄^e_0 = N P_0 and Δ^{e,i}_0 = I. Requires linear sensors.
+    pub fn new(system: &System, horizon: usize) -> Result<Self, SchemeError> {
+        let n = system.state_dim();
+        let nf = system.n_sensors() as f64;
+        let sensors = system
+            .sensors
+            .iter()
+            .map(|s| {
+                s.as_linear().ok_or_else(|| {
+                    SchemeError::Unsupported(
+                        "the distributed KF of seed 004 needs linear sensors".into(),
+                    )
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let a = system.transition.f().clone();
+        let q = system.transition.q();
+        let a_inv = a.clone().try_inverse();
+        let mut mean_info = Matrix::zeros(n, n);
+        for s in &sensors {
+            mean_info += s.information();
+        }
+        mean_info /= nf;
+
+        let p0 = &system.prior.cov;
+        let p0_inv = spd_inverse(p0).map_err(|source| SchemeError::Matrix {
+            what: "prior covariance",
+            source,
+        })?;
+        let identity = Matrix::identity(n, n);
+        let init = StepMatrices {
+            cbar_p: p0 * nf,
+            cbar_p_inv: &p0_inv / nf,
+            cbar_e: p0 * nf,
+            cbar_e_inv: &p0_inv / nf,
+            prediction_weight: identity.clone(),
+            measurement_weight: vec![Matrix::zeros(n, 0); sensors.len()],
+            delta_p: vec![identity.clone(); sensors.len()],
+            delta_e: vec![identity.clone(); sensors.len()],
+            kf_gain: vec![Matrix::zeros(n, 0); sensors.len()],
+            kf_cov: vec![p0.clone(); sensors.len()],
+        };
+        let mut steps = vec![init];
+        let mut converged = false;
+        for _k in 1..=horizon {
+            let prev = steps.last().expect("non-empty");
+            let mut cbar_p = &a * &prev.cbar_e * a.transpose() + q * nf;
+            symmetrize(&mut cbar_p);
+            let cbar_p_inv = inv(&cbar_p, "globalized predicted covariance")?;
+            let cbar_e_inv = &cbar_p_inv + &mean_info;
+            let cbar_e = inv(&cbar_e_inv, "globalized filtered covariance")?;
+            let prediction_weight = &cbar_e * &cbar_p_inv;
+            let measurement_weight: Vec<Matrix> =
+                sensors.iter().map(|s| &cbar_e * s.ht_rinv()).collect();
+            let (delta_p, delta_e) = match &a_inv {
+                Some(a_inv) => {
+                    let dp: Vec<Matrix> = prev.delta_e.iter().map(|d| &a * d * a_inv).collect();
+                    let de = dp
+                        .iter()
+                        .zip(&measurement_weight)
+                        .zip(&sensors)
+                        .map(|((dp, w), s)| &prediction_weight * dp + w * s.h())
+                        .collect();
+                    (dp, de)
+                }
+                None => (Vec::new(), Vec::new()),
+            };
+            let mut kf_gain = Vec::with_capacity(sensors.len());
+            let mut kf_cov = Vec::with_capacity(sensors.len());
+            for (s, p_prev) in sensors.iter().zip(&prev.kf_cov) {
+                let mut pp = &a * p_prev * a.transpose() + q;
+                symmetrize(&mut pp);
+                let mut innov = s.h() * &pp * s.h().transpose() + crate::model::MeasurementModel::noise_cov(*s);
+                symmetrize(&mut innov);
+                let innov_inv = inv(&innov, "local innovation covariance")?;
+                let k = &pp * s.h().transpose() * innov_inv;
+                let i_kh = Matrix::identity(n, n) - &k * s.h();
+                let mut pe = &i_kh * &pp * i_kh.transpose()
+                    + &k * crate::model::MeasurementModel::noise_cov(*s) * k.transpose();
+                symmetrize(&mut pe);
+                kf_gain.push(k);
+                kf_cov.push(pe);
+            }
+            let next = StepMatrices {
+                cbar_p,
+                cbar_p_inv,
+                cbar_e,
+                cbar_e_inv,
+                prediction_weight,
+                measurement_weight,
+                delta_p,
+                delta_e,
+                kf_gain,
+                kf_cov,
+            };
+            let done = steps.len() > 2 && same(&next, steps.last().expect("non-empty"));
+            steps.push(next);
+            if done {
+                converged = true;
+                break;
+            }
+        }
+        Ok(Self {
+            steps,
+            converged,
+            a,
+            a_inv,
+            n_sensors: sensors.len(),
+        })
+    }
+
+    /// Matrices of step k (k = 0 is the initialization).
+    pub fn at(&self, k: usize) -> Result<&StepMatrices, SchemeError> {
+        match self.steps.get(k) {
+            Some(s) => Ok(s),
+            None if self.converged => Ok(self.steps.last().expect("non-empty")),
+            None => Err(SchemeError::HorizonExceeded {
+                k,
+                horizon: self.steps.len() - 1,
+            }),
+        }
+    }
+
+    /// The system matrix A.
+    pub fn a(&self) -> &Matrix {
+        &self.a
+    }
+
+    /// A^{-1}, needed by the debiasing of Algorithm 2; `None` when A is singular.
+    pub fn a_inv(&self) -> Option<&Matrix> {
+        self.a_inv.as_ref()
+    }
+
+    /// Number of sensors N.
+    pub fn n_sensors(&self) -> usize {
+        self.n_sensors
+    }
+
+    /// Whether the recursion converged before the horizon.
+    pub fn converged(&self) -> bool {
+        self.converged
+    }
+}
+
+fn inv(m: &Matrix, what: &'static str) -> Result<Matrix, SchemeError> {
+    spd_inverse(m).map_err(|source| SchemeError::Matrix { what, source })
+}
+
+fn same(a: &StepMatrices, b: &StepMatrices) -> bool {
+    const TOL: f64 = 1e-14;
+    relative_difference(&a.cbar_e, &b.cbar_e) < TOL
+        && a.delta_e
+            .iter()
+            .zip(&b.delta_e)
+            .all(|(x, y)| relative_difference(x, y) < TOL)
+        && a.kf_cov
+            .iter()
+            .zip(&b.kf_cov)
+            .all(|(x, y)| relative_difference(x, y) < TOL)
+}
