@@ -14,4 +14,5 @@ pub mod link;
 pub mod model;
 pub mod network;
 pub mod scheme;
+pub mod sim;
 pub mod stats;

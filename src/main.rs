@@ -1,1 +1,214 @@
-fn main() {}
+//! `hushfuse` command line: run scenarios, list the built-in ones, reproduce paper figures.
+use clap::{Parser, Subcommand};
+use hushfuse::sim::{build, builtin, plot, report, results, runner};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(
+    name = "hushfuse",
+    version,
+    about = "Multi-sensor state estimation when sensors must save bandwidth.\nWith no command, runs the built-in default scenario."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(clap::Args, Clone, Default)]
+struct RunArgs {
+    /// Override the number of Monte Carlo trials.
+    #[arg(long)]
+    trials: Option<usize>,
+    /// Override the seed.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Worker threads (default: one per core). Results do not depend on it.
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Output folder (default: hushfuse-out/<scenario>/).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scenario file or a built-in scenario and write summary.json, per_step.csv, SVGs.
+    Run {
+        /// Path of a TOML scenario, or the name of a built-in one (see `hushfuse list`).
+        scenario: String,
+        #[command(flatten)]
+        args: RunArgs,
+    },
+    /// List the built-in scenarios.
+    List,
+    /// Run a built-in paper scenario and print our numbers beside the paper's, and its claims.
+    Reproduce {
+        /// Built-in scenario id, e.g. dormann-fig1.
+        id: String,
+        #[command(flatten)]
+        args: RunArgs,
+    },
+}
+
+/// Exit codes: 2 for bad input (scenario, arguments), 1 for a failed run.
+enum Failure {
+    Input(String),
+    Run(String),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        None => run("default", &RunArgs::default(), false),
+        Some(Command::Run { scenario, args }) => run(&scenario, &args, false),
+        Some(Command::Reproduce { id, args }) => {
+            if builtin::get(&id).is_none() {
+                Err(Failure::Input(format!(
+                    "unknown built-in scenario {id:?}; `hushfuse list` shows them"
+                )))
+            } else {
+                run(&id, &args, true)
+            }
+        }
+        Some(Command::List) => {
+            for (name, desc, _) in builtin::BUILTIN {
+                println!("{name:<16} {desc}");
+            }
+            Ok(())
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(Failure::Input(m)) => {
+            eprintln!("error: {m}");
+            ExitCode::from(2)
+        }
+        Err(Failure::Run(m)) => {
+            eprintln!("error: {m}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Loads a scenario from a path or the built-in list.
+fn load(scenario: &str) -> Result<build::Experiment, Failure> {
+    let path = Path::new(scenario);
+    let (text, source) = if path.exists() || scenario.ends_with(".toml") {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Failure::Input(format!("{scenario}: cannot read: {e}")))?;
+        (text, scenario.to_string())
+    } else if let Some(t) = builtin::get(scenario) {
+        (t.to_string(), format!("built-in:{scenario}"))
+    } else {
+        return Err(Failure::Input(format!(
+            "{scenario:?} is neither a file nor a built-in scenario (`hushfuse list`)"
+        )));
+    };
+    build::load(&text, &source).map_err(|e| Failure::Input(e.to_string()))
+}
+
+#[derive(Serialize)]
+struct Output<'a> {
+    #[serde(flatten)]
+    summary: &'a results::Summary,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    paper: Option<PaperOutput<'a>>,
+}
+
+#[derive(Serialize)]
+struct PaperOutput<'a> {
+    citation: &'a str,
+    notes: &'a [String],
+    published: Vec<report::Comparison>,
+    claims: Vec<report::ClaimResult>,
+}
+
+fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
+    let mut exp = load(scenario)?;
+    if let Some(t) = args.trials {
+        if t == 0 {
+            return Err(Failure::Input("--trials must be at least 1".into()));
+        }
+        exp.trials = t;
+    }
+    if let Some(s) = args.seed {
+        exp.seed = s;
+    }
+    let start = Instant::now();
+    let bar = ProgressBar::with_draw_target(Some(exp.trials as u64), ProgressDrawTarget::hidden());
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} trials ({eta} left)")
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    bar.set_message(exp.name.clone());
+    let shown = AtomicBool::new(false);
+    let interactive = std::io::stderr().is_terminal();
+    let progress = |done: usize| {
+        // Only for runs longer than a second, and only on a terminal.
+        if interactive && !shown.load(Ordering::Relaxed) && start.elapsed().as_secs_f64() > 1.0 {
+            shown.store(true, Ordering::Relaxed);
+            bar.set_draw_target(ProgressDrawTarget::stderr());
+        }
+        bar.set_position(done as u64);
+    };
+    let sums = runner::run(&exp, runner::RunOptions { threads: args.threads }, &progress)
+        .map_err(|e| Failure::Run(e.to_string()))?;
+    bar.finish_and_clear();
+    let elapsed = start.elapsed().as_secs_f64();
+    let summary = results::summarize(&exp, &sums);
+
+    println!(
+        "{} — {} trials x {} steps, seed {}, {} sensors ({:.1} s)\n",
+        summary.scenario, summary.trials, summary.steps, summary.seed, summary.sensors, elapsed
+    );
+    print!("{}", results::table(&summary));
+    println!(
+        "\nMSE(ss), trace(ss): steady state from step {}; ANEES = mean NEES / state dimension (1 = consistent).",
+        exp.steady_from
+    );
+
+    let paper = if reproduce || exp.paper.is_some() {
+        exp.paper.as_ref().map(|p| PaperOutput {
+            citation: &p.citation,
+            notes: &p.notes,
+            published: report::compare_published(&exp, &summary),
+            claims: report::check_claims(&exp, &summary),
+        })
+    } else {
+        None
+    };
+    if reproduce {
+        if let Some(p) = &paper {
+            println!("\n{}", report::render(&exp, &p.published, &p.claims));
+        }
+    }
+
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(&summary.scenario));
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
+    let out = Output {
+        summary: &summary,
+        paper,
+    };
+    let json = serde_json::to_string_pretty(&out).map_err(|e| Failure::Run(e.to_string()))?;
+    let write = |name: &str, text: &str| {
+        std::fs::write(dir.join(name), text)
+            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", dir.join(name).display())))
+    };
+    write("summary.json", &json)?;
+    write("per_step.csv", &results::per_step_csv(&summary))?;
+    let mut files = vec!["summary.json".to_string(), "per_step.csv".to_string()];
+    files.extend(plot::write_all(&exp, &summary, &dir).map_err(Failure::Run)?);
+    println!("\nwrote {}: {}", dir.display(), files.join(", "));
+    Ok(())
+}

@@ -1,0 +1,503 @@
+//! Scenario file -> validated experiment. Every check names the file, the field and what was
+//! expected, so a user can fix a file without reading Rust.
+use super::scenario::{FrontierSpec, ModelSpec, PaperSpec, ScenarioFile, SchemeParams};
+use crate::filter::Gaussian;
+use crate::linalg::{check_spd, Matrix, Vector};
+use crate::model::{presets, LinearSensor, LinearTransition, MeasurementModel};
+use crate::scheme::centralized::CentralizedScheme;
+use crate::scheme::distributed_kf::{DistributedKfScheme, Trigger};
+use crate::scheme::{Scheme, System};
+use std::collections::BTreeMap;
+use std::fmt;
+use std::sync::Arc;
+
+/// A scenario that could not be read or is inconsistent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScenarioError {
+    /// File (or built-in name) the scenario came from.
+    pub file: String,
+    /// Field path, e.g. `sensors[2].R`.
+    pub field: String,
+    /// What was expected and what was found.
+    pub message: String,
+}
+
+impl fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.field.is_empty() {
+            write!(f, "{}: {}", self.file, self.message)
+        } else {
+            write!(f, "{}: field `{}`: {}", self.file, self.field, self.message)
+        }
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+/// One scheme at one sweep point, ready to run.
+#[derive(Debug)]
+pub struct Variant {
+    /// Index of the scheme entry in the file (a curve).
+    pub curve: usize,
+    /// Parameters of this point, as written (kind-specific numbers).
+    pub params: BTreeMap<String, f64>,
+    pub spec: SchemeParams,
+    pub scheme: Box<dyn Scheme>,
+}
+
+/// One `[[schemes]]` entry: a curve of one or more variants.
+#[derive(Debug, Clone)]
+pub struct Curve {
+    pub label: String,
+    pub kind: String,
+    /// Names of the swept parameters (empty when not swept).
+    pub swept: Vec<String>,
+    pub frontier: Option<FrontierSpec>,
+}
+
+/// A validated experiment.
+#[derive(Debug)]
+pub struct Experiment {
+    pub name: String,
+    pub description: String,
+    pub source: String,
+    pub system: Arc<System>,
+    pub groups: Vec<(String, Vec<usize>)>,
+    pub curves: Vec<Curve>,
+    pub variants: Vec<Variant>,
+    pub trials: usize,
+    pub steps: usize,
+    pub seed: u64,
+    /// First step (1-based) of the steady-state averages.
+    pub steady_from: usize,
+    pub paper: Option<PaperSpec>,
+}
+
+struct Ctx<'a> {
+    file: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, field: impl Into<String>, message: impl Into<String>) -> ScenarioError {
+        ScenarioError {
+            file: self.file.to_string(),
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+}
+
+/// Parses TOML text into the file structure.
+pub fn parse(text: &str, file: &str) -> Result<ScenarioFile, ScenarioError> {
+    toml::from_str(text).map_err(|e| ScenarioError {
+        file: file.to_string(),
+        field: e
+            .span()
+            .map(|s| field_at(text, s.start))
+            .unwrap_or_default(),
+        message: e.message().to_string(),
+    })
+}
+
+/// Best-effort name of the key or table around a byte offset, for error messages.
+fn field_at(text: &str, offset: usize) -> String {
+    let upto = &text[..offset.min(text.len())];
+    let line_no = upto.matches('\n').count() + 1;
+    let line = text.lines().nth(line_no - 1).unwrap_or("").trim();
+    let key = line.split('=').next().unwrap_or("").trim();
+    let table = upto
+        .lines()
+        .rev()
+        .find(|l| l.trim_start().starts_with('['))
+        .map(|l| l.trim().to_string())
+        .unwrap_or_default();
+    match (table.is_empty(), key.is_empty() || key.starts_with('[')) {
+        (true, _) => format!("{key} (line {line_no})"),
+        (false, true) => format!("{table} (line {line_no})"),
+        (false, false) => format!("{table} {key} (line {line_no})"),
+    }
+}
+
+/// Parses and validates a scenario.
+pub fn load(text: &str, file: &str) -> Result<Experiment, ScenarioError> {
+    let parsed = parse(text, file)?;
+    build(parsed, file)
+}
+
+fn matrix(ctx: &Ctx, field: &str, rows: &[Vec<f64>]) -> Result<Matrix, ScenarioError> {
+    if rows.is_empty() {
+        return Err(ctx.err(field, "expected a non-empty matrix (a list of rows)"));
+    }
+    let cols = rows[0].len();
+    if let Some((i, r)) = rows.iter().enumerate().find(|(_, r)| r.len() != cols) {
+        return Err(ctx.err(
+            field,
+            format!("row {i} has {} entries, row 0 has {cols}", r.len()),
+        ));
+    }
+    if rows.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(ctx.err(field, "expected finite numbers"));
+    }
+    Ok(crate::linalg::matrix_from_rows(rows))
+}
+
+fn covariance(ctx: &Ctx, field: &str, m: &Matrix, n: usize) -> Result<(), ScenarioError> {
+    if m.nrows() != n || m.ncols() != n {
+        return Err(ctx.err(
+            field,
+            format!("expected a {n}x{n} matrix, got {}x{}", m.nrows(), m.ncols()),
+        ));
+    }
+    check_spd(m).map_err(|e| {
+        ctx.err(
+            field,
+            format!("expected a symmetric positive definite covariance: {e}"),
+        )
+    })
+}
+
+fn transition(ctx: &Ctx, spec: &ModelSpec) -> Result<LinearTransition, ScenarioError> {
+    let built = match spec {
+        ModelSpec::ConstantVelocity1d { dt, sigma2 } => presets::constant_velocity_1d(*dt, *sigma2),
+        ModelSpec::ConstantVelocity2d { dt, sigma2 } => presets::constant_velocity_2d(*dt, *sigma2),
+        ModelSpec::NearConstantAcceleration2d { dt, sigma2 } => {
+            presets::near_constant_acceleration_2d(*dt, *sigma2)
+        }
+        ModelSpec::RotationOscillator { omega, dt, q } => presets::rotation_oscillator(*omega, *dt, *q),
+        ModelSpec::Matrix { f, q } => {
+            let f = matrix(ctx, "model.F", f)?;
+            let q = matrix(ctx, "model.Q", q)?;
+            LinearTransition::new(f, q)
+        }
+    };
+    built.map_err(|e| ctx.err("model", e.to_string()))
+}
+
+/// Validates every field and builds the runtime objects.
+pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, ScenarioError> {
+    let ctx = Ctx { file };
+    if file_spec.trials == 0 {
+        return Err(ctx.err("trials", "expected at least 1 trial"));
+    }
+    if file_spec.steps == 0 {
+        return Err(ctx.err("steps", "expected at least 1 step"));
+    }
+    let transition = transition(&ctx, &file_spec.model)?;
+    let n = transition.dim();
+
+    // Prior.
+    let p = &file_spec.prior;
+    if p.mean.len() != n {
+        return Err(ctx.err(
+            "prior.mean",
+            format!("expected {n} entries (the model's state dimension), got {}", p.mean.len()),
+        ));
+    }
+    if p.mean.iter().any(|v| !v.is_finite()) {
+        return Err(ctx.err("prior.mean", "expected finite numbers"));
+    }
+    let cov = match (&p.cov, &p.cov_diag) {
+        (Some(c), None) => matrix(&ctx, "prior.cov", c)?,
+        (None, Some(d)) => {
+            if d.len() != n {
+                return Err(ctx.err("prior.cov_diag", format!("expected {n} entries, got {}", d.len())));
+            }
+            Matrix::from_diagonal(&Vector::from_vec(d.clone()))
+        }
+        _ => return Err(ctx.err("prior", "give exactly one of `cov` and `cov_diag`")),
+    };
+    covariance(&ctx, if p.cov.is_some() { "prior.cov" } else { "prior.cov_diag" }, &cov, n)?;
+    let prior = Gaussian::new(Vector::from_vec(p.mean.clone()), cov);
+
+    // Sensors.
+    if file_spec.sensors.is_empty() {
+        return Err(ctx.err("sensors", "expected at least one [[sensors]] entry"));
+    }
+    let mut sensors: Vec<Arc<dyn MeasurementModel>> = Vec::new();
+    for (i, s) in file_spec.sensors.iter().enumerate() {
+        let f = |name: &str| format!("sensors[{i}].{name}");
+        let h = match (&s.h, &s.observe) {
+            (Some(h), None) => {
+                let h = matrix(&ctx, &f("H"), h)?;
+                if h.ncols() != n {
+                    return Err(ctx.err(
+                        f("H"),
+                        format!("expected {n} columns (the state dimension), got {}", h.ncols()),
+                    ));
+                }
+                h
+            }
+            (None, Some(idx)) => {
+                if idx.is_empty() {
+                    return Err(ctx.err(f("observe"), "expected at least one state index"));
+                }
+                if let Some(bad) = idx.iter().find(|&&j| j >= n) {
+                    return Err(ctx.err(
+                        f("observe"),
+                        format!("state index {bad} is outside the state dimension {n}"),
+                    ));
+                }
+                let mut h = Matrix::zeros(idx.len(), n);
+                for (row, &j) in idx.iter().enumerate() {
+                    h[(row, j)] = 1.0;
+                }
+                h
+            }
+            _ => return Err(ctx.err(format!("sensors[{i}]"), "give exactly one of `H` and `observe`")),
+        };
+        let m = h.nrows();
+        let (r, rname) = match (&s.r, &s.r_diag) {
+            (Some(r), None) => (matrix(&ctx, &f("R"), r)?, f("R")),
+            (None, Some(d)) => {
+                if d.len() != m {
+                    return Err(ctx.err(f("R_diag"), format!("expected {m} entries (one per measured component), got {}", d.len())));
+                }
+                (Matrix::from_diagonal(&Vector::from_vec(d.clone())), f("R_diag"))
+            }
+            _ => return Err(ctx.err(format!("sensors[{i}]"), "give exactly one of `R` and `R_diag`")),
+        };
+        covariance(&ctx, &rname, &r, m)?;
+        let sensor = LinearSensor::new(h, r).map_err(|e| ctx.err(format!("sensors[{i}]"), e.to_string()))?;
+        sensors.push(Arc::new(sensor));
+    }
+
+    // Groups.
+    let mut groups = Vec::new();
+    for (name, value) in &file_spec.groups {
+        let idx: Vec<usize> = value.clone().try_into().map_err(|_| {
+            ctx.err(
+                format!("groups.{name}"),
+                "expected a list of state indices, e.g. position = [0, 3]",
+            )
+        })?;
+        if idx.is_empty() {
+            return Err(ctx.err(format!("groups.{name}"), "expected at least one state index"));
+        }
+        if let Some(bad) = idx.iter().find(|&&j| j >= n) {
+            return Err(ctx.err(
+                format!("groups.{name}"),
+                format!("state index {bad} is outside the state dimension {n}"),
+            ));
+        }
+        groups.push((name.clone(), idx));
+    }
+    if groups.is_empty() {
+        groups.push(("state".to_string(), (0..n).collect()));
+    }
+
+    let steady_from = file_spec.steady_state_from.unwrap_or(file_spec.steps / 2 + 1);
+    if steady_from == 0 || steady_from > file_spec.steps {
+        return Err(ctx.err(
+            "steady_state_from",
+            format!("expected a step in 1..={}, got {steady_from}", file_spec.steps),
+        ));
+    }
+
+    let system = Arc::new(System {
+        transition,
+        sensors,
+        prior,
+    });
+
+    // Schemes and sweeps.
+    if file_spec.schemes.is_empty() {
+        return Err(ctx.err("schemes", "expected at least one [[schemes]] entry"));
+    }
+    let mut curves = Vec::new();
+    let mut variants = Vec::new();
+    for (ci, table) in file_spec.schemes.iter().enumerate() {
+        let field = format!("schemes[{ci}]");
+        let mut base = table.clone();
+        let label = match base.remove("label") {
+            Some(toml::Value::String(s)) => Some(s),
+            Some(_) => return Err(ctx.err(format!("{field}.label"), "expected a string")),
+            None => None,
+        };
+        let frontier = match base.remove("frontier") {
+            Some(v) => {
+                let f: FrontierSpec = v
+                    .try_into()
+                    .map_err(|e: toml::de::Error| ctx.err(format!("{field}.frontier"), e.message().to_string()))?;
+                if f.metric != "trace" && f.metric != "mse" {
+                    return Err(ctx.err(format!("{field}.frontier.metric"), format!("expected \"trace\" or \"mse\", got {:?}", f.metric)));
+                }
+                if !(f.bin_width.is_finite() && f.bin_width > 0.0) {
+                    return Err(ctx.err(format!("{field}.frontier.bin_width"), "expected a positive number"));
+                }
+                Some(f)
+            }
+            None => None,
+        };
+        let sweep: Vec<(String, Vec<toml::Value>)> = match base.remove("sweep") {
+            None => Vec::new(),
+            Some(toml::Value::Table(t)) => {
+                let mut v = Vec::new();
+                for (k, vals) in t {
+                    match vals {
+                        toml::Value::Array(a) if !a.is_empty() => v.push((k, a)),
+                        _ => {
+                            return Err(ctx.err(
+                                format!("{field}.sweep.{k}"),
+                                "expected a non-empty list of values",
+                            ))
+                        }
+                    }
+                }
+                v
+            }
+            Some(_) => return Err(ctx.err(format!("{field}.sweep"), "expected a table, e.g. sweep = { rate = [0.5, 1.0] }")),
+        };
+        let points = grid(&sweep);
+        let mut kind = String::new();
+        let mut curve_label = label.clone();
+        for point in points {
+            let mut t = base.clone();
+            let mut desc = Vec::new();
+            for (k, v) in &point {
+                t.insert(k.clone(), v.clone());
+                desc.push(format!("{k} = {v}"));
+            }
+            let at = if desc.is_empty() {
+                field.clone()
+            } else {
+                format!("{field} (sweep point {})", desc.join(", "))
+            };
+            let spec: SchemeParams = toml::Value::Table(t.clone())
+                .try_into()
+                .map_err(|e: toml::de::Error| ctx.err(&at, scheme_message(&e)))?;
+            kind = spec.kind().to_string();
+            if curve_label.is_none() {
+                curve_label = Some(spec.default_label().to_string());
+            }
+            let params: BTreeMap<String, f64> = t
+                .iter()
+                .filter_map(|(k, v)| match v {
+                    toml::Value::Float(x) => Some((k.clone(), *x)),
+                    toml::Value::Integer(x) => Some((k.clone(), *x as f64)),
+                    _ => None,
+                })
+                .collect();
+            let scheme = scheme(&ctx, &at, &spec, &system, file_spec.steps)?;
+            variants.push(Variant {
+                curve: ci,
+                params,
+                spec,
+                scheme,
+            });
+        }
+        curves.push(Curve {
+            label: curve_label.unwrap_or_default(),
+            kind,
+            swept: sweep.iter().map(|(k, _)| k.clone()).collect(),
+            frontier,
+        });
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    for c in &curves {
+        if !seen.insert(c.label.clone()) {
+            return Err(ctx.err("schemes", format!("two schemes share the label {:?}; give each a distinct `label`", c.label)));
+        }
+    }
+
+    Ok(Experiment {
+        name: file_spec.name,
+        description: file_spec.description,
+        source: file.to_string(),
+        system,
+        groups,
+        curves,
+        variants,
+        trials: file_spec.trials,
+        steps: file_spec.steps,
+        seed: file_spec.seed,
+        steady_from,
+        paper: file_spec.paper,
+    })
+}
+
+/// Cartesian product of the sweep lists, in file order.
+fn grid(sweep: &[(String, Vec<toml::Value>)]) -> Vec<Vec<(String, toml::Value)>> {
+    let mut points: Vec<Vec<(String, toml::Value)>> = vec![Vec::new()];
+    for (k, vals) in sweep {
+        let mut next = Vec::new();
+        for p in &points {
+            for v in vals {
+                let mut q = p.clone();
+                q.push((k.clone(), v.clone()));
+                next.push(q);
+            }
+        }
+        points = next;
+    }
+    points
+}
+
+fn scheme_message(e: &toml::de::Error) -> String {
+    let m = e.message().to_string();
+    if m.contains("unknown variant") {
+        format!("unknown scheme kind: {m}")
+    } else {
+        m
+    }
+}
+
+fn scheme(
+    ctx: &Ctx,
+    at: &str,
+    spec: &SchemeParams,
+    system: &Arc<System>,
+    steps: usize,
+) -> Result<Box<dyn Scheme>, ScenarioError> {
+    let finite_nonneg = |name: &str, v: f64| {
+        if v.is_finite() && v >= 0.0 {
+            Ok(v)
+        } else {
+            Err(ctx.err(format!("{at}.{name}"), format!("expected a finite number >= 0, got {v}")))
+        }
+    };
+    let dkf = |trigger: Trigger, bound: Option<Matrix>| -> Result<Box<dyn Scheme>, ScenarioError> {
+        DistributedKfScheme::new(system.clone(), steps, trigger, bound)
+            .map(|s| Box::new(s) as Box<dyn Scheme>)
+            .map_err(|e| ctx.err(at, e.to_string()))
+    };
+    match spec {
+        SchemeParams::CentralizedKf => Ok(Box::new(CentralizedScheme::new(system.clone(), 1.0))),
+        SchemeParams::CentralizedKfRandom { rate } => {
+            if !(*rate > 0.0 && *rate <= 1.0) {
+                return Err(ctx.err(format!("{at}.rate"), format!("expected a rate in (0, 1], got {rate}")));
+            }
+            Ok(Box::new(CentralizedScheme::new(system.clone(), *rate)))
+        }
+        SchemeParams::Dkf => dkf(Trigger::Always, None),
+        SchemeParams::DkfAlg1Random { rate } => {
+            if !(*rate >= 0.5 && *rate <= 1.0) {
+                return Err(ctx.err(
+                    format!("{at}.rate"),
+                    format!("expected a rate in [0.5, 1] (Algorithm 1 needs a transmission at least every other step), got {rate}"),
+                ));
+            }
+            dkf(Trigger::random_for_rate(*rate), None)
+        }
+        SchemeParams::DkfAlg1Event { alpha } => dkf(Trigger::Event { alpha: finite_nonneg("alpha", *alpha)? }, None),
+        SchemeParams::DkfAlg2Event { alpha, b, b_matrix } => {
+            let alpha = finite_nonneg("alpha", *alpha)?;
+            let n = system.state_dim();
+            let bm = match (b, b_matrix) {
+                (Some(b), None) => {
+                    if !(b.is_finite() && *b > 0.0) {
+                        return Err(ctx.err(format!("{at}.b"), format!("expected a positive number (B = b I), got {b}")));
+                    }
+                    Matrix::identity(n, n) * *b
+                }
+                (None, Some(rows)) => {
+                    let m = matrix(ctx, &format!("{at}.B"), rows)?;
+                    covariance(ctx, &format!("{at}.B"), &m, n)?;
+                    m
+                }
+                _ => return Err(ctx.err(at, "give exactly one of `b` (B = b I) and `B`")),
+            };
+            let b_inv = crate::linalg::spd_inverse(&bm).map_err(|e| ctx.err(format!("{at}.B"), e.to_string()))?;
+            dkf(Trigger::Bounded { alpha, b_inv }, Some(bm))
+        }
+    }
+}

@@ -1,0 +1,20 @@
+//! Built-in scenarios, embedded in the binary from `scenarios/*.toml`.
+
+/// (name, one-line description, TOML text).
+pub const BUILTIN: &[(&str, &str, &str)] = &[
+    (
+        "default",
+        "Seed 004 comparison at a few rates (centralized KF, Algorithms 1 and 2), 100 trials",
+        include_str!("../../scenarios/default.toml"),
+    ),
+    (
+        "dormann-fig1",
+        "Seed 004 Fig. 1: MSE and trace against the communication rate, 500 runs x 100 steps",
+        include_str!("../../scenarios/dormann-fig1.toml"),
+    ),
+];
+
+/// The TOML text of a built-in scenario.
+pub fn get(name: &str) -> Option<&'static str> {
+    BUILTIN.iter().find(|(n, _, _)| *n == name).map(|(_, _, t)| *t)
+}

@@ -1,0 +1,195 @@
+//! SVG figures: RMSE per step per scheme, and steady-state MSE (solid) and trace (dashed)
+//! against the communication rate, the layout of seed 004's Fig. 1.
+use super::build::Experiment;
+use super::results::{curve_points, Summary};
+use plotters::prelude::*;
+use std::path::Path;
+
+const COLORS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
+];
+
+fn color(i: usize) -> RGBColor {
+    COLORS[i % COLORS.len()]
+}
+
+fn plot_err(e: impl std::fmt::Display) -> String {
+    format!("plot: {e}")
+}
+
+/// A named line of (x, y) points.
+pub struct Line {
+    pub name: String,
+    pub points: Vec<(f64, f64)>,
+    pub dashed: bool,
+    pub color: usize,
+}
+
+/// Draws lines into an SVG file with a log-scale y axis when the data span more than a decade.
+pub fn lines(path: &Path, title: &str, x_label: &str, y_label: &str, data: &[Line]) -> Result<(), String> {
+    let all: Vec<(f64, f64)> = data
+        .iter()
+        .flat_map(|l| l.points.iter().copied())
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect();
+    if all.is_empty() {
+        return Err("plot: nothing to draw".into());
+    }
+    let (mut x0, mut x1) = all.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    if x1 - x0 < 1e-12 {
+        x0 -= 0.5;
+        x1 += 0.5;
+    }
+    let positive: Vec<f64> = all.iter().map(|p| p.1).filter(|y| *y > 0.0).collect();
+    let y0 = positive.iter().copied().fold(f64::INFINITY, f64::min);
+    let y1 = positive.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let log = y0.is_finite() && y1 / y0 > 10.0;
+    let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    macro_rules! draw {
+        ($chart:expr) => {{
+            let mut chart = $chart;
+            chart
+                .configure_mesh()
+                .x_desc(x_label)
+                .y_desc(y_label)
+                .draw()
+                .map_err(plot_err)?;
+            for l in data {
+                let c = color(l.color);
+                let pts: Vec<(f64, f64)> = l.points.iter().copied().filter(|(_, y)| !log || *y > 0.0).collect();
+                if l.dashed {
+                    chart
+                        .draw_series(DashedLineSeries::new(pts, 6, 4, c.stroke_width(2)))
+                        .map_err(plot_err)?
+                        .label(l.name.clone())
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1)));
+                } else {
+                    chart
+                        .draw_series(LineSeries::new(pts, c.stroke_width(2)))
+                        .map_err(plot_err)?
+                        .label(l.name.clone())
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+                }
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::UpperRight)
+                .draw()
+                .map_err(plot_err)?;
+        }};
+    }
+    let mut builder = ChartBuilder::on(&root);
+    builder
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70);
+    if log {
+        draw!(builder
+            .build_cartesian_2d(x0..x1, (y0 * 0.8..y1 * 1.25).log_scale())
+            .map_err(plot_err)?);
+    } else {
+        let ymax = all.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+        let ymin = all.iter().map(|p| p.1).fold(f64::INFINITY, f64::min).min(0.0);
+        draw!(builder
+            .build_cartesian_2d(x0..x1, ymin..(ymax * 1.1).max(ymin + 1e-12))
+            .map_err(plot_err)?);
+    }
+    root.present().map_err(plot_err)?;
+    Ok(())
+}
+
+/// Writes the figures of a run into `dir`; returns the files written.
+pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<String>, String> {
+    let mut written = Vec::new();
+    let group = summary.group_order.first().cloned().unwrap_or_default();
+    // Unswept schemes together; each swept scheme on its own figure (one line per point).
+    let single: Vec<Line> = summary
+        .schemes
+        .iter()
+        .filter(|s| exp.curves[s.curve].swept.is_empty())
+        .map(|s| Line {
+            name: s.name.clone(),
+            points: s.rmse[&group].iter().enumerate().map(|(k, v)| ((k + 1) as f64, *v)).collect(),
+            dashed: false,
+            color: s.curve,
+        })
+        .collect();
+    if !single.is_empty() {
+        let f = format!("rmse_{group}_per_step.svg");
+        lines(&dir.join(&f), &format!("{}: RMSE of {group} per step", summary.scenario), "step k", &format!("RMSE {group}"), &single)?;
+        written.push(f);
+    }
+    for (ci, curve) in exp.curves.iter().enumerate().filter(|(_, c)| !c.swept.is_empty()) {
+        let data: Vec<Line> = summary
+            .schemes
+            .iter()
+            .filter(|s| s.curve == ci)
+            .enumerate()
+            .map(|(j, s)| Line {
+                name: super::results::params_text(&s.params),
+                points: s.rmse[&group].iter().enumerate().map(|(k, v)| ((k + 1) as f64, *v)).collect(),
+                dashed: false,
+                color: j,
+            })
+            .collect();
+        if data.len() > 12 {
+            continue; // unreadable; the rate plot summarizes this curve
+        }
+        let f = format!("rmse_{group}_per_step_{}.svg", slug(&curve.label));
+        lines(&dir.join(&f), &format!("{}: RMSE of {group} per step", curve.label), "step k", &format!("RMSE {group}"), &data)?;
+        written.push(f);
+    }
+    // Steady state against the communication rate, when any scheme is swept.
+    if exp.curves.iter().any(|c| !c.swept.is_empty()) {
+        let mut data = Vec::new();
+        for (ci, curve) in exp.curves.iter().enumerate() {
+            let pts = curve_points(exp, summary, ci);
+            data.push(Line {
+                name: format!("{} MSE", curve.label),
+                points: pts.iter().map(|p| (p.rate, p.mse)).collect(),
+                dashed: false,
+                color: ci,
+            });
+            data.push(Line {
+                name: format!("{} trace", curve.label),
+                points: pts.iter().map(|p| (p.rate, p.trace)).collect(),
+                dashed: true,
+                color: ci,
+            });
+        }
+        let f = "mse_trace_vs_rate.svg".to_string();
+        lines(
+            &dir.join(&f),
+            &format!("{}: steady-state MSE (solid) and trace (dashed)", summary.scenario),
+            "communication rate",
+            "MSE / trace of covariance",
+            &data,
+        )?;
+        written.push(f);
+    }
+    Ok(written)
+}
+
+/// File-name-safe version of a label.
+pub fn slug(s: &str) -> String {
+    let mut out = String::new();
+    for c in s.chars() {
+        if c.is_ascii_alphanumeric() {
+            out.push(c.to_ascii_lowercase());
+        } else if !out.ends_with('-') {
+            out.push('-');
+        }
+    }
+    out.trim_matches('-').to_string()
+}

@@ -1,0 +1,263 @@
+//! `hushfuse reproduce`: our numbers beside the paper's published ones, and each of the paper's
+//! claims checked on our numbers.
+use super::build::Experiment;
+use super::results::{curve_points, params_text, CurvePoint, Summary};
+use super::scenario::ClaimSpec;
+use serde::Serialize;
+use std::fmt::Write as _;
+
+/// A claim and whether it holds in our run.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ClaimResult {
+    pub text: String,
+    pub holds: bool,
+    /// The numbers behind the verdict.
+    pub evidence: String,
+}
+
+/// A published number and ours.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Comparison {
+    pub scheme: String,
+    pub params: String,
+    pub metric: String,
+    pub source: String,
+    pub paper: f64,
+    pub ours: Option<f64>,
+    pub ours_se: Option<f64>,
+}
+
+fn curve_index(exp: &Experiment, label: &str) -> Option<usize> {
+    exp.curves.iter().position(|c| c.label == label)
+}
+
+fn metric_of(p: &CurvePoint, metric: &str) -> f64 {
+    if metric == "trace" {
+        p.trace
+    } else {
+        p.mse
+    }
+}
+
+/// Linear interpolation of `metric` along a curve sorted by rate; `None` outside its span.
+fn interpolate(pts: &[CurvePoint], rate: f64, metric: &str) -> Option<f64> {
+    let first = pts.first()?;
+    let last = pts.last()?;
+    if rate < first.rate - 1e-9 || rate > last.rate + 1e-9 {
+        return None;
+    }
+    for w in pts.windows(2) {
+        let (p, q) = (&w[0], &w[1]);
+        if rate >= p.rate - 1e-9 && rate <= q.rate + 1e-9 {
+            let span = q.rate - p.rate;
+            if span.abs() < 1e-12 {
+                return Some(metric_of(p, metric).min(metric_of(q, metric)));
+            }
+            let t = ((rate - p.rate) / span).clamp(0.0, 1.0);
+            return Some(metric_of(p, metric) * (1.0 - t) + metric_of(q, metric) * t);
+        }
+    }
+    Some(metric_of(first, metric))
+}
+
+/// Checks every claim of the scenario's `[paper]` section.
+pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
+    let Some(paper) = &exp.paper else {
+        return Vec::new();
+    };
+    paper
+        .claims
+        .iter()
+        .map(|c| match c {
+            ClaimSpec::Below {
+                text,
+                a,
+                b,
+                metric,
+                rate_range,
+            } => {
+                let (Some(ia), Some(ib)) = (curve_index(exp, a), curve_index(exp, b)) else {
+                    return missing(text, &format!("{a} / {b}"));
+                };
+                let pa = curve_points(exp, summary, ia);
+                let pb = curve_points(exp, summary, ib);
+                let mut evidence = Vec::new();
+                let mut holds = true;
+                let mut compared = 0;
+                for p in pa
+                    .iter()
+                    .filter(|p| p.rate >= rate_range[0] && p.rate <= rate_range[1])
+                {
+                    if let Some(vb) = interpolate(&pb, p.rate, metric) {
+                        let va = metric_of(p, metric);
+                        compared += 1;
+                        holds &= va < vb;
+                        evidence.push(format!(
+                            "rate {:.3}: {:.4} vs {:.4} ({})",
+                            p.rate,
+                            va,
+                            vb,
+                            if va < vb { "ok" } else { "FAILS" }
+                        ));
+                    }
+                }
+                if compared == 0 {
+                    holds = false;
+                    evidence.push(format!(
+                        "no rate of {a:?} in [{}, {}] is covered by {b:?}",
+                        rate_range[0], rate_range[1]
+                    ));
+                }
+                ClaimResult {
+                    text: text.clone(),
+                    holds,
+                    evidence: format!("{metric} of {a} vs {b}: {}", evidence.join("; ")),
+                }
+            }
+            ClaimSpec::ReachesRateBelow { text, scheme, rate } => {
+                let Some(i) = curve_index(exp, scheme) else {
+                    return missing(text, scheme);
+                };
+                let min = summary
+                    .schemes
+                    .iter()
+                    .filter(|s| s.curve == i)
+                    .map(|s| s.steady_state.rate)
+                    .fold(f64::INFINITY, f64::min);
+                ClaimResult {
+                    text: text.clone(),
+                    holds: min < *rate,
+                    evidence: format!("lowest steady-state rate of {scheme}: {min:.3} (bound {rate})"),
+                }
+            }
+            ClaimSpec::Consistent { text, schemes } => {
+                let mut holds = true;
+                let mut worst: Option<(f64, String)> = None;
+                let mut count = 0;
+                for name in schemes {
+                    let Some(i) = curve_index(exp, name) else {
+                        return missing(text, name);
+                    };
+                    for s in summary.schemes.iter().filter(|s| s.curve == i) {
+                        count += 1;
+                        let ss = &s.steady_state;
+                        holds &= ss.mse <= ss.trace + 3.0 * ss.mse_se;
+                        let ratio = ss.mse / ss.trace;
+                        if worst.as_ref().is_none_or(|(w, _)| ratio > *w) {
+                            worst = Some((
+                                ratio,
+                                format!(
+                                    "{} [{}]: MSE {:.4} ± {:.4}, trace {:.4}",
+                                    s.name,
+                                    params_text(&s.params),
+                                    ss.mse,
+                                    ss.mse_se,
+                                    ss.trace
+                                ),
+                            ));
+                        }
+                    }
+                }
+                let (ratio, at) = worst.unwrap_or((f64::NAN, String::new()));
+                ClaimResult {
+                    text: text.clone(),
+                    holds,
+                    evidence: format!(
+                        "{count} variants; largest MSE/trace = {ratio:.3} at {at} (criterion: MSE <= trace + 3 se)"
+                    ),
+                }
+            }
+        })
+        .collect()
+}
+
+fn missing(text: &str, name: &str) -> ClaimResult {
+    ClaimResult {
+        text: text.to_string(),
+        holds: false,
+        evidence: format!("no scheme labelled {name:?} in this scenario"),
+    }
+}
+
+/// Our value of each published number.
+pub fn compare_published(exp: &Experiment, summary: &Summary) -> Vec<Comparison> {
+    let Some(paper) = &exp.paper else {
+        return Vec::new();
+    };
+    paper
+        .published
+        .iter()
+        .map(|p| {
+            let found = summary.schemes.iter().find(|s| {
+                s.name == p.scheme
+                    && p.params
+                        .iter()
+                        .all(|(k, v)| s.params.get(k).is_some_and(|x| (x - v).abs() < 1e-12))
+            });
+            let (ours, se) = match found {
+                None => (None, None),
+                Some(s) => {
+                    let ss = &s.steady_state;
+                    match p.metric.as_str() {
+                        "mse" => (Some(ss.mse), Some(ss.mse_se)),
+                        "trace" => (Some(ss.trace), Some(ss.trace_se)),
+                        "rate" => (Some(ss.rate), Some(ss.rate_se)),
+                        "transmissions_per_step" => (Some(s.transmissions_per_step), None),
+                        m => match m.strip_prefix("rmse:") {
+                            Some(g) => (s.mean_rmse.get(g).copied(), None),
+                            None => (None, None),
+                        },
+                    }
+                }
+            };
+            Comparison {
+                scheme: p.scheme.clone(),
+                params: params_text(&p.params),
+                metric: p.metric.clone(),
+                source: p.source.clone(),
+                paper: p.value,
+                ours,
+                ours_se: se,
+            }
+        })
+        .collect()
+}
+
+/// Human-readable reproduction report.
+pub fn render(exp: &Experiment, comparisons: &[Comparison], claims: &[ClaimResult]) -> String {
+    let mut out = String::new();
+    if let Some(p) = &exp.paper {
+        let _ = writeln!(out, "Reproducing: {}", p.citation);
+        for n in &p.notes {
+            let _ = writeln!(out, "  note: {n}");
+        }
+    }
+    if comparisons.is_empty() {
+        let _ = writeln!(out, "\nThe paper prints no numbers for this figure; its claims:");
+    } else {
+        let _ = writeln!(out, "\nPublished numbers vs ours:");
+        for c in comparisons {
+            let ours = match (c.ours, c.ours_se) {
+                (Some(v), Some(se)) => format!("{v:.4} ± {se:.4}"),
+                (Some(v), None) => format!("{v:.4}"),
+                _ => "not found".to_string(),
+            };
+            let _ = writeln!(
+                out,
+                "  {} [{}] {} ({}): paper {:.4}, ours {}",
+                c.scheme, c.params, c.metric, c.source, c.paper, ours
+            );
+        }
+        let _ = writeln!(out, "\nClaims:");
+    }
+    for c in claims {
+        let _ = writeln!(
+            out,
+            "  [{}] {}\n        {}",
+            if c.holds { "holds" } else { "FAILS" },
+            c.text,
+            c.evidence
+        );
+    }
+    out
+}

@@ -1,0 +1,211 @@
+//! Scenario files as written by users: plain serde structs that mirror the TOML, with no
+//! validation. [`super::build`] turns them into runtime objects that cannot be wrong.
+//! Documented field by field in `docs/scenarios.md`.
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// A whole scenario file.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile {
+    /// Short name, used for the output folder.
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// Monte Carlo trials.
+    pub trials: usize,
+    /// Time steps per trial (k = 1..=steps).
+    pub steps: usize,
+    /// Seed of every random stream of the run.
+    pub seed: u64,
+    /// First step of the steady-state averages (default: steps / 2 + 1).
+    #[serde(default)]
+    pub steady_state_from: Option<usize>,
+    pub model: ModelSpec,
+    pub prior: PriorSpec,
+    pub sensors: Vec<SensorSpec>,
+    /// Named groups of state indices whose RMSE is reported, e.g. position = [0, 3].
+    /// Kept in file order (the first group is the one plotted per step).
+    #[serde(default)]
+    pub groups: toml::Table,
+    /// Schemes to compare; each a table with `kind`, its parameters, and optionally `label`,
+    /// `sweep` and `frontier`. Kept as raw tables until each sweep point is expanded.
+    pub schemes: Vec<toml::Table>,
+    /// Published numbers and claims to check (`hushfuse reproduce`).
+    #[serde(default)]
+    pub paper: Option<PaperSpec>,
+}
+
+/// Motion model: a preset or explicit matrices.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ModelSpec {
+    /// State (x, vx), white-noise acceleration of intensity sigma2.
+    #[serde(rename = "constant-velocity-1d")]
+    ConstantVelocity1d { dt: f64, sigma2: f64 },
+    /// State (x, vx, y, vy).
+    #[serde(rename = "constant-velocity-2d")]
+    ConstantVelocity2d { dt: f64, sigma2: f64 },
+    /// State (x, vx, ax, y, vy, ay), white-noise jerk (seed 004 Section V).
+    #[serde(rename = "near-constant-acceleration-2d")]
+    NearConstantAcceleration2d { dt: f64, sigma2: f64 },
+    /// 2-D rotation by omega * dt per step, noise q I.
+    RotationOscillator { omega: f64, dt: f64, q: f64 },
+    /// Any F and Q.
+    Matrix {
+        #[serde(rename = "F")]
+        f: Vec<Vec<f64>>,
+        #[serde(rename = "Q")]
+        q: Vec<Vec<f64>>,
+    },
+}
+
+/// Prior of x_0: the truth is drawn from it and every filter starts from it.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PriorSpec {
+    pub mean: Vec<f64>,
+    /// Full covariance (give this or `cov_diag`).
+    #[serde(default)]
+    pub cov: Option<Vec<Vec<f64>>>,
+    /// Diagonal covariance.
+    #[serde(default)]
+    pub cov_diag: Option<Vec<f64>>,
+}
+
+/// One sensor.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorSpec {
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Measurement matrix (give this or `observe`).
+    #[serde(default, rename = "H")]
+    pub h: Option<Vec<Vec<f64>>>,
+    /// Shorthand for H: the state indices the sensor measures directly.
+    #[serde(default)]
+    pub observe: Option<Vec<usize>>,
+    /// Measurement noise covariance (give this or `R_diag`).
+    #[serde(default, rename = "R")]
+    pub r: Option<Vec<Vec<f64>>>,
+    #[serde(default, rename = "R_diag")]
+    pub r_diag: Option<Vec<f64>>,
+}
+
+/// Parameters of one scheme at one sweep point.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum SchemeParams {
+    /// Centralized KF with every measurement: the bound.
+    CentralizedKf,
+    /// Centralized KF; each measurement is sent with probability `rate`, else lost.
+    CentralizedKfRandom { rate: f64 },
+    /// Globalized distributed KF at full rate (seed 004 Section II).
+    Dkf,
+    /// Algorithm 1 with random communication at average rate `rate` in [0.5, 1].
+    DkfAlg1Random { rate: f64 },
+    /// Algorithm 1 with the event test (12).
+    DkfAlg1Event { alpha: f64 },
+    /// Algorithm 2 with test (13): threshold alpha and bound B = b I (or the matrix `B`).
+    DkfAlg2Event {
+        alpha: f64,
+        #[serde(default)]
+        b: Option<f64>,
+        #[serde(default, rename = "B")]
+        b_matrix: Option<Vec<Vec<f64>>>,
+    },
+}
+
+impl SchemeParams {
+    /// The `kind` string as written in files.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            SchemeParams::CentralizedKf => "centralized-kf",
+            SchemeParams::CentralizedKfRandom { .. } => "centralized-kf-random",
+            SchemeParams::Dkf => "dkf",
+            SchemeParams::DkfAlg1Random { .. } => "dkf-alg1-random",
+            SchemeParams::DkfAlg1Event { .. } => "dkf-alg1-event",
+            SchemeParams::DkfAlg2Event { .. } => "dkf-alg2-event",
+        }
+    }
+
+    /// Default curve label of a kind.
+    pub fn default_label(&self) -> &'static str {
+        match self {
+            SchemeParams::CentralizedKf => "Centralized KF (all data)",
+            SchemeParams::CentralizedKfRandom { .. } => "Centralized KF (random)",
+            SchemeParams::Dkf => "Globalized DKF (full rate)",
+            SchemeParams::DkfAlg1Random { .. } => "Algorithm 1 (random)",
+            SchemeParams::DkfAlg1Event { .. } => "Algorithm 1 (event-based)",
+            SchemeParams::DkfAlg2Event { .. } => "Algorithm 2 (event-based)",
+        }
+    }
+}
+
+/// Keep only the best variant of a swept scheme per communication-rate bin (seed 004 Fig. 1
+/// shows, for Algorithm 2, the smallest error covariance per rate).
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FrontierSpec {
+    /// `trace` or `mse` (steady state).
+    pub metric: String,
+    /// Width of a rate bin.
+    pub bin_width: f64,
+}
+
+/// Published results and claims.
+#[derive(Debug, Clone, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct PaperSpec {
+    /// Full reference of the paper and the figure/table.
+    pub citation: String,
+    /// Choices the paper leaves open and how we made them.
+    #[serde(default)]
+    pub notes: Vec<String>,
+    /// Numbers printed in the paper.
+    #[serde(default)]
+    pub published: Vec<PublishedValue>,
+    /// Claims the paper makes that we check.
+    #[serde(default)]
+    pub claims: Vec<ClaimSpec>,
+}
+
+/// One number printed in the paper.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PublishedValue {
+    /// Curve label of the scheme.
+    pub scheme: String,
+    /// Sweep parameters identifying the variant (empty for unswept schemes).
+    #[serde(default)]
+    pub params: BTreeMap<String, f64>,
+    /// `mse`, `trace`, `rate`, `rmse:<group>`, `transmissions_per_step`.
+    pub metric: String,
+    pub value: f64,
+    /// Where in the paper, e.g. "Table I".
+    pub source: String,
+}
+
+/// A claim of the paper, checked on our numbers.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ClaimSpec {
+    /// Curve `a`'s steady-state metric is below curve `b`'s at every rate of `a` inside
+    /// `rate_range` (b interpolated linearly in the rate).
+    Below {
+        text: String,
+        a: String,
+        b: String,
+        metric: String,
+        rate_range: [f64; 2],
+    },
+    /// Some variant of `scheme` communicates at a rate below `rate`.
+    ReachesRateBelow {
+        text: String,
+        scheme: String,
+        rate: f64,
+    },
+    /// Steady-state MSE <= trace (within 3 Monte Carlo standard errors) for every variant of
+    /// the listed schemes.
+    Consistent { text: String, schemes: Vec<String> },
+}
