@@ -70,7 +70,10 @@ pub fn check_spd(a: &Matrix) -> Result<(), LinalgError> {
     if a.iter().any(|v| !v.is_finite()) {
         return Err(LinalgError::NonFinite);
     }
-    let scale = a.iter().fold(0.0_f64, |m, v| m.max(v.abs())).max(f64::MIN_POSITIVE);
+    let scale = a
+        .iter()
+        .fold(0.0_f64, |m, v| m.max(v.abs()))
+        .max(f64::MIN_POSITIVE);
     for i in 0..a.nrows() {
         for j in (i + 1)..a.ncols() {
             let d = (a[(i, j)] - a[(j, i)]).abs();
@@ -89,7 +92,10 @@ pub fn check_spd(a: &Matrix) -> Result<(), LinalgError> {
 /// Normalized estimation error squared `e^T P^{-1} e` through the Cholesky factor of `P`.
 pub fn mahalanobis_sq(e: &Vector, p: &Matrix) -> Result<f64, LinalgError> {
     let chol = cholesky(p)?;
-    let y = chol.l().solve_lower_triangular(e).ok_or(LinalgError::NotPositiveDefinite)?;
+    let y = chol
+        .l()
+        .solve_lower_triangular(e)
+        .ok_or(LinalgError::NotPositiveDefinite)?;
     Ok(y.norm_squared())
 }
 
@@ -122,9 +128,15 @@ mod tests {
     #[test]
     fn rejects_non_spd_and_asymmetric() {
         let indefinite = matrix_from_rows(&[vec![1.0, 2.0], vec![2.0, 1.0]]);
-        assert_eq!(check_spd(&indefinite), Err(LinalgError::NotPositiveDefinite));
+        assert_eq!(
+            check_spd(&indefinite),
+            Err(LinalgError::NotPositiveDefinite)
+        );
         let asym = matrix_from_rows(&[vec![1.0, 0.5], vec![0.0, 1.0]]);
-        assert!(matches!(check_spd(&asym), Err(LinalgError::NotSymmetric { .. })));
+        assert!(matches!(
+            check_spd(&asym),
+            Err(LinalgError::NotSymmetric { .. })
+        ));
         let nan = matrix_from_rows(&[vec![f64::NAN, 0.0], vec![0.0, 1.0]]);
         assert_eq!(check_spd(&nan), Err(LinalgError::NonFinite));
     }

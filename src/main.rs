@@ -158,8 +158,14 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         }
         bar.set_position(done as u64);
     };
-    let sums = runner::run(&exp, runner::RunOptions { threads: args.threads }, &progress)
-        .map_err(|e| Failure::Run(e.to_string()))?;
+    let sums = runner::run(
+        &exp,
+        runner::RunOptions {
+            threads: args.threads,
+        },
+        &progress,
+    )
+    .map_err(|e| Failure::Run(e.to_string()))?;
     bar.finish_and_clear();
     let elapsed = start.elapsed().as_secs_f64();
     let summary = results::summarize(&exp, &sums);

@@ -41,7 +41,11 @@ impl Information {
 
     /// Adds one linear measurement: Y += H^T R^{-1} H, y += H^T R^{-1} z
     /// (seed 004, centralized filtering step).
-    pub fn add_measurement(&mut self, sensor: &LinearSensor, z: &Vector) -> Result<(), FilterError> {
+    pub fn add_measurement(
+        &mut self,
+        sensor: &LinearSensor,
+        z: &Vector,
+    ) -> Result<(), FilterError> {
         crate::filter::kf::check_measurement(sensor, z)?;
         self.matrix += sensor.information();
         self.vector += sensor.ht_rinv() * z;

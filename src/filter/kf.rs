@@ -46,7 +46,9 @@ pub fn check_measurement(sensor: &dyn MeasurementModel, z: &Vector) -> Result<()
         });
     }
     if z.iter().any(|v| !v.is_finite()) {
-        return Err(FilterError::NonFiniteMeasurement(z.iter().copied().collect()));
+        return Err(FilterError::NonFiniteMeasurement(
+            z.iter().copied().collect(),
+        ));
     }
     Ok(())
 }
@@ -100,16 +102,21 @@ mod tests {
     use crate::model::LinearSensor;
 
     fn scalar(f: f64, q: f64) -> LinearTransition {
-        LinearTransition::new(Matrix::from_element(1, 1, f), Matrix::from_element(1, 1, q))
-            .unwrap()
+        LinearTransition::new(Matrix::from_element(1, 1, f), Matrix::from_element(1, 1, q)).unwrap()
     }
 
     #[test]
     fn scalar_update_by_hand() {
         // Prior N(0, 4), z = 2 with r = 1: K = 4/5, mean 1.6, variance 4/5.
-        let s = LinearSensor::new(Matrix::from_element(1, 1, 1.0), Matrix::from_element(1, 1, 1.0))
-            .unwrap();
-        let e = Gaussian::new(Vector::from_element(1, 0.0), Matrix::from_element(1, 1, 4.0));
+        let s = LinearSensor::new(
+            Matrix::from_element(1, 1, 1.0),
+            Matrix::from_element(1, 1, 1.0),
+        )
+        .unwrap();
+        let e = Gaussian::new(
+            Vector::from_element(1, 0.0),
+            Matrix::from_element(1, 1, 4.0),
+        );
         let u = update(&s, e, &Vector::from_element(1, 2.0)).unwrap();
         assert!((u.mean[0] - 1.6).abs() < 1e-15);
         assert!((u.cov[(0, 0)] - 0.8).abs() < 1e-15);
@@ -124,14 +131,25 @@ mod tests {
         let p_pred = (-b + (b * b + 4.0 * q * r).sqrt()) / 2.0;
         let p_filt = p_pred * r / (p_pred + r);
         let model = scalar(a, q);
-        let s = LinearSensor::new(Matrix::from_element(1, 1, 1.0), Matrix::from_element(1, 1, r))
-            .unwrap();
-        let mut e = Gaussian::new(Vector::from_element(1, 0.0), Matrix::from_element(1, 1, 100.0));
+        let s = LinearSensor::new(
+            Matrix::from_element(1, 1, 1.0),
+            Matrix::from_element(1, 1, r),
+        )
+        .unwrap();
+        let mut e = Gaussian::new(
+            Vector::from_element(1, 0.0),
+            Matrix::from_element(1, 1, 100.0),
+        );
         for _ in 0..200 {
             let z = Vector::from_element(1, 0.3);
             e = step(&model, &e, &[(&s, &z)]).unwrap();
         }
-        assert!((e.cov[(0, 0)] - p_filt).abs() < 1e-12, "{} vs {}", e.cov[(0, 0)], p_filt);
+        assert!(
+            (e.cov[(0, 0)] - p_filt).abs() < 1e-12,
+            "{} vs {}",
+            e.cov[(0, 0)],
+            p_filt
+        );
     }
 
     #[test]
@@ -150,7 +168,10 @@ mod tests {
         let two = Vector::zeros(2);
         assert!(matches!(
             update(&s, e, &two),
-            Err(FilterError::MeasurementDimension { expected: 1, got: 2 })
+            Err(FilterError::MeasurementDimension {
+                expected: 1,
+                got: 2
+            })
         ));
     }
 }

@@ -26,11 +26,7 @@ pub fn constant_velocity_1d(dt: f64, sigma2: f64) -> Result<LinearTransition, Mo
     let d = positive("sampling interval dt", dt)?;
     let s = positive("noise intensity sigma2", sigma2)?;
     let f = Matrix::from_row_slice(2, 2, &[1.0, d, 0.0, 1.0]);
-    let q = Matrix::from_row_slice(
-        2,
-        2,
-        &[d.powi(3) / 3.0, d * d / 2.0, d * d / 2.0, d],
-    ) * s;
+    let q = Matrix::from_row_slice(2, 2, &[d.powi(3) / 3.0, d * d / 2.0, d * d / 2.0, d]) * s;
     LinearTransition::new(f, q)
 }
 
@@ -45,10 +41,7 @@ pub fn constant_velocity_2d(dt: f64, sigma2: f64) -> Result<LinearTransition, Mo
 /// (`0 0 0 0 0 1`, which would make F singular and lose vy); we use the standard block
 /// `[[1, D, D^2/2], [0, 1, D], [0, 0, 1]]` per axis, which is the one the printed noise matrix
 /// `[[D^5/20, D^4/8, D^3/6], [D^4/8, D^3/3, D^2/2], [D^3/6, D^2/2, D]]` belongs to.
-pub fn near_constant_acceleration_2d(
-    dt: f64,
-    sigma2: f64,
-) -> Result<LinearTransition, ModelError> {
+pub fn near_constant_acceleration_2d(dt: f64, sigma2: f64) -> Result<LinearTransition, ModelError> {
     let d = positive("sampling interval dt", dt)?;
     let s = positive("noise intensity sigma2", sigma2)?;
     let f = Matrix::from_row_slice(3, 3, &[1.0, d, d * d / 2.0, 0.0, 1.0, d, 0.0, 0.0, 1.0]);

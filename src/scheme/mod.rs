@@ -53,7 +53,9 @@ pub enum SchemeError {
     Unsupported(String),
     #[error("sensor {sensor}: {message}")]
     Protocol { sensor: usize, message: String },
-    #[error("step {k} is beyond the precomputed horizon {horizon} and the recursion had not converged")]
+    #[error(
+        "step {k} is beyond the precomputed horizon {horizon} and the recursion had not converged"
+    )]
     HorizonExceeded { k: usize, horizon: usize },
 }
 

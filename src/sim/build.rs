@@ -112,7 +112,8 @@ fn field_at(text: &str, offset: usize) -> String {
         .map(|l| l.trim().to_string())
         .unwrap_or_default();
     match (table.is_empty(), key.is_empty() || key.starts_with('[')) {
-        (true, _) => format!("{key} (line {line_no})"),
+        (true, true) => format!("top level (line {line_no})"),
+        (true, false) => format!("{key} (line {line_no})"),
         (false, true) => format!("{table} (line {line_no})"),
         (false, false) => format!("{table} {key} (line {line_no})"),
     }
@@ -163,7 +164,9 @@ fn transition(ctx: &Ctx, spec: &ModelSpec) -> Result<LinearTransition, ScenarioE
         ModelSpec::NearConstantAcceleration2d { dt, sigma2 } => {
             presets::near_constant_acceleration_2d(*dt, *sigma2)
         }
-        ModelSpec::RotationOscillator { omega, dt, q } => presets::rotation_oscillator(*omega, *dt, *q),
+        ModelSpec::RotationOscillator { omega, dt, q } => {
+            presets::rotation_oscillator(*omega, *dt, *q)
+        }
         ModelSpec::Matrix { f, q } => {
             let f = matrix(ctx, "model.F", f)?;
             let q = matrix(ctx, "model.Q", q)?;
@@ -190,7 +193,10 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
     if p.mean.len() != n {
         return Err(ctx.err(
             "prior.mean",
-            format!("expected {n} entries (the model's state dimension), got {}", p.mean.len()),
+            format!(
+                "expected {n} entries (the model's state dimension), got {}",
+                p.mean.len()
+            ),
         ));
     }
     if p.mean.iter().any(|v| !v.is_finite()) {
@@ -200,13 +206,25 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
         (Some(c), None) => matrix(&ctx, "prior.cov", c)?,
         (None, Some(d)) => {
             if d.len() != n {
-                return Err(ctx.err("prior.cov_diag", format!("expected {n} entries, got {}", d.len())));
+                return Err(ctx.err(
+                    "prior.cov_diag",
+                    format!("expected {n} entries, got {}", d.len()),
+                ));
             }
             Matrix::from_diagonal(&Vector::from_vec(d.clone()))
         }
         _ => return Err(ctx.err("prior", "give exactly one of `cov` and `cov_diag`")),
     };
-    covariance(&ctx, if p.cov.is_some() { "prior.cov" } else { "prior.cov_diag" }, &cov, n)?;
+    covariance(
+        &ctx,
+        if p.cov.is_some() {
+            "prior.cov"
+        } else {
+            "prior.cov_diag"
+        },
+        &cov,
+        n,
+    )?;
     let prior = Gaussian::new(Vector::from_vec(p.mean.clone()), cov);
 
     // Sensors.
@@ -222,7 +240,10 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
                 if h.ncols() != n {
                     return Err(ctx.err(
                         f("H"),
-                        format!("expected {n} columns (the state dimension), got {}", h.ncols()),
+                        format!(
+                            "expected {n} columns (the state dimension), got {}",
+                            h.ncols()
+                        ),
                     ));
                 }
                 h
@@ -243,21 +264,41 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
                 }
                 h
             }
-            _ => return Err(ctx.err(format!("sensors[{i}]"), "give exactly one of `H` and `observe`")),
+            _ => {
+                return Err(ctx.err(
+                    format!("sensors[{i}]"),
+                    "give exactly one of `H` and `observe`",
+                ))
+            }
         };
         let m = h.nrows();
         let (r, rname) = match (&s.r, &s.r_diag) {
             (Some(r), None) => (matrix(&ctx, &f("R"), r)?, f("R")),
             (None, Some(d)) => {
                 if d.len() != m {
-                    return Err(ctx.err(f("R_diag"), format!("expected {m} entries (one per measured component), got {}", d.len())));
+                    return Err(ctx.err(
+                        f("R_diag"),
+                        format!(
+                            "expected {m} entries (one per measured component), got {}",
+                            d.len()
+                        ),
+                    ));
                 }
-                (Matrix::from_diagonal(&Vector::from_vec(d.clone())), f("R_diag"))
+                (
+                    Matrix::from_diagonal(&Vector::from_vec(d.clone())),
+                    f("R_diag"),
+                )
             }
-            _ => return Err(ctx.err(format!("sensors[{i}]"), "give exactly one of `R` and `R_diag`")),
+            _ => {
+                return Err(ctx.err(
+                    format!("sensors[{i}]"),
+                    "give exactly one of `R` and `R_diag`",
+                ))
+            }
         };
         covariance(&ctx, &rname, &r, m)?;
-        let sensor = LinearSensor::new(h, r).map_err(|e| ctx.err(format!("sensors[{i}]"), e.to_string()))?;
+        let sensor =
+            LinearSensor::new(h, r).map_err(|e| ctx.err(format!("sensors[{i}]"), e.to_string()))?;
         sensors.push(Arc::new(sensor));
     }
 
@@ -271,7 +312,10 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
             )
         })?;
         if idx.is_empty() {
-            return Err(ctx.err(format!("groups.{name}"), "expected at least one state index"));
+            return Err(ctx.err(
+                format!("groups.{name}"),
+                "expected at least one state index",
+            ));
         }
         if let Some(bad) = idx.iter().find(|&&j| j >= n) {
             return Err(ctx.err(
@@ -285,11 +329,16 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
         groups.push(("state".to_string(), (0..n).collect()));
     }
 
-    let steady_from = file_spec.steady_state_from.unwrap_or(file_spec.steps / 2 + 1);
+    let steady_from = file_spec
+        .steady_state_from
+        .unwrap_or(file_spec.steps / 2 + 1);
     if steady_from == 0 || steady_from > file_spec.steps {
         return Err(ctx.err(
             "steady_state_from",
-            format!("expected a step in 1..={}, got {steady_from}", file_spec.steps),
+            format!(
+                "expected a step in 1..={}, got {steady_from}",
+                file_spec.steps
+            ),
         ));
     }
 
@@ -315,14 +364,20 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
         };
         let frontier = match base.remove("frontier") {
             Some(v) => {
-                let f: FrontierSpec = v
-                    .try_into()
-                    .map_err(|e: toml::de::Error| ctx.err(format!("{field}.frontier"), e.message().to_string()))?;
+                let f: FrontierSpec = v.try_into().map_err(|e: toml::de::Error| {
+                    ctx.err(format!("{field}.frontier"), e.message().to_string())
+                })?;
                 if f.metric != "trace" && f.metric != "mse" {
-                    return Err(ctx.err(format!("{field}.frontier.metric"), format!("expected \"trace\" or \"mse\", got {:?}", f.metric)));
+                    return Err(ctx.err(
+                        format!("{field}.frontier.metric"),
+                        format!("expected \"trace\" or \"mse\", got {:?}", f.metric),
+                    ));
                 }
                 if !(f.bin_width.is_finite() && f.bin_width > 0.0) {
-                    return Err(ctx.err(format!("{field}.frontier.bin_width"), "expected a positive number"));
+                    return Err(ctx.err(
+                        format!("{field}.frontier.bin_width"),
+                        "expected a positive number",
+                    ));
                 }
                 Some(f)
             }
@@ -345,7 +400,12 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
                 }
                 v
             }
-            Some(_) => return Err(ctx.err(format!("{field}.sweep"), "expected a table, e.g. sweep = { rate = [0.5, 1.0] }")),
+            Some(_) => {
+                return Err(ctx.err(
+                    format!("{field}.sweep"),
+                    "expected a table, e.g. sweep = { rate = [0.5, 1.0] }",
+                ))
+            }
         };
         let points = grid(&sweep);
         let mut kind = String::new();
@@ -395,7 +455,13 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
     let mut seen = std::collections::BTreeSet::new();
     for c in &curves {
         if !seen.insert(c.label.clone()) {
-            return Err(ctx.err("schemes", format!("two schemes share the label {:?}; give each a distinct `label`", c.label)));
+            return Err(ctx.err(
+                "schemes",
+                format!(
+                    "two schemes share the label {:?}; give each a distinct `label`",
+                    c.label
+                ),
+            ));
         }
     }
 
@@ -452,7 +518,10 @@ fn scheme(
         if v.is_finite() && v >= 0.0 {
             Ok(v)
         } else {
-            Err(ctx.err(format!("{at}.{name}"), format!("expected a finite number >= 0, got {v}")))
+            Err(ctx.err(
+                format!("{at}.{name}"),
+                format!("expected a finite number >= 0, got {v}"),
+            ))
         }
     };
     let dkf = |trigger: Trigger, bound: Option<Matrix>| -> Result<Box<dyn Scheme>, ScenarioError> {
@@ -464,7 +533,10 @@ fn scheme(
         SchemeParams::CentralizedKf => Ok(Box::new(CentralizedScheme::new(system.clone(), 1.0))),
         SchemeParams::CentralizedKfRandom { rate } => {
             if !(*rate > 0.0 && *rate <= 1.0) {
-                return Err(ctx.err(format!("{at}.rate"), format!("expected a rate in (0, 1], got {rate}")));
+                return Err(ctx.err(
+                    format!("{at}.rate"),
+                    format!("expected a rate in (0, 1], got {rate}"),
+                ));
             }
             Ok(Box::new(CentralizedScheme::new(system.clone(), *rate)))
         }
@@ -478,14 +550,22 @@ fn scheme(
             }
             dkf(Trigger::random_for_rate(*rate), None)
         }
-        SchemeParams::DkfAlg1Event { alpha } => dkf(Trigger::Event { alpha: finite_nonneg("alpha", *alpha)? }, None),
+        SchemeParams::DkfAlg1Event { alpha } => dkf(
+            Trigger::Event {
+                alpha: finite_nonneg("alpha", *alpha)?,
+            },
+            None,
+        ),
         SchemeParams::DkfAlg2Event { alpha, b, b_matrix } => {
             let alpha = finite_nonneg("alpha", *alpha)?;
             let n = system.state_dim();
             let bm = match (b, b_matrix) {
                 (Some(b), None) => {
                     if !(b.is_finite() && *b > 0.0) {
-                        return Err(ctx.err(format!("{at}.b"), format!("expected a positive number (B = b I), got {b}")));
+                        return Err(ctx.err(
+                            format!("{at}.b"),
+                            format!("expected a positive number (B = b I), got {b}"),
+                        ));
                     }
                     Matrix::identity(n, n) * *b
                 }
@@ -496,7 +576,8 @@ fn scheme(
                 }
                 _ => return Err(ctx.err(at, "give exactly one of `b` (B = b I) and `B`")),
             };
-            let b_inv = crate::linalg::spd_inverse(&bm).map_err(|e| ctx.err(format!("{at}.B"), e.to_string()))?;
+            let b_inv = crate::linalg::spd_inverse(&bm)
+                .map_err(|e| ctx.err(format!("{at}.B"), e.to_string()))?;
             dkf(Trigger::Bounded { alpha, b_inv }, Some(bm))
         }
     }

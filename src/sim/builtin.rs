@@ -16,5 +16,8 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
 
 /// The TOML text of a built-in scenario.
 pub fn get(name: &str) -> Option<&'static str> {
-    BUILTIN.iter().find(|(n, _, _)| *n == name).map(|(_, _, t)| *t)
+    BUILTIN
+        .iter()
+        .find(|(n, _, _)| *n == name)
+        .map(|(_, _, t)| *t)
 }

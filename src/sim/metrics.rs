@@ -196,7 +196,10 @@ mod tests {
             Matrix::from_diagonal(&Vector::from_vec(vec![1.0, 4.0])),
         );
         let mut t = s.trial(&groups, 2);
-        let traffic = Traffic { messages: 3, bits: 96 };
+        let traffic = Traffic {
+            messages: 3,
+            bits: 96,
+        };
         t.record(1, &truth, &est, traffic).unwrap();
         t.record(2, &truth, &est, traffic).unwrap();
         t.finish();

@@ -3,8 +3,8 @@
 pub mod build;
 pub mod builtin;
 pub mod metrics;
+pub mod plot;
 pub mod report;
 pub mod results;
 pub mod runner;
 pub mod scenario;
-pub mod plot;

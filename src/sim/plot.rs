@@ -33,7 +33,13 @@ pub struct Line {
 }
 
 /// Draws lines into an SVG file with a log-scale y axis when the data span more than a decade.
-pub fn lines(path: &Path, title: &str, x_label: &str, y_label: &str, data: &[Line]) -> Result<(), String> {
+pub fn lines(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    data: &[Line],
+) -> Result<(), String> {
     let all: Vec<(f64, f64)> = data
         .iter()
         .flat_map(|l| l.points.iter().copied())
@@ -42,7 +48,11 @@ pub fn lines(path: &Path, title: &str, x_label: &str, y_label: &str, data: &[Lin
     if all.is_empty() {
         return Err("plot: nothing to draw".into());
     }
-    let (mut x0, mut x1) = all.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (mut x0, mut x1) = all
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.0), b.max(p.0))
+        });
     if x1 - x0 < 1e-12 {
         x0 -= 0.5;
         x1 += 0.5;
@@ -64,19 +74,28 @@ pub fn lines(path: &Path, title: &str, x_label: &str, y_label: &str, data: &[Lin
                 .map_err(plot_err)?;
             for l in data {
                 let c = color(l.color);
-                let pts: Vec<(f64, f64)> = l.points.iter().copied().filter(|(_, y)| !log || *y > 0.0).collect();
+                let pts: Vec<(f64, f64)> = l
+                    .points
+                    .iter()
+                    .copied()
+                    .filter(|(_, y)| !log || *y > 0.0)
+                    .collect();
                 if l.dashed {
                     chart
                         .draw_series(DashedLineSeries::new(pts, 6, 4, c.stroke_width(2)))
                         .map_err(plot_err)?
                         .label(l.name.clone())
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1)));
+                        .legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1))
+                        });
                 } else {
                     chart
                         .draw_series(LineSeries::new(pts, c.stroke_width(2)))
                         .map_err(plot_err)?
                         .label(l.name.clone())
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+                        .legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3))
+                        });
                 }
             }
             chart
@@ -100,7 +119,11 @@ pub fn lines(path: &Path, title: &str, x_label: &str, y_label: &str, data: &[Lin
             .map_err(plot_err)?);
     } else {
         let ymax = all.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
-        let ymin = all.iter().map(|p| p.1).fold(f64::INFINITY, f64::min).min(0.0);
+        let ymin = all
+            .iter()
+            .map(|p| p.1)
+            .fold(f64::INFINITY, f64::min)
+            .min(0.0);
         draw!(builder
             .build_cartesian_2d(x0..x1, ymin..(ymax * 1.1).max(ymin + 1e-12))
             .map_err(plot_err)?);
@@ -120,17 +143,32 @@ pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<
         .filter(|s| exp.curves[s.curve].swept.is_empty())
         .map(|s| Line {
             name: s.name.clone(),
-            points: s.rmse[&group].iter().enumerate().map(|(k, v)| ((k + 1) as f64, *v)).collect(),
+            points: s.rmse[&group]
+                .iter()
+                .enumerate()
+                .map(|(k, v)| ((k + 1) as f64, *v))
+                .collect(),
             dashed: false,
             color: s.curve,
         })
         .collect();
     if !single.is_empty() {
         let f = format!("rmse_{group}_per_step.svg");
-        lines(&dir.join(&f), &format!("{}: RMSE of {group} per step", summary.scenario), "step k", &format!("RMSE {group}"), &single)?;
+        lines(
+            &dir.join(&f),
+            &format!("{}: RMSE of {group} per step", summary.scenario),
+            "step k",
+            &format!("RMSE {group}"),
+            &single,
+        )?;
         written.push(f);
     }
-    for (ci, curve) in exp.curves.iter().enumerate().filter(|(_, c)| !c.swept.is_empty()) {
+    for (ci, curve) in exp
+        .curves
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| !c.swept.is_empty())
+    {
         let data: Vec<Line> = summary
             .schemes
             .iter()
@@ -138,7 +176,11 @@ pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<
             .enumerate()
             .map(|(j, s)| Line {
                 name: super::results::params_text(&s.params),
-                points: s.rmse[&group].iter().enumerate().map(|(k, v)| ((k + 1) as f64, *v)).collect(),
+                points: s.rmse[&group]
+                    .iter()
+                    .enumerate()
+                    .map(|(k, v)| ((k + 1) as f64, *v))
+                    .collect(),
                 dashed: false,
                 color: j,
             })
@@ -147,7 +189,13 @@ pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<
             continue; // unreadable; the rate plot summarizes this curve
         }
         let f = format!("rmse_{group}_per_step_{}.svg", slug(&curve.label));
-        lines(&dir.join(&f), &format!("{}: RMSE of {group} per step", curve.label), "step k", &format!("RMSE {group}"), &data)?;
+        lines(
+            &dir.join(&f),
+            &format!("{}: RMSE of {group} per step", curve.label),
+            "step k",
+            &format!("RMSE {group}"),
+            &data,
+        )?;
         written.push(f);
     }
     // Steady state against the communication rate, when any scheme is swept.
@@ -171,7 +219,10 @@ pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<
         let f = "mse_trace_vs_rate.svg".to_string();
         lines(
             &dir.join(&f),
-            &format!("{}: steady-state MSE (solid) and trace (dashed)", summary.scenario),
+            &format!(
+                "{}: steady-state MSE (solid) and trace (dashed)",
+                summary.scenario
+            ),
             "communication rate",
             "MSE / trace of covariance",
             &data,

@@ -233,7 +233,10 @@ pub fn render(exp: &Experiment, comparisons: &[Comparison], claims: &[ClaimResul
         }
     }
     if comparisons.is_empty() {
-        let _ = writeln!(out, "\nThe paper prints no numbers for this figure; its claims:");
+        let _ = writeln!(
+            out,
+            "\nThe paper prints no numbers for this figure; its claims:"
+        );
     } else {
         let _ = writeln!(out, "\nPublished numbers vs ours:");
         for c in comparisons {

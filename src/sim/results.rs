@@ -159,7 +159,13 @@ pub fn per_step_csv(summary: &Summary) -> String {
     out.push_str(",mse,trace,anees\n");
     for s in &summary.schemes {
         for k in 0..summary.steps {
-            let _ = write!(out, "\"{}\",\"{}\",{}", s.name, params_text(&s.params), k + 1);
+            let _ = write!(
+                out,
+                "\"{}\",\"{}\",{}",
+                s.name,
+                params_text(&s.params),
+                k + 1
+            );
             for g in &groups {
                 let _ = write!(out, ",{}", s.rmse[*g][k]);
             }
@@ -172,15 +178,20 @@ pub fn per_step_csv(summary: &Summary) -> String {
 /// The results table printed on the terminal.
 pub fn table(summary: &Summary) -> String {
     let groups: Vec<&String> = summary.group_order.iter().collect();
-    let mut header = vec![
-        "scheme".to_string(),
-        "params".to_string(),
-    ];
+    let mut header = vec!["scheme".to_string(), "params".to_string()];
     header.extend(groups.iter().map(|g| format!("RMSE {g}")));
     header.extend(
-        ["MSE(ss)", "±se", "trace(ss)", "ANEES", "rate", "tx/step", "bits/step"]
-            .iter()
-            .map(|s| s.to_string()),
+        [
+            "MSE(ss)",
+            "±se",
+            "trace(ss)",
+            "ANEES",
+            "rate",
+            "tx/step",
+            "bits/step",
+        ]
+        .iter()
+        .map(|s| s.to_string()),
     );
     let mut rows = vec![header];
     for s in &summary.schemes {

@@ -121,7 +121,8 @@ impl GlobalizedPlan {
             for (s, p_prev) in sensors.iter().zip(&prev.kf_cov) {
                 let mut pp = &a * p_prev * a.transpose() + q;
                 symmetrize(&mut pp);
-                let mut innov = s.h() * &pp * s.h().transpose() + crate::model::MeasurementModel::noise_cov(*s);
+                let mut innov =
+                    s.h() * &pp * s.h().transpose() + crate::model::MeasurementModel::noise_cov(*s);
                 symmetrize(&mut innov);
                 let innov_inv = inv(&innov, "local innovation covariance")?;
                 let k = &pp * s.h().transpose() * innov_inv;

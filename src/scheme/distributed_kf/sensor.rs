@@ -138,12 +138,8 @@ impl SensorNode for DkfSensor {
                 Trigger::Random { send_probability } => u < *send_probability,
                 Trigger::Event { alpha } => correction.norm() > *alpha,
                 Trigger::Bounded { alpha, b_inv } => {
-                    let d = debiased_difference(
-                        &m.delta_p[i],
-                        &self.held_delta,
-                        &self.held,
-                        &xbar_p,
-                    )?;
+                    let d =
+                        debiased_difference(&m.delta_p[i], &self.held_delta, &self.held, &xbar_p)?;
                     (&self.kf_held - &self.kf).norm() > *alpha || d.dot(&(b_inv * &d)) > 1.0
                 }
             };
@@ -168,9 +164,11 @@ pub fn debiased_extrapolation(
     delta_pp: &Matrix,
     held: &Vector,
 ) -> Result<Vector, SchemeError> {
-    let solved = delta_pp.clone().lu().solve(held).ok_or_else(|| {
-        SchemeError::Unsupported("debiasing matrix Δ^pp is singular".into())
-    })?;
+    let solved = delta_pp
+        .clone()
+        .lu()
+        .solve(held)
+        .ok_or_else(|| SchemeError::Unsupported("debiasing matrix Δ^pp is singular".into()))?;
     Ok(delta_p * solved)
 }
 

@@ -19,7 +19,14 @@ fn dormann_system() -> Arc<System> {
         h[(1, b)] = 1.0;
         Arc::new(LinearSensor::new(h, Matrix::identity(2, 2)).unwrap()) as Arc<dyn MeasurementModel>
     };
-    let sensors = vec![pick(0, 3), pick(0, 3), pick(1, 4), pick(1, 4), pick(2, 5), pick(2, 5)];
+    let sensors = vec![
+        pick(0, 3),
+        pick(0, 3),
+        pick(1, 4),
+        pick(1, 4),
+        pick(2, 5),
+        pick(2, 5),
+    ];
     let prior = Gaussian::new(
         Vector::from_vec(vec![1.0, 0.5, 0.1, -2.0, 0.3, 0.0]),
         Matrix::from_diagonal(&Vector::from_vec(vec![4.0, 1.0, 0.5, 4.0, 1.0, 0.5])),
@@ -37,7 +44,11 @@ fn simulate(system: &System, steps: usize, seed: u64) -> Vec<Vec<Vector>> {
     (0..steps)
         .map(|_| {
             x = system.transition.sample_next(&x, &mut rng);
-            system.sensors.iter().map(|s| s.sample(&x, &mut rng)).collect()
+            system
+                .sensors
+                .iter()
+                .map(|s| s.sample(&x, &mut rng))
+                .collect()
         })
         .collect()
 }
@@ -47,12 +58,9 @@ fn rel_vec(a: &Vector, b: &Vector) -> f64 {
 }
 
 /// Drives sensors and center with a prescribed send pattern, bypassing the trigger.
-fn run_pattern(
-    system: &Arc<System>,
-    data: &[Vec<Vector>],
-    pattern: &[Vec<bool>],
-) -> Vec<Gaussian> {
-    let scheme = DistributedKfScheme::new(system.clone(), data.len(), Trigger::Always, None).unwrap();
+fn run_pattern(system: &Arc<System>, data: &[Vec<Vector>], pattern: &[Vec<bool>]) -> Vec<Gaussian> {
+    let scheme =
+        DistributedKfScheme::new(system.clone(), data.len(), Trigger::Always, None).unwrap();
     let mut inst = scheme.build().unwrap();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(0);
     let mut out = Vec::new();
@@ -63,10 +71,12 @@ fn run_pattern(
             .iter_mut()
             .zip(zs)
             .zip(&pattern[k0])
-            .map(|((s, z), &send)| match s.step(k, z, None, &mut rng).unwrap() {
-                Transmission::Send(m) if send => Transmission::Send(m).into(),
-                _ => Received::Silent,
-            })
+            .map(
+                |((s, z), &send)| match s.step(k, z, None, &mut rng).unwrap() {
+                    Transmission::Send(m) if send => Transmission::Send(m).into(),
+                    _ => Received::Silent,
+                },
+            )
             .collect();
         inst.center.step(k, &inbox).unwrap();
         out.push(inst.center.estimate().clone());
@@ -82,10 +92,16 @@ fn full_rate_globalized_dkf_equals_centralized_kf() {
     let dkf = run_pattern(&system, &data, &all);
     let mut ckf = CentralizedKf::new(system.clone());
     for (k0, zs) in data.iter().enumerate() {
-        let inbox: Vec<Received> = zs.iter().map(|z| Received::Measurement(z.clone())).collect();
+        let inbox: Vec<Received> = zs
+            .iter()
+            .map(|z| Received::Measurement(z.clone()))
+            .collect();
         ckf.step(k0 + 1, &inbox).unwrap();
         let c = ckf.estimate();
-        assert!(relative_difference(&dkf[k0].cov, &c.cov) < 1e-9, "step {k0}");
+        assert!(
+            relative_difference(&dkf[k0].cov, &c.cov) < 1e-9,
+            "step {k0}"
+        );
         assert!(rel_vec(&dkf[k0].mean, &c.mean) < 1e-9, "step {k0}");
     }
 }
@@ -141,7 +157,10 @@ fn algorithm1_rejects_two_silent_steps() {
 fn random_rate_mapping_hits_the_target_rate() {
     // p = 2 - 1/r; the stationary sending fraction of the forced-send chain is 1/(2 - p).
     for &r in &[0.5, 0.6, 0.75, 0.9, 1.0] {
-        let Trigger::Random { send_probability: p } = Trigger::random_for_rate(r) else {
+        let Trigger::Random {
+            send_probability: p,
+        } = Trigger::random_for_rate(r)
+        else {
             unreachable!()
         };
         assert!((1.0 / (2.0 - p) - r).abs() < 1e-12);
@@ -195,8 +214,14 @@ fn debiasing_matrices_track_the_bias_of_globalized_estimates() {
         };
         let debiased = z_scores(&s1, &s2);
         let raw = z_scores(&r1, &r2);
-        assert!(debiased.amax() < 4.0, "sensor {sensor_index}: z = {debiased}");
-        assert!(raw.amax() > 10.0, "sensor {sensor_index}: raw bias z = {raw}");
+        assert!(
+            debiased.amax() < 4.0,
+            "sensor {sensor_index}: z = {debiased}"
+        );
+        assert!(
+            raw.amax() > 10.0,
+            "sensor {sensor_index}: raw bias z = {raw}"
+        );
     }
     let _ = matrix_from_rows;
 }

@@ -1,0 +1,216 @@
+//! The command line as a user meets it: bad scenario files get exit code 2 and a message that
+//! names the field; good runs write their outputs; the thread count never changes a result.
+use std::path::Path;
+use std::process::{Command, Output};
+
+const VALID: &str = r#"
+name = "tiny"
+trials = 8
+steps = 20
+seed = 1
+
+[model]
+kind = "constant-velocity-1d"
+dt = 1.0
+sigma2 = 0.1
+
+[prior]
+mean = [0.0, 1.0]
+cov_diag = [1.0, 1.0]
+
+[groups]
+position = [0]
+
+[[sensors]]
+observe = [0]
+R_diag = [1.0]
+
+[[sensors]]
+H = [[1.0, 0.0]]
+R = [[2.0]]
+
+[[schemes]]
+kind = "centralized-kf"
+
+[[schemes]]
+kind = "dkf-alg1-random"
+sweep.rate = [0.5, 1.0]
+"#;
+
+fn hushfuse(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hushfuse"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("binary runs")
+}
+
+fn run_text(text: &str) -> (Option<i32>, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scenario.toml");
+    std::fs::write(&path, text).unwrap();
+    let out = hushfuse(&["run", path.to_str().unwrap()], dir.path());
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn valid_scenario_runs_and_writes_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scenario.toml");
+    std::fs::write(&path, VALID).unwrap();
+    let out = hushfuse(&["run", path.to_str().unwrap(), "--out", "o"], dir.path());
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("Centralized KF (all data)"), "{stdout}");
+    for f in [
+        "summary.json",
+        "per_step.csv",
+        "rmse_position_per_step.svg",
+        "mse_trace_vs_rate.svg",
+    ] {
+        assert!(dir.path().join("o").join(f).exists(), "missing {f}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("o/summary.json")).unwrap())
+            .unwrap();
+    for key in ["scenario", "trials", "steps", "seed", "schemes"] {
+        assert!(json.get(key).is_some(), "summary.json lacks {key}");
+    }
+    let s = &json["schemes"][0];
+    for key in [
+        "name",
+        "params",
+        "rmse",
+        "mean_rmse",
+        "mse",
+        "trace",
+        "anees",
+        "rate",
+        "transmissions_per_step",
+        "bits_per_step",
+    ] {
+        assert!(s.get(key).is_some(), "scheme entry lacks {key}");
+    }
+    assert_eq!(s["rmse"]["position"].as_array().unwrap().len(), 20);
+    // All-send: both sensors every step, one 32-bit component each.
+    assert_eq!(s["rate"].as_f64().unwrap(), 1.0);
+    assert_eq!(s["bits_per_step"].as_f64().unwrap(), 64.0);
+}
+
+/// Each bad file must exit with code 2 and name the offending field.
+#[test]
+fn malformed_scenarios_exit_2_and_name_the_field() {
+    let cases: &[(&str, &str, &str)] = &[
+        ("trials = 8", "trials = 0", "trials"),
+        ("R_diag = [1.0]", "R_diag = [1.0, 2.0]", "sensors[0].R_diag"),
+        ("R = [[2.0]]", "R = [[-2.0]]", "sensors[1].R"),
+        ("H = [[1.0, 0.0]]", "H = [[1.0, 0.0, 0.0]]", "sensors[1].H"),
+        ("observe = [0]", "observe = [5]", "sensors[0].observe"),
+        (
+            "cov_diag = [1.0, 1.0]",
+            "cov = [[1.0, 2.0], [2.0, 1.0]]",
+            "prior.cov",
+        ),
+        ("mean = [0.0, 1.0]", "mean = [0.0, 1.0, 2.0]", "prior.mean"),
+        ("sweep.rate = [0.5, 1.0]", "sweep.rate = [0.3, 1.0]", "rate"),
+        (
+            "kind = \"centralized-kf\"",
+            "kind = \"telepathy\"",
+            "unknown scheme",
+        ),
+        ("R_diag = [1.0]", "R_diag = [nan]", "sensors[0].R_diag"),
+        ("position = [0]", "position = [7]", "groups.position"),
+        ("seed = 1\n", "", "seed"),
+        ("dt = 1.0", "dt = -1.0", "model"),
+        (
+            "kind = \"dkf-alg1-random\"",
+            "kind = \"dkf-alg1-random\"\nalpha = 3",
+            "alpha",
+        ),
+    ];
+    for (from, to, field) in cases {
+        assert!(
+            VALID.contains(from),
+            "test case pattern {from:?} not in VALID"
+        );
+        let text = VALID.replacen(from, to, 1);
+        let (code, stderr) = run_text(&text);
+        assert_eq!(code, Some(2), "case {to:?}: stderr {stderr}");
+        assert!(
+            stderr.contains("scenario.toml"),
+            "case {to:?}: no file name in {stderr}"
+        );
+        assert!(
+            stderr.contains(field),
+            "case {to:?}: {field:?} not named in {stderr}"
+        );
+        assert!(
+            !stderr.contains("panicked"),
+            "case {to:?} panicked: {stderr}"
+        );
+    }
+    let (code, stderr) = run_text("this is [ not toml");
+    assert_eq!(code, Some(2), "{stderr}");
+}
+
+#[test]
+fn missing_file_and_unknown_builtin_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = hushfuse(&["run", "nope.toml"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    let out = hushfuse(&["reproduce", "no-such-figure"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn one_and_two_threads_give_identical_summaries() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut outputs = Vec::new();
+    for threads in ["1", "2"] {
+        let out_dir = format!("out{threads}");
+        let out = hushfuse(
+            &[
+                "run",
+                "default",
+                "--trials",
+                "24",
+                "--threads",
+                threads,
+                "--out",
+                &out_dir,
+            ],
+            dir.path(),
+        );
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        outputs.push(std::fs::read(dir.path().join(out_dir).join("summary.json")).unwrap());
+    }
+    assert!(!outputs[0].is_empty());
+    assert!(
+        outputs[0] == outputs[1],
+        "summary.json differs between 1 and 2 threads"
+    );
+}
+
+#[test]
+fn list_names_every_builtin() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = hushfuse(&["list"], dir.path());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("default") && stdout.contains("dormann-fig1"),
+        "{stdout}"
+    );
+}
