@@ -49,7 +49,7 @@ enum Command {
     List,
     /// Run a built-in paper scenario and print our numbers beside the paper's, and its claims.
     Reproduce {
-        /// Built-in scenario id, e.g. dormann-fig1.
+        /// Built-in scenario id (e.g. dormann-fig1) or a scenario file with a [paper] section.
         id: String,
         #[command(flatten)]
         args: RunArgs,
@@ -68,7 +68,7 @@ fn main() -> ExitCode {
         None => run("default", &RunArgs::default(), false),
         Some(Command::Run { scenario, args }) => run(&scenario, &args, false),
         Some(Command::Reproduce { id, args }) => {
-            if builtin::get(&id).is_none() {
+            if builtin::get(&id).is_none() && !Path::new(&id).exists() {
                 Err(Failure::Input(format!(
                     "unknown built-in scenario {id:?}; `hushfuse list` shows them"
                 )))

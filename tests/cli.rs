@@ -214,3 +214,66 @@ fn list_names_every_builtin() {
         "{stdout}"
     );
 }
+
+#[test]
+fn reproduce_prints_published_numbers_and_claims() {
+    let text = format!(
+        "{VALID}\n[paper]\ncitation = \"test paper, Table 9\"\n\
+         [[paper.published]]\nscheme = \"Algorithm 1 (random)\"\nparams = {{ rate = 0.5 }}\n\
+         metric = \"rate\"\nvalue = 0.5\nsource = \"Table 9\"\n\
+         [[paper.claims]]\nkind = \"reaches-rate-below\"\ntext = \"reaches 0.75\"\n\
+         scheme = \"Algorithm 1 (random)\"\nrate = 0.75\n\
+         [[paper.claims]]\nkind = \"reaches-rate-below\"\ntext = \"reaches 0.1\"\n\
+         scheme = \"Algorithm 1 (random)\"\nrate = 0.1\n"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("paper.toml");
+    std::fs::write(&path, text).unwrap();
+    let out = hushfuse(
+        &["reproduce", path.to_str().unwrap(), "--out", "o"],
+        dir.path(),
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("Reproducing: test paper, Table 9"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("rate (Table 9): paper 0.5000, ours 0."),
+        "{stdout}"
+    );
+    assert!(stdout.contains("[holds] reaches 0.75"), "{stdout}");
+    assert!(stdout.contains("[FAILS] reaches 0.1"), "{stdout}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("o/summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["paper"]["claims"][0]["holds"], true);
+    assert_eq!(json["paper"]["claims"][1]["holds"], false);
+}
+
+#[test]
+fn reproduce_dormann_fig1_runs_with_few_trials() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = hushfuse(
+        &["reproduce", "dormann-fig1", "--trials", "8", "--out", "o"],
+        dir.path(),
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("Algorithm 2 reaches communication rates below 0.5"),
+        "{stdout}"
+    );
+    assert!(dir.path().join("o/mse_trace_vs_rate.svg").exists());
+}
