@@ -2,6 +2,7 @@
 //! returns the next estimate; only the simulator owns a time loop.
 pub mod information;
 pub mod kf;
+pub mod particle;
 
 use crate::linalg::{LinalgError, Matrix, Vector};
 
