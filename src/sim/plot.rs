@@ -5,7 +5,7 @@ use super::results::{curve_points, Summary};
 use plotters::prelude::*;
 use std::path::Path;
 
-const COLORS: [RGBColor; 8] = [
+const COLORS: [RGBColor; 12] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
@@ -14,6 +14,10 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(140, 86, 75),
     RGBColor(227, 119, 194),
     RGBColor(23, 190, 207),
+    RGBColor(188, 189, 34),
+    RGBColor(127, 127, 127),
+    RGBColor(0, 0, 0),
+    RGBColor(255, 187, 120),
 ];
 
 fn color(i: usize) -> RGBColor {
@@ -136,20 +140,30 @@ pub fn lines(
 pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<String>, String> {
     let mut written = Vec::new();
     let group = summary.group_order.first().cloned().unwrap_or_default();
-    // Unswept schemes together; each swept scheme on its own figure (one line per point).
+    // Every variant on one figure when that stays readable; otherwise the unswept schemes
+    // together and each swept scheme on a figure of its own (one line per sweep point).
+    let few = summary.schemes.len() <= 12;
+    let name = |s: &super::results::SchemeSummary| {
+        if s.params.is_empty() {
+            s.name.clone()
+        } else {
+            format!("{} [{}]", s.name, super::results::params_text(&s.params))
+        }
+    };
     let single: Vec<Line> = summary
         .schemes
         .iter()
-        .filter(|s| exp.curves[s.curve].swept.is_empty())
-        .map(|s| Line {
-            name: s.name.clone(),
+        .enumerate()
+        .filter(|(_, s)| few || exp.curves[s.curve].swept.is_empty())
+        .map(|(i, s)| Line {
+            name: name(s),
             points: s.rmse[&group]
                 .iter()
                 .enumerate()
                 .map(|(k, v)| ((k + 1) as f64, *v))
                 .collect(),
             dashed: false,
-            color: s.curve,
+            color: if few { i } else { s.curve },
         })
         .collect();
     if !single.is_empty() {
@@ -167,7 +181,7 @@ pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<
         .curves
         .iter()
         .enumerate()
-        .filter(|(_, c)| !c.swept.is_empty())
+        .filter(|(_, c)| !few && !c.swept.is_empty())
     {
         let data: Vec<Line> = summary
             .schemes
