@@ -15,14 +15,30 @@ pub enum Message {
     /// deterministic function of the model that the fusion center computes itself
     /// (seed 004: the globalized covariance is common to all sensors).
     Estimate(Vector),
+    /// An encoded frame, exactly the octets a radio sends (seed 003's 802.15.4 codecs), with
+    /// the paper's payload bits c_i.
+    Frame { octets: Vec<u8>, payload_bits: u32 },
 }
 
 impl Message {
-    /// Payload bits of this message under the default codec (32 bits per component).
+    /// Payload bits of this message: 32 per component unless a codec defines its own.
     pub fn bits(&self) -> u64 {
         match self {
             Message::Measurement(z) => z.len() as u64 * BITS_PER_COMPONENT,
             Message::Estimate(x) => x.len() as u64 * BITS_PER_COMPONENT,
+            Message::Frame { payload_bits, .. } => u64::from(*payload_bits),
+        }
+    }
+
+    /// Bits of the whole IEEE 802.15.4 MAC frame (MPDU) that carries the message: the MAC
+    /// header and footer of [`crate::link::codec802154`] (9 + 2 octets) around the payload in
+    /// whole octets. A codec's frame is counted as it is. A real radio pays for this, not for
+    /// the payload alone.
+    pub fn frame_bits(&self) -> u64 {
+        use crate::link::codec802154::{FCS_OCTETS, MHR_OCTETS};
+        match self {
+            Message::Frame { octets, .. } => 8 * octets.len() as u64,
+            other => 8 * (MHR_OCTETS + FCS_OCTETS) as u64 + 8 * other.bits().div_ceil(8),
         }
     }
 }
@@ -48,6 +64,8 @@ pub enum Received {
     Measurement(Vector),
     /// A state estimate arrived.
     Estimate(Vector),
+    /// Frame octets arrived; the fusion center decodes them (and rejects corrupt ones).
+    Frame(Vec<u8>),
 }
 
 impl From<Transmission> for Received {
@@ -56,6 +74,7 @@ impl From<Transmission> for Received {
             Transmission::Silent => Received::Silent,
             Transmission::Send(Message::Measurement(z)) => Received::Measurement(z),
             Transmission::Send(Message::Estimate(x)) => Received::Estimate(x),
+            Transmission::Send(Message::Frame { octets, .. }) => Received::Frame(octets),
         }
     }
 }

@@ -9,6 +9,10 @@ pub struct Traffic {
     pub messages: u64,
     /// Payload bits of those messages.
     pub bits: u64,
+    /// Bits of the 802.15.4 MAC frames that carry them.
+    pub frame_bits: u64,
+    /// Bits the fusion center sent back to sensors (feedback).
+    pub downlink_bits: u64,
 }
 
 /// Which sensors may talk at a step.
@@ -43,6 +47,7 @@ pub fn deliver(
         if let Transmission::Send(m) = &t {
             traffic.messages += 1;
             traffic.bits += m.bits();
+            traffic.frame_bits += m.frame_bits();
         }
         inbox.push(t.into());
     }
@@ -66,6 +71,8 @@ mod tests {
         let t = deliver(tx, &mut inbox);
         assert_eq!(t.messages, 2);
         assert_eq!(t.bits, 64 + 192);
+        // (9 + 2) octets of MAC header and footer around 8 and 24 payload octets.
+        assert_eq!(t.frame_bits, 8 * (11 + 8) + 8 * (11 + 24));
         assert_eq!(inbox[0], Received::Silent);
     }
 

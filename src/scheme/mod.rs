@@ -31,12 +31,42 @@ impl System {
     }
 }
 
-/// What the fusion center sends back to sensors (seed 000's feedback modes, seed 003's
-/// y_hat and Delta). Unused by schemes without feedback.
+/// What the fusion center sends back to sensors before they measure. Unused by schemes
+/// without feedback. Its bits are counted as downlink traffic.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Feedback {
-    pub mean: Vector,
-    pub cov: Option<crate::linalg::Matrix>,
+pub enum Feedback {
+    /// The fused prediction, with its covariance or not (seed 000's CFwMD / CFwMD2).
+    Prediction {
+        mean: Vector,
+        cov: Option<crate::linalg::Matrix>,
+    },
+    /// Per sensor: the predicted measurement y_hat and the innovation standard deviation Delta
+    /// of seed 003 eq. (2), for activated sensors; `None` for the others.
+    InnovationReference(Vec<Option<InnovationReference>>),
+}
+
+/// Seed 003 eq. (2): y_hat = h x_{k|k-1}, Delta = sqrt(h P h^T + R).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InnovationReference {
+    pub y_hat: f64,
+    pub delta: f64,
+}
+
+impl Feedback {
+    /// Downlink bits, 32 per real number sent to each sensor that receives something.
+    pub fn bits(&self, n_sensors: usize) -> u64 {
+        let c = crate::link::BITS_PER_COMPONENT;
+        match self {
+            Feedback::Prediction { mean, cov } => {
+                let n = mean.len() as u64;
+                let per = n + cov.as_ref().map_or(0, |_| n * (n + 1) / 2);
+                per * c * n_sensors as u64
+            }
+            Feedback::InnovationReference(refs) => {
+                refs.iter().filter(|r| r.is_some()).count() as u64 * 2 * c
+            }
+        }
+    }
 }
 
 /// Why a scheme could not be built or could not take a step.

@@ -16,7 +16,9 @@ impl Layout {
     pub const TRACE: usize = 2;
     pub const MESSAGES: usize = 3;
     pub const BITS: usize = 4;
-    const FIXED: usize = 5;
+    pub const FRAME_BITS: usize = 5;
+    pub const DOWNLINK_BITS: usize = 6;
+    const FIXED: usize = 7;
 
     /// Entries per step.
     pub fn width(&self) -> usize {
@@ -160,6 +162,8 @@ impl TrialObserver<'_> {
         row[Layout::TRACE] += trace;
         row[Layout::MESSAGES] += traffic.messages as f64;
         row[Layout::BITS] += traffic.bits as f64;
+        row[Layout::FRAME_BITS] += traffic.frame_bits as f64;
+        row[Layout::DOWNLINK_BITS] += traffic.downlink_bits as f64;
         if k >= self.steady_from {
             self.acc[0] += total;
             self.acc[1] += trace;
@@ -199,6 +203,8 @@ mod tests {
         let traffic = Traffic {
             messages: 3,
             bits: 96,
+            frame_bits: 400,
+            downlink_bits: 64,
         };
         t.record(1, &truth, &est, traffic).unwrap();
         t.record(2, &truth, &est, traffic).unwrap();
@@ -210,6 +216,8 @@ mod tests {
         assert_eq!(s.at(1, Layout::NEES), 2.0); // 1/1 + 4/4
         assert_eq!(s.at(1, Layout::TRACE), 5.0);
         assert_eq!(s.at(1, Layout::BITS), 96.0);
+        assert_eq!(s.at(1, Layout::FRAME_BITS), 400.0);
+        assert_eq!(s.at(1, Layout::DOWNLINK_BITS), 64.0);
         assert_eq!(s.steady_mse.sum, 5.0);
         let mut m = s.clone();
         m.merge(&s);

@@ -46,6 +46,10 @@ pub struct SchemeSummary {
     pub transmissions_per_step: f64,
     /// Mean payload bits sent per step (all sensors).
     pub bits_per_step: f64,
+    /// Mean bits of the 802.15.4 MAC frames sent per step (header, payload, footer).
+    pub frame_bits_per_step: f64,
+    /// Mean feedback bits from the fusion center to the sensors per step.
+    pub downlink_bits_per_step: f64,
     pub steady_state: SteadyState,
 }
 
@@ -89,6 +93,8 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
             let anees_per_step: Vec<f64> = col(Layout::NEES).into_iter().map(|x| x / n).collect();
             let messages: f64 = col(Layout::MESSAGES).iter().sum();
             let bits: f64 = col(Layout::BITS).iter().sum();
+            let frame_bits: f64 = col(Layout::FRAME_BITS).iter().sum();
+            let downlink_bits: f64 = col(Layout::DOWNLINK_BITS).iter().sum();
             let (mse_ss, mse_se) = s.steady_mse.mean_se(exp.trials);
             let (trace_ss, trace_se) = s.steady_trace.mean_se(exp.trials);
             let (nees_ss, _) = s.steady_nees.mean_se(exp.trials);
@@ -107,6 +113,8 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
                 rate: messages / (steps as f64 * n_sensors),
                 transmissions_per_step: messages / steps as f64,
                 bits_per_step: bits / steps as f64,
+                frame_bits_per_step: frame_bits / steps as f64,
+                downlink_bits_per_step: downlink_bits / steps as f64,
                 steady_state: SteadyState {
                     from_step: exp.steady_from,
                     mse: mse_ss,

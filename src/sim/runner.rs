@@ -113,7 +113,8 @@ fn run_trial(exp: &Experiment, trial: usize, sums: &mut [Sums]) -> Result<(), Ru
                 };
                 transmissions.push(t);
             }
-            let traffic = network::deliver(transmissions.drain(..), &mut inbox);
+            let mut traffic = network::deliver(transmissions.drain(..), &mut inbox);
+            traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
             if schedule != network::Schedule::All {
                 for (i, r) in inbox.iter_mut().enumerate() {
                     if !schedule.allows(k, i, n_sensors) {

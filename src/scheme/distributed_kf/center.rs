@@ -136,10 +136,10 @@ impl FusionCenter for DkfCenter {
                     };
                     info_vec += &m.cbar_p_inv * contribution;
                 }
-                Received::Measurement(_) => {
+                Received::Measurement(_) | Received::Frame(_) => {
                     return Err(SchemeError::Protocol {
                         sensor: i,
-                        message: "distributed KF expects estimates, got a measurement".into(),
+                        message: "distributed KF expects estimates".into(),
                     })
                 }
             }
