@@ -197,6 +197,8 @@ pub fn table(summary: &Summary) -> String {
             "rate",
             "tx/step",
             "bits/step",
+            "frame bits/step",
+            "downlink/step",
         ]
         .iter()
         .map(|s| s.to_string()),
@@ -212,6 +214,8 @@ pub fn table(summary: &Summary) -> String {
         r.push(format!("{:.3}", s.rate));
         r.push(format!("{:.2}", s.transmissions_per_step));
         r.push(format!("{:.0}", s.bits_per_step));
+        r.push(format!("{:.0}", s.frame_bits_per_step));
+        r.push(format!("{:.0}", s.downlink_bits_per_step));
         rows.push(r);
     }
     let widths: Vec<usize> = (0..rows[0].len())
