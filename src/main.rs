@@ -77,9 +77,11 @@ fn main() -> ExitCode {
             }
         }
         Some(Command::List) => {
-            for (name, desc, _) in builtin::BUILTIN {
-                println!("{name:<16} {desc}");
-            }
+            let text: String = builtin::BUILTIN
+                .iter()
+                .map(|(name, desc, _)| format!("{name:<20} {desc}\n"))
+                .collect();
+            print_out(&text);
             Ok(())
         }
     };
@@ -94,6 +96,12 @@ fn main() -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// Writes to stdout; a closed pipe (`hushfuse | head`) is not an error worth a panic.
+fn print_out(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }
 
 /// Loads a scenario from a path or the built-in list.
@@ -170,15 +178,15 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     let elapsed = start.elapsed().as_secs_f64();
     let summary = results::summarize(&exp, &sums);
 
-    println!(
-        "{} — {} trials x {} steps, seed {}, {} sensors ({:.1} s)\n",
+    let mut text = format!(
+        "{} — {} trials x {} steps, seed {}, {} sensors ({:.1} s)\n\n",
         summary.scenario, summary.trials, summary.steps, summary.seed, summary.sensors, elapsed
     );
-    print!("{}", results::table(&summary));
-    println!(
-        "\nMSE(ss), trace(ss): steady state from step {}; ANEES = mean NEES / state dimension (1 = consistent).",
+    text.push_str(&results::table(&summary));
+    text.push_str(&format!(
+        "\nMSE(ss), trace(ss): steady state from step {}; ANEES = mean NEES / state dimension (1 = consistent).\n",
         exp.steady_from
-    );
+    ));
 
     let paper = if reproduce || exp.paper.is_some() {
         exp.paper.as_ref().map(|p| PaperOutput {
@@ -192,7 +200,10 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     };
     if reproduce {
         if let Some(p) = &paper {
-            println!("\n{}", report::render(&exp, &p.published, &p.claims));
+            text.push_str(&format!(
+                "\n{}\n",
+                report::render(&exp, &p.published, &p.claims)
+            ));
         }
     }
 
@@ -215,6 +226,11 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     write("per_step.csv", &results::per_step_csv(&summary))?;
     let mut files = vec!["summary.json".to_string(), "per_step.csv".to_string()];
     files.extend(plot::write_all(&exp, &summary, &dir).map_err(Failure::Run)?);
-    println!("\nwrote {}: {}", dir.display(), files.join(", "));
+    text.push_str(&format!(
+        "\nwrote {}: {}\n",
+        dir.display(),
+        files.join(", ")
+    ));
+    print_out(&text);
     Ok(())
 }
