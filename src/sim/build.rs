@@ -1,13 +1,14 @@
 //! Scenario file -> validated experiment. Every check names the file, the field and what was
 //! expected, so a user can fix a file without reading Rust.
-use super::scenario::{FrontierSpec, ModelSpec, PaperSpec, ScenarioFile, SchemeParams};
+use super::scenario::{
+    FrontierSpec, ModelSpec, PaperSpec, ParamValue, Params, ScenarioFile, SchemeParams,
+};
 use crate::filter::Gaussian;
 use crate::linalg::{check_spd, Matrix, Vector};
 use crate::model::{presets, LinearSensor, LinearTransition, MeasurementModel};
 use crate::scheme::centralized::CentralizedScheme;
 use crate::scheme::distributed_kf::{DistributedKfScheme, Trigger};
 use crate::scheme::{Scheme, System};
-use std::collections::BTreeMap;
 use std::fmt;
 use std::sync::Arc;
 
@@ -40,7 +41,7 @@ pub struct Variant {
     /// Index of the scheme entry in the file (a curve).
     pub curve: usize,
     /// Parameters of this point, as written (kind-specific numbers).
-    pub params: BTreeMap<String, f64>,
+    pub params: Params,
     pub spec: SchemeParams,
     pub scheme: Box<dyn Scheme>,
 }
@@ -429,11 +430,14 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
             if curve_label.is_none() {
                 curve_label = Some(spec.default_label().to_string());
             }
-            let params: BTreeMap<String, f64> = t
+            let params: Params = t
                 .iter()
+                .filter(|(k, _)| k.as_str() != "kind")
                 .filter_map(|(k, v)| match v {
-                    toml::Value::Float(x) => Some((k.clone(), *x)),
-                    toml::Value::Integer(x) => Some((k.clone(), *x as f64)),
+                    toml::Value::Float(x) => Some((k.clone(), ParamValue::Number(*x))),
+                    toml::Value::Integer(x) => Some((k.clone(), ParamValue::Number(*x as f64))),
+                    toml::Value::Boolean(b) => Some((k.clone(), ParamValue::Flag(*b))),
+                    toml::Value::String(s) => Some((k.clone(), ParamValue::Text(s.clone()))),
                     _ => None,
                 })
                 .collect();

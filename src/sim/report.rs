@@ -192,7 +192,7 @@ pub fn compare_published(exp: &Experiment, summary: &Summary) -> Vec<Comparison>
                 s.name == p.scheme
                     && p.params
                         .iter()
-                        .all(|(k, v)| s.params.get(k).is_some_and(|x| (x - v).abs() < 1e-12))
+                        .all(|(k, v)| s.params.get(k).is_some_and(|x| x.matches(v)))
             });
             let (ours, se) = match found {
                 None => (None, None),

@@ -1,6 +1,7 @@
 //! From merged sums to the numbers people read: `summary.json`, `per_step.csv` and the table.
 use super::build::Experiment;
 use super::metrics::{Layout, Sums};
+use super::scenario::Params;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -27,7 +28,7 @@ pub struct SchemeSummary {
     pub name: String,
     pub kind: String,
     pub curve: usize,
-    pub params: BTreeMap<String, f64>,
+    pub params: Params,
     /// RMSE per state group per step.
     pub rmse: BTreeMap<String, Vec<f64>>,
     /// Time average of the per-step RMSE, per group.
@@ -144,17 +145,11 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
 }
 
 /// Compact "k=v, k=v" of a variant's parameters.
-pub fn params_text(p: &BTreeMap<String, f64>) -> String {
+pub fn params_text(p: &Params) -> String {
     p.iter()
-        .map(|(k, v)| format!("{k}={}", trim_float(*v)))
+        .map(|(k, v)| format!("{k}={v}"))
         .collect::<Vec<_>>()
         .join(", ")
-}
-
-fn trim_float(v: f64) -> String {
-    let s = format!("{v:.6}");
-    let s = s.trim_end_matches('0').trim_end_matches('.');
-    s.to_string()
 }
 
 /// `per_step.csv`: one row per scheme variant and step.

@@ -4,6 +4,41 @@
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
+/// A scheme parameter's value as written in a file.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(untagged)]
+pub enum ParamValue {
+    Number(f64),
+    Flag(bool),
+    Text(String),
+}
+
+impl ParamValue {
+    /// Same value (numbers to 1e-12).
+    pub fn matches(&self, other: &ParamValue) -> bool {
+        match (self, other) {
+            (ParamValue::Number(a), ParamValue::Number(b)) => (a - b).abs() < 1e-12,
+            (a, b) => a == b,
+        }
+    }
+}
+
+impl std::fmt::Display for ParamValue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ParamValue::Number(v) => {
+                let s = format!("{v:.6}");
+                write!(f, "{}", s.trim_end_matches('0').trim_end_matches('.'))
+            }
+            ParamValue::Flag(b) => write!(f, "{b}"),
+            ParamValue::Text(t) => write!(f, "{t}"),
+        }
+    }
+}
+
+/// A scheme's parameters by name.
+pub type Params = BTreeMap<String, ParamValue>;
+
 /// A whole scenario file.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -176,9 +211,9 @@ pub struct PaperSpec {
 pub struct PublishedValue {
     /// Curve label of the scheme.
     pub scheme: String,
-    /// Sweep parameters identifying the variant (empty for unswept schemes).
+    /// Parameters identifying the variant (empty for unswept schemes).
     #[serde(default)]
-    pub params: BTreeMap<String, f64>,
+    pub params: Params,
     /// `mse`, `trace`, `rate`, `rmse:<group>`, `transmissions_per_step`.
     pub metric: String,
     pub value: f64,
