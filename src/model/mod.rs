@@ -1,10 +1,12 @@
 //! Motion and sensor models, as small capability traits so that each filter asks only for what
 //! it uses: a Kalman filter needs a [`LinearTransition`] and a [`MeasurementModel`]'s Jacobian;
 //! the extended Kalman filter is the same update with the Jacobian evaluated at the prediction.
+pub mod nonlinear;
 pub mod presets;
 pub mod sensor;
 pub mod transition;
 
+pub use nonlinear::{Placement, RangeSensor, RssSensor};
 pub use sensor::{LinearSensor, MeasurementModel};
 pub use transition::LinearTransition;
 

@@ -24,6 +24,11 @@ pub trait MeasurementModel: Debug + Send + Sync {
     fn as_linear(&self) -> Option<&LinearSensor> {
         None
     }
+    /// The sensor's planar position, for sensors that have one (used to activate the sensors
+    /// nearest to the target).
+    fn position(&self) -> Option<[f64; 2]> {
+        None
+    }
     /// Draw z = h(x) + v.
     fn sample(&self, x: &Vector, rng: &mut dyn RngCore) -> Vector {
         let v = Vector::from_fn(self.meas_dim(), |_, _| StandardNormal.sample(rng));
