@@ -111,6 +111,9 @@ impl MeasurementModel for RangeSensor {
     fn position(&self) -> Option<[f64; 2]> {
         Some(self.placement.position)
     }
+    fn target_indices(&self) -> Option<[usize; 2]> {
+        Some(self.placement.indices)
+    }
 }
 
 /// Received-signal-strength sensor z = sqrt(P0 / (1 + alpha d^n)) + v, v ~ N(0, r)
@@ -196,6 +199,9 @@ impl MeasurementModel for RssSensor {
     }
     fn position(&self) -> Option<[f64; 2]> {
         Some(self.placement.position)
+    }
+    fn target_indices(&self) -> Option<[usize; 2]> {
+        Some(self.placement.indices)
     }
 }
 

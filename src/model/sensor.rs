@@ -29,6 +29,10 @@ pub trait MeasurementModel: Debug + Send + Sync {
     fn position(&self) -> Option<[f64; 2]> {
         None
     }
+    /// State indices of the target position the sensor measures from, for placed sensors.
+    fn target_indices(&self) -> Option<[usize; 2]> {
+        None
+    }
     /// Draw z = h(x) + v.
     fn sample(&self, x: &Vector, rng: &mut dyn RngCore) -> Vector {
         let v = Vector::from_fn(self.meas_dim(), |_, _| StandardNormal.sample(rng));

@@ -2,6 +2,7 @@
 //! paper; the simulator drives every scheme through the same loop on the same data.
 pub mod centralized;
 pub mod distributed_kf;
+pub mod quantized_innovation;
 
 use crate::filter::{FilterError, Gaussian};
 use crate::linalg::{LinalgError, Vector};

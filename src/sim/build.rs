@@ -2,7 +2,11 @@
 //! expected, so a user can fix a file without reading Rust.
 use super::scenario::{
     FrontierSpec, ModelSpec, PaperSpec, ParamValue, Params, ScenarioFile, SchemeParams,
+    SensorFieldSpec, SensorSpec,
 };
+use crate::model::{Placement, RangeSensor, RssSensor};
+use crate::scheme::quantized_innovation::{Activation, QuantizedInnovationScheme, QuantizerChoice};
+use rand::{Rng, SeedableRng};
 use crate::filter::Gaussian;
 use crate::linalg::{check_spd, Matrix, Vector};
 use crate::model::{presets, LinearSensor, LinearTransition, MeasurementModel};
@@ -229,78 +233,20 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
     let prior = Gaussian::new(Vector::from_vec(p.mean.clone()), cov);
 
     // Sensors.
-    if file_spec.sensors.is_empty() {
-        return Err(ctx.err("sensors", "expected at least one [[sensors]] entry"));
-    }
     let mut sensors: Vec<Arc<dyn MeasurementModel>> = Vec::new();
     for (i, s) in file_spec.sensors.iter().enumerate() {
-        let f = |name: &str| format!("sensors[{i}].{name}");
-        let h = match (&s.h, &s.observe) {
-            (Some(h), None) => {
-                let h = matrix(&ctx, &f("H"), h)?;
-                if h.ncols() != n {
-                    return Err(ctx.err(
-                        f("H"),
-                        format!(
-                            "expected {n} columns (the state dimension), got {}",
-                            h.ncols()
-                        ),
-                    ));
-                }
-                h
-            }
-            (None, Some(idx)) => {
-                if idx.is_empty() {
-                    return Err(ctx.err(f("observe"), "expected at least one state index"));
-                }
-                if let Some(bad) = idx.iter().find(|&&j| j >= n) {
-                    return Err(ctx.err(
-                        f("observe"),
-                        format!("state index {bad} is outside the state dimension {n}"),
-                    ));
-                }
-                let mut h = Matrix::zeros(idx.len(), n);
-                for (row, &j) in idx.iter().enumerate() {
-                    h[(row, j)] = 1.0;
-                }
-                h
-            }
-            _ => {
-                return Err(ctx.err(
-                    format!("sensors[{i}]"),
-                    "give exactly one of `H` and `observe`",
-                ))
-            }
-        };
-        let m = h.nrows();
-        let (r, rname) = match (&s.r, &s.r_diag) {
-            (Some(r), None) => (matrix(&ctx, &f("R"), r)?, f("R")),
-            (None, Some(d)) => {
-                if d.len() != m {
-                    return Err(ctx.err(
-                        f("R_diag"),
-                        format!(
-                            "expected {m} entries (one per measured component), got {}",
-                            d.len()
-                        ),
-                    ));
-                }
-                (
-                    Matrix::from_diagonal(&Vector::from_vec(d.clone())),
-                    f("R_diag"),
-                )
-            }
-            _ => {
-                return Err(ctx.err(
-                    format!("sensors[{i}]"),
-                    "give exactly one of `R` and `R_diag`",
-                ))
-            }
-        };
-        covariance(&ctx, &rname, &r, m)?;
-        let sensor =
-            LinearSensor::new(h, r).map_err(|e| ctx.err(format!("sensors[{i}]"), e.to_string()))?;
-        sensors.push(Arc::new(sensor));
+        sensors.push(sensor(&ctx, &format!("sensors[{i}]"), s, n)?);
+    }
+    for (j, field) in file_spec.sensor_fields.iter().enumerate() {
+        for (m, spec) in sensor_field(&ctx, j, field)?.iter().enumerate() {
+            sensors.push(sensor(&ctx, &format!("sensor_fields[{j}] (sensor {m})"), spec, n)?);
+        }
+    }
+    if sensors.is_empty() {
+        return Err(ctx.err(
+            "sensors",
+            "expected at least one [[sensors]] or [[sensor_fields]] entry",
+        ));
     }
 
     // Groups.
@@ -485,6 +431,233 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
     })
 }
 
+/// One sensor from its spec; `at` names it in errors.
+fn sensor(
+    ctx: &Ctx,
+    at: &str,
+    s: &SensorSpec,
+    n: usize,
+) -> Result<Arc<dyn MeasurementModel>, ScenarioError> {
+    let f = |name: &str| format!("{at}.{name}");
+    let kind = s.kind.as_deref().unwrap_or("linear");
+    if kind != "linear" {
+        return placed_sensor(ctx, at, kind, s, n);
+    }
+    for (name, present) in [
+        ("position", s.position.is_some()),
+        ("position_indices", s.position_indices.is_some()),
+        ("p0", s.p0.is_some()),
+        ("path_loss_alpha", s.path_loss_alpha.is_some()),
+        ("path_loss_exponent", s.path_loss_exponent.is_some()),
+    ] {
+        if present {
+            return Err(ctx.err(f(name), "only for `range` and `rss` sensors"));
+        }
+    }
+    let h = match (&s.h, &s.observe) {
+        (Some(h), None) => {
+            let h = matrix(&ctx, &f("H"), h)?;
+            if h.ncols() != n {
+                return Err(ctx.err(
+                    f("H"),
+                    format!(
+                        "expected {n} columns (the state dimension), got {}",
+                        h.ncols()
+                    ),
+                ));
+            }
+            h
+        }
+        (None, Some(idx)) => {
+            if idx.is_empty() {
+                return Err(ctx.err(f("observe"), "expected at least one state index"));
+            }
+            if let Some(bad) = idx.iter().find(|&&j| j >= n) {
+                return Err(ctx.err(
+                    f("observe"),
+                    format!("state index {bad} is outside the state dimension {n}"),
+                ));
+            }
+            let mut h = Matrix::zeros(idx.len(), n);
+            for (row, &j) in idx.iter().enumerate() {
+                h[(row, j)] = 1.0;
+            }
+            h
+        }
+        _ => {
+            return Err(ctx.err(
+                at.to_string(),
+                "give exactly one of `H` and `observe`",
+            ))
+        }
+    };
+    let m = h.nrows();
+    let (r, rname) = match (&s.r, &s.r_diag) {
+        (Some(r), None) => (matrix(&ctx, &f("R"), r)?, f("R")),
+        (None, Some(d)) => {
+            if d.len() != m {
+                return Err(ctx.err(
+                    f("R_diag"),
+                    format!(
+                        "expected {m} entries (one per measured component), got {}",
+                        d.len()
+                    ),
+                ));
+            }
+            (
+                Matrix::from_diagonal(&Vector::from_vec(d.clone())),
+                f("R_diag"),
+            )
+        }
+        _ => {
+            return Err(ctx.err(
+                at.to_string(),
+                "give exactly one of `R` and `R_diag`",
+            ))
+        }
+    };
+    covariance(&ctx, &rname, &r, m)?;
+    let sensor = LinearSensor::new(h, r).map_err(|e| ctx.err(at, e.to_string()))?;
+    Ok(Arc::new(sensor))
+}
+
+/// A range or RSS sensor: position, target indices and a scalar noise variance.
+fn placed_sensor(
+    ctx: &Ctx,
+    at: &str,
+    kind: &str,
+    s: &SensorSpec,
+    n: usize,
+) -> Result<Arc<dyn MeasurementModel>, ScenarioError> {
+    let f = |name: &str| format!("{at}.{name}");
+    if s.h.is_some() || s.observe.is_some() {
+        return Err(ctx.err(at, format!("a `{kind}` sensor has no `H` or `observe`")));
+    }
+    let position = s
+        .position
+        .ok_or_else(|| ctx.err(f("position"), "expected the sensor position [x, y]"))?;
+    let indices = s.position_indices.ok_or_else(|| {
+        ctx.err(
+            f("position_indices"),
+            "expected the state indices of the target's [x, y]",
+        )
+    })?;
+    if let Some(bad) = indices.iter().find(|&&j| j >= n) {
+        return Err(ctx.err(
+            f("position_indices"),
+            format!("state index {bad} is outside the state dimension {n}"),
+        ));
+    }
+    let r = match (&s.r, &s.r_diag) {
+        (Some(r), None) if r.len() == 1 && r[0].len() == 1 => r[0][0],
+        (None, Some(d)) if d.len() == 1 => d[0],
+        _ => {
+            return Err(ctx.err(
+                f("R"),
+                "expected the scalar noise variance as R = [[r]] or R_diag = [r]",
+            ))
+        }
+    };
+    if !(r.is_finite() && r > 0.0) {
+        return Err(ctx.err(f("R"), format!("expected a positive variance, got {r}")));
+    }
+    let placement = Placement {
+        position,
+        indices,
+        state_dim: n,
+    };
+    let built: Result<Arc<dyn MeasurementModel>, _> = match kind {
+        "range" => RangeSensor::new(placement, r).map(|s| Arc::new(s) as Arc<dyn MeasurementModel>),
+        "rss" => {
+            let need = |v: Option<f64>, name: &str| {
+                v.ok_or_else(|| ctx.err(f(name), "expected a positive number for an `rss` sensor"))
+            };
+            RssSensor::new(
+                placement,
+                need(s.p0, "p0")?,
+                need(s.path_loss_alpha, "path_loss_alpha")?,
+                need(s.path_loss_exponent, "path_loss_exponent")?,
+                r,
+            )
+            .map(|s| Arc::new(s) as Arc<dyn MeasurementModel>)
+        }
+        other => {
+            return Err(ctx.err(
+                f("kind"),
+                format!("unknown sensor kind {other:?}; expected `linear`, `range` or `rss`"),
+            ))
+        }
+    };
+    built.map_err(|e| ctx.err(at, e.to_string()))
+}
+
+/// The sensor specs of a field: random positions from the field's own seed, or grid cells.
+fn sensor_field(
+    ctx: &Ctx,
+    j: usize,
+    field: &SensorFieldSpec,
+) -> Result<Vec<SensorSpec>, ScenarioError> {
+    let at = |name: &str| format!("sensor_fields[{j}].{name}");
+    let [x0, x1, y0, y1] = field.area;
+    if !(field.area.iter().all(|v| v.is_finite()) && x0 < x1 && y0 < y1) {
+        return Err(ctx.err(at("area"), "expected [x_min, x_max, y_min, y_max] with min < max"));
+    }
+    let positions: Vec<[f64; 2]> = match field.layout.as_str() {
+        "random" => {
+            let count = field
+                .count
+                .filter(|&c| c > 0)
+                .ok_or_else(|| ctx.err(at("count"), "expected a positive number of sensors"))?;
+            let seed = field
+                .seed
+                .ok_or_else(|| ctx.err(at("seed"), "expected the placement seed"))?;
+            let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
+            (0..count)
+                .map(|_| {
+                    let u: f64 = rng.random();
+                    let v: f64 = rng.random();
+                    [x0 + u * (x1 - x0), y0 + v * (y1 - y0)]
+                })
+                .collect()
+        }
+        "grid" => {
+            let [nx, ny] = field
+                .grid
+                .filter(|g| g[0] > 0 && g[1] > 0)
+                .ok_or_else(|| ctx.err(at("grid"), "expected [nx, ny] with positive counts"))?;
+            let mut p = Vec::with_capacity(nx * ny);
+            for iy in 0..ny {
+                for ix in 0..nx {
+                    p.push([
+                        x0 + (ix as f64 + 0.5) * (x1 - x0) / nx as f64,
+                        y0 + (iy as f64 + 0.5) * (y1 - y0) / ny as f64,
+                    ]);
+                }
+            }
+            p
+        }
+        other => {
+            return Err(ctx.err(
+                at("layout"),
+                format!("unknown layout {other:?}; expected `random` or `grid`"),
+            ))
+        }
+    };
+    Ok(positions
+        .into_iter()
+        .map(|position| SensorSpec {
+            kind: Some(field.kind.clone()),
+            position: Some(position),
+            position_indices: Some(field.position_indices),
+            r_diag: Some(vec![field.r]),
+            p0: field.p0,
+            path_loss_alpha: field.path_loss_alpha,
+            path_loss_exponent: field.path_loss_exponent,
+            ..SensorSpec::default()
+        })
+        .collect())
+}
+
 /// Cartesian product of the sweep lists, in file order.
 fn grid(sweep: &[(String, Vec<toml::Value>)]) -> Vec<Vec<(String, toml::Value)>> {
     let mut points: Vec<Vec<(String, toml::Value)>> = vec![Vec::new()];
@@ -583,6 +756,97 @@ fn scheme(
             let b_inv = crate::linalg::spd_inverse(&bm)
                 .map_err(|e| ctx.err(format!("{at}.B"), e.to_string()))?;
             dkf(Trigger::Bounded { alpha, b_inv }, Some(bm))
+        }
+        SchemeParams::QuantizedInnovation {
+            quantizer,
+            bits,
+            levels,
+            flag_zone,
+            activate,
+        } => {
+            let need_bits = || -> Result<u8, ScenarioError> {
+                bits.ok_or_else(|| {
+                    ctx.err(format!("{at}.bits"), format!("quantizer {quantizer:?} needs `bits`"))
+                })
+            };
+            let unused = |name: &str, present: bool| -> Result<(), ScenarioError> {
+                if present {
+                    Err(ctx.err(
+                        format!("{at}.{name}"),
+                        format!("not a parameter of quantizer {quantizer:?}"),
+                    ))
+                } else {
+                    Ok(())
+                }
+            };
+            let choice = match quantizer.as_str() {
+                "zhang" => {
+                    unused("levels", levels.is_some())?;
+                    QuantizerChoice::Zhang {
+                        bits: need_bits()?,
+                        flag_zone: flag_zone.unwrap_or(true),
+                    }
+                }
+                "you" | "msechu" | "sign" => {
+                    unused("levels", levels.is_some())?;
+                    unused("flag_zone", flag_zone.is_some())?;
+                    match quantizer.as_str() {
+                        "you" => QuantizerChoice::You { bits: need_bits()? },
+                        "msechu" => QuantizerChoice::Msechu { bits: need_bits()? },
+                        _ => {
+                            unused("bits", bits.is_some())?;
+                            QuantizerChoice::Msechu { bits: 1 }
+                        }
+                    }
+                }
+                "lloyd-max" => {
+                    unused("bits", bits.is_some())?;
+                    unused("flag_zone", flag_zone.is_some())?;
+                    QuantizerChoice::LloydMax {
+                        levels: levels.ok_or_else(|| {
+                            ctx.err(format!("{at}.levels"), "quantizer \"lloyd-max\" needs `levels`")
+                        })?,
+                    }
+                }
+                "analog" => {
+                    unused("bits", bits.is_some())?;
+                    unused("levels", levels.is_some())?;
+                    unused("flag_zone", flag_zone.is_some())?;
+                    QuantizerChoice::Analog
+                }
+                other => {
+                    return Err(ctx.err(
+                        format!("{at}.quantizer"),
+                        format!(
+                            "unknown quantizer {other:?}; expected zhang, you, msechu, sign, lloyd-max or analog"
+                        ),
+                    ))
+                }
+            };
+            let activation = match activate {
+                None => Activation::All,
+                Some(count) => {
+                    if *count == 0 || *count > system.n_sensors() {
+                        return Err(ctx.err(
+                            format!("{at}.activate"),
+                            format!("expected 1..={} sensors, got {count}", system.n_sensors()),
+                        ));
+                    }
+                    let indices = system.sensors[0].target_indices().ok_or_else(|| {
+                        ctx.err(
+                            format!("{at}.activate"),
+                            "nearest-sensor activation needs placed (range or rss) sensors",
+                        )
+                    })?;
+                    Activation::Nearest {
+                        count: *count,
+                        indices,
+                    }
+                }
+            };
+            QuantizedInnovationScheme::new(system.clone(), &choice, activation)
+                .map(|s| Box::new(s) as Box<dyn Scheme>)
+                .map_err(|e| ctx.err(at, e.to_string()))
         }
     }
 }

@@ -101,7 +101,8 @@ fn run_trial(exp: &Experiment, trial: usize, sums: &mut [Sums]) -> Result<(), Ru
         let mut inst = variant.scheme.build().map_err(|e| scheme_err(0, e))?;
         let schedule = variant.scheme.schedule();
         let mut obs = sums[v].trial(&exp.groups, exp.steady_from);
-        let mut feedback = None;
+        // What the fusion center tells the sensors before the first measurement.
+        let mut feedback = inst.center.feedback();
         for k in 1..=exp.steps {
             transmissions.clear();
             for (i, node) in inst.sensors.iter_mut().enumerate() {

@@ -58,7 +58,11 @@ pub struct ScenarioFile {
     pub steady_state_from: Option<usize>,
     pub model: ModelSpec,
     pub prior: PriorSpec,
+    #[serde(default)]
     pub sensors: Vec<SensorSpec>,
+    /// Many sensors of one kind placed at random or on a grid (appended after `sensors`).
+    #[serde(default)]
+    pub sensor_fields: Vec<SensorFieldSpec>,
     /// Named groups of state indices whose RMSE is reported, e.g. position = [0, 3].
     /// Kept in file order (the first group is the one plotted per step).
     #[serde(default)]
@@ -109,11 +113,29 @@ pub struct PriorSpec {
 }
 
 /// One sensor.
-#[derive(Debug, Clone, Deserialize, Serialize)]
+#[derive(Debug, Clone, Deserialize, Serialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct SensorSpec {
     #[serde(default)]
     pub name: Option<String>,
+    /// `linear` (default), `range` (seed 003 eq. (17)) or `rss` (seed 000 Section VII-C).
+    #[serde(default)]
+    pub kind: Option<String>,
+    /// Sensor position (x, y), for `range` and `rss`.
+    #[serde(default)]
+    pub position: Option<[f64; 2]>,
+    /// State indices of the target's (x, y), for `range` and `rss`.
+    #[serde(default)]
+    pub position_indices: Option<[usize; 2]>,
+    /// RSS signal power P0.
+    #[serde(default)]
+    pub p0: Option<f64>,
+    /// RSS path-loss coefficient alpha.
+    #[serde(default)]
+    pub path_loss_alpha: Option<f64>,
+    /// RSS path-loss exponent n.
+    #[serde(default)]
+    pub path_loss_exponent: Option<f64>,
     /// Measurement matrix (give this or `observe`).
     #[serde(default, rename = "H")]
     pub h: Option<Vec<Vec<f64>>>,
@@ -125,6 +147,38 @@ pub struct SensorSpec {
     pub r: Option<Vec<Vec<f64>>>,
     #[serde(default, rename = "R_diag")]
     pub r_diag: Option<Vec<f64>>,
+}
+
+/// A field of placed sensors of one kind.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorFieldSpec {
+    /// `range` or `rss`.
+    pub kind: String,
+    /// `random` (uniform over `area`, drawn from `seed`) or `grid` (cell centres of an
+    /// nx x ny grid over `area`).
+    pub layout: String,
+    /// [x_min, x_max, y_min, y_max].
+    pub area: [f64; 4],
+    /// Number of sensors (random layout).
+    #[serde(default)]
+    pub count: Option<usize>,
+    /// Seed of the placement (random layout); independent of the scenario seed, so the
+    /// network stays the same across runs with other seeds.
+    #[serde(default)]
+    pub seed: Option<u64>,
+    /// [nx, ny] (grid layout).
+    #[serde(default)]
+    pub grid: Option<[usize; 2]>,
+    pub position_indices: [usize; 2],
+    /// Measurement noise variance of every sensor.
+    pub r: f64,
+    #[serde(default)]
+    pub p0: Option<f64>,
+    #[serde(default)]
+    pub path_loss_alpha: Option<f64>,
+    #[serde(default)]
+    pub path_loss_exponent: Option<f64>,
 }
 
 /// Parameters of one scheme at one sweep point.
@@ -149,6 +203,21 @@ pub enum SchemeParams {
         #[serde(default, rename = "B")]
         b_matrix: Option<Vec<Vec<f64>>>,
     },
+    /// Seed 003: quantized innovations of activated sensors, fused in information form.
+    /// `quantizer`: `zhang` (with `bits` 1-3 and `flag_zone`), `you` or `msechu` (with
+    /// `bits`; msechu with 1 bit is SOI-KF's sign), `lloyd-max` (with `levels`), `analog`.
+    QuantizedInnovation {
+        quantizer: String,
+        #[serde(default)]
+        bits: Option<u8>,
+        #[serde(default)]
+        levels: Option<usize>,
+        #[serde(default)]
+        flag_zone: Option<bool>,
+        /// Activate the `activate` sensors nearest to the predicted position (default: all).
+        #[serde(default)]
+        activate: Option<usize>,
+    },
 }
 
 impl SchemeParams {
@@ -161,6 +230,7 @@ impl SchemeParams {
             SchemeParams::DkfAlg1Random { .. } => "dkf-alg1-random",
             SchemeParams::DkfAlg1Event { .. } => "dkf-alg1-event",
             SchemeParams::DkfAlg2Event { .. } => "dkf-alg2-event",
+            SchemeParams::QuantizedInnovation { .. } => "quantized-innovation",
         }
     }
 
@@ -173,6 +243,7 @@ impl SchemeParams {
             SchemeParams::DkfAlg1Random { .. } => "Algorithm 1 (random)",
             SchemeParams::DkfAlg1Event { .. } => "Algorithm 1 (event-based)",
             SchemeParams::DkfAlg2Event { .. } => "Algorithm 2 (event-based)",
+            SchemeParams::QuantizedInnovation { .. } => "Quantized innovation",
         }
     }
 }

@@ -1,0 +1,426 @@
+//! Seed 003 — Zhang, Li, Liu, "Distributed state estimation and data fusion in wireless sensor
+//! networks using multi-level quantized innovation": activated sensors quantize their
+//! normalized innovation (eq. (3)-(5)) against the fusion center's y_hat and Delta (eq. (2)),
+//! send the level as a real IEEE 802.15.4 frame (Tables 1-4) or stay silent on the centre
+//! level, and the fusion center fuses the quantized innovations of all activated sensors in
+//! information form (eq. (9)-(14), with (13)'s denominator sqrt(h P h^T + R) as derived in
+//! (A24)). The same fusion runs with the baselines' quantizers (SOI-KF's sign, Msechu's 2^c
+//! levels, You's 2^c + 1 levels) and, for reference, with analog measurements (the EKF).
+use crate::filter::{kf, Gaussian};
+use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
+use crate::link::codec802154::{DynamicCodec, FixedLengthCodec, LevelCodec, LinkAddressing, Strategy};
+use crate::link::quantizer::{
+    CellTable, InnovationQuantizer, Level, MsechuQuantizer, SignQuantizer, YouQuantizer,
+};
+use crate::link::{Message, Received, Transmission};
+use crate::model::MeasurementModel;
+use crate::scheme::{
+    Feedback, FusionCenter, InnovationReference, Scheme, SchemeError, SchemeInstance, SensorNode,
+    System,
+};
+use rand::RngCore;
+use std::sync::Arc;
+
+/// PAN id and fusion-center short address of the simulated network; sensor i has short
+/// address i + 1.
+const PAN_ID: u16 = 0x0003;
+const FUSION_CENTER_ADDRESS: u16 = 0x0000;
+
+/// A quantizer together with the codec that carries its levels.
+pub struct QuantizerLink {
+    pub quantizer: Box<dyn InnovationQuantizer + Send + Sync>,
+    pub codec: Box<dyn LevelCodec + Send + Sync>,
+}
+
+impl std::fmt::Debug for QuantizerLink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "QuantizerLink({} levels)", self.quantizer.levels())
+    }
+}
+
+/// Which quantizer the activated sensors use.
+#[derive(Debug, Clone, PartialEq)]
+pub enum QuantizerChoice {
+    /// Seed 003's 4l + 1 levels with the dynamic transmission strategy, at most `bits` payload
+    /// bits (Tables 2 and 4: 5/21/69 levels with the flag zone, 5/13/29 without).
+    Zhang { bits: u8, flag_zone: bool },
+    /// You et al.: 2^c + 1 Lloyd-Max levels, silent centre, c-bit fixed-length code.
+    You { bits: u8 },
+    /// Msechu et al.: 2^c Lloyd-Max levels, always sent, c-bit code (c = 1 is SOI-KF's sign).
+    Msechu { bits: u8 },
+    /// Any number of Lloyd-Max levels (silent centre when odd), fixed-length code.
+    LloydMax { levels: usize },
+    /// Analog measurements (32-bit floats): the EKF the paper compares against.
+    Analog,
+}
+
+impl QuantizerChoice {
+    /// Builds the quantizer and its codec; `None` for analog.
+    pub fn build(&self) -> Result<Option<QuantizerLink>, SchemeError> {
+        let link = LinkAddressing::new(PAN_ID, FUSION_CENTER_ADDRESS)
+            .map_err(|e| SchemeError::Unsupported(e.to_string()))?;
+        let q = |e: crate::link::quantizer::QuantizerError| SchemeError::Unsupported(e.to_string());
+        let c = |e: crate::link::codec802154::CodecError| SchemeError::Unsupported(e.to_string());
+        Ok(Some(match *self {
+            QuantizerChoice::Zhang { bits, flag_zone } => {
+                let strategy = if flag_zone { Strategy::FlagZone } else { Strategy::NoFlagZone };
+                let codec = DynamicCodec::new(strategy, bits, link).map_err(c)?;
+                QuantizerLink {
+                    quantizer: Box::new(codec.quantizer().map_err(q)?),
+                    codec: Box::new(codec),
+                }
+            }
+            QuantizerChoice::You { bits } => QuantizerLink {
+                quantizer: Box::new(YouQuantizer::new(bits).map_err(q)?),
+                codec: Box::new(FixedLengthCodec::you(bits, link).map_err(c)?),
+            },
+            QuantizerChoice::Msechu { bits: 1 } => QuantizerLink {
+                quantizer: Box::new(SignQuantizer::new()),
+                codec: Box::new(FixedLengthCodec::sign(link)),
+            },
+            QuantizerChoice::Msechu { bits } => QuantizerLink {
+                quantizer: Box::new(MsechuQuantizer::new(bits).map_err(q)?),
+                codec: Box::new(FixedLengthCodec::msechu(bits, link).map_err(c)?),
+            },
+            QuantizerChoice::LloydMax { levels } => QuantizerLink {
+                quantizer: Box::new(GenericLloydMax::new(levels).map_err(q)?),
+                codec: Box::new(FixedLengthCodec::new(levels, levels % 2 == 1, link).map_err(c)?),
+            },
+            QuantizerChoice::Analog => return Ok(None),
+        }))
+    }
+}
+
+/// Lloyd-Max quantizer with any number of levels; the centre level of an odd count is silent.
+#[derive(Debug, Clone)]
+struct GenericLloydMax {
+    table: CellTable,
+}
+
+impl GenericLloydMax {
+    fn new(levels: usize) -> Result<Self, crate::link::quantizer::QuantizerError> {
+        Ok(Self {
+            table: CellTable::lloyd_max(levels)?,
+        })
+    }
+}
+
+impl InnovationQuantizer for GenericLloydMax {
+    fn table(&self) -> &CellTable {
+        &self.table
+    }
+    fn is_silent(&self, level: Level) -> bool {
+        self.table.levels() % 2 == 1 && level.index() == self.table.levels() / 2
+    }
+}
+
+/// Which sensors the fusion center activates at each step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Activation {
+    /// Every sensor.
+    All,
+    /// The `count` sensors nearest to the predicted target position (seed 003 Section 6 keeps
+    /// the three nearest active; the fusion center can only know the prediction). Needs
+    /// sensors with positions and the target's position at `indices` of the state.
+    Nearest { count: usize, indices: [usize; 2] },
+}
+
+/// Sensor node: quantizes ψ = (y - y_hat) / Delta (eq. (3)) when activated, encodes the
+/// level into a frame, stays silent on the centre level. Analog sensors send z itself.
+pub struct QuantizingSensor {
+    index: usize,
+    sensor: Arc<dyn MeasurementModel>,
+    link: Option<Arc<QuantizerLink>>,
+    sequence: u8,
+}
+
+impl QuantizingSensor {
+    pub fn new(index: usize, sensor: Arc<dyn MeasurementModel>, link: Option<Arc<QuantizerLink>>) -> Self {
+        Self {
+            index,
+            sensor,
+            link,
+            sequence: 0,
+        }
+    }
+
+    fn address(&self) -> u16 {
+        self.index as u16 + 1
+    }
+}
+
+impl SensorNode for QuantizingSensor {
+    fn step(
+        &mut self,
+        _k: usize,
+        z: &Vector,
+        feedback: Option<&Feedback>,
+        _rng: &mut dyn RngCore,
+    ) -> Result<Transmission, SchemeError> {
+        kf::check_measurement(self.sensor.as_ref(), z)?;
+        let reference = match feedback {
+            Some(Feedback::InnovationReference(refs)) => refs.get(self.index).copied().flatten(),
+            _ => {
+                return Err(SchemeError::Protocol {
+                    sensor: self.index,
+                    message: "needs y_hat and Delta from the fusion center (eq. (2))".into(),
+                })
+            }
+        };
+        let Some(r) = reference else {
+            return Ok(Transmission::Silent); // not activated at this step
+        };
+        let Some(link) = &self.link else {
+            return Ok(Transmission::Send(Message::Measurement(z.clone())));
+        };
+        let psi = (z[0] - r.y_hat) / r.delta; // eq. (3)
+        let level = link.quantizer.quantize(psi); // eq. (4)-(5)
+        self.sequence = self.sequence.wrapping_add(1);
+        let frame = link
+            .codec
+            .encode(level, self.address(), self.sequence)
+            .map_err(|e| SchemeError::Protocol {
+                sensor: self.index,
+                message: e.to_string(),
+            })?;
+        Ok(match frame {
+            None => Transmission::Silent,
+            Some(octets) => {
+                let payload_bits = u32::from(link.codec.payload_bits(level).map_err(|e| {
+                    SchemeError::Protocol {
+                        sensor: self.index,
+                        message: e.to_string(),
+                    }
+                })?);
+                Transmission::Send(Message::Frame { octets, payload_bits })
+            }
+        })
+    }
+}
+
+/// What the fusion center told an activated sensor at this step, kept to fuse its answer.
+#[derive(Debug, Clone)]
+struct Activated {
+    index: usize,
+    y_hat: f64,
+    delta: f64,
+    /// Jacobian row h at the prediction.
+    h: Matrix,
+}
+
+/// Fusion center of seed 003's Algorithm 1.
+pub struct QuantizedFusionCenter {
+    system: Arc<System>,
+    link: Option<Arc<QuantizerLink>>,
+    activation: Activation,
+    est: Gaussian,
+    prediction: Gaussian,
+    active: Vec<Activated>,
+}
+
+impl QuantizedFusionCenter {
+    pub fn new(system: Arc<System>, link: Option<Arc<QuantizerLink>>, activation: Activation) -> Result<Self, SchemeError> {
+        let est = system.prior.clone();
+        let mut fc = Self {
+            prediction: est.clone(),
+            system,
+            link,
+            activation,
+            est,
+            active: Vec::new(),
+        };
+        fc.prepare()?;
+        Ok(fc)
+    }
+
+    /// Predicts to the next step ((A2)-(A3)), chooses the activated sensors and computes
+    /// their y_hat and Delta (eq. (2)), linearizing at the prediction (EKF).
+    fn prepare(&mut self) -> Result<(), SchemeError> {
+        self.prediction = kf::predict(&self.system.transition, &self.est);
+        let x = &self.prediction.mean;
+        let chosen: Vec<usize> = match self.activation {
+            Activation::All => (0..self.system.n_sensors()).collect(),
+            Activation::Nearest { count, indices } => {
+                let mut by_distance: Vec<(f64, usize)> = self
+                    .system
+                    .sensors
+                    .iter()
+                    .enumerate()
+                    .map(|(i, s)| {
+                        let p = s.position().unwrap_or([f64::INFINITY; 2]);
+                        ((x[indices[0]] - p[0]).hypot(x[indices[1]] - p[1]), i)
+                    })
+                    .collect();
+                by_distance.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                by_distance.into_iter().take(count).map(|(_, i)| i).collect()
+            }
+        };
+        self.active.clear();
+        for i in chosen {
+            let s = &self.system.sensors[i];
+            let h = s.jacobian(x);
+            let s2 = (&h * &self.prediction.cov * h.transpose())[(0, 0)] + s.noise_cov()[(0, 0)];
+            self.active.push(Activated {
+                index: i,
+                y_hat: s.predict(x)[0],
+                delta: s2.sqrt(),
+                h,
+            });
+        }
+        Ok(())
+    }
+
+    /// Decodes what sensor `i` sent into a quantization level; silence is the centre level.
+    fn level_of(&self, link: &QuantizerLink, i: usize, msg: &Received) -> Result<Level, SchemeError> {
+        let err = |message: String| SchemeError::Protocol { sensor: i, message };
+        match msg {
+            Received::Frame(octets) => {
+                let d = link.codec.decode(octets).map_err(|e| err(format!("corrupt frame: {e}")))?;
+                if usize::from(d.source) != i + 1 {
+                    return Err(err(format!("frame from address {} in sensor {i}'s slot", d.source)));
+                }
+                Ok(d.level)
+            }
+            Received::Silent | Received::NotScheduled => (0..link.quantizer.levels())
+                .map(|j| Level::new(j as u16))
+                .find(|&l| link.quantizer.is_silent(l))
+                .ok_or_else(|| err("silent, but this quantizer has no silent level".into())),
+            other => Err(err(format!("expected a quantized frame, got {other:?}"))),
+        }
+    }
+}
+
+impl FusionCenter for QuantizedFusionCenter {
+    fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
+        let pred = &self.prediction;
+        let pred_info = {
+            let chol = cholesky(&pred.cov).map_err(|source| SchemeError::Matrix {
+                what: "predicted covariance",
+                source,
+            })?;
+            let mut m = chol.inverse();
+            symmetrize(&mut m);
+            m
+        };
+        // Eq. (9) and (12): each activated sensor's individual update from the common
+        // prediction enters as (P^i)^{-1} - P^{-1} and (P^i)^{-1} x^i - P^{-1} x. With
+        // P^i = P - c g g^T, g = P h^T, c = eta / Delta^2 (eq. (10)), Sherman-Morrison gives
+        // (P^i)^{-1} - P^{-1} = c h^T h / (1 - c s) and, with x^i = x + sigma g / Delta (eq.
+        // (13) with the (A24) denominator),
+        // (P^i)^{-1} x^i - P^{-1} x = h^T (c h x + sigma / Delta) / (1 - c s), s = h P h^T.
+        let mut info = pred_info.clone();
+        let mut info_vec = &pred_info * &pred.mean;
+        for a in &self.active {
+            let msg = inbox.get(a.index).ok_or_else(|| SchemeError::Protocol {
+                sensor: a.index,
+                message: "missing from the inbox".into(),
+            })?;
+            let (c, sigma) = match &self.link {
+                Some(link) => {
+                    let level = self.level_of(link, a.index, msg)?;
+                    (link.quantizer.eta(level) / (a.delta * a.delta), link.quantizer.reconstruction(level))
+                }
+                None => match msg {
+                    // Analog: eta = 1 and sigma = psi recover the EKF update.
+                    Received::Measurement(z) => (1.0 / (a.delta * a.delta), (z[0] - a.y_hat) / a.delta),
+                    other => {
+                        return Err(SchemeError::Protocol {
+                            sensor: a.index,
+                            message: format!("expected an analog measurement, got {other:?}"),
+                        })
+                    }
+                },
+            };
+            let s = (&a.h * &pred.cov * a.h.transpose())[(0, 0)];
+            let denom = 1.0 - c * s;
+            if denom <= 0.0 {
+                return Err(SchemeError::Unsupported(format!(
+                    "sensor {}: quantized update would remove more than the prior covariance",
+                    a.index
+                )));
+            }
+            let hx = (&a.h * &pred.mean)[(0, 0)];
+            info += a.h.transpose() * &a.h * (c / denom);
+            info_vec += a.h.transpose() * ((c * hx + sigma / a.delta) / denom);
+        }
+        symmetrize(&mut info);
+        let chol = cholesky(&info).map_err(|source| SchemeError::Matrix {
+            what: "fused information matrix (9)",
+            source,
+        })?;
+        let mut cov = chol.inverse();
+        symmetrize(&mut cov);
+        self.est = Gaussian {
+            mean: chol.solve(&info_vec),
+            cov,
+        };
+        self.prepare()
+    }
+
+    fn estimate(&self) -> &Gaussian {
+        &self.est
+    }
+
+    fn feedback(&self) -> Option<Feedback> {
+        let mut refs = vec![None; self.system.n_sensors()];
+        for a in &self.active {
+            refs[a.index] = Some(InnovationReference {
+                y_hat: a.y_hat,
+                delta: a.delta,
+            });
+        }
+        Some(Feedback::InnovationReference(refs))
+    }
+}
+
+/// Seed 003's scheme with a chosen quantizer and activation rule.
+#[derive(Debug, Clone)]
+pub struct QuantizedInnovationScheme {
+    system: Arc<System>,
+    link: Option<Arc<QuantizerLink>>,
+    activation: Activation,
+}
+
+impl QuantizedInnovationScheme {
+    /// Checks that every sensor is scalar (the paper's h^i are rows) and, for nearest-sensor
+    /// activation, placed.
+    pub fn new(system: Arc<System>, quantizer: &QuantizerChoice, activation: Activation) -> Result<Self, SchemeError> {
+        if let Some(i) = system.sensors.iter().position(|s| s.meas_dim() != 1) {
+            return Err(SchemeError::Unsupported(format!(
+                "sensor {i} is not scalar; seed 003 quantizes scalar innovations"
+            )));
+        }
+        if let Activation::Nearest { count, .. } = activation {
+            if count == 0 {
+                return Err(SchemeError::Unsupported("activate at least one sensor".into()));
+            }
+            if let Some(i) = system.sensors.iter().position(|s| s.position().is_none()) {
+                return Err(SchemeError::Unsupported(format!(
+                    "sensor {i} has no position, so the nearest sensors cannot be activated"
+                )));
+            }
+        }
+        Ok(Self {
+            link: quantizer.build()?.map(Arc::new),
+            system,
+            activation,
+        })
+    }
+}
+
+impl Scheme for QuantizedInnovationScheme {
+    fn build(&self) -> Result<SchemeInstance, SchemeError> {
+        let sensors = self
+            .system
+            .sensors
+            .iter()
+            .enumerate()
+            .map(|(i, s)| Box::new(QuantizingSensor::new(i, s.clone(), self.link.clone())) as Box<dyn SensorNode>)
+            .collect();
+        let center = QuantizedFusionCenter::new(self.system.clone(), self.link.clone(), self.activation)?;
+        Ok(SchemeInstance {
+            sensors,
+            center: Box::new(center),
+        })
+    }
+}
