@@ -8,7 +8,9 @@
 //! levels, You's 2^c + 1 levels) and, for reference, with analog measurements (the EKF).
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
-use crate::link::codec802154::{DynamicCodec, FixedLengthCodec, LevelCodec, LinkAddressing, Strategy};
+use crate::link::codec802154::{
+    DynamicCodec, FixedLengthCodec, LevelCodec, LinkAddressing, Strategy,
+};
 use crate::link::quantizer::{
     CellTable, InnovationQuantizer, Level, MsechuQuantizer, SignQuantizer, YouQuantizer,
 };
@@ -63,7 +65,11 @@ impl QuantizerChoice {
         let c = |e: crate::link::codec802154::CodecError| SchemeError::Unsupported(e.to_string());
         Ok(Some(match *self {
             QuantizerChoice::Zhang { bits, flag_zone } => {
-                let strategy = if flag_zone { Strategy::FlagZone } else { Strategy::NoFlagZone };
+                let strategy = if flag_zone {
+                    Strategy::FlagZone
+                } else {
+                    Strategy::NoFlagZone
+                };
                 let codec = DynamicCodec::new(strategy, bits, link).map_err(c)?;
                 QuantizerLink {
                     quantizer: Box::new(codec.quantizer().map_err(q)?),
@@ -135,7 +141,11 @@ pub struct QuantizingSensor {
 }
 
 impl QuantizingSensor {
-    pub fn new(index: usize, sensor: Arc<dyn MeasurementModel>, link: Option<Arc<QuantizerLink>>) -> Self {
+    pub fn new(
+        index: usize,
+        sensor: Arc<dyn MeasurementModel>,
+        link: Option<Arc<QuantizerLink>>,
+    ) -> Self {
         Self {
             index,
             sensor,
@@ -192,7 +202,10 @@ impl SensorNode for QuantizingSensor {
                         message: e.to_string(),
                     }
                 })?);
-                Transmission::Send(Message::Frame { octets, payload_bits })
+                Transmission::Send(Message::Frame {
+                    octets,
+                    payload_bits,
+                })
             }
         })
     }
@@ -219,7 +232,11 @@ pub struct QuantizedFusionCenter {
 }
 
 impl QuantizedFusionCenter {
-    pub fn new(system: Arc<System>, link: Option<Arc<QuantizerLink>>, activation: Activation) -> Result<Self, SchemeError> {
+    pub fn new(
+        system: Arc<System>,
+        link: Option<Arc<QuantizerLink>>,
+        activation: Activation,
+    ) -> Result<Self, SchemeError> {
         let est = system.prior.clone();
         let mut fc = Self {
             prediction: est.clone(),
@@ -252,7 +269,11 @@ impl QuantizedFusionCenter {
                     })
                     .collect();
                 by_distance.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                by_distance.into_iter().take(count).map(|(_, i)| i).collect()
+                by_distance
+                    .into_iter()
+                    .take(count)
+                    .map(|(_, i)| i)
+                    .collect()
             }
         };
         self.active.clear();
@@ -271,13 +292,24 @@ impl QuantizedFusionCenter {
     }
 
     /// Decodes what sensor `i` sent into a quantization level; silence is the centre level.
-    fn level_of(&self, link: &QuantizerLink, i: usize, msg: &Received) -> Result<Level, SchemeError> {
+    fn level_of(
+        &self,
+        link: &QuantizerLink,
+        i: usize,
+        msg: &Received,
+    ) -> Result<Level, SchemeError> {
         let err = |message: String| SchemeError::Protocol { sensor: i, message };
         match msg {
             Received::Frame(octets) => {
-                let d = link.codec.decode(octets).map_err(|e| err(format!("corrupt frame: {e}")))?;
+                let d = link
+                    .codec
+                    .decode(octets)
+                    .map_err(|e| err(format!("corrupt frame: {e}")))?;
                 if usize::from(d.source) != i + 1 {
-                    return Err(err(format!("frame from address {} in sensor {i}'s slot", d.source)));
+                    return Err(err(format!(
+                        "frame from address {} in sensor {i}'s slot",
+                        d.source
+                    )));
                 }
                 Ok(d.level)
             }
@@ -318,11 +350,16 @@ impl FusionCenter for QuantizedFusionCenter {
             let (c, sigma) = match &self.link {
                 Some(link) => {
                     let level = self.level_of(link, a.index, msg)?;
-                    (link.quantizer.eta(level) / (a.delta * a.delta), link.quantizer.reconstruction(level))
+                    (
+                        link.quantizer.eta(level) / (a.delta * a.delta),
+                        link.quantizer.reconstruction(level),
+                    )
                 }
                 None => match msg {
                     // Analog: eta = 1 and sigma = psi recover the EKF update.
-                    Received::Measurement(z) => (1.0 / (a.delta * a.delta), (z[0] - a.y_hat) / a.delta),
+                    Received::Measurement(z) => {
+                        (1.0 / (a.delta * a.delta), (z[0] - a.y_hat) / a.delta)
+                    }
                     other => {
                         return Err(SchemeError::Protocol {
                             sensor: a.index,
@@ -384,7 +421,11 @@ pub struct QuantizedInnovationScheme {
 impl QuantizedInnovationScheme {
     /// Checks that every sensor is scalar (the paper's h^i are rows) and, for nearest-sensor
     /// activation, placed.
-    pub fn new(system: Arc<System>, quantizer: &QuantizerChoice, activation: Activation) -> Result<Self, SchemeError> {
+    pub fn new(
+        system: Arc<System>,
+        quantizer: &QuantizerChoice,
+        activation: Activation,
+    ) -> Result<Self, SchemeError> {
         if let Some(i) = system.sensors.iter().position(|s| s.meas_dim() != 1) {
             return Err(SchemeError::Unsupported(format!(
                 "sensor {i} is not scalar; seed 003 quantizes scalar innovations"
@@ -392,7 +433,9 @@ impl QuantizedInnovationScheme {
         }
         if let Activation::Nearest { count, .. } = activation {
             if count == 0 {
-                return Err(SchemeError::Unsupported("activate at least one sensor".into()));
+                return Err(SchemeError::Unsupported(
+                    "activate at least one sensor".into(),
+                ));
             }
             if let Some(i) = system.sensors.iter().position(|s| s.position().is_none()) {
                 return Err(SchemeError::Unsupported(format!(
@@ -415,9 +458,13 @@ impl Scheme for QuantizedInnovationScheme {
             .sensors
             .iter()
             .enumerate()
-            .map(|(i, s)| Box::new(QuantizingSensor::new(i, s.clone(), self.link.clone())) as Box<dyn SensorNode>)
+            .map(|(i, s)| {
+                Box::new(QuantizingSensor::new(i, s.clone(), self.link.clone()))
+                    as Box<dyn SensorNode>
+            })
             .collect();
-        let center = QuantizedFusionCenter::new(self.system.clone(), self.link.clone(), self.activation)?;
+        let center =
+            QuantizedFusionCenter::new(self.system.clone(), self.link.clone(), self.activation)?;
         Ok(SchemeInstance {
             sensors,
             center: Box::new(center),

@@ -4,15 +4,15 @@ use super::scenario::{
     FrontierSpec, ModelSpec, PaperSpec, ParamValue, Params, ScenarioFile, SchemeParams,
     SensorFieldSpec, SensorSpec,
 };
-use crate::model::{Placement, RangeSensor, RssSensor};
-use crate::scheme::quantized_innovation::{Activation, QuantizedInnovationScheme, QuantizerChoice};
-use rand::{Rng, SeedableRng};
 use crate::filter::Gaussian;
 use crate::linalg::{check_spd, Matrix, Vector};
 use crate::model::{presets, LinearSensor, LinearTransition, MeasurementModel};
+use crate::model::{Placement, RangeSensor, RssSensor};
 use crate::scheme::centralized::CentralizedScheme;
 use crate::scheme::distributed_kf::{DistributedKfScheme, Trigger};
+use crate::scheme::quantized_innovation::{Activation, QuantizedInnovationScheme, QuantizerChoice};
 use crate::scheme::{Scheme, System};
+use rand::{Rng, SeedableRng};
 use std::fmt;
 use std::sync::Arc;
 
@@ -239,7 +239,12 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
     }
     for (j, field) in file_spec.sensor_fields.iter().enumerate() {
         for (m, spec) in sensor_field(&ctx, j, field)?.iter().enumerate() {
-            sensors.push(sensor(&ctx, &format!("sensor_fields[{j}] (sensor {m})"), spec, n)?);
+            sensors.push(sensor(
+                &ctx,
+                &format!("sensor_fields[{j}] (sensor {m})"),
+                spec,
+                n,
+            )?);
         }
     }
     if sensors.is_empty() {
@@ -484,12 +489,7 @@ fn sensor(
             }
             h
         }
-        _ => {
-            return Err(ctx.err(
-                at.to_string(),
-                "give exactly one of `H` and `observe`",
-            ))
-        }
+        _ => return Err(ctx.err(at.to_string(), "give exactly one of `H` and `observe`")),
     };
     let m = h.nrows();
     let (r, rname) = match (&s.r, &s.r_diag) {
@@ -509,12 +509,7 @@ fn sensor(
                 f("R_diag"),
             )
         }
-        _ => {
-            return Err(ctx.err(
-                at.to_string(),
-                "give exactly one of `R` and `R_diag`",
-            ))
-        }
+        _ => return Err(ctx.err(at.to_string(), "give exactly one of `R` and `R_diag`")),
     };
     covariance(&ctx, &rname, &r, m)?;
     let sensor = LinearSensor::new(h, r).map_err(|e| ctx.err(at, e.to_string()))?;
@@ -600,7 +595,10 @@ fn sensor_field(
     let at = |name: &str| format!("sensor_fields[{j}].{name}");
     let [x0, x1, y0, y1] = field.area;
     if !(field.area.iter().all(|v| v.is_finite()) && x0 < x1 && y0 < y1) {
-        return Err(ctx.err(at("area"), "expected [x_min, x_max, y_min, y_max] with min < max"));
+        return Err(ctx.err(
+            at("area"),
+            "expected [x_min, x_max, y_min, y_max] with min < max",
+        ));
     }
     let positions: Vec<[f64; 2]> = match field.layout.as_str() {
         "random" => {
@@ -766,7 +764,10 @@ fn scheme(
         } => {
             let need_bits = || -> Result<u8, ScenarioError> {
                 bits.ok_or_else(|| {
-                    ctx.err(format!("{at}.bits"), format!("quantizer {quantizer:?} needs `bits`"))
+                    ctx.err(
+                        format!("{at}.bits"),
+                        format!("quantizer {quantizer:?} needs `bits`"),
+                    )
                 })
             };
             let unused = |name: &str, present: bool| -> Result<(), ScenarioError> {

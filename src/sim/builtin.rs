@@ -12,6 +12,16 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         "Seed 004 Fig. 1: MSE and trace against the communication rate, 500 runs x 100 steps",
         include_str!("../../scenarios/dormann-fig1.toml"),
     ),
+    (
+        "zhang-fig4",
+        "Seed 003 Fig. 4: quantized-innovation fusion at 1 payload bit, 50 range sensors, 1000 runs",
+        include_str!("../../scenarios/zhang-fig4.toml"),
+    ),
+    (
+        "zhang-fig5",
+        "Seed 003 Fig. 5: quantized-innovation fusion at 2 payload bits, 50 range sensors, 1000 runs",
+        include_str!("../../scenarios/zhang-fig5.toml"),
+    ),
 ];
 
 /// The TOML text of a built-in scenario.

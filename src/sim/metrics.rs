@@ -71,6 +71,9 @@ pub struct Sums {
     pub steady_trace: TrialStat,
     pub steady_nees: TrialStat,
     pub steady_messages: TrialStat,
+    /// Per trial, in trial order: steady-state mean squared error, total then per group.
+    /// Kept so that two schemes can be compared by paired differences on the same trials.
+    pub per_trial: Vec<Vec<f64>>,
 }
 
 /// Observer of one trial of one variant: accumulates into a [`Sums`] as the trial runs.
@@ -79,6 +82,7 @@ pub struct TrialObserver<'a> {
     groups: &'a [(String, Vec<usize>)],
     steady_from: usize,
     acc: [f64; 4],
+    group_acc: Vec<f64>,
     count: usize,
 }
 
@@ -94,6 +98,7 @@ impl Sums {
             steady_trace: TrialStat::default(),
             steady_nees: TrialStat::default(),
             steady_messages: TrialStat::default(),
+            per_trial: Vec::new(),
         }
     }
 
@@ -114,6 +119,7 @@ impl Sums {
             groups,
             steady_from,
             acc: [0.0; 4],
+            group_acc: vec![0.0; groups.len()],
             count: 0,
         }
     }
@@ -128,6 +134,7 @@ impl Sums {
         self.steady_trace.merge(&o.steady_trace);
         self.steady_nees.merge(&o.steady_nees);
         self.steady_messages.merge(&o.steady_messages);
+        self.per_trial.extend(o.per_trial.iter().cloned());
     }
 
     /// Sum of entry `field` at step index `s` (0-based).
@@ -152,8 +159,13 @@ impl TrialObserver<'_> {
         let row = &mut self.sums.per_step[(k - 1) * w..k * w];
         let err = &est.mean - truth;
         let total: f64 = err.iter().map(|e| e * e).sum();
+        let steady = k >= self.steady_from;
         for (g, (_, idx)) in self.groups.iter().enumerate() {
-            row[layout.group(g)] += idx.iter().map(|&j| err[j] * err[j]).sum::<f64>();
+            let se = idx.iter().map(|&j| err[j] * err[j]).sum::<f64>();
+            row[layout.group(g)] += se;
+            if steady {
+                self.group_acc[g] += se;
+            }
         }
         let nees = mahalanobis_sq(&err, &est.cov)?;
         let trace = est.cov.trace();
@@ -164,7 +176,7 @@ impl TrialObserver<'_> {
         row[Layout::BITS] += traffic.bits as f64;
         row[Layout::FRAME_BITS] += traffic.frame_bits as f64;
         row[Layout::DOWNLINK_BITS] += traffic.downlink_bits as f64;
-        if k >= self.steady_from {
+        if steady {
             self.acc[0] += total;
             self.acc[1] += trace;
             self.acc[2] += nees;
@@ -182,6 +194,10 @@ impl TrialObserver<'_> {
         self.sums.steady_trace.add(self.acc[1] / c);
         self.sums.steady_nees.add(self.acc[2] / c);
         self.sums.steady_messages.add(self.acc[3] / c);
+        let mut row = Vec::with_capacity(1 + self.group_acc.len());
+        row.push(self.acc[0] / c);
+        row.extend(self.group_acc.iter().map(|v| v / c));
+        self.sums.per_trial.push(row);
     }
 }
 
@@ -219,6 +235,7 @@ mod tests {
         assert_eq!(s.at(1, Layout::FRAME_BITS), 400.0);
         assert_eq!(s.at(1, Layout::DOWNLINK_BITS), 64.0);
         assert_eq!(s.steady_mse.sum, 5.0);
+        assert_eq!(s.per_trial, vec![vec![5.0, 1.0, 4.0]]);
         let mut m = s.clone();
         m.merge(&s);
         assert_eq!(m.trials, 2);

@@ -139,78 +139,8 @@ pub fn lines(
 /// Writes the figures of a run into `dir`; returns the files written.
 pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<String>, String> {
     let mut written = Vec::new();
-    let group = summary.group_order.first().cloned().unwrap_or_default();
-    // Every variant on one figure when that stays readable; otherwise the unswept schemes
-    // together and each swept scheme on a figure of its own (one line per sweep point).
-    let few = summary.schemes.len() <= 12;
-    let name = |s: &super::results::SchemeSummary| {
-        if s.params.is_empty() {
-            s.name.clone()
-        } else {
-            format!("{} [{}]", s.name, super::results::params_text(&s.params))
-        }
-    };
-    let single: Vec<Line> = summary
-        .schemes
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| few || exp.curves[s.curve].swept.is_empty())
-        .map(|(i, s)| Line {
-            name: name(s),
-            points: s.rmse[&group]
-                .iter()
-                .enumerate()
-                .map(|(k, v)| ((k + 1) as f64, *v))
-                .collect(),
-            dashed: false,
-            color: if few { i } else { s.curve },
-        })
-        .collect();
-    if !single.is_empty() {
-        let f = format!("rmse_{group}_per_step.svg");
-        lines(
-            &dir.join(&f),
-            &format!("{}: RMSE of {group} per step", summary.scenario),
-            "step k",
-            &format!("RMSE {group}"),
-            &single,
-        )?;
-        written.push(f);
-    }
-    for (ci, curve) in exp
-        .curves
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| !few && !c.swept.is_empty())
-    {
-        let data: Vec<Line> = summary
-            .schemes
-            .iter()
-            .filter(|s| s.curve == ci)
-            .enumerate()
-            .map(|(j, s)| Line {
-                name: super::results::params_text(&s.params),
-                points: s.rmse[&group]
-                    .iter()
-                    .enumerate()
-                    .map(|(k, v)| ((k + 1) as f64, *v))
-                    .collect(),
-                dashed: false,
-                color: j,
-            })
-            .collect();
-        if data.len() > 12 {
-            continue; // unreadable; the rate plot summarizes this curve
-        }
-        let f = format!("rmse_{group}_per_step_{}.svg", slug(&curve.label));
-        lines(
-            &dir.join(&f),
-            &format!("{}: RMSE of {group} per step", curve.label),
-            "step k",
-            &format!("RMSE {group}"),
-            &data,
-        )?;
-        written.push(f);
+    for group in &summary.group_order {
+        per_step(exp, summary, dir, group, &mut written)?;
     }
     // Steady state against the communication rate, when any scheme is swept.
     if exp.curves.iter().any(|c| !c.swept.is_empty()) {
@@ -244,6 +174,90 @@ pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<
         written.push(f);
     }
     Ok(written)
+}
+
+/// RMSE of one state group per step: every variant on one figure when that stays readable;
+/// otherwise the unswept schemes together and each swept scheme on a figure of its own.
+fn per_step(
+    exp: &Experiment,
+    summary: &Summary,
+    dir: &Path,
+    group: &str,
+    written: &mut Vec<String>,
+) -> Result<(), String> {
+    // Every variant on one figure when that stays readable; otherwise the unswept schemes
+    // together and each swept scheme on a figure of its own (one line per sweep point).
+    let few = summary.schemes.len() <= 12;
+    let name = |s: &super::results::SchemeSummary| {
+        if s.params.is_empty() {
+            s.name.clone()
+        } else {
+            format!("{} [{}]", s.name, super::results::params_text(&s.params))
+        }
+    };
+    let single: Vec<Line> = summary
+        .schemes
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| few || exp.curves[s.curve].swept.is_empty())
+        .map(|(i, s)| Line {
+            name: name(s),
+            points: s.rmse[group]
+                .iter()
+                .enumerate()
+                .map(|(k, v)| ((k + 1) as f64, *v))
+                .collect(),
+            dashed: false,
+            color: if few { i } else { s.curve },
+        })
+        .collect();
+    if !single.is_empty() {
+        let f = format!("rmse_{group}_per_step.svg");
+        lines(
+            &dir.join(&f),
+            &format!("{}: RMSE of {group} per step", summary.scenario),
+            "step k",
+            &format!("RMSE {group}"),
+            &single,
+        )?;
+        written.push(f);
+    }
+    for (ci, curve) in exp
+        .curves
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| !few && !c.swept.is_empty())
+    {
+        let data: Vec<Line> = summary
+            .schemes
+            .iter()
+            .filter(|s| s.curve == ci)
+            .enumerate()
+            .map(|(j, s)| Line {
+                name: super::results::params_text(&s.params),
+                points: s.rmse[group]
+                    .iter()
+                    .enumerate()
+                    .map(|(k, v)| ((k + 1) as f64, *v))
+                    .collect(),
+                dashed: false,
+                color: j,
+            })
+            .collect();
+        if data.len() > 12 {
+            continue; // unreadable; the rate plot summarizes this curve
+        }
+        let f = format!("rmse_{group}_per_step_{}.svg", slug(&curve.label));
+        lines(
+            &dir.join(&f),
+            &format!("{}: RMSE of {group} per step", curve.label),
+            "step k",
+            &format!("RMSE {group}"),
+            &data,
+        )?;
+        written.push(f);
+    }
+    Ok(())
 }
 
 /// File-name-safe version of a label.

@@ -130,6 +130,35 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                     evidence: format!("lowest steady-state rate of {scheme}: {min:.3} (bound {rate})"),
                 }
             }
+            ClaimSpec::Better {
+                text,
+                a,
+                a_params,
+                b,
+                b_params,
+                metric,
+            } => pairwise(summary, text, (a, a_params), (b, b_params), metric, |d, se, _, _| {
+                let z = d / se;
+                (
+                    d < 0.0 && z < -2.0,
+                    format!("z = {z:.1} (criterion: difference < 0 by more than 2 standard errors)"),
+                )
+            }),
+            ClaimSpec::Close {
+                text,
+                a,
+                a_params,
+                b,
+                b_params,
+                metric,
+                within,
+            } => pairwise(summary, text, (a, a_params), (b, b_params), metric, |_, _, ma, mb| {
+                let rel = (ma - mb).abs() / mb;
+                (
+                    rel <= *within,
+                    format!("relative difference {:.1}% (criterion: <= {:.1}%)", 100.0 * rel, 100.0 * within),
+                )
+            }),
             ClaimSpec::Consistent { text, schemes } => {
                 let mut holds = true;
                 let mut worst: Option<(f64, String)> = None;
@@ -169,6 +198,90 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
             }
         })
         .collect()
+}
+
+/// The one variant of curve `label` whose parameters include `params`.
+fn variant<'a>(
+    summary: &'a Summary,
+    label: &str,
+    params: &super::scenario::Params,
+) -> Result<&'a super::results::SchemeSummary, String> {
+    let found: Vec<_> = summary
+        .schemes
+        .iter()
+        .filter(|s| {
+            s.name == label
+                && params
+                    .iter()
+                    .all(|(k, v)| s.params.get(k).is_some_and(|x| x.matches(v)))
+        })
+        .collect();
+    match found.len() {
+        1 => Ok(found[0]),
+        0 => Err(format!(
+            "no scheme labelled {label:?} with those parameters"
+        )),
+        n => Err(format!(
+            "{n} variants of {label:?} match; give its sweep parameters"
+        )),
+    }
+}
+
+/// Column of `per_trial` for a metric: `mse` (total) or `mse:<group>`.
+fn metric_column(summary: &Summary, metric: &str) -> Result<usize, String> {
+    if metric == "mse" {
+        return Ok(0);
+    }
+    metric
+        .strip_prefix("mse:")
+        .and_then(|g| summary.group_order.iter().position(|n| n == g))
+        .map(|i| i + 1)
+        .ok_or_else(|| format!("unknown metric {metric:?}; expected mse or mse:<group>"))
+}
+
+/// Mean of `a - b` over trials and its standard error.
+fn paired(a: &[Vec<f64>], b: &[Vec<f64>], col: usize) -> (f64, f64, f64, f64) {
+    let n = a.len().min(b.len()) as f64;
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x[col] - y[col]).collect();
+    let mean = d.iter().sum::<f64>() / n;
+    let var = d.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (n - 1.0).max(1.0);
+    let ma = a.iter().map(|x| x[col]).sum::<f64>() / n;
+    let mb = b.iter().map(|x| x[col]).sum::<f64>() / n;
+    (mean, (var / n).sqrt(), ma, mb)
+}
+
+fn pairwise(
+    summary: &Summary,
+    text: &str,
+    (a, ap): (&str, &super::scenario::Params),
+    (b, bp): (&str, &super::scenario::Params),
+    metric: &str,
+    verdict: impl Fn(f64, f64, f64, f64) -> (bool, String),
+) -> ClaimResult {
+    let found = variant(summary, a, ap)
+        .and_then(|va| variant(summary, b, bp).map(|vb| (va, vb)))
+        .and_then(|(va, vb)| metric_column(summary, metric).map(|c| (va, vb, c)));
+    match found {
+        Err(e) => ClaimResult {
+            text: text.to_string(),
+            holds: false,
+            evidence: e,
+        },
+        Ok((va, vb, col)) => {
+            let (d, se, ma, mb) = paired(&va.per_trial, &vb.per_trial, col);
+            let (holds, why) = verdict(d, se, ma, mb);
+            ClaimResult {
+                text: text.to_string(),
+                holds,
+                evidence: format!(
+                    "{metric}: {a} {ma:.4} (RMS {:.4}) vs {b} {mb:.4} (RMS {:.4}); paired difference {d:.4} ± {se:.4} over {} trials; {why}",
+                    ma.sqrt(),
+                    mb.sqrt(),
+                    va.per_trial.len()
+                ),
+            }
+        }
+    }
 }
 
 fn missing(text: &str, name: &str) -> ClaimResult {

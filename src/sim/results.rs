@@ -52,6 +52,10 @@ pub struct SchemeSummary {
     /// Mean feedback bits from the fusion center to the sensors per step.
     pub downlink_bits_per_step: f64,
     pub steady_state: SteadyState,
+    /// Per trial: steady-state MSE, total then per group (for paired comparisons; not
+    /// written to summary.json).
+    #[serde(skip)]
+    pub per_trial: Vec<Vec<f64>>,
 }
 
 /// The whole run.
@@ -116,6 +120,7 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
                 bits_per_step: bits / steps as f64,
                 frame_bits_per_step: frame_bits / steps as f64,
                 downlink_bits_per_step: downlink_bits / steps as f64,
+                per_trial: s.per_trial.clone(),
                 steady_state: SteadyState {
                     from_step: exp.steady_from,
                     mse: mse_ss,

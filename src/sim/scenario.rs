@@ -314,4 +314,28 @@ pub enum ClaimSpec {
     /// Steady-state MSE <= trace (within 3 Monte Carlo standard errors) for every variant of
     /// the listed schemes.
     Consistent { text: String, schemes: Vec<String> },
+    /// Scheme `a` has a smaller steady-state `metric` (`mse` or `mse:<group>`) than `b`, by a
+    /// paired difference on the same trials at least 2 standard errors below zero.
+    Better {
+        text: String,
+        a: String,
+        #[serde(default)]
+        a_params: Params,
+        b: String,
+        #[serde(default)]
+        b_params: Params,
+        metric: String,
+    },
+    /// The steady-state `metric` of `a` is within the relative tolerance `within` of `b`'s.
+    Close {
+        text: String,
+        a: String,
+        #[serde(default)]
+        a_params: Params,
+        b: String,
+        #[serde(default)]
+        b_params: Params,
+        metric: String,
+        within: f64,
+    },
 }
