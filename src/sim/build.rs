@@ -461,7 +461,7 @@ fn sensor(
     }
     let h = match (&s.h, &s.observe) {
         (Some(h), None) => {
-            let h = matrix(&ctx, &f("H"), h)?;
+            let h = matrix(ctx, &f("H"), h)?;
             if h.ncols() != n {
                 return Err(ctx.err(
                     f("H"),
@@ -493,7 +493,7 @@ fn sensor(
     };
     let m = h.nrows();
     let (r, rname) = match (&s.r, &s.r_diag) {
-        (Some(r), None) => (matrix(&ctx, &f("R"), r)?, f("R")),
+        (Some(r), None) => (matrix(ctx, &f("R"), r)?, f("R")),
         (None, Some(d)) => {
             if d.len() != m {
                 return Err(ctx.err(
@@ -511,7 +511,7 @@ fn sensor(
         }
         _ => return Err(ctx.err(at.to_string(), "give exactly one of `R` and `R_diag`")),
     };
-    covariance(&ctx, &rname, &r, m)?;
+    covariance(ctx, &rname, &r, m)?;
     let sensor = LinearSensor::new(h, r).map_err(|e| ctx.err(at, e.to_string()))?;
     Ok(Arc::new(sensor))
 }
