@@ -1,6 +1,6 @@
 //! `hushfuse` command line: run scenarios, list the built-in ones, reproduce paper figures.
 use clap::{Parser, Subcommand};
-use hushfuse::sim::{build, builtin, plot, report, results, runner};
+use hushfuse::sim::{build, builtin, plot, report, results, runner, tables};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use std::io::IsTerminal;
@@ -104,23 +104,6 @@ fn print_out(text: &str) {
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }
 
-/// Loads a scenario from a path or the built-in list.
-fn load(scenario: &str) -> Result<build::Experiment, Failure> {
-    let path = Path::new(scenario);
-    let (text, source) = if path.exists() || scenario.ends_with(".toml") {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| Failure::Input(format!("{scenario}: cannot read: {e}")))?;
-        (text, scenario.to_string())
-    } else if let Some(t) = builtin::get(scenario) {
-        (t.to_string(), format!("built-in:{scenario}"))
-    } else {
-        return Err(Failure::Input(format!(
-            "{scenario:?} is neither a file nor a built-in scenario (`hushfuse list`)"
-        )));
-    };
-    build::load(&text, &source).map_err(|e| Failure::Input(e.to_string()))
-}
-
 #[derive(Serialize)]
 struct Output<'a> {
     #[serde(flatten)]
@@ -137,8 +120,53 @@ struct PaperOutput<'a> {
     claims: Vec<report::ClaimResult>,
 }
 
+/// Text and source name of a scenario given as a path or a built-in name.
+fn scenario_text(scenario: &str) -> Result<(String, String), Failure> {
+    let path = Path::new(scenario);
+    if path.exists() || scenario.ends_with(".toml") {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Failure::Input(format!("{scenario}: cannot read: {e}")))?;
+        Ok((text, scenario.to_string()))
+    } else if let Some(t) = builtin::get(scenario) {
+        Ok((t.to_string(), format!("built-in:{scenario}")))
+    } else {
+        Err(Failure::Input(format!(
+            "{scenario:?} is neither a file nor a built-in scenario (`hushfuse list`)"
+        )))
+    }
+}
+
+/// A computed table reproduction (no Monte Carlo): ours beside the paper's printed values.
+fn table_report(text: &str, source: &str, args: &RunArgs) -> Result<(), Failure> {
+    let file: tables::TableReportFile =
+        toml::from_str(text).map_err(|e| Failure::Input(format!("{source}: {}", e.message())))?;
+    let rows = tables::compare(&file).map_err(|e| Failure::Input(format!("{source}: {e}")))?;
+    let mut out = tables::render(&file, &rows);
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(&file.name));
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
+    let json =
+        serde_json::json!({ "scenario": file.name, "citation": file.citation, "rows": rows });
+    let path = dir.join("summary.json");
+    std::fs::write(
+        &path,
+        serde_json::to_string_pretty(&json).expect("serializable"),
+    )
+    .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+    out.push_str(&format!("\nwrote {}\n", path.display()));
+    print_out(&out);
+    Ok(())
+}
+
 fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
-    let mut exp = load(scenario)?;
+    let (text, source) = scenario_text(scenario)?;
+    if text.lines().any(|l| l.trim_start().starts_with("report =")) {
+        return table_report(&text, &source, args);
+    }
+    let mut exp = build::load(&text, &source).map_err(|e| Failure::Input(e.to_string()))?;
     if let Some(t) = args.trials {
         if t == 0 {
             return Err(Failure::Input("--trials must be at least 1".into()));

@@ -277,3 +277,49 @@ fn reproduce_dormann_fig1_runs_with_few_trials() {
     );
     assert!(dir.path().join("o/mse_trace_vs_rate.svg").exists());
 }
+
+#[test]
+fn table_reports_reproduce_every_printed_value() {
+    let dir = tempfile::tempdir().unwrap();
+    for (id, expected) in [("zhang-table7", "6 of 6"), ("zhang-tables", "18 of 18")] {
+        let out = hushfuse(&["reproduce", id, "--out", "o"], dir.path());
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            stdout.contains(&format!("{expected} printed values reproduced")),
+            "{stdout}"
+        );
+    }
+}
+
+#[test]
+fn zhang_fig5_runs_with_few_trials() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = hushfuse(
+        &["reproduce", "zhang-fig5", "--trials", "10", "--out", "o"],
+        dir.path(),
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("close to the analog EKF"), "{stdout}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("o/summary.json")).unwrap())
+            .unwrap();
+    // Three activated sensors each get y_hat and Delta: 3 x 2 x 32 downlink bits per step.
+    assert_eq!(
+        json["schemes"][0]["downlink_bits_per_step"]
+            .as_f64()
+            .unwrap(),
+        192.0
+    );
+}

@@ -22,6 +22,16 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         "Seed 003 Fig. 5: quantized-innovation fusion at 2 payload bits, 50 range sensors, 1000 runs",
         include_str!("../../scenarios/zhang-fig5.toml"),
     ),
+    (
+        "zhang-table7",
+        "Seed 003 Table 7: covariance-correction coefficient rho of every quantizer (computed)",
+        include_str!("../../scenarios/zhang-table7.toml"),
+    ),
+    (
+        "zhang-tables",
+        "Seed 003 Tables 1-6: quantization levels against payload bits (computed)",
+        include_str!("../../scenarios/zhang-tables.toml"),
+    ),
 ];
 
 /// The TOML text of a built-in scenario.
