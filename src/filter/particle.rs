@@ -1,1 +1,1522 @@
-//! (to be written)
+//! Bootstrap particle filter machinery: a particle cloud, linear-Gaussian propagation, weight
+//! normalization, estimates and resampling — the fusion center of seed 000 (Zheng, Niu,
+//! Varshney), Algorithm 1 steps (A1.3)–(A1.6). Schemes compute their own likelihood (received
+//! measurements and the censoring bands of silent sensors) and add it to
+//! [`ParticleCloud::log_weights_mut`]; everything else lives here.
+//!
+//! This is the hot path of the project (10^3–10^4 particles, thousands of trials), so the
+//! layout and the loops are chosen for speed:
+//! - particles are stored structure-of-arrays, component-major: component `j` of all particles
+//!   is one contiguous slice, so per-particle arithmetic is a loop over plain slices that the
+//!   compiler vectorizes;
+//! - every buffer (states, log-weights, normalized weights, normal draws, ancestor indices) is
+//!   owned by the cloud and sized at construction: no step allocates;
+//! - normal draws are made in blocks of `n` into a scratch slice and then applied to the state
+//!   components with `axpy` loops;
+//! - the exponential in the normalization is a branch-free polynomial that vectorizes (the
+//!   libm `exp` is an opaque call per particle).
+//!
+//! Each function does one step; the caller owns the time loop and the random number generator,
+//! so the same seed gives bit-identical clouds.
+use super::Gaussian;
+use crate::linalg::{LinalgError, Matrix, Vector};
+use crate::model::transition::psd_sqrt;
+use crate::model::LinearTransition;
+use rand::Rng;
+use rand_distr::{Distribution, Exp1, StandardNormal};
+
+/// Why a particle-filter operation failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ParticleError {
+    #[error("a particle cloud needs at least one particle and one state component")]
+    Empty,
+    #[error("{what}: expected dimension {expected}, got {got}")]
+    Dimension {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
+    #[error("{what}: {source}")]
+    Matrix {
+        what: &'static str,
+        source: LinalgError,
+    },
+    /// Every particle has zero weight (all log-weights `-inf`), or a log-weight is NaN or
+    /// `+inf`: the posterior cannot be represented and the caller must decide (re-initialize,
+    /// skip the update, ...).
+    #[error("particle weights are degenerate: no finite positive total (all -inf, NaN or +inf)")]
+    DegenerateWeights,
+    #[error("ESS threshold must be a fraction in [0, 1], got {0}")]
+    Threshold(f64),
+}
+
+/// How to draw the `n` ancestor indices from the normalized weights. All four are unbiased
+/// (each particle's expected number of copies is `n w_i`) and produce sorted indices, so the
+/// gather that follows reads memory in order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Resampling {
+    /// One uniform `u`, positions `(k + u) / n`: copies are `floor(n w_i)` or `ceil(n w_i)`;
+    /// the lowest-variance choice and the cheapest (one branch-free pass).
+    #[default]
+    Systematic,
+    /// One uniform per stratum, positions `(k + u_k) / n`: copies differ from `n w_i` by less
+    /// than 2.
+    Stratified,
+    /// `floor(n w_i)` deterministic copies, the remaining `n - sum floor(n w_i)` drawn
+    /// multinomially from the fractional parts.
+    Residual,
+    /// `n` independent draws (the textbook bootstrap filter), done in O(n) through sorted
+    /// uniforms generated as normalized cumulative sums of exponential spacings.
+    Multinomial,
+}
+
+/// When to resample.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum ResamplePolicy {
+    /// Every step, as in seed 000's Algorithm 1 (A1.6).
+    #[default]
+    Always,
+    /// Only when the effective sample size falls below `fraction * n` (a common choice is
+    /// 0.5): resampling adds Monte Carlo noise, so it is done only when the weights degenerate.
+    EssBelow(f64),
+}
+
+/// A square-root factor `L` (with `L L^T = A`) kept as the non-negligible columns and their
+/// nonzero entries, so sampling `L z` costs one block of normal draws per kept column and one
+/// `axpy` per nonzero entry.
+#[derive(Debug, Clone)]
+struct SqrtColumns {
+    /// For each kept column: (row, coefficient) of its nonzero entries.
+    columns: Vec<Vec<(usize, f64)>>,
+}
+
+impl SqrtColumns {
+    /// Keeps the columns carrying more than 1e-12 of the total variance `trace(L L^T)`. A
+    /// singular covariance (seed 000's white-noise-acceleration `Q = sigma^2 G G^T` has rank
+    /// one per axis) factors with columns that are zero up to rounding; drawing normals for
+    /// them would double the cost of propagation and change the covariance by less than the
+    /// rounding of the filter's own sums.
+    fn new(l: &Matrix) -> Self {
+        let total: f64 = l.iter().map(|v| v * v).sum();
+        let columns = (0..l.ncols())
+            .filter_map(|c| {
+                let col = l.column(c);
+                let energy: f64 = col.iter().map(|v| v * v).sum();
+                if total > 0.0 && energy > 1e-12 * total {
+                    Some(
+                        col.iter()
+                            .enumerate()
+                            .filter(|(_, v)| **v != 0.0)
+                            .map(|(r, v)| (r, *v))
+                            .collect(),
+                    )
+                } else {
+                    None
+                }
+            })
+            .collect();
+        Self { columns }
+    }
+
+    /// Adds `L z` to the component-major `states` (`n` particles), drawing `z` one block of
+    /// `n` standard normals per kept column into `noise`.
+    fn add_noise<R: Rng + ?Sized>(
+        &self,
+        states: &mut [f64],
+        n: usize,
+        noise: &mut [f64],
+        rng: &mut R,
+    ) {
+        let noise = &mut noise[..n];
+        for col in &self.columns {
+            fill_standard_normal(noise, rng);
+            for &(row, coef) in col {
+                axpy(coef, noise, &mut states[row * n..(row + 1) * n]);
+            }
+        }
+    }
+}
+
+/// Linear-Gaussian transition `x' = F x + w`, `w ~ N(0, Q)`, prepared for propagating a cloud:
+/// the nonzero entries of `F` per row and a square root of `Q` (`Q` may be singular). Built
+/// once per model, so the per-step propagation does no factorization and no allocation.
+#[derive(Debug, Clone)]
+pub struct ParticleTransition {
+    dim: usize,
+    /// For each row `i` of `F`: (column, coefficient) of its nonzero entries.
+    rows: Vec<Vec<(usize, f64)>>,
+    noise: SqrtColumns,
+}
+
+impl ParticleTransition {
+    /// Prepares `model` for propagation (a positive semi-definite square root of `Q`).
+    pub fn new(model: &LinearTransition) -> Result<Self, ParticleError> {
+        let f = model.f();
+        let dim = model.dim();
+        let rows = (0..dim)
+            .map(|i| {
+                (0..dim)
+                    .filter(|&j| f[(i, j)] != 0.0)
+                    .map(|j| (j, f[(i, j)]))
+                    .collect()
+            })
+            .collect();
+        let q_sqrt = psd_sqrt(model.q()).map_err(|source| ParticleError::Matrix {
+            what: "process noise Q",
+            source,
+        })?;
+        Ok(Self {
+            dim,
+            rows,
+            noise: SqrtColumns::new(&q_sqrt),
+        })
+    }
+
+    /// State dimension.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// Number of standard normal draws per particle and step (the numerical rank of `Q`).
+    pub fn noise_rank(&self) -> usize {
+        self.noise.columns.len()
+    }
+}
+
+/// Read-only view of the particle states, component-major. Returned together with the mutable
+/// log-weights by [`ParticleCloud::states_and_log_weights_mut`] so that likelihood code can
+/// read states and write weights at the same time.
+#[derive(Debug, Clone, Copy)]
+pub struct StateView<'a> {
+    data: &'a [f64],
+    n: usize,
+}
+
+impl<'a> StateView<'a> {
+    /// Component `j` of every particle, contiguous.
+    #[inline]
+    pub fn component(&self, j: usize) -> &'a [f64] {
+        &self.data[j * self.n..(j + 1) * self.n]
+    }
+    /// Number of particles.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.n
+    }
+    /// Always false: a cloud has at least one particle.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+    /// State dimension.
+    #[inline]
+    pub fn dim(&self) -> usize {
+        self.data.len() / self.n
+    }
+}
+
+/// `n` weighted particles in `dim` dimensions, stored component-major, with every scratch
+/// buffer a filter step needs (see the module documentation for why).
+///
+/// Weights live in the log domain (`log_weights`), where likelihoods of many sensors add
+/// without underflow. [`normalize`](Self::normalize) turns them into normalized weights;
+/// estimates and resampling normalize first if the log-weights changed since.
+#[derive(Debug, Clone)]
+pub struct ParticleCloud {
+    dim: usize,
+    n: usize,
+    /// `dim * n` values; component `j` of particle `i` at `j * n + i`.
+    states: Vec<f64>,
+    /// Same shape as `states`: target of propagation and of the resampling gather, swapped in
+    /// afterwards.
+    spare: Vec<f64>,
+    log_weights: Vec<f64>,
+    /// Normalized weights when `normalized`; resampling reuses it for cumulative sums.
+    weights: Vec<f64>,
+    /// `n` standard normals per noise column; sorted uniforms for multinomial resampling.
+    noise: Vec<f64>,
+    /// Ancestor indices of the last resampling; one extra slot for the branch-free scatter.
+    ancestors: Vec<usize>,
+    /// Copies per particle (residual resampling).
+    counts: Vec<usize>,
+    /// Whether `weights` holds the normalized `exp(log_weights)`.
+    normalized: bool,
+}
+
+impl ParticleCloud {
+    /// A cloud of `n` particles at the origin of a `dim`-dimensional space, equally weighted.
+    /// All buffers are allocated here and never again.
+    pub fn new(dim: usize, n: usize) -> Result<Self, ParticleError> {
+        if dim == 0 || n == 0 {
+            return Err(ParticleError::Empty);
+        }
+        let inv_n = 1.0 / n as f64;
+        Ok(Self {
+            dim,
+            n,
+            states: vec![0.0; dim * n],
+            spare: vec![0.0; dim * n],
+            log_weights: vec![-(n as f64).ln(); n],
+            weights: vec![inv_n; n],
+            noise: vec![0.0; n],
+            ancestors: (0..=n).collect(),
+            counts: vec![0; n],
+            normalized: true,
+        })
+    }
+
+    /// `n` equally weighted particles drawn from `prior` (seed 000 initializes the fusion
+    /// center's filter from the prior of x_0).
+    pub fn from_gaussian<R: Rng + ?Sized>(
+        n: usize,
+        prior: &Gaussian,
+        rng: &mut R,
+    ) -> Result<Self, ParticleError> {
+        let mut cloud = Self::new(prior.dim(), n)?;
+        cloud.init_gaussian(prior, rng)?;
+        Ok(cloud)
+    }
+
+    /// Redraws every particle from `prior` and resets the weights to equal, reusing the
+    /// buffers (one cloud can serve every Monte Carlo trial). The covariance may be singular
+    /// (a known component): a positive semi-definite square root is used. Draws are made one
+    /// block of `n` normals per column of the square root.
+    pub fn init_gaussian<R: Rng + ?Sized>(
+        &mut self,
+        prior: &Gaussian,
+        rng: &mut R,
+    ) -> Result<(), ParticleError> {
+        self.check_dim("prior mean", prior.mean.len())?;
+        self.check_dim("prior covariance rows", prior.cov.nrows())?;
+        self.check_dim("prior covariance columns", prior.cov.ncols())?;
+        let sqrt = psd_sqrt(&prior.cov).map_err(|source| ParticleError::Matrix {
+            what: "prior covariance",
+            source,
+        })?;
+        if prior.mean.iter().any(|v| !v.is_finite()) {
+            return Err(ParticleError::Matrix {
+                what: "prior mean",
+                source: LinalgError::NonFinite,
+            });
+        }
+        let n = self.n;
+        for (j, &m) in prior.mean.iter().enumerate() {
+            self.states[j * n..(j + 1) * n].fill(m);
+        }
+        SqrtColumns::new(&sqrt).add_noise(&mut self.states, n, &mut self.noise, rng);
+        self.set_equal_weights();
+        for (k, a) in self.ancestors.iter_mut().enumerate() {
+            *a = k;
+        }
+        Ok(())
+    }
+
+    fn check_dim(&self, what: &'static str, got: usize) -> Result<(), ParticleError> {
+        if got == self.dim {
+            Ok(())
+        } else {
+            Err(ParticleError::Dimension {
+                what,
+                expected: self.dim,
+                got,
+            })
+        }
+    }
+
+    /// Number of particles.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Always false: a cloud has at least one particle.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// State dimension.
+    #[inline]
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// Component `j` of every particle, contiguous.
+    #[inline]
+    pub fn component(&self, j: usize) -> &[f64] {
+        &self.states[j * self.n..(j + 1) * self.n]
+    }
+
+    /// Mutable component `j` of every particle (weights are unaffected).
+    #[inline]
+    pub fn component_mut(&mut self, j: usize) -> &mut [f64] {
+        &mut self.states[j * self.n..(j + 1) * self.n]
+    }
+
+    /// All states as a read-only component-major view.
+    #[inline]
+    pub fn states(&self) -> StateView<'_> {
+        StateView {
+            data: &self.states,
+            n: self.n,
+        }
+    }
+
+    /// Copies particle `i` into `out` (length `dim`), for per-particle code that wants the
+    /// state as one vector.
+    pub fn copy_particle(&self, i: usize, out: &mut [f64]) {
+        for (j, o) in out.iter_mut().enumerate().take(self.dim) {
+            *o = self.states[j * self.n + i];
+        }
+    }
+
+    /// The log-weights (unnormalized until [`normalize`](Self::normalize)).
+    #[inline]
+    pub fn log_weights(&self) -> &[f64] {
+        &self.log_weights
+    }
+
+    /// The log-weights, for adding per-particle log-likelihoods. Marks the normalized weights
+    /// stale.
+    #[inline]
+    pub fn log_weights_mut(&mut self) -> &mut [f64] {
+        self.normalized = false;
+        &mut self.log_weights
+    }
+
+    /// The states (read-only) and the log-weights (mutable) at once: a likelihood reads the
+    /// former and adds to the latter. Marks the normalized weights stale.
+    #[inline]
+    pub fn states_and_log_weights_mut(&mut self) -> (StateView<'_>, &mut [f64]) {
+        self.normalized = false;
+        (
+            StateView {
+                data: &self.states,
+                n: self.n,
+            },
+            &mut self.log_weights,
+        )
+    }
+
+    /// Ancestor indices chosen by the last resampling (particle `k` is a copy of the previous
+    /// particle `ancestors()[k]`), sorted; the identity before any resampling. Schemes that
+    /// keep per-particle data beside the states permute it with these.
+    #[inline]
+    pub fn ancestors(&self) -> &[usize] {
+        &self.ancestors[..self.n]
+    }
+
+    /// Propagates every particle through `x' = F x + w` (seed 000, (A1.3)): `F x` as one
+    /// `axpy` per nonzero entry of `F` over whole components, then one block of normal draws
+    /// per column of the square root of `Q`. Weights are unchanged (bootstrap proposal).
+    pub fn propagate<R: Rng + ?Sized>(
+        &mut self,
+        transition: &ParticleTransition,
+        rng: &mut R,
+    ) -> Result<(), ParticleError> {
+        self.check_dim("transition", transition.dim)?;
+        let n = self.n;
+        for (i, row) in transition.rows.iter().enumerate() {
+            let out = &mut self.spare[i * n..(i + 1) * n];
+            match row.split_first() {
+                None => out.fill(0.0),
+                Some((&(j0, a0), rest)) => {
+                    scale_into(a0, &self.states[j0 * n..(j0 + 1) * n], out);
+                    for &(j, a) in rest {
+                        axpy(a, &self.states[j * n..(j + 1) * n], out);
+                    }
+                }
+            }
+        }
+        transition
+            .noise
+            .add_noise(&mut self.spare, n, &mut self.noise, rng);
+        std::mem::swap(&mut self.states, &mut self.spare);
+        Ok(())
+    }
+
+    /// Normalizes the weights: subtracts the largest log-weight before exponentiating (so
+    /// nothing overflows and the largest weight is exactly representable), stores normalized
+    /// weights, shifts the log-weights so that `sum exp(log_weights) = 1`, and returns the log
+    /// of the normalizing constant, `ln sum_i exp(l_i)` of the log-weights as they were.
+    ///
+    /// Because resampling leaves the log-weights normalized too (`-ln n` each), after adding a
+    /// step's log-likelihoods the returned value is the log of the particle estimate of
+    /// `p(z_k | z_{1:k-1})`, whether or not the previous step resampled.
+    ///
+    /// Fails with [`ParticleError::DegenerateWeights`] if every log-weight is `-inf` or any is
+    /// NaN or `+inf`; the log-weights are then left untouched.
+    pub fn normalize(&mut self) -> Result<f64, ParticleError> {
+        let m = max_lanes(&self.log_weights);
+        if !m.is_finite() {
+            return Err(ParticleError::DegenerateWeights);
+        }
+        let s = exp_shifted_into(&self.log_weights, m, &mut self.weights);
+        // s >= 1 (the largest particle contributes exp(0) = 1) unless a NaN got in.
+        if !s.is_finite() {
+            return Err(ParticleError::DegenerateWeights);
+        }
+        let ln_s = s.ln();
+        let inv_s = 1.0 / s;
+        for (w, l) in self.weights.iter_mut().zip(self.log_weights.iter_mut()) {
+            *w *= inv_s;
+            // (l - m) first: exact for the particles that matter (Sterbenz), so normalized
+            // log-weights keep full relative precision even when the raw ones are ~1e3.
+            *l = (*l - m) - ln_s;
+        }
+        self.normalized = true;
+        Ok(m + ln_s)
+    }
+
+    /// Normalizes if the log-weights changed since the last normalization.
+    fn ensure_normalized(&mut self) -> Result<(), ParticleError> {
+        if !self.normalized {
+            self.normalize()?;
+        }
+        Ok(())
+    }
+
+    /// Normalized weights (normalizing first if needed).
+    pub fn weights(&mut self) -> Result<&[f64], ParticleError> {
+        self.ensure_normalized()?;
+        Ok(&self.weights)
+    }
+
+    /// Effective sample size `1 / sum w_i^2`: `n` for equal weights, 1 when one particle
+    /// carries all the weight.
+    pub fn ess(&mut self) -> Result<f64, ParticleError> {
+        self.ensure_normalized()?;
+        Ok(1.0 / dot_lanes(&self.weights, &self.weights))
+    }
+
+    /// Weighted mean, written into `out` (length `dim`) without allocating.
+    pub fn mean_into(&mut self, out: &mut [f64]) -> Result<(), ParticleError> {
+        self.check_dim("mean output", out.len())?;
+        self.ensure_normalized()?;
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = dot_lanes(&self.weights, self.component(j));
+        }
+        Ok(())
+    }
+
+    /// Weighted mean.
+    pub fn mean(&mut self) -> Result<Vector, ParticleError> {
+        let mut m = Vector::zeros(self.dim);
+        self.mean_into(m.as_mut_slice())?;
+        Ok(m)
+    }
+
+    /// Weighted covariance `sum w_i (x_i - m)(x_i - m)^T` about the weighted mean, computed
+    /// from centered products (not `E[x x^T] - m m^T`, which cancels catastrophically when the
+    /// spread is small against the mean). With normalized weights it has no `n / (n - 1)`
+    /// correction: after resampling it is the population covariance of the cloud.
+    pub fn covariance(&mut self) -> Result<Matrix, ParticleError> {
+        Ok(self.estimate()?.cov)
+    }
+
+    /// Weighted mean and covariance at once (what a fusion center reports each step).
+    pub fn estimate(&mut self) -> Result<Gaussian, ParticleError> {
+        let mut g = Gaussian::new(Vector::zeros(self.dim), Matrix::zeros(self.dim, self.dim));
+        self.estimate_into(&mut g)?;
+        Ok(g)
+    }
+
+    /// Weighted mean and covariance into an existing `Gaussian` of the right dimension,
+    /// without allocating.
+    pub fn estimate_into(&mut self, out: &mut Gaussian) -> Result<(), ParticleError> {
+        self.check_dim("estimate covariance rows", out.cov.nrows())?;
+        self.check_dim("estimate covariance columns", out.cov.ncols())?;
+        self.mean_into(out.mean.as_mut_slice())?;
+        // Centered components a_j = x_j - m_j into the spare buffer, then for each row j the
+        // weighted t = w a_j into the noise buffer, and entry (j, k) = sum t a_k: two flops per
+        // particle and entry instead of five for sum w (x_j - m_j)(x_k - m_k).
+        let n = self.n;
+        for j in 0..self.dim {
+            let m = out.mean[j];
+            let x = &self.states[j * n..(j + 1) * n];
+            for (a, xi) in self.spare[j * n..(j + 1) * n].iter_mut().zip(x) {
+                *a = xi - m;
+            }
+        }
+        let t = &mut self.noise[..n];
+        for j in 0..self.dim {
+            let aj = &self.spare[j * n..(j + 1) * n];
+            for ((ti, wi), ai) in t.iter_mut().zip(&self.weights).zip(aj) {
+                *ti = wi * ai;
+            }
+            for k in j..self.dim {
+                let c = dot_lanes(t, &self.spare[k * n..(k + 1) * n]);
+                out.cov[(j, k)] = c;
+                out.cov[(k, j)] = c;
+            }
+        }
+        Ok(())
+    }
+
+    /// Resamples if `policy` asks for it (seed 000, (A1.6)); returns whether it did.
+    pub fn resample_if<R: Rng + ?Sized>(
+        &mut self,
+        policy: ResamplePolicy,
+        scheme: Resampling,
+        rng: &mut R,
+    ) -> Result<bool, ParticleError> {
+        match policy {
+            ResamplePolicy::Always => {}
+            ResamplePolicy::EssBelow(fraction) => {
+                if !(0.0..=1.0).contains(&fraction) {
+                    return Err(ParticleError::Threshold(fraction));
+                }
+                if self.ess()? >= fraction * self.n as f64 {
+                    return Ok(false);
+                }
+            }
+        }
+        self.resample(scheme, rng)?;
+        Ok(true)
+    }
+
+    /// Draws `n` ancestors with `scheme` (normalizing first if needed), gathers the states
+    /// component by component into the spare buffer, swaps it in and sets all weights equal
+    /// (log-weights `-ln n`, already normalized; see [`normalize`](Self::normalize) for why not
+    /// 0).
+    pub fn resample<R: Rng + ?Sized>(
+        &mut self,
+        scheme: Resampling,
+        rng: &mut R,
+    ) -> Result<(), ParticleError> {
+        self.ensure_normalized()?;
+        let n = self.n;
+        let anc = &mut self.ancestors;
+        if scheme == Resampling::Systematic {
+            systematic(&self.weights, rng.random(), anc);
+        } else {
+            // Cumulative sums in place: the normalized weights are not needed after this.
+            let (total, last) = cumulative_in_place(&mut self.weights);
+            if !(total.is_finite() && total > 0.0) {
+                return Err(ParticleError::DegenerateWeights);
+            }
+            let cum = &mut self.weights;
+            match scheme {
+                Resampling::Stratified => {
+                    let step = total / n as f64;
+                    for (k, u) in self.noise.iter_mut().enumerate() {
+                        *u = (k as f64 + rng.random::<f64>()) * step;
+                    }
+                    merge(cum, last, &self.noise, anc);
+                }
+                Resampling::Multinomial => {
+                    sorted_uniforms(&mut self.noise, total, rng);
+                    merge(cum, last, &self.noise, anc);
+                }
+                Resampling::Residual => {
+                    residual(cum, last, &mut self.noise, &mut self.counts, anc, rng)
+                }
+                Resampling::Systematic => unreachable!("handled above"),
+            }
+        }
+        for j in 0..self.dim {
+            let src = &self.states[j * n..(j + 1) * n];
+            let dst = &mut self.spare[j * n..(j + 1) * n];
+            for (d, &a) in dst.iter_mut().zip(&anc[..n]) {
+                *d = src[a];
+            }
+        }
+        std::mem::swap(&mut self.states, &mut self.spare);
+        self.set_equal_weights();
+        Ok(())
+    }
+
+    fn set_equal_weights(&mut self) {
+        let n = self.n as f64;
+        self.log_weights.fill(-n.ln());
+        self.weights.fill(1.0 / n);
+        self.normalized = true;
+    }
+}
+
+/// `y += a x`.
+#[inline]
+fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += a * xi;
+    }
+}
+
+/// `y = a x`.
+#[inline]
+fn scale_into(a: f64, x: &[f64], y: &mut [f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi = a * xi;
+    }
+}
+
+/// Fills `out` with independent standard normals (ziggurat; one generator call per draw in
+/// 99% of cases).
+#[inline]
+fn fill_standard_normal<R: Rng + ?Sized>(out: &mut [f64], rng: &mut R) {
+    for v in out.iter_mut() {
+        *v = StandardNormal.sample(rng);
+    }
+}
+
+/// Lanes for the reductions below: independent accumulators break the serial dependency of a
+/// floating-point sum (which the compiler may not reorder) and map onto SIMD registers. The
+/// summation order is fixed, so results are bit-reproducible.
+const LANES: usize = 8;
+
+/// Sum of the lane accumulators in the order that matches how they sit in SIMD registers
+/// (pairs `k, k + 1`): the compiler then keeps the loop in vector form instead of shuffling
+/// lanes every iteration (1.5x faster than `acc.iter().sum()`).
+#[inline(always)]
+fn reduce_lanes(acc: [f64; LANES]) -> f64 {
+    ((acc[0] + acc[4]) + (acc[2] + acc[6])) + ((acc[1] + acc[5]) + (acc[3] + acc[7]))
+}
+
+/// Largest element; NaNs are ignored (they are caught later by the sum they poison).
+fn max_lanes(x: &[f64]) -> f64 {
+    let mut acc = [f64::NEG_INFINITY; LANES];
+    let mut chunks = x.chunks_exact(LANES);
+    for c in &mut chunks {
+        for k in 0..LANES {
+            acc[k] = if c[k] > acc[k] { c[k] } else { acc[k] };
+        }
+    }
+    chunks
+        .remainder()
+        .iter()
+        .chain(acc.iter())
+        .fold(f64::NEG_INFINITY, |m, &v| if v > m { v } else { m })
+}
+
+/// `sum_i x_i y_i`.
+fn dot_lanes(x: &[f64], y: &[f64]) -> f64 {
+    let mut acc = [0.0; LANES];
+    let mut xc = x.chunks_exact(LANES);
+    let mut yc = y.chunks_exact(LANES);
+    for (a, b) in (&mut xc).zip(&mut yc) {
+        for k in 0..LANES {
+            acc[k] += a[k] * b[k];
+        }
+    }
+    let tail: f64 = xc
+        .remainder()
+        .iter()
+        .zip(yc.remainder())
+        .map(|(a, b)| a * b)
+        .sum();
+    reduce_lanes(acc) + tail
+}
+
+/// `out_i = exp(l_i - m)`, returning `sum_i out_i`.
+fn exp_shifted_into(l: &[f64], m: f64, out: &mut [f64]) -> f64 {
+    let mut acc = [0.0; LANES];
+    let mut oc = out.chunks_exact_mut(LANES);
+    let mut lc = l.chunks_exact(LANES);
+    for (o, x) in (&mut oc).zip(&mut lc) {
+        for k in 0..LANES {
+            o[k] = exp_nonpositive(x[k] - m);
+            acc[k] += o[k];
+        }
+    }
+    let mut tail = 0.0;
+    for (o, x) in oc.into_remainder().iter_mut().zip(lc.remainder()) {
+        *o = exp_nonpositive(x - m);
+        tail += *o;
+    }
+    reduce_lanes(acc) + tail
+}
+
+/// `exp(x)` for `x <= 0`, branch-free so that loops over it vectorize (libm's `exp` is an
+/// opaque call). Range reduction `x = k ln 2 + r`, `|r| <= ln 2 / 2` (Cody–Waite split of
+/// `ln 2`), the degree-12 Taylor polynomial of `exp(r)` (truncation below 2e-16) evaluated by
+/// Estrin's scheme (short dependency chains), and `2^k` built in the exponent bits. Relative
+/// error within a few ulp (tested against libm). Returns 0 below -708 (where `2^k` would be
+/// subnormal; such weights are below 1e-307 of the largest), 0 for `-inf`, NaN for NaN.
+#[inline(always)]
+fn exp_nonpositive(x: f64) -> f64 {
+    // 1.5 * 2^52: adding it rounds to an integer and leaves that integer in the low bits.
+    const SHIFTER: f64 = 6_755_399_441_055_744.0;
+    // fdlibm's split of ln 2: LN2_HI has trailing zero bits, so k * LN2_HI is exact.
+    const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
+    let t = x * std::f64::consts::LOG2_E + SHIFTER;
+    let k = t - SHIFTER;
+    let r = x - k * LN2_HI - k * LN2_LO;
+    let r2 = r * r;
+    let r4 = r2 * r2;
+    let r8 = r4 * r4;
+    let p01 = 1.0 + r;
+    let p23 = 0.5 + r * (1.0 / 6.0);
+    let p45 = 1.0 / 24.0 + r * (1.0 / 120.0);
+    let p67 = 1.0 / 720.0 + r * (1.0 / 5040.0);
+    let p89 = 1.0 / 40_320.0 + r * (1.0 / 362_880.0);
+    let p1011 = 1.0 / 3_628_800.0 + r * (1.0 / 39_916_800.0);
+    let p12 = 1.0 / 479_001_600.0;
+    let lo = (p01 + p23 * r2) + (p45 + p67 * r2) * r4;
+    let hi = (p89 + p1011 * r2) + p12 * r4;
+    let p = lo + hi * r8;
+    // The low bits of t hold k + SHIFTER's mantissa; rebias to k + 1023 and shift into the
+    // exponent field.
+    let two_k = f64::from_bits(
+        t.to_bits()
+            .wrapping_add(1023u64.wrapping_sub(SHIFTER.to_bits()))
+            << 52,
+    );
+    let y = p * two_k;
+    if x < -708.0 {
+        0.0
+    } else {
+        y
+    }
+}
+
+/// Replaces `w` by its running sums; returns the total and the index of the last particle with
+/// positive weight (rounding in the sums must never hand a position to a zero-weight particle
+/// after it).
+fn cumulative_in_place(w: &mut [f64]) -> (f64, usize) {
+    let mut c = 0.0;
+    let mut last = 0;
+    for (i, v) in w.iter_mut().enumerate() {
+        last = if *v > 0.0 { i } else { last };
+        c += *v;
+        *v = c;
+    }
+    (c, last)
+}
+
+/// Systematic resampling in one pass over the normalized weights, with no data-dependent
+/// branch. With `v` uniform on [0, 1), the positions are `(k + 1 - v) / n`, `k = 0..n`, and
+/// particle `i` owns those in `(C_{i-1}, C_i]` (C the running sum of the weights): the first
+/// `N_i = floor(n C_i + v)` positions lie at or below `C_i`, so particle `i` gets slots
+/// `N_{i-1}..N_i` — `floor(n w_i)` or `ceil(n w_i)` of them. The runs are filled by
+/// [`mark_run_starts`]'s prefix sum. If rounding leaves `n C_n + v` a hair below `n`, the last
+/// slots go to the last particle with positive weight, never to a zero-weight one. `anc` has
+/// `n + 1` slots so a run may start at `n`.
+fn systematic(w: &[f64], v: f64, anc: &mut [usize]) {
+    let n = w.len();
+    let nf = n as f64;
+    let mut c = 0.0;
+    mark_run_starts(
+        anc,
+        w.iter().map(|&wi| {
+            c += wi;
+            // n C_i + v >= 0, so the truncating conversion is the floor; `min` absorbs a total a
+            // few ulp above 1.
+            (wi > 0.0, ((c * nf + v) as usize).min(n))
+        }),
+    );
+}
+
+/// Writes sorted ancestor indices from the end of each particle's run of slots, given in
+/// particle order as `(has_copies, end)` with non-decreasing ends. Instead of filling runs
+/// (a loop whose trip count is random, hence mispredicted branches) each particle with copies
+/// adds `i - previous_owner` at the start of its run and a prefix sum turns these steps into
+/// the indices. Particles flagged without copies write nothing, so a particle whose run is
+/// empty, or a zero-weight particle after a rounding shortfall, never appears.
+fn mark_run_starts(anc: &mut [usize], runs: impl Iterator<Item = (bool, usize)>) {
+    let n = anc.len() - 1;
+    anc.fill(0);
+    let mut start = 0usize;
+    let mut owner = 0usize;
+    for (i, (has_copies, end)) in runs.enumerate() {
+        let step = if has_copies { i - owner } else { 0 };
+        anc[start] += step;
+        owner = if has_copies { i } else { owner };
+        start = end;
+    }
+    let mut s = 0usize;
+    for a in anc[..n].iter_mut() {
+        s += *a;
+        *a = s;
+    }
+}
+
+/// Ancestors of sorted positions `pos` (in the units of the cumulative sums `cum`): particle
+/// `i` takes the positions in `[cum[i-1], cum[i])`. Never moves past `last`, the last particle
+/// with positive weight.
+fn merge(cum: &[f64], last: usize, pos: &[f64], anc: &mut [usize]) {
+    let mut i = 0usize;
+    for (a, &u) in anc.iter_mut().zip(pos) {
+        while i < last && cum[i] <= u {
+            i += 1;
+        }
+        *a = i;
+    }
+}
+
+/// Fills `out` with the order statistics of `out.len()` uniforms on `[0, total)` in O(n): if
+/// `E_0, ..., E_n` are i.i.d. exponential, the partial sums `S_k / S_n` are distributed as
+/// sorted uniforms — no sort needed.
+fn sorted_uniforms<R: Rng + ?Sized>(out: &mut [f64], total: f64, rng: &mut R) {
+    let mut s = 0.0;
+    for v in out.iter_mut() {
+        s += <Exp1 as Distribution<f64>>::sample(&Exp1, rng);
+        *v = s;
+    }
+    s += <Exp1 as Distribution<f64>>::sample(&Exp1, rng);
+    let scale = total / s;
+    for v in out.iter_mut() {
+        *v *= scale;
+    }
+}
+
+/// Residual resampling: `floor(n w_i)` deterministic copies of particle `i`, then the
+/// remaining `R = n - sum floor(n w_i)` drawn multinomially from the fractional parts `n w_i -
+/// floor(n w_i)` (sorted uniforms merged against their running sums), then the copies expanded
+/// into sorted ancestors. `cum` holds the cumulative weights on entry and the cumulative
+/// fractional parts on exit; `noise` receives the sorted uniforms.
+fn residual<R: Rng + ?Sized>(
+    cum: &mut [f64],
+    last: usize,
+    noise: &mut [f64],
+    counts: &mut [usize],
+    anc: &mut [usize],
+    rng: &mut R,
+) {
+    let n = cum.len();
+    let scale = n as f64 / cum[n - 1];
+    let mut prev = 0.0;
+    let mut frac_sum = 0.0;
+    let mut deterministic = 0usize;
+    let mut last_frac = 0usize;
+    for (i, (c, k)) in cum.iter_mut().zip(counts.iter_mut()).enumerate() {
+        let nw = (*c - prev) * scale;
+        prev = *c;
+        let f = nw.floor();
+        *k = f as usize;
+        deterministic += *k;
+        let r = nw - f;
+        last_frac = if r > 0.0 { i } else { last_frac };
+        frac_sum += r;
+        *c = frac_sum;
+    }
+    // In exact arithmetic sum floor(n w_i) <= n; rounding of the running sums could in
+    // principle add one, which is taken back from the last particles.
+    let mut excess = deterministic.saturating_sub(n);
+    for k in counts.iter_mut().rev() {
+        let take = excess.min(*k);
+        *k -= take;
+        excess -= take;
+    }
+    let remaining = n - deterministic.min(n);
+    if remaining > 0 {
+        if frac_sum > 0.0 {
+            let pos = &mut noise[..remaining];
+            sorted_uniforms(pos, frac_sum, rng);
+            let mut i = 0usize;
+            for &u in pos.iter() {
+                while i < last_frac && cum[i] <= u {
+                    i += 1;
+                }
+                counts[i] += 1;
+            }
+        } else {
+            // Only reachable through rounding (the fractional parts sum to R >= 1 exactly).
+            counts[last] += remaining;
+        }
+    }
+    expand_counts(counts, anc);
+}
+
+/// Sorted ancestors from copies per particle.
+fn expand_counts(counts: &[usize], anc: &mut [usize]) {
+    let mut end = 0usize;
+    mark_run_starts(
+        anc,
+        counts.iter().map(|&c| {
+            end += c;
+            (c > 0, end)
+        }),
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::kf;
+    use crate::linalg::matrix_from_rows;
+    use crate::model::LinearSensor;
+    use rand::{RngCore, SeedableRng};
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    fn rng(seed: u64) -> Xoshiro256PlusPlus {
+        Xoshiro256PlusPlus::seed_from_u64(seed)
+    }
+
+    const ALL_SCHEMES: [Resampling; 4] = [
+        Resampling::Systematic,
+        Resampling::Stratified,
+        Resampling::Residual,
+        Resampling::Multinomial,
+    ];
+
+    #[test]
+    fn vectorized_exp_matches_libm() {
+        let mut r = rng(1);
+        let mut worst = 0.0_f64;
+        for i in 0..200_000 {
+            let x = -(i as f64) * 708.0 / 200_000.0 - 1e-3 * r.random::<f64>();
+            let (e, c) = (x.exp(), exp_nonpositive(x));
+            worst = worst.max(((c - e) / e).abs());
+        }
+        // A few ulp: the polynomial truncates below 2e-16 and the reduction adds one rounding.
+        assert!(worst < 8.0 * f64::EPSILON, "worst relative error {worst:e}");
+        assert_eq!(exp_nonpositive(0.0), 1.0);
+        assert_eq!(exp_nonpositive(-0.0), 1.0);
+        assert_eq!(exp_nonpositive(-750.0), 0.0);
+        assert_eq!(exp_nonpositive(f64::NEG_INFINITY), 0.0);
+        assert!(exp_nonpositive(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn normalize_is_stable_for_huge_negative_log_weights() {
+        let mut c = ParticleCloud::new(1, 3).unwrap();
+        c.log_weights_mut()
+            .copy_from_slice(&[-1000.0, -1001.0, -2000.0]);
+        let log_z = c.normalize().unwrap();
+        let e = (-1.0_f64).exp();
+        // Exact: w = (1, e^-1, e^-1000) / (1 + e^-1 + e^-1000), and e^-1000 underflows.
+        assert!((log_z - (-1000.0 + (1.0 + e).ln())).abs() < 1e-12);
+        let w = c.weights().unwrap().to_vec();
+        assert!(w.iter().all(|v| v.is_finite()));
+        assert!((w[0] - 1.0 / (1.0 + e)).abs() < 1e-15);
+        assert!((w[1] / w[0] - e).abs() < 1e-15);
+        assert_eq!(w[2], 0.0);
+        // The log-weights are now normalized: they sum to one in the linear domain.
+        let s: f64 = c.log_weights().iter().map(|l| l.exp()).sum();
+        assert!((s - 1.0).abs() < 1e-15);
+        // Normalizing again changes nothing and reports log Z = 0.
+        assert!(c.normalize().unwrap().abs() < 1e-15);
+    }
+
+    #[test]
+    fn degenerate_weights_are_errors_and_leave_log_weights_alone() {
+        let mut c = ParticleCloud::new(1, 3).unwrap();
+        for bad in [
+            [f64::NEG_INFINITY; 3],
+            [0.0, f64::NAN, 1.0],
+            [0.0, f64::INFINITY, 1.0],
+        ] {
+            c.log_weights_mut().copy_from_slice(&bad);
+            assert_eq!(c.normalize(), Err(ParticleError::DegenerateWeights));
+            assert_eq!(c.ess(), Err(ParticleError::DegenerateWeights));
+            assert_eq!(
+                c.resample(Resampling::Systematic, &mut rng(0)),
+                Err(ParticleError::DegenerateWeights)
+            );
+            let kept = c.log_weights();
+            assert!(kept
+                .iter()
+                .zip(&bad)
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
+    }
+
+    #[test]
+    fn ess_of_equal_and_of_single_weight() {
+        let n = 1000;
+        let mut c = ParticleCloud::new(1, n).unwrap();
+        c.log_weights_mut().fill(-3.7);
+        assert!((c.ess().unwrap() - n as f64).abs() < 1e-9);
+        let lw = c.log_weights_mut();
+        lw.fill(f64::NEG_INFINITY);
+        lw[417] = -5.0;
+        assert_eq!(c.ess().unwrap(), 1.0);
+        // Two equal weights among zeros: ESS 2.
+        let lw = c.log_weights_mut();
+        lw[3] = lw[417];
+        assert!((c.ess().unwrap() - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn normalize_returns_the_evidence_after_resampling() {
+        // After resampling the log-weights are -ln n, so adding log-likelihoods ln(1..4) and
+        // normalizing returns ln of their average, (1 + 2 + 3 + 4) / 4.
+        let mut c = ParticleCloud::new(1, 4).unwrap();
+        c.log_weights_mut().copy_from_slice(&[0.0, -1.0, 2.0, 0.5]);
+        c.resample(Resampling::Systematic, &mut rng(3)).unwrap();
+        for (l, v) in c.log_weights_mut().iter_mut().zip([1.0_f64, 2.0, 3.0, 4.0]) {
+            *l += v.ln();
+        }
+        assert!((c.normalize().unwrap() - 2.5_f64.ln()).abs() < 1e-15);
+    }
+
+    /// Raw weights with zeros at the front, in the middle and at the end; n w_i is never an
+    /// integer, so floor and ceil differ for every positive weight.
+    fn test_weights() -> Vec<f64> {
+        let raw = [0.0, 0.5, 2.95, 0.0, 1.7, 0.05, 2.2, 0.9, 0.0, 1.3, 0.4, 0.0];
+        let s: f64 = raw.iter().sum();
+        raw.iter().map(|r| r / s).collect()
+    }
+
+    /// Counts of each index over `reps` resamplings with fixed weights; also checks, on every
+    /// repetition, the structural properties all schemes share.
+    fn resampling_counts(scheme: Resampling, reps: usize, seed: u64) -> Vec<Vec<usize>> {
+        let w = test_weights();
+        let n = w.len();
+        let mut c = ParticleCloud::new(1, n).unwrap();
+        let mut r = rng(seed);
+        let mut counts = Vec::with_capacity(reps);
+        for _ in 0..reps {
+            for (i, x) in c.component_mut(0).iter_mut().enumerate() {
+                *x = i as f64;
+            }
+            for (l, wi) in c.log_weights_mut().iter_mut().zip(&w) {
+                *l = wi.ln() + 7.0; // any constant offset
+            }
+            c.resample(scheme, &mut r).unwrap();
+            let anc = c.ancestors().to_vec();
+            assert!(anc.windows(2).all(|p| p[0] <= p[1]), "{scheme:?}: unsorted");
+            // The gather moved the states: particle k now holds the old particle anc[k].
+            assert!(c
+                .component(0)
+                .iter()
+                .zip(&anc)
+                .all(|(x, &a)| *x == a as f64));
+            assert!(c.log_weights().iter().all(|l| *l == -(n as f64).ln()));
+            assert!(c.weights().unwrap().iter().all(|v| *v == 1.0 / n as f64));
+            let mut k = vec![0usize; n];
+            for a in anc {
+                assert!(w[a] > 0.0, "{scheme:?} picked zero-weight particle {a}");
+                k[a] += 1;
+            }
+            counts.push(k);
+        }
+        counts
+    }
+
+    fn mean_var(counts: &[Vec<usize>], i: usize) -> (f64, f64) {
+        let r = counts.len() as f64;
+        let m = counts.iter().map(|k| k[i] as f64).sum::<f64>() / r;
+        let v = counts
+            .iter()
+            .map(|k| (k[i] as f64 - m).powi(2))
+            .sum::<f64>()
+            / (r - 1.0);
+        (m, v)
+    }
+
+    #[test]
+    fn every_scheme_is_unbiased() {
+        // The mean count over R repetitions has standard error sd_i / sqrt(R), sd_i the
+        // sample standard deviation of the count. 4 standard errors: a false alarm among the
+        // 48 comparisons has probability about 48 * 6e-5 = 3e-3 (and the seed is fixed).
+        let reps = 20_000;
+        let w = test_weights();
+        let n = w.len() as f64;
+        for (s, scheme) in ALL_SCHEMES.into_iter().enumerate() {
+            let counts = resampling_counts(scheme, reps, 100 + s as u64);
+            for (i, wi) in w.iter().enumerate() {
+                let (m, v) = mean_var(&counts, i);
+                let se = (v / reps as f64).sqrt();
+                assert!(
+                    (m - n * wi).abs() <= 4.0 * se,
+                    "{scheme:?} index {i}: mean count {m} vs n w = {} (se {se})",
+                    n * wi
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn systematic_counts_are_floor_or_ceil() {
+        let w = test_weights();
+        let n = w.len() as f64;
+        for k in resampling_counts(Resampling::Systematic, 5000, 7) {
+            for (c, wi) in k.iter().zip(&w) {
+                let nw = n * wi;
+                assert!(
+                    *c as f64 == nw.floor() || *c as f64 == nw.ceil(),
+                    "{c} vs {nw}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn stratified_counts_are_within_two_of_expectation() {
+        // Particle i's interval has length n w_i in stratum units: it lies fully inside at least
+        // floor(n w_i) - 1 strata (each gives it exactly one copy) and touches at most
+        // ceil(n w_i) + 1, so |count - n w_i| < 2. Both bounds are attained.
+        let w = test_weights();
+        let n = w.len() as f64;
+        let mut spread = [0usize; 2];
+        for k in resampling_counts(Resampling::Stratified, 5000, 8) {
+            for (c, wi) in k.iter().zip(&w) {
+                let d = *c as f64 - n * wi;
+                assert!(d.abs() < 2.0, "{c} vs {}", n * wi);
+                if d.abs() > 1.0 {
+                    spread[usize::from(d > 0.0)] += 1;
+                }
+            }
+        }
+        // Stratified is not systematic: it does leave the floor/ceil band sometimes.
+        assert!(spread[0] + spread[1] > 0);
+    }
+
+    #[test]
+    fn residual_keeps_the_deterministic_copies_and_has_multinomial_remainder() {
+        let w = test_weights();
+        let n = w.len() as f64;
+        let reps = 20_000;
+        let counts = resampling_counts(Resampling::Residual, reps, 9);
+        let floors: Vec<f64> = w.iter().map(|wi| (n * wi).floor()).collect();
+        for k in &counts {
+            for (c, f) in k.iter().zip(&floors) {
+                assert!(*c as f64 >= *f);
+            }
+        }
+        // The remainder is multinomial(R, r_i / R): variance R p (1 - p). The sample variance
+        // of 20,000 binomial counts has relative standard error sqrt((2 + kurtosis) / reps),
+        // below 4% for these p; 20% is more than 5 standard errors.
+        let rem = n - floors.iter().sum::<f64>();
+        for (i, wi) in w.iter().enumerate() {
+            let p = (n * wi - floors[i]) / rem;
+            let expected = rem * p * (1.0 - p);
+            let (_, v) = mean_var(&counts, i);
+            assert!(
+                (v - expected).abs() <= 0.2 * expected + 1e-12,
+                "index {i}: variance {v} vs {expected}"
+            );
+        }
+    }
+
+    #[test]
+    fn multinomial_counts_have_binomial_variance() {
+        // Sorted uniforms built from exponential spacings must be exactly as good as sorting
+        // n independent uniforms: count i is Binomial(n, w_i). Same tolerance argument as the
+        // residual test.
+        let w = test_weights();
+        let n = w.len() as f64;
+        let counts = resampling_counts(Resampling::Multinomial, 20_000, 10);
+        for (i, wi) in w.iter().enumerate() {
+            let expected = n * wi * (1.0 - wi);
+            let (_, v) = mean_var(&counts, i);
+            assert!(
+                (v - expected).abs() <= 0.2 * expected + 1e-12,
+                "index {i}: variance {v} vs {expected}"
+            );
+        }
+    }
+
+    #[test]
+    fn resample_if_follows_the_policy() {
+        let mut c = ParticleCloud::new(1, 100).unwrap();
+        let mut r = rng(4);
+        // Equal weights: ESS = n, not below half.
+        assert!(!c
+            .resample_if(
+                ResamplePolicy::EssBelow(0.5),
+                Resampling::Systematic,
+                &mut r
+            )
+            .unwrap());
+        // One dominant particle: ESS near 1.
+        c.log_weights_mut()[10] = 50.0;
+        for (i, x) in c.component_mut(0).iter_mut().enumerate() {
+            *x = i as f64;
+        }
+        assert!(c
+            .resample_if(
+                ResamplePolicy::EssBelow(0.5),
+                Resampling::Systematic,
+                &mut r
+            )
+            .unwrap());
+        assert!(c.component(0).iter().all(|x| *x == 10.0));
+        assert!(c
+            .resample_if(ResamplePolicy::Always, Resampling::Systematic, &mut r)
+            .unwrap());
+        for bad in [-0.1, 1.5, f64::NAN] {
+            assert!(matches!(
+                c.resample_if(
+                    ResamplePolicy::EssBelow(bad),
+                    Resampling::Systematic,
+                    &mut r
+                ),
+                Err(ParticleError::Threshold(_))
+            ));
+        }
+    }
+
+    #[test]
+    fn single_particle_cloud_works() {
+        let mut c = ParticleCloud::new(2, 1).unwrap();
+        c.component_mut(1)[0] = 3.0;
+        for s in ALL_SCHEMES {
+            c.log_weights_mut()[0] = -12.0;
+            c.resample(s, &mut rng(5)).unwrap();
+            assert_eq!(c.ancestors(), &[0]);
+            assert_eq!(c.component(1), &[3.0]);
+        }
+        assert_eq!(c.ess().unwrap(), 1.0);
+    }
+
+    fn sample_moments_within_mc_error(c: &mut ParticleCloud, m: &Vector, p: &Matrix) {
+        // With n independent draws from N(m, P): the sample mean of component j has standard
+        // error sqrt(P_jj / n) and the sample covariance entry (j, k) has standard error
+        // sqrt((P_jj P_kk + P_jk^2) / n) (Isserlis). 4 standard errors each.
+        let n = c.len() as f64;
+        let est = c.estimate().unwrap();
+        for j in 0..m.len() {
+            let se = (p[(j, j)] / n).sqrt();
+            assert!(
+                (est.mean[j] - m[j]).abs() <= 4.0 * se,
+                "mean[{j}] {} vs {}",
+                est.mean[j],
+                m[j]
+            );
+            for k in 0..m.len() {
+                let se = ((p[(j, j)] * p[(k, k)] + p[(j, k)].powi(2)) / n).sqrt();
+                assert!(
+                    (est.cov[(j, k)] - p[(j, k)]).abs() <= 4.0 * se,
+                    "cov[{j},{k}] {} vs {}",
+                    est.cov[(j, k)],
+                    p[(j, k)]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn gaussian_initialization_has_the_right_moments() {
+        let m = Vector::from_vec(vec![1.0, -2.0, 0.5]);
+        let p = matrix_from_rows(&[
+            vec![4.0, 1.2, -0.5],
+            vec![1.2, 2.0, 0.3],
+            vec![-0.5, 0.3, 1.0],
+        ]);
+        let prior = Gaussian::new(m.clone(), p.clone());
+        let mut c = ParticleCloud::from_gaussian(100_000, &prior, &mut rng(11)).unwrap();
+        sample_moments_within_mc_error(&mut c, &m, &p);
+        // estimate() agrees with mean() and covariance().
+        let est = c.estimate().unwrap();
+        assert_eq!(est.mean, c.mean().unwrap());
+        assert_eq!(est.cov, c.covariance().unwrap());
+    }
+
+    #[test]
+    fn singular_prior_puts_particles_on_a_line() {
+        // P = g g^T with g = (1, 2): every particle satisfies x_1 - m_1 = 2 (x_0 - m_0).
+        let prior = Gaussian::new(
+            Vector::from_vec(vec![3.0, -1.0]),
+            matrix_from_rows(&[vec![1.0, 2.0], vec![2.0, 4.0]]),
+        );
+        let c = ParticleCloud::from_gaussian(1000, &prior, &mut rng(12)).unwrap();
+        for (x0, x1) in c.component(0).iter().zip(c.component(1)) {
+            assert!(((x1 + 1.0) - 2.0 * (x0 - 3.0)).abs() < 1e-12);
+        }
+        assert!(c.component(0).iter().any(|x| (x - 3.0).abs() > 0.5));
+    }
+
+    /// Seed 000 Section VII-A: white-noise acceleration, D = 1, sigma^2 = 4. Q is rank one.
+    fn paper_cv() -> LinearTransition {
+        let d = 1.0_f64;
+        let s2 = 4.0;
+        LinearTransition::new(
+            matrix_from_rows(&[vec![1.0, d], vec![0.0, 1.0]]),
+            matrix_from_rows(&[
+                vec![s2 * d.powi(4) / 4.0, s2 * d.powi(3) / 2.0],
+                vec![s2 * d.powi(3) / 2.0, s2 * d * d],
+            ]),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn propagation_matches_the_linear_gaussian_moments() {
+        let model = paper_cv();
+        let t = ParticleTransition::new(&model).unwrap();
+        assert_eq!(t.noise_rank(), 1);
+        let prior = Gaussian::new(
+            Vector::from_vec(vec![0.0, 10.0]),
+            matrix_from_rows(&[vec![4.0, 1.0], vec![1.0, 1.0]]),
+        );
+        let n = 100_000;
+        let mut c = ParticleCloud::from_gaussian(n, &prior, &mut rng(13)).unwrap();
+        let before = c.estimate().unwrap();
+        let (x0, x1) = (c.component(0).to_vec(), c.component(1).to_vec());
+        c.propagate(&t, &mut rng(14)).unwrap();
+        let after = c.estimate().unwrap();
+        // Given the cloud, F m_hat and F P_hat F^T are exact; only the noise is random. Its
+        // contribution to the errors (sample mean of w, cross terms F x w^T, sample
+        // covariance of w) is bounded by the error of a full sample from N(F m, F P F^T + Q),
+        // which is what the helper checks against.
+        let f = model.f();
+        let m = f * &before.mean;
+        let p = f * &before.cov * f.transpose() + model.q();
+        let mut check = c.clone();
+        check.log_weights_mut().fill(0.0);
+        sample_moments_within_mc_error(&mut check, &m, &p);
+        assert!((after.mean[1] - m[1]).abs() < 4.0 * (p[(1, 1)] / n as f64).sqrt());
+        // The noise is sigma (D^2 / 2, D) z: position noise is exactly half the velocity noise.
+        for i in 0..n {
+            let w0 = c.component(0)[i] - (x0[i] + x1[i]);
+            let w1 = c.component(1)[i] - x1[i];
+            assert!((w0 - 0.5 * w1).abs() < 1e-12, "particle {i}: {w0} vs {w1}");
+        }
+    }
+
+    #[test]
+    fn bootstrap_filter_tracks_the_kalman_filter() {
+        // x' = 0.9 x + w (q = 0.5), z = x + v (r = 1), prior N(0, 1), 20 steps.
+        let (a, q, r) = (0.9, 0.5, 1.0);
+        let model =
+            LinearTransition::new(Matrix::from_element(1, 1, a), Matrix::from_element(1, 1, q))
+                .unwrap();
+        let sensor = LinearSensor::new(
+            Matrix::from_element(1, 1, 1.0),
+            Matrix::from_element(1, 1, r),
+        )
+        .unwrap();
+        let prior = Gaussian::new(Vector::zeros(1), Matrix::identity(1, 1));
+        let mut truth_rng = rng(20);
+        let mut x = Vector::from_element(1, StandardNormal.sample(&mut truth_rng));
+        let zs: Vec<Vector> = (0..20)
+            .map(|_| {
+                x = model.sample_next(&x, &mut truth_rng);
+                crate::model::MeasurementModel::sample(&sensor, &x, &mut truth_rng)
+            })
+            .collect();
+        let t = ParticleTransition::new(&model).unwrap();
+        let n = 20_000;
+        for (s, scheme) in ALL_SCHEMES.into_iter().enumerate() {
+            let mut pf_rng = rng(30 + s as u64);
+            let mut cloud = ParticleCloud::from_gaussian(n, &prior, &mut pf_rng).unwrap();
+            let mut est = prior.clone();
+            let (mut log_z_pf, mut log_z_kf) = (0.0, 0.0);
+            for (k, z) in zs.iter().enumerate() {
+                let pred = kf::predict(&model, &est);
+                let s_k = pred.cov[(0, 0)] + r;
+                log_z_kf += -0.5
+                    * ((z[0] - pred.mean[0]).powi(2) / s_k
+                        + (2.0 * std::f64::consts::PI * s_k).ln());
+                est = kf::step(&model, &est, &[(&sensor, z)]).unwrap();
+
+                cloud.propagate(&t, &mut pf_rng).unwrap();
+                let (states, lw) = cloud.states_and_log_weights_mut();
+                let c0 = -0.5 * (2.0 * std::f64::consts::PI * r).ln();
+                for (l, xi) in lw.iter_mut().zip(states.component(0)) {
+                    *l += c0 - 0.5 * (z[0] - xi).powi(2) / r;
+                }
+                log_z_pf += cloud.normalize().unwrap();
+                let g = cloud.estimate().unwrap();
+                let ess = cloud.ess().unwrap();
+                // A weighted mean of particles drawn from the prediction has variance about
+                // P_k / ESS (the self-normalized importance sampling rule; ESS rather than N
+                // because one outlying z can cut the ESS to a few percent). The particles
+                // themselves carry the Monte Carlo error of earlier steps, which resampling
+                // re-injects and the dynamics damp by a^2 = 0.81 per step: a geometric sum
+                // below 5. So sd <= sqrt(5 P_k / ESS), and we allow 4 sd. The weighted
+                // variance has relative sd about sqrt(2 * 5 / ESS) on the same argument.
+                let p = est.cov[(0, 0)];
+                let sd = (5.0 * p / ess).sqrt();
+                assert!(
+                    (g.mean[0] - est.mean[0]).abs() <= 4.0 * sd,
+                    "{scheme:?} step {k}: PF {} vs KF {} (sd {sd})",
+                    g.mean[0],
+                    est.mean[0]
+                );
+                let rel = (g.cov[(0, 0)] - p).abs() / p;
+                assert!(
+                    rel <= 4.0 * (10.0 / ess).sqrt(),
+                    "{scheme:?} step {k}: PF var {} vs KF {p}",
+                    g.cov[(0, 0)]
+                );
+                cloud
+                    .resample_if(ResamplePolicy::Always, scheme, &mut pf_rng)
+                    .unwrap();
+            }
+            // The product of the normalizing constants estimates p(z_1:20) (the returned log
+            // Z is the per-step evidence because weights stay normalized). Its log has
+            // variance about sum_k (E[w^2]/E[w]^2 - 1) / N ~ 20 * 0.12 / N; with the same 5x
+            // allowance for resampling, 4 sd is under 0.1 nats.
+            assert!(
+                (log_z_pf - log_z_kf).abs() < 0.1,
+                "{scheme:?}: log evidence PF {log_z_pf} vs KF {log_z_kf}"
+            );
+        }
+    }
+
+    fn run_a_few_steps(seed: u64, scheme: Resampling) -> (Vec<u64>, Vec<u64>) {
+        let model = paper_cv();
+        let t = ParticleTransition::new(&model).unwrap();
+        let prior = Gaussian::new(
+            Vector::from_vec(vec![0.0, 10.0]),
+            Matrix::identity(2, 2) * 3.0,
+        );
+        let mut r = rng(seed);
+        // Through a trait object, as a scheme holding `&mut dyn RngCore` would call it.
+        let r: &mut dyn RngCore = &mut r;
+        let mut c = ParticleCloud::from_gaussian(500, &prior, r).unwrap();
+        for k in 0..5 {
+            c.propagate(&t, r).unwrap();
+            let (s, lw) = c.states_and_log_weights_mut();
+            for (l, x) in lw.iter_mut().zip(s.component(0)) {
+                *l += -0.5 * (x - 10.0 * k as f64).powi(2);
+            }
+            c.normalize().unwrap();
+            c.resample_if(ResamplePolicy::EssBelow(0.6), scheme, r)
+                .unwrap();
+        }
+        c.log_weights_mut()[0] += 0.25;
+        c.normalize().unwrap();
+        let states = (0..2)
+            .flat_map(|j| {
+                c.component(j)
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let weights = c.weights().unwrap().iter().map(|v| v.to_bits()).collect();
+        (states, weights)
+    }
+
+    #[test]
+    fn same_seed_gives_bit_identical_clouds() {
+        for scheme in ALL_SCHEMES {
+            let a = run_a_few_steps(42, scheme);
+            assert_eq!(a, run_a_few_steps(42, scheme), "{scheme:?}");
+            assert_ne!(a, run_a_few_steps(43, scheme), "{scheme:?}");
+        }
+    }
+
+    #[test]
+    fn dimension_mismatches_are_errors() {
+        assert_eq!(ParticleCloud::new(0, 10).unwrap_err(), ParticleError::Empty);
+        assert_eq!(ParticleCloud::new(2, 0).unwrap_err(), ParticleError::Empty);
+        let mut c = ParticleCloud::new(3, 10).unwrap();
+        let t = ParticleTransition::new(&paper_cv()).unwrap();
+        assert!(matches!(
+            c.propagate(&t, &mut rng(0)),
+            Err(ParticleError::Dimension {
+                expected: 3,
+                got: 2,
+                ..
+            })
+        ));
+        let prior = Gaussian::new(Vector::zeros(2), Matrix::identity(2, 2));
+        assert!(matches!(
+            c.init_gaussian(&prior, &mut rng(0)),
+            Err(ParticleError::Dimension { .. })
+        ));
+        let not_psd = Gaussian::new(
+            Vector::zeros(3),
+            matrix_from_rows(&[
+                vec![1.0, 2.0, 0.0],
+                vec![2.0, 1.0, 0.0],
+                vec![0.0, 0.0, 1.0],
+            ]),
+        );
+        assert!(matches!(
+            c.init_gaussian(&not_psd, &mut rng(0)),
+            Err(ParticleError::Matrix { .. })
+        ));
+        let mut out = [0.0; 2];
+        assert!(matches!(
+            c.mean_into(&mut out),
+            Err(ParticleError::Dimension { .. })
+        ));
+    }
+}
