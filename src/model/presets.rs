@@ -30,6 +30,28 @@ pub fn constant_velocity_1d(dt: f64, sigma2: f64) -> Result<LinearTransition, Mo
     LinearTransition::new(f, q)
 }
 
+/// 1-D constant velocity with discrete white-noise acceleration (seed 000 Section VII):
+/// Q = sigma2 [[D^4/4, D^3/2], [D^3/2, D^2]], rank one (the acceleration is constant over a
+/// sampling interval).
+pub fn constant_velocity_1d_discrete(dt: f64, sigma2: f64) -> Result<LinearTransition, ModelError> {
+    let d = positive("sampling interval dt", dt)?;
+    let s = positive("noise intensity sigma2", sigma2)?;
+    let f = Matrix::from_row_slice(2, 2, &[1.0, d, 0.0, 1.0]);
+    let q = Matrix::from_row_slice(
+        2,
+        2,
+        &[d.powi(4) / 4.0, d.powi(3) / 2.0, d.powi(3) / 2.0, d * d],
+    ) * s;
+    LinearTransition::new(f, q)
+}
+
+/// 2-D constant velocity with discrete white-noise acceleration, state (x, vx, y, vy)
+/// (seed 000 Section VII-C).
+pub fn constant_velocity_2d_discrete(dt: f64, sigma2: f64) -> Result<LinearTransition, ModelError> {
+    let one = constant_velocity_1d_discrete(dt, sigma2)?;
+    LinearTransition::new(block_diag(one.f(), 2), block_diag(one.q(), 2))
+}
+
 /// 2-D constant velocity, state (x, vx, y, vy): two independent copies of the 1-D model.
 pub fn constant_velocity_2d(dt: f64, sigma2: f64) -> Result<LinearTransition, ModelError> {
     let one = constant_velocity_1d(dt, sigma2)?;

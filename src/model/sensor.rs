@@ -33,6 +33,23 @@ pub trait MeasurementModel: Debug + Send + Sync {
     fn target_indices(&self) -> Option<[usize; 2]> {
         None
     }
+    /// h(x) for `n` states at once, for particle filters: `component(j)` is the j-th state
+    /// component of every state (contiguous), and row r of h(x_p) goes to `out[r * n + p]`.
+    /// The default goes state by state; the sensors here override it with loops over whole
+    /// components that the compiler vectorizes.
+    fn predict_many<'a>(&self, component: &dyn Fn(usize) -> &'a [f64], n: usize, out: &mut [f64]) {
+        let d = self.state_dim();
+        let mut x = Vector::zeros(d);
+        for p in 0..n {
+            for j in 0..d {
+                x[j] = component(j)[p];
+            }
+            let z = self.predict(&x);
+            for (r, v) in z.iter().enumerate() {
+                out[r * n + p] = *v;
+            }
+        }
+    }
     /// Draw z = h(x) + v.
     fn sample(&self, x: &Vector, rng: &mut dyn RngCore) -> Vector {
         let v = Vector::from_fn(self.meas_dim(), |_, _| StandardNormal.sample(rng));
@@ -132,5 +149,19 @@ impl MeasurementModel for LinearSensor {
     }
     fn as_linear(&self) -> Option<&LinearSensor> {
         Some(self)
+    }
+    fn predict_many<'a>(&self, component: &dyn Fn(usize) -> &'a [f64], n: usize, out: &mut [f64]) {
+        for r in 0..self.h.nrows() {
+            let row = &mut out[r * n..(r + 1) * n];
+            row.fill(0.0);
+            for j in 0..self.h.ncols() {
+                let c = self.h[(r, j)];
+                if c != 0.0 {
+                    for (o, x) in row.iter_mut().zip(component(j)) {
+                        *o += c * x;
+                    }
+                }
+            }
+        }
     }
 }

@@ -1,5 +1,6 @@
 //! A scheme is a sensor node + a fusion center + the network rule between them. One module per
 //! paper; the simulator drives every scheme through the same loop on the same data.
+pub mod censored_pf;
 pub mod centralized;
 pub mod distributed_kf;
 pub mod quantized_innovation;
@@ -54,14 +55,15 @@ pub struct InnovationReference {
 }
 
 impl Feedback {
-    /// Downlink bits, 32 per real number sent to each sensor that receives something.
-    pub fn bits(&self, n_sensors: usize) -> u64 {
+    /// Downlink bits, 32 per real number: a prediction is broadcast once to all sensors
+    /// (the covariance as its n(n+1)/2 distinct entries); y_hat and Delta go to each
+    /// activated sensor.
+    pub fn bits(&self, _n_sensors: usize) -> u64 {
         let c = crate::link::BITS_PER_COMPONENT;
         match self {
             Feedback::Prediction { mean, cov } => {
                 let n = mean.len() as u64;
-                let per = n + cov.as_ref().map_or(0, |_| n * (n + 1) / 2);
-                per * c * n_sensors as u64
+                (n + cov.as_ref().map_or(0, |_| n * (n + 1) / 2)) * c
             }
             Feedback::InnovationReference(refs) => {
                 refs.iter().filter(|r| r.is_some()).count() as u64 * 2 * c
@@ -125,6 +127,12 @@ pub struct SchemeInstance {
 /// A configured scheme: builds fresh sensor nodes and a fusion center for each trial.
 pub trait Scheme: Send + Sync + Debug {
     fn build(&self) -> Result<SchemeInstance, SchemeError>;
+    /// Like [`Scheme::build`], for fusion centers that draw random numbers (particle
+    /// filters): they seed their own generator from `seed`, so results stay reproducible.
+    fn build_with_seed(&self, seed: u64) -> Result<SchemeInstance, SchemeError> {
+        let _ = seed;
+        self.build()
+    }
     /// Which sensors may talk at each step.
     fn schedule(&self) -> Schedule {
         Schedule::All

@@ -67,6 +67,8 @@ pub struct Experiment {
     pub description: String,
     pub source: String,
     pub system: Arc<System>,
+    /// Distribution of the true x_0 (the filters' prior unless the file says otherwise).
+    pub initial_truth: Gaussian,
     pub groups: Vec<(String, Vec<usize>)>,
     pub curves: Vec<Curve>,
     pub variants: Vec<Variant>,
@@ -163,9 +165,31 @@ fn covariance(ctx: &Ctx, field: &str, m: &Matrix, n: usize) -> Result<(), Scenar
 }
 
 fn transition(ctx: &Ctx, spec: &ModelSpec) -> Result<LinearTransition, ScenarioError> {
+    let discrete = |noise: &Option<String>| -> Result<bool, ScenarioError> {
+        match noise.as_deref() {
+            None | Some("continuous") => Ok(false),
+            Some("discrete") => Ok(true),
+            Some(other) => Err(ctx.err(
+                "model.noise",
+                format!("expected \"continuous\" or \"discrete\", got {other:?}"),
+            )),
+        }
+    };
     let built = match spec {
-        ModelSpec::ConstantVelocity1d { dt, sigma2 } => presets::constant_velocity_1d(*dt, *sigma2),
-        ModelSpec::ConstantVelocity2d { dt, sigma2 } => presets::constant_velocity_2d(*dt, *sigma2),
+        ModelSpec::ConstantVelocity1d { dt, sigma2, noise } => {
+            if discrete(noise)? {
+                presets::constant_velocity_1d_discrete(*dt, *sigma2)
+            } else {
+                presets::constant_velocity_1d(*dt, *sigma2)
+            }
+        }
+        ModelSpec::ConstantVelocity2d { dt, sigma2, noise } => {
+            if discrete(noise)? {
+                presets::constant_velocity_2d_discrete(*dt, *sigma2)
+            } else {
+                presets::constant_velocity_2d(*dt, *sigma2)
+            }
+        }
         ModelSpec::NearConstantAcceleration2d { dt, sigma2 } => {
             presets::near_constant_acceleration_2d(*dt, *sigma2)
         }
@@ -193,44 +217,12 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
     let transition = transition(&ctx, &file_spec.model)?;
     let n = transition.dim();
 
-    // Prior.
-    let p = &file_spec.prior;
-    if p.mean.len() != n {
-        return Err(ctx.err(
-            "prior.mean",
-            format!(
-                "expected {n} entries (the model's state dimension), got {}",
-                p.mean.len()
-            ),
-        ));
-    }
-    if p.mean.iter().any(|v| !v.is_finite()) {
-        return Err(ctx.err("prior.mean", "expected finite numbers"));
-    }
-    let cov = match (&p.cov, &p.cov_diag) {
-        (Some(c), None) => matrix(&ctx, "prior.cov", c)?,
-        (None, Some(d)) => {
-            if d.len() != n {
-                return Err(ctx.err(
-                    "prior.cov_diag",
-                    format!("expected {n} entries, got {}", d.len()),
-                ));
-            }
-            Matrix::from_diagonal(&Vector::from_vec(d.clone()))
-        }
-        _ => return Err(ctx.err("prior", "give exactly one of `cov` and `cov_diag`")),
+    // Prior, and the truth's initial distribution.
+    let prior = gaussian_spec(&ctx, "prior", &file_spec.prior, n, false)?;
+    let initial_truth = match &file_spec.initial_truth {
+        Some(t) => gaussian_spec(&ctx, "initial_truth", t, n, true)?,
+        None => prior.clone(),
     };
-    covariance(
-        &ctx,
-        if p.cov.is_some() {
-            "prior.cov"
-        } else {
-            "prior.cov_diag"
-        },
-        &cov,
-        n,
-    )?;
-    let prior = Gaussian::new(Vector::from_vec(p.mean.clone()), cov);
 
     // Sensors.
     let mut sensors: Vec<Arc<dyn MeasurementModel>> = Vec::new();
@@ -425,6 +417,7 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
         description: file_spec.description,
         source: file.to_string(),
         system,
+        initial_truth,
         groups,
         curves,
         variants,
@@ -434,6 +427,65 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
         steady_from,
         paper: file_spec.paper,
     })
+}
+
+/// A Gaussian from a `mean` and `cov`/`cov_diag`; the truth's may be semi-definite (a known
+/// start), the filters' prior must be definite.
+fn gaussian_spec(
+    ctx: &Ctx,
+    name: &str,
+    p: &super::scenario::PriorSpec,
+    n: usize,
+    semidefinite: bool,
+) -> Result<Gaussian, ScenarioError> {
+    if p.mean.len() != n {
+        return Err(ctx.err(
+            format!("{name}.mean"),
+            format!(
+                "expected {n} entries (the model's state dimension), got {}",
+                p.mean.len()
+            ),
+        ));
+    }
+    if p.mean.iter().any(|v| !v.is_finite()) {
+        return Err(ctx.err(format!("{name}.mean"), "expected finite numbers"));
+    }
+    let (cov, field) = match (&p.cov, &p.cov_diag) {
+        (Some(c), None) => (
+            matrix(ctx, &format!("{name}.cov"), c)?,
+            format!("{name}.cov"),
+        ),
+        (None, Some(d)) => {
+            if d.len() != n {
+                return Err(ctx.err(
+                    format!("{name}.cov_diag"),
+                    format!("expected {n} entries, got {}", d.len()),
+                ));
+            }
+            if d.iter().any(|v| !v.is_finite()) {
+                return Err(ctx.err(format!("{name}.cov_diag"), "expected finite numbers"));
+            }
+            (
+                Matrix::from_diagonal(&Vector::from_vec(d.clone())),
+                format!("{name}.cov_diag"),
+            )
+        }
+        _ => return Err(ctx.err(name, "give exactly one of `cov` and `cov_diag`")),
+    };
+    if semidefinite {
+        if cov.nrows() != n || cov.ncols() != n {
+            return Err(ctx.err(&field, format!("expected a {n}x{n} matrix")));
+        }
+        crate::model::transition::psd_sqrt(&cov).map_err(|e| {
+            ctx.err(
+                &field,
+                format!("expected a symmetric positive semi-definite covariance: {e}"),
+            )
+        })?;
+    } else {
+        covariance(ctx, &field, &cov, n)?;
+    }
+    Ok(Gaussian::new(Vector::from_vec(p.mean.clone()), cov))
 }
 
 /// One sensor from its spec; `at` names it in errors.
@@ -656,6 +708,161 @@ fn sensor_field(
         .collect())
 }
 
+/// The `censored-pf` parameters as written.
+struct CensoredPfArgs<'a> {
+    policy: Option<&'a str>,
+    l: Option<f64>,
+    feedback: Option<&'a str>,
+    fusion: Option<&'a str>,
+    particles: Option<usize>,
+    resampling: Option<&'a str>,
+    ess_threshold: Option<f64>,
+    band: Option<&'a str>,
+    band_samples: Option<usize>,
+    prop3_samples: Option<usize>,
+}
+
+/// Seed 000's scheme from its parameters.
+fn censored_pf(
+    ctx: &Ctx,
+    at: &str,
+    system: &Arc<System>,
+    a: CensoredPfArgs,
+) -> Result<Box<dyn Scheme>, ScenarioError> {
+    use crate::filter::particle::{ResamplePolicy, Resampling};
+    use crate::scheme::censored_pf::{
+        censoring::nis_threshold, BandMethod, CensoredPfScheme, FeedbackMode, Fusion, PfOptions,
+        SendRule,
+    };
+    let field = |name: &str| format!("{at}.{name}");
+    let n = system.n_sensors();
+    let policy = a.policy.unwrap_or("nis");
+    let need_l = || -> Result<f64, ScenarioError> {
+        let l = a.l.ok_or_else(|| {
+            ctx.err(
+                field("l"),
+                format!("policy {policy:?} needs `l`, the average number of sensors sending"),
+            )
+        })?;
+        if !(l > 0.0 && l <= n as f64) {
+            return Err(ctx.err(field("l"), format!("expected l in (0, N = {n}], got {l}")));
+        }
+        Ok(l)
+    };
+    let dims: Vec<usize> = system.sensors.iter().map(|s| s.meas_dim()).collect();
+    let eta = || -> Result<f64, ScenarioError> {
+        if dims.iter().any(|&m| m != dims[0]) {
+            return Err(ctx.err(at, "censoring with one threshold needs sensors of equal measurement dimension (eq. (32))"));
+        }
+        nis_threshold(dims[0], need_l()?, n).map_err(|e| ctx.err(field("l"), e.to_string()))
+    };
+    let (rule, eta_opt) = match policy {
+        "nis" => {
+            let e = eta()?;
+            (SendRule::Nis { eta: e }, Some(e))
+        }
+        "kl" => {
+            let e = eta()?;
+            (SendRule::KlDivergence { eta: e }, Some(e))
+        }
+        "random" => (
+            SendRule::Random {
+                p: need_l()? / n as f64,
+            },
+            None,
+        ),
+        "all" => {
+            if a.l.is_some() {
+                return Err(ctx.err(field("l"), "policy \"all\" sends everything; remove `l`"));
+            }
+            (SendRule::All, None)
+        }
+        other => {
+            return Err(ctx.err(
+                field("policy"),
+                format!("unknown policy {other:?}; expected nis, kl, random or all"),
+            ))
+        }
+    };
+    let feedback = match a.feedback.unwrap_or("prediction") {
+        "none" => FeedbackMode::None,
+        "prediction" => FeedbackMode::Prediction,
+        "prediction-covariance" => FeedbackMode::PredictionAndCovariance,
+        other => {
+            return Err(ctx.err(
+                field("feedback"),
+                format!(
+                "unknown feedback {other:?}; expected none, prediction or prediction-covariance"
+            ),
+            ))
+        }
+    };
+    let fusion = match a
+        .fusion
+        .unwrap_or(if eta_opt.is_some() { "full" } else { "simple" })
+    {
+        "full" => Fusion::Full,
+        "simple" => Fusion::Simple,
+        other => {
+            return Err(ctx.err(
+                field("fusion"),
+                format!("unknown fusion {other:?}; expected full or simple"),
+            ))
+        }
+    };
+    let particles = a.particles.unwrap_or(1000);
+    if particles == 0 {
+        return Err(ctx.err(field("particles"), "expected at least 1 particle"));
+    }
+    let resampling = match a.resampling.unwrap_or("systematic") {
+        "systematic" => Resampling::Systematic,
+        "stratified" => Resampling::Stratified,
+        "residual" => Resampling::Residual,
+        "multinomial" => Resampling::Multinomial,
+        other => return Err(ctx.err(field("resampling"), format!("unknown resampling {other:?}; expected systematic, stratified, residual or multinomial"))),
+    };
+    let resample_policy = match a.ess_threshold {
+        None => ResamplePolicy::Always,
+        Some(t) if (0.0..=1.0).contains(&t) => ResamplePolicy::EssBelow(t),
+        Some(t) => {
+            return Err(ctx.err(
+                field("ess_threshold"),
+                format!("expected a fraction in [0, 1], got {t}"),
+            ))
+        }
+    };
+    let band = match (a.band.unwrap_or("exact"), a.band_samples) {
+        ("exact", None) => BandMethod::Exact,
+        ("exact", Some(_)) => {
+            return Err(ctx.err(field("band_samples"), "only for band = \"monte-carlo\""))
+        }
+        ("monte-carlo", s) => BandMethod::MonteCarlo {
+            samples: s.filter(|&s| s > 0).ok_or_else(|| {
+                ctx.err(field("band_samples"), "expected a positive number of draws")
+            })?,
+        },
+        (other, _) => {
+            return Err(ctx.err(
+                field("band"),
+                format!("unknown band method {other:?}; expected exact or monte-carlo"),
+            ))
+        }
+    };
+    let options = PfOptions {
+        particles,
+        fusion,
+        feedback,
+        eta: eta_opt,
+        resampling,
+        resample_policy,
+        band,
+        prop3_samples: a.prop3_samples.unwrap_or(200),
+    };
+    CensoredPfScheme::new(system.clone(), rule, options)
+        .map(|s| Box::new(s) as Box<dyn Scheme>)
+        .map_err(|e| ctx.err(at, e.to_string()))
+}
+
 /// Cartesian product of the sweep lists, in file order.
 fn grid(sweep: &[(String, Vec<toml::Value>)]) -> Vec<Vec<(String, toml::Value)>> {
     let mut points: Vec<Vec<(String, toml::Value)>> = vec![Vec::new()];
@@ -755,6 +962,34 @@ fn scheme(
                 .map_err(|e| ctx.err(format!("{at}.B"), e.to_string()))?;
             dkf(Trigger::Bounded { alpha, b_inv }, Some(bm))
         }
+        SchemeParams::CensoredPf {
+            policy,
+            l,
+            feedback,
+            fusion,
+            particles,
+            resampling,
+            ess_threshold,
+            band,
+            band_samples,
+            prop3_samples,
+        } => censored_pf(
+            ctx,
+            at,
+            system,
+            CensoredPfArgs {
+                policy: policy.as_deref(),
+                l: *l,
+                feedback: feedback.as_deref(),
+                fusion: fusion.as_deref(),
+                particles: *particles,
+                resampling: resampling.as_deref(),
+                ess_threshold: *ess_threshold,
+                band: band.as_deref(),
+                band_samples: *band_samples,
+                prop3_samples: *prop3_samples,
+            },
+        ),
         SchemeParams::QuantizedInnovation {
             quantizer,
             bits,

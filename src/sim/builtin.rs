@@ -13,6 +13,11 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/dormann-fig1.toml"),
     ),
     (
+        "zheng-fig1",
+        "Seed 000 Fig. 1: censoring with feedback, N = 2, l = 1, 5000 trials, 1000 particles",
+        include_str!("../../scenarios/zheng-fig1.toml"),
+    ),
+    (
         "zhang-fig4",
         "Seed 003 Fig. 4: quantized-innovation fusion at 1 payload bit, 50 range sensors, 1000 runs",
         include_str!("../../scenarios/zhang-fig4.toml"),

@@ -19,8 +19,11 @@ const BLOCK: usize = 4;
 
 /// Stream 0 of a trial draws truth and measurements; stream 1 + v is variant v's coins.
 pub fn trial_rng(seed: u64, trial: u64, stream: u64) -> Xoshiro256PlusPlus {
-    let h = splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream);
-    Xoshiro256PlusPlus::seed_from_u64(h)
+    Xoshiro256PlusPlus::seed_from_u64(trial_seed(seed, trial, stream))
+}
+
+fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
+    splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream)
 }
 
 fn splitmix64(mut z: u64) -> u64 {
@@ -64,11 +67,12 @@ pub struct TrialData {
 pub fn draw_trial(exp: &Experiment, trial: usize) -> TrialData {
     let sys = &exp.system;
     let mut rng = trial_rng(exp.seed, trial as u64, 0);
-    let prior_sqrt = crate::model::transition::psd_sqrt(&sys.prior.cov).expect("validated prior");
+    let x0 = &exp.initial_truth;
+    let x0_sqrt = crate::model::transition::psd_sqrt(&x0.cov).expect("validated initial truth");
     let n0 = Vector::from_fn(sys.state_dim(), |_, _| {
         rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, &mut rng)
     });
-    let mut x = &sys.prior.mean + prior_sqrt * n0;
+    let mut x = &x0.mean + x0_sqrt * n0;
     let mut truth = Vec::with_capacity(exp.steps);
     let mut measurements = Vec::with_capacity(exp.steps);
     for _ in 0..exp.steps {
@@ -98,7 +102,13 @@ fn run_trial(exp: &Experiment, trial: usize, sums: &mut [Sums]) -> Result<(), Ru
             source,
         };
         let mut rng = trial_rng(exp.seed, trial as u64, 1 + v as u64);
-        let mut inst = variant.scheme.build().map_err(|e| scheme_err(0, e))?;
+        // The fusion center's own stream (particle filters) is independent of the sensors'.
+        let center_seed =
+            splitmix64(trial_seed(exp.seed, trial as u64, 1 + v as u64) ^ 0xC3A5_C85C_97CB_3127);
+        let mut inst = variant
+            .scheme
+            .build_with_seed(center_seed)
+            .map_err(|e| scheme_err(0, e))?;
         let schedule = variant.scheme.schedule();
         let mut obs = sums[v].trial(&exp.groups, exp.steady_from);
         // What the fusion center tells the sensors before the first measurement.

@@ -58,6 +58,10 @@ pub struct ScenarioFile {
     pub steady_state_from: Option<usize>,
     pub model: ModelSpec,
     pub prior: PriorSpec,
+    /// Distribution of the true x_0 when it differs from the filters' prior (e.g. a known
+    /// start: `cov_diag = [0, 0]`). Default: the prior.
+    #[serde(default)]
+    pub initial_truth: Option<PriorSpec>,
     #[serde(default)]
     pub sensors: Vec<SensorSpec>,
     /// Many sensors of one kind placed at random or on a grid (appended after `sensors`).
@@ -80,11 +84,23 @@ pub struct ScenarioFile {
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum ModelSpec {
     /// State (x, vx), white-noise acceleration of intensity sigma2.
+    /// `noise = "discrete"` uses the discrete white-noise acceleration
+    /// Q = sigma2 [[D^4/4, D^3/2], [D^3/2, D^2]] (seed 000 Section VII) instead.
     #[serde(rename = "constant-velocity-1d")]
-    ConstantVelocity1d { dt: f64, sigma2: f64 },
+    ConstantVelocity1d {
+        dt: f64,
+        sigma2: f64,
+        #[serde(default)]
+        noise: Option<String>,
+    },
     /// State (x, vx, y, vy).
     #[serde(rename = "constant-velocity-2d")]
-    ConstantVelocity2d { dt: f64, sigma2: f64 },
+    ConstantVelocity2d {
+        dt: f64,
+        sigma2: f64,
+        #[serde(default)]
+        noise: Option<String>,
+    },
     /// State (x, vx, ax, y, vy, ay), white-noise jerk (seed 004 Section V).
     #[serde(rename = "near-constant-acceleration-2d")]
     NearConstantAcceleration2d { dt: f64, sigma2: f64 },
@@ -203,6 +219,38 @@ pub enum SchemeParams {
         #[serde(default, rename = "B")]
         b_matrix: Option<Vec<Vec<f64>>>,
     },
+    /// Seed 000: censoring sensors and a particle-filter fusion center.
+    CensoredPf {
+        /// `nis` (censoring, eq. (4)/(31)), `kl` (eq. (24)), `random` (send with probability
+        /// l/N), `all`.
+        #[serde(default)]
+        policy: Option<String>,
+        /// Target average number of sensors sending per step (not for `all`).
+        #[serde(default)]
+        l: Option<f64>,
+        /// `none`, `prediction` (CFwMD), `prediction-covariance` (CFwMD2). Default `prediction`.
+        #[serde(default)]
+        feedback: Option<String>,
+        /// `full` (CFwMD) or `simple` (CFoMD). Default `full`.
+        #[serde(default)]
+        fusion: Option<String>,
+        #[serde(default)]
+        particles: Option<usize>,
+        /// `systematic` (default), `stratified`, `residual`, `multinomial`.
+        #[serde(default)]
+        resampling: Option<String>,
+        /// Resample only when ESS < ess_threshold * particles (default: every step).
+        #[serde(default)]
+        ess_threshold: Option<f64>,
+        /// Vector band probability: `exact` (default) or `monte-carlo` with `band_samples`.
+        #[serde(default)]
+        band: Option<String>,
+        #[serde(default)]
+        band_samples: Option<usize>,
+        /// Monte Carlo draws of the Prop. 3 / 6 integral (default 200).
+        #[serde(default)]
+        prop3_samples: Option<usize>,
+    },
     /// Seed 003: quantized innovations of activated sensors, fused in information form.
     /// `quantizer`: `zhang` (with `bits` 1-3 and `flag_zone`), `you` or `msechu` (with
     /// `bits`; msechu with 1 bit is SOI-KF's sign), `lloyd-max` (with `levels`), `analog`.
@@ -231,6 +279,7 @@ impl SchemeParams {
             SchemeParams::DkfAlg1Event { .. } => "dkf-alg1-event",
             SchemeParams::DkfAlg2Event { .. } => "dkf-alg2-event",
             SchemeParams::QuantizedInnovation { .. } => "quantized-innovation",
+            SchemeParams::CensoredPf { .. } => "censored-pf",
         }
     }
 
@@ -244,6 +293,7 @@ impl SchemeParams {
             SchemeParams::DkfAlg1Event { .. } => "Algorithm 1 (event-based)",
             SchemeParams::DkfAlg2Event { .. } => "Algorithm 2 (event-based)",
             SchemeParams::QuantizedInnovation { .. } => "Quantized innovation",
+            SchemeParams::CensoredPf { .. } => "Censored PF",
         }
     }
 }

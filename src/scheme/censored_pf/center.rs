@@ -1,0 +1,424 @@
+//! Fusion center of seed 000: a bootstrap particle filter whose weights use the received
+//! measurements and, with the full likelihood (CFwMD), the probability that each silent
+//! sensor's innovation stayed inside its no-send band.
+use super::sensor::local_covariance_update;
+use super::{BandMethod, FeedbackMode, Fusion, PfOptions};
+use crate::filter::particle::{ParticleCloud, ParticleTransition};
+use crate::filter::{kf, Gaussian};
+use crate::linalg::{symmetrize, Matrix, Vector};
+use crate::link::Received;
+use crate::scheme::{Feedback, FusionCenter, SchemeError, System};
+use crate::stats::{normal, quadform::QuadFormCdf};
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use std::sync::Arc;
+
+fn pf_err(e: crate::filter::particle::ParticleError) -> SchemeError {
+    SchemeError::Unsupported(format!("particle filter: {e}"))
+}
+
+/// The particle-filter fusion center.
+pub struct CensoredPfCenter {
+    system: Arc<System>,
+    transition: ParticleTransition,
+    options: PfOptions,
+    cloud: ParticleCloud,
+    rng: Xoshiro256PlusPlus,
+    est: Gaussian,
+    /// x_{k|k-1} and P_{k|k-1} fed back before step k.
+    prediction: Gaussian,
+    /// Replica of each sensor's local covariance P^i_{k-1|k-1} (Remark 1 (I), Remark 3 (I)).
+    local_cov: Vec<Matrix>,
+    /// Cross-covariances P^{i,j}_{k-1|k-1} of the local filters (eq. (22)-(23)), for the
+    /// non-feedback full likelihood (Prop. 3 / 6).
+    cross_cov: Vec<Vec<Matrix>>,
+    /// h(x) of every particle for one sensor, rows component-major.
+    hx: Vec<f64>,
+    /// Log of the Prop. 3 / 6 factor of the last step (the same for every particle).
+    last_prop3_log_factor: f64,
+}
+
+impl CensoredPfCenter {
+    pub fn new(system: Arc<System>, options: PfOptions, seed: u64) -> Result<Self, SchemeError> {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let transition = ParticleTransition::new(&system.transition).map_err(pf_err)?;
+        let cloud = ParticleCloud::from_gaussian(options.particles, &system.prior, &mut rng)
+            .map_err(pf_err)?;
+        let n = system.n_sensors();
+        let max_m = system
+            .sensors
+            .iter()
+            .map(|s| s.meas_dim())
+            .max()
+            .unwrap_or(1);
+        let prediction = kf::predict(&system.transition, &system.prior);
+        Ok(Self {
+            local_cov: vec![system.prior.cov.clone(); n],
+            cross_cov: vec![vec![system.prior.cov.clone(); n]; n],
+            hx: vec![0.0; max_m * options.particles],
+            est: system.prior.clone(),
+            prediction,
+            transition,
+            cloud,
+            rng,
+            options,
+            system,
+            last_prop3_log_factor: 0.0,
+        })
+    }
+
+    /// The log of the Prop. 3 / 6 factor at the last step.
+    pub fn last_prop3_log_factor(&self) -> f64 {
+        self.last_prop3_log_factor
+    }
+
+    /// Adds -1/2 (z - h(x))^T R^{-1} (z - h(x)) to every particle's log-weight.
+    fn add_measurement(&mut self, i: usize, z: &Vector) -> Result<(), SchemeError> {
+        let sensor = self.system.sensors[i].clone();
+        let n = self.cloud.len();
+        let m = sensor.meas_dim();
+        let (states, lw) = self.cloud.states_and_log_weights_mut();
+        sensor.predict_many(&|j| states.component(j), n, &mut self.hx[..m * n]);
+        let r_inv = crate::linalg::spd_inverse(sensor.noise_cov()).map_err(|source| {
+            SchemeError::Matrix {
+                what: "measurement noise R",
+                source,
+            }
+        })?;
+        if m == 1 {
+            let (z0, w) = (z[0], 0.5 * r_inv[(0, 0)]);
+            for (l, h) in lw.iter_mut().zip(&self.hx[..n]) {
+                let e = z0 - h;
+                *l -= w * e * e;
+            }
+        } else {
+            for (p, l) in lw.iter_mut().enumerate() {
+                let mut q = 0.0;
+                for a in 0..m {
+                    let ea = z[a] - self.hx[a * n + p];
+                    for b in 0..m {
+                        q += ea * r_inv[(a, b)] * (z[b] - self.hx[b * n + p]);
+                    }
+                }
+                *l -= 0.5 * q;
+            }
+        }
+        Ok(())
+    }
+
+    /// Full likelihood of a silent sensor with feedback: log P(NIS < eta | x) with the
+    /// innovation taken against `x_ref` and covariance `s` (seed 000 eq. (9), (15), (44), (45)
+    /// for scalars with xi_1 = (-sqrt(eta s) - mu) / sqrt(r), xi_2 = (sqrt(eta s) - mu) /
+    /// sqrt(r), the square root covering eta s only as (14) shows; eq. (33), (39) for vectors).
+    fn add_band(
+        &mut self,
+        i: usize,
+        x_ref: &Vector,
+        s: &Matrix,
+        eta: f64,
+    ) -> Result<(), SchemeError> {
+        let sensor = self.system.sensors[i].clone();
+        let n = self.cloud.len();
+        let m = sensor.meas_dim();
+        let h_ref = sensor.predict(x_ref);
+        let r = sensor.noise_cov().clone();
+        let band_method = self.options.band;
+        let (states, lw) = self.cloud.states_and_log_weights_mut();
+        sensor.predict_many(&|j| states.component(j), n, &mut self.hx[..m * n]);
+        if m == 1 {
+            let half_width = (eta * s[(0, 0)]).sqrt();
+            let inv_sd = 1.0 / r[(0, 0)].sqrt();
+            let h0 = h_ref[0];
+            for (l, h) in lw.iter_mut().zip(&self.hx[..n]) {
+                let mu = h - h0; // eq. (13) / Prop. 7: h(x) - h(x_{k|k-1})
+                *l += normal::log_q_band((-half_width - mu) * inv_sd, (half_width - mu) * inv_sd);
+            }
+            return Ok(());
+        }
+        // Vector: q = S^{-1/2} nu ~ N(S^{-1/2} (h(x) - h(x_ref)), S^{-1/2} R S^{-1/2}) (35)-(38).
+        let eig = s.clone().symmetric_eigen();
+        let s_inv_sqrt = &eig.eigenvectors
+            * Matrix::from_diagonal(&eig.eigenvalues.map(|v| 1.0 / v.sqrt()))
+            * eig.eigenvectors.transpose();
+        let mut c = &s_inv_sqrt * &r * &s_inv_sqrt;
+        symmetrize(&mut c);
+        let mut mean = vec![0.0; m];
+        match band_method {
+            BandMethod::Exact => {
+                let qf =
+                    QuadFormCdf::new(&c).map_err(|e| SchemeError::Unsupported(e.to_string()))?;
+                for (p, l) in lw.iter_mut().enumerate() {
+                    for (a, v) in mean.iter_mut().enumerate() {
+                        *v = (0..m)
+                            .map(|b| s_inv_sqrt[(a, b)] * (self.hx[b * n + p] - h_ref[b]))
+                            .sum();
+                    }
+                    let prob = qf
+                        .prob_below_slice(&mean, eta)
+                        .map_err(|e| SchemeError::Unsupported(e.to_string()))?;
+                    *l += prob.max(f64::MIN_POSITIVE).ln();
+                }
+            }
+            BandMethod::MonteCarlo { samples } => {
+                // The paper's counting estimate: N_q draws of q, count q^T q < eta. A count of
+                // zero gets half a count, so a particle is never given weight exactly zero.
+                let sqrt_c = crate::model::transition::psd_sqrt(&c).map_err(|source| {
+                    SchemeError::Matrix {
+                        what: "band covariance",
+                        source,
+                    }
+                })?;
+                let mut draw = vec![0.0; m];
+                for (p, lp) in lw.iter_mut().enumerate() {
+                    for (a, v) in mean.iter_mut().enumerate() {
+                        *v = (0..m)
+                            .map(|b| s_inv_sqrt[(a, b)] * (self.hx[b * n + p] - h_ref[b]))
+                            .sum();
+                    }
+                    let mut inside = 0usize;
+                    for _ in 0..samples {
+                        for v in draw.iter_mut() {
+                            *v = StandardNormal.sample(&mut self.rng);
+                        }
+                        let mut q2 = 0.0;
+                        for a in 0..m {
+                            let qa =
+                                mean[a] + (0..m).map(|b| sqrt_c[(a, b)] * draw[b]).sum::<f64>();
+                            q2 += qa * qa;
+                        }
+                        inside += usize::from(q2 < eta);
+                    }
+                    *lp += (inside.max(1) as f64 - if inside == 0 { 0.5 } else { 0.0 }).ln()
+                        - (samples as f64).ln();
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Prop. 3 / 6 (no feedback): the band probability integrated over the local predictions
+    /// given x, with p(x_hat^{1:N} | x) = N([x; ...; x], Sigma) of eq. (21)-(23). With that
+    /// model the innovation mean h_i (x - x_hat^i) = -h_i e_i, e ~ N(0, Sigma), does not depend
+    /// on x: the integral is the same number for every particle, so the weights (and the
+    /// estimate) equal CFoMD's. We still evaluate it (Monte Carlo with shared draws, as the
+    /// paper integrates numerically) because it is the likelihood as printed and enters the
+    /// evidence; see the scheme's notes for what this means for Fig. 3 and Fig. 6.
+    fn prop3_log_factor(
+        &mut self,
+        silent: &[usize],
+        p_pred: &[Matrix],
+        cross_pred: &[Vec<Matrix>],
+        eta: f64,
+    ) -> Result<f64, SchemeError> {
+        if silent.is_empty() {
+            return Ok(0.0);
+        }
+        let d = self.system.state_dim();
+        // Joint covariance of the silent sensors' prediction errors.
+        let k = silent.len();
+        let mut sigma = Matrix::zeros(k * d, k * d);
+        for (a, &i) in silent.iter().enumerate() {
+            for (b, &j) in silent.iter().enumerate() {
+                let block = if i == j {
+                    &p_pred[i]
+                } else {
+                    &cross_pred[i][j]
+                };
+                sigma.view_mut((a * d, b * d), (d, d)).copy_from(block);
+            }
+        }
+        symmetrize(&mut sigma);
+        let l =
+            crate::model::transition::psd_sqrt(&sigma).map_err(|source| SchemeError::Matrix {
+                what: "cross-covariance (21)",
+                source,
+            })?;
+        let samples = self.options.prop3_samples.max(1);
+        let mut total = 0.0;
+        let mut w = Vector::zeros(k * d);
+        for _ in 0..samples {
+            for v in w.iter_mut() {
+                *v = StandardNormal.sample(&mut self.rng);
+            }
+            let e = &l * &w;
+            let mut logp = 0.0;
+            for (a, &i) in silent.iter().enumerate() {
+                let sensor = &self.system.sensors[i];
+                let h = sensor.as_linear().ok_or_else(|| {
+                    SchemeError::Unsupported(
+                        "Prop. 3 / 6 needs linear sensors (Remark 4 (III))".into(),
+                    )
+                })?;
+                let ea = e.rows(a * d, d).into_owned();
+                let mu = -(h.h() * ea); // h (x - x_hat) with x_hat = x + e
+                let s = h.h() * &p_pred[i] * h.h().transpose() + sensor.noise_cov();
+                if mu.len() == 1 {
+                    let half = (eta * s[(0, 0)]).sqrt();
+                    let sd = sensor.noise_cov()[(0, 0)].sqrt();
+                    logp += normal::log_q_band((-half - mu[0]) / sd, (half - mu[0]) / sd);
+                } else {
+                    let eig = s.clone().symmetric_eigen();
+                    let sis = &eig.eigenvectors
+                        * Matrix::from_diagonal(&eig.eigenvalues.map(|v| 1.0 / v.sqrt()))
+                        * eig.eigenvectors.transpose();
+                    let mut c = &sis * sensor.noise_cov() * &sis;
+                    symmetrize(&mut c);
+                    let p = crate::stats::quadform::prob_below(&(&sis * mu), &c, eta)
+                        .map_err(|e| SchemeError::Unsupported(e.to_string()))?;
+                    logp += p.max(f64::MIN_POSITIVE).ln();
+                }
+            }
+            total += logp.exp();
+        }
+        Ok((total / samples as f64).max(f64::MIN_POSITIVE).ln())
+    }
+}
+
+impl FusionCenter for CensoredPfCenter {
+    fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
+        let sys = self.system.clone();
+        let f = sys.transition.f();
+        let q = sys.transition.q();
+        let n_sensors = sys.n_sensors();
+        if inbox.len() != n_sensors {
+            return Err(SchemeError::Unsupported(format!(
+                "inbox has {} entries for {n_sensors} sensors",
+                inbox.len()
+            )));
+        }
+        // Replicas of the local covariance predictions.
+        let p_pred: Vec<Matrix> = self
+            .local_cov
+            .iter()
+            .map(|p| {
+                let mut m = f * p * f.transpose() + q;
+                symmetrize(&mut m);
+                m
+            })
+            .collect();
+        let full_nofb = self.options.fusion == Fusion::Full
+            && self.options.feedback == FeedbackMode::None
+            && self.options.eta.is_some();
+        let cross_pred: Vec<Vec<Matrix>> = if full_nofb {
+            self.cross_cov
+                .iter()
+                .map(|row| row.iter().map(|p| f * p * f.transpose() + q).collect())
+                .collect()
+        } else {
+            Vec::new()
+        };
+
+        self.cloud
+            .propagate(&self.transition, &mut self.rng)
+            .map_err(pf_err)?;
+        let mut silent = Vec::new();
+        for (i, msg) in inbox.iter().enumerate() {
+            match msg {
+                Received::Measurement(z) => {
+                    if z.len() != sys.sensors[i].meas_dim() || z.iter().any(|v| !v.is_finite()) {
+                        return Err(SchemeError::Protocol {
+                            sensor: i,
+                            message: format!("corrupt measurement {:?}", z.as_slice()),
+                        });
+                    }
+                    self.add_measurement(i, z)?
+                }
+                Received::Silent => silent.push(i),
+                Received::NotScheduled => {}
+                other => {
+                    return Err(SchemeError::Protocol {
+                        sensor: i,
+                        message: format!("expected a measurement or silence, got {other:?}"),
+                    })
+                }
+            }
+        }
+        // Silence is data only under censoring with the full likelihood.
+        if let (Fusion::Full, Some(eta)) = (self.options.fusion, self.options.eta) {
+            match self.options.feedback {
+                FeedbackMode::None => {
+                    self.last_prop3_log_factor =
+                        self.prop3_log_factor(&silent, &p_pred, &cross_pred, eta)?;
+                    let c = self.last_prop3_log_factor;
+                    for l in self.cloud.log_weights_mut() {
+                        *l += c;
+                    }
+                }
+                mode => {
+                    let x_ref = self.prediction.mean.clone();
+                    for &i in &silent {
+                        let sensor = sys.sensors[i].clone();
+                        let p_ref = if mode == FeedbackMode::Prediction {
+                            &p_pred[i]
+                        } else {
+                            &self.prediction.cov
+                        };
+                        let h = sensor.jacobian(&x_ref);
+                        let mut s = &h * p_ref * h.transpose() + sensor.noise_cov();
+                        symmetrize(&mut s);
+                        self.add_band(i, &x_ref, &s, eta)?;
+                    }
+                }
+            }
+        }
+        self.cloud.normalize().map_err(pf_err)?;
+        self.est = self.cloud.estimate().map_err(pf_err)?;
+        self.cloud
+            .resample_if(
+                self.options.resample_policy,
+                self.options.resampling,
+                &mut self.rng,
+            )
+            .map_err(pf_err)?;
+
+        // Replicas of the local covariance updates (each sensor always uses its own z).
+        let mut gains = Vec::with_capacity(n_sensors);
+        for (i, sensor) in sys.sensors.iter().enumerate() {
+            let x_ref = match self.options.feedback {
+                FeedbackMode::None => self.prediction.mean.clone(), // linear: H does not depend on it
+                _ => self.prediction.mean.clone(),
+            };
+            let (p, gain, _) = local_covariance_update(sensor.as_ref(), &p_pred[i], &x_ref)?;
+            self.local_cov[i] = p;
+            gains.push((gain, sensor.jacobian(&x_ref)));
+        }
+        if full_nofb {
+            // Eq. (23): P^{i,j}_{k|k} = (I - w_i h_i^T) (F P^{i,j} F^T + Q) (I - w_j h_j^T)^T.
+            let d = sys.state_dim();
+            let eye = Matrix::identity(d, d);
+            for i in 0..n_sensors {
+                for j in 0..n_sensors {
+                    self.cross_cov[i][j] = if i == j {
+                        self.local_cov[i].clone()
+                    } else {
+                        (&eye - &gains[i].0 * &gains[i].1)
+                            * &cross_pred[i][j]
+                            * (&eye - &gains[j].0 * &gains[j].1).transpose()
+                    };
+                }
+            }
+        }
+        // What is fed back before the next step: x_{k+1|k} = F x_{k|k}, P = F P_{k|k} F^T + Q.
+        self.prediction = kf::predict(&sys.transition, &self.est);
+        Ok(())
+    }
+
+    fn estimate(&self) -> &Gaussian {
+        &self.est
+    }
+
+    fn feedback(&self) -> Option<Feedback> {
+        match self.options.feedback {
+            FeedbackMode::None => None,
+            FeedbackMode::Prediction => Some(Feedback::Prediction {
+                mean: self.prediction.mean.clone(),
+                cov: None,
+            }),
+            FeedbackMode::PredictionAndCovariance => Some(Feedback::Prediction {
+                mean: self.prediction.mean.clone(),
+                cov: Some(self.prediction.cov.clone()),
+            }),
+        }
+    }
+}

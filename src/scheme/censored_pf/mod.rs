@@ -1,0 +1,147 @@
+//! Seed 000 — Zheng, Niu, Varshney, "Sequential Bayesian Estimation With Censored Data for
+//! Multi-Sensor Systems": sensors run a local KF/EKF and send their measurement only when its
+//! normalized innovation squared passes the threshold eta = chi^2(l/N) (eq. (4), (8), (31),
+//! (43)); the fusion center runs a particle filter whose weights use the full likelihood of
+//! the received measurements and of the silences (CFwMD: eq. (9), (15), (33), (39), (44),
+//! (45); without feedback Prop. 3 / 6 with (21)-(23)), or the simple likelihood that ignores
+//! silences (CFoMD). Random selection and all-send are the baselines.
+pub mod censoring;
+pub mod center;
+pub mod sensor;
+
+pub use center::CensoredPfCenter;
+pub use sensor::{CensoringSensor, SendRule};
+
+use crate::filter::particle::{ResamplePolicy, Resampling};
+use crate::scheme::{Scheme, SchemeError, SchemeInstance, SensorNode, System};
+use std::sync::Arc;
+
+/// What the fusion center feeds back before each step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FeedbackMode {
+    /// Nothing: sensors censor against their own KF prediction (Prop. 3 / 6).
+    None,
+    /// The fused prediction x_{k|k-1} (CFwMD, Prop. 1 / 4 / 7).
+    Prediction,
+    /// The fused prediction and its covariance (CFwMD2, Prop. 2 / 5 / 8).
+    PredictionAndCovariance,
+}
+
+/// Which likelihood the particle filter uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fusion {
+    /// Received measurements and silences (CFwMD).
+    Full,
+    /// Received measurements only (CFoMD; also random selection and all-send).
+    Simple,
+}
+
+/// How the probability that a vector innovation stayed inside the ellipsoid is computed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BandMethod {
+    /// Exact generalized chi-square CDF (deterministic).
+    Exact,
+    /// The paper's counting of `samples` Monte Carlo draws (Section VII-B).
+    MonteCarlo { samples: usize },
+}
+
+/// Options of the particle-filter fusion center.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PfOptions {
+    pub particles: usize,
+    pub fusion: Fusion,
+    pub feedback: FeedbackMode,
+    /// The censoring threshold when sensors censor by NIS; `None` for random selection and
+    /// all-send (their silences carry no information).
+    pub eta: Option<f64>,
+    pub resampling: Resampling,
+    pub resample_policy: ResamplePolicy,
+    pub band: BandMethod,
+    /// Monte Carlo draws for the Prop. 3 / 6 integral.
+    pub prop3_samples: usize,
+}
+
+/// Seed 000's scheme: censoring sensors + particle-filter fusion center.
+#[derive(Debug, Clone)]
+pub struct CensoredPfScheme {
+    system: Arc<System>,
+    transition: Arc<crate::model::LinearTransition>,
+    rule: SendRule,
+    options: PfOptions,
+}
+
+impl CensoredPfScheme {
+    /// Checks what the paper supports: the full likelihood without feedback needs linear
+    /// sensors (Remark 4 (III)); the KL rule needs scalar measurements.
+    pub fn new(
+        system: Arc<System>,
+        rule: SendRule,
+        options: PfOptions,
+    ) -> Result<Self, SchemeError> {
+        if options.particles == 0 {
+            return Err(SchemeError::Unsupported(
+                "particles must be at least 1".into(),
+            ));
+        }
+        let censoring = matches!(rule, SendRule::Nis { .. } | SendRule::KlDivergence { .. });
+        if censoring != options.eta.is_some() {
+            return Err(SchemeError::Unsupported(
+                "eta must be given exactly when sensors censor".into(),
+            ));
+        }
+        if options.fusion == Fusion::Full
+            && options.feedback == FeedbackMode::None
+            && censoring
+            && system.sensors.iter().any(|s| s.as_linear().is_none())
+        {
+            return Err(SchemeError::Unsupported(
+                "the full likelihood without feedback needs linear sensors (seed 000 Remark 4 (III)); use feedback or fusion = \"simple\"".into(),
+            ));
+        }
+        if let SendRule::KlDivergence { .. } = rule {
+            if options.feedback != FeedbackMode::None
+                || system.sensors.iter().any(|s| s.meas_dim() != 1)
+            {
+                return Err(SchemeError::Unsupported(
+                    "the KL rule (24) is defined for scalar measurements censored against the local prediction (no feedback)".into(),
+                ));
+            }
+        }
+        Ok(Self {
+            transition: Arc::new(system.transition.clone()),
+            system,
+            rule,
+            options,
+        })
+    }
+}
+
+impl Scheme for CensoredPfScheme {
+    fn build(&self) -> Result<SchemeInstance, SchemeError> {
+        self.build_with_seed(0)
+    }
+
+    fn build_with_seed(&self, seed: u64) -> Result<SchemeInstance, SchemeError> {
+        let sensors = self
+            .system
+            .sensors
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                Box::new(CensoringSensor::new(
+                    i,
+                    s.clone(),
+                    self.transition.clone(),
+                    self.system.prior.clone(),
+                    self.rule,
+                    self.options.feedback,
+                )) as Box<dyn SensorNode>
+            })
+            .collect();
+        let center = CensoredPfCenter::new(self.system.clone(), self.options, seed)?;
+        Ok(SchemeInstance {
+            sensors,
+            center: Box::new(center),
+        })
+    }
+}
