@@ -323,3 +323,38 @@ fn zhang_fig5_runs_with_few_trials() {
         192.0
     );
 }
+
+/// Bad input to the particle-filter scheme's fields gets exit code 2 and names the field.
+#[test]
+fn bad_censoring_parameters_exit_2() {
+    let base = VALID.split("[[schemes]]").next().unwrap();
+    let cases: &[(&str, &str)] = &[
+        ("kind = \"censored-pf\"\nl = 3.0\n", "l"),
+        ("kind = \"censored-pf\"\nl = 0.0\n", "l"),
+        (
+            "kind = \"censored-pf\"\nl = 1.0\nparticles = 0\n",
+            "particles",
+        ),
+        (
+            "kind = \"censored-pf\"\nl = 1.0\nfeedback = \"sometimes\"\n",
+            "feedback",
+        ),
+        ("kind = \"censored-pf\"\npolicy = \"random\"\n", "l"),
+    ];
+    for (scheme, field) in cases {
+        let (code, stderr) = run_text(&format!("{base}[[schemes]]\n{scheme}"));
+        assert_eq!(code, Some(2), "{scheme}: {stderr}");
+        assert!(
+            stderr.contains(field),
+            "{scheme}: {field} not named in {stderr}"
+        );
+    }
+    // A range sensor placed on state indices the model does not have.
+    let text = format!(
+        "{}[[sensors]]\nkind = \"range\"\nposition = [0.0, 0.0]\nposition_indices = [0, 7]\nR_diag = [1.0]\n[[schemes]]\nkind = \"centralized-kf\"\n",
+        base
+    );
+    let (code, stderr) = run_text(&text);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(stderr.contains("position_indices"), "{stderr}");
+}

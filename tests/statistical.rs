@@ -124,3 +124,40 @@ fn algorithm1_random_is_consistent() {
         s.schemes[0].rate
     );
 }
+
+/// The particle filter with all data converges to the Kalman filter as particles grow: with
+/// 4000 particles the position MSE is within 2% of the KF's (paired over the same trials),
+/// with 20 particles it is clearly worse — the comparison can fail.
+#[test]
+fn particle_filter_approaches_the_kalman_filter() {
+    let base = builtin::get("zheng-fig1").unwrap();
+    let head = base.split("[[schemes]]").next().unwrap();
+    let text = format!(
+        "{}[[schemes]]\nkind = \"censored-pf\"\nlabel = \"pf20\"\npolicy = \"all\"\nparticles = 20\n\
+         [[schemes]]\nkind = \"censored-pf\"\nlabel = \"pf4000\"\npolicy = \"all\"\nparticles = 4000\n\
+         [[schemes]]\nkind = \"centralized-kf\"\nlabel = \"kf\"\n",
+        head.replace("trials = 5000", "trials = 300")
+    );
+    let exp = build::load(&text, "pf-vs-kf").unwrap();
+    let s = run(&exp);
+    let mse = |i: usize| s.schemes[i].steady_state.mse;
+    let (coarse, fine, kf) = (mse(0), mse(1), mse(2));
+    // Paired standard error of the fine PF vs KF difference.
+    let d: Vec<f64> = s.schemes[1]
+        .per_trial
+        .iter()
+        .zip(&s.schemes[2].per_trial)
+        .map(|(a, b)| a[0] - b[0])
+        .collect();
+    let n = d.len() as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let se = (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    assert!(
+        mean.abs() < (3.0 * se).max(0.02 * kf),
+        "4000 particles: {fine} vs KF {kf} (diff {mean} ± {se})"
+    );
+    assert!(
+        coarse > 1.1 * kf,
+        "20 particles should be clearly worse: {coarse} vs KF {kf}"
+    );
+}

@@ -121,3 +121,82 @@ impl Scheme for CentralizedScheme {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linalg::{matrix_from_rows, relative_difference, Matrix};
+    use crate::model::{presets, LinearSensor, MeasurementModel};
+
+    /// A linear sensor that hides its linearity, so filters take the EKF path (Jacobian at
+    /// the prediction, sequential updates).
+    #[derive(Debug)]
+    struct Opaque(LinearSensor);
+    impl MeasurementModel for Opaque {
+        fn state_dim(&self) -> usize {
+            self.0.state_dim()
+        }
+        fn meas_dim(&self) -> usize {
+            self.0.meas_dim()
+        }
+        fn predict(&self, x: &Vector) -> Vector {
+            self.0.predict(x)
+        }
+        fn jacobian(&self, x: &Vector) -> Matrix {
+            self.0.jacobian(x)
+        }
+        fn noise_cov(&self) -> &Matrix {
+            self.0.noise_cov()
+        }
+        fn noise_sqrt(&self) -> &Matrix {
+            self.0.noise_sqrt()
+        }
+    }
+
+    /// The EKF on a linear model equals the KF (information-form fusion).
+    #[test]
+    fn ekf_on_a_linear_model_equals_the_kf() {
+        let transition = presets::constant_velocity_2d(0.5, 1.0).unwrap();
+        let a = LinearSensor::new(
+            matrix_from_rows(&[vec![1.0, 0.0, 0.0, 0.0], vec![0.0, 0.0, 1.0, 0.0]]),
+            Matrix::identity(2, 2) * 2.0,
+        )
+        .unwrap();
+        let b = LinearSensor::new(
+            matrix_from_rows(&[vec![0.3, 1.0, 0.0, 0.2]]),
+            Matrix::from_element(1, 1, 0.5),
+        )
+        .unwrap();
+        let prior = Gaussian::new(
+            Vector::from_vec(vec![1.0, 0.0, -1.0, 0.5]),
+            Matrix::identity(4, 4) * 3.0,
+        );
+        let linear = Arc::new(System {
+            transition: transition.clone(),
+            sensors: vec![Arc::new(a.clone()), Arc::new(b.clone())],
+            prior: prior.clone(),
+        });
+        let opaque = Arc::new(System {
+            transition,
+            sensors: vec![Arc::new(Opaque(a)), Arc::new(Opaque(b))],
+            prior,
+        });
+        let mut kf = CentralizedKf::new(linear);
+        let mut ekf = CentralizedKf::new(opaque);
+        for k in 1..=30 {
+            let t = k as f64;
+            let inbox = vec![
+                Received::Measurement(Vector::from_vec(vec![t.sin(), 0.5 * t])),
+                if k % 3 == 0 {
+                    Received::Silent
+                } else {
+                    Received::Measurement(Vector::from_element(1, 0.1 * t))
+                },
+            ];
+            kf.step(k, &inbox).unwrap();
+            ekf.step(k, &inbox).unwrap();
+            assert!(relative_difference(&kf.estimate().cov, &ekf.estimate().cov) < 1e-10);
+            assert!((&kf.estimate().mean - &ekf.estimate().mean).amax() < 1e-9);
+        }
+    }
+}

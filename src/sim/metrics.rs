@@ -18,7 +18,9 @@ impl Layout {
     pub const BITS: usize = 4;
     pub const FRAME_BITS: usize = 5;
     pub const DOWNLINK_BITS: usize = 6;
-    const FIXED: usize = 7;
+    /// Steps whose fused covariance was not positive definite (a collapsed particle cloud).
+    pub const DEGENERATE: usize = 7;
+    const FIXED: usize = 8;
 
     /// Entries per step.
     pub fn width(&self) -> usize {
@@ -167,7 +169,19 @@ impl TrialObserver<'_> {
                 self.group_acc[g] += se;
             }
         }
-        let nees = mahalanobis_sq(&err, &est.cov)?;
+        // A particle cloud can collapse onto one particle: its covariance is then singular.
+        // NEES is computed with a tiny relative jitter (so the claim of certainty shows as a
+        // huge NEES) and the step is counted as degenerate; NaN/inf remain errors.
+        let (nees, degenerate) = match mahalanobis_sq(&err, &est.cov) {
+            Ok(v) => (v, false),
+            Err(crate::linalg::LinalgError::NotPositiveDefinite) => {
+                let n = est.cov.nrows();
+                let scale = (est.cov.trace().abs() / n as f64).max(1e-300);
+                let jittered = &est.cov + crate::linalg::Matrix::identity(n, n) * (1e-9 * scale);
+                (mahalanobis_sq(&err, &jittered)?, true)
+            }
+            Err(e) => return Err(e),
+        };
         let trace = est.cov.trace();
         row[Layout::TOTAL_SE] += total;
         row[Layout::NEES] += nees;
@@ -176,6 +190,7 @@ impl TrialObserver<'_> {
         row[Layout::BITS] += traffic.bits as f64;
         row[Layout::FRAME_BITS] += traffic.frame_bits as f64;
         row[Layout::DOWNLINK_BITS] += traffic.downlink_bits as f64;
+        row[Layout::DEGENERATE] += f64::from(u8::from(degenerate));
         if steady {
             self.acc[0] += total;
             self.acc[1] += trace;

@@ -51,6 +51,9 @@ pub struct SchemeSummary {
     pub frame_bits_per_step: f64,
     /// Mean feedback bits from the fusion center to the sensors per step.
     pub downlink_bits_per_step: f64,
+    /// Fraction of (trial, step) pairs whose fused covariance was singular (collapsed
+    /// particle clouds); their NEES used a 1e-9 relative jitter.
+    pub degenerate_covariance_fraction: f64,
     pub steady_state: SteadyState,
     /// Per trial: steady-state MSE, total then per group (for paired comparisons; not
     /// written to summary.json).
@@ -100,6 +103,7 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
             let bits: f64 = col(Layout::BITS).iter().sum();
             let frame_bits: f64 = col(Layout::FRAME_BITS).iter().sum();
             let downlink_bits: f64 = col(Layout::DOWNLINK_BITS).iter().sum();
+            let degenerate: f64 = col(Layout::DEGENERATE).iter().sum();
             let (mse_ss, mse_se) = s.steady_mse.mean_se(exp.trials);
             let (trace_ss, trace_se) = s.steady_trace.mean_se(exp.trials);
             let (nees_ss, _) = s.steady_nees.mean_se(exp.trials);
@@ -120,6 +124,7 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
                 bits_per_step: bits / steps as f64,
                 frame_bits_per_step: frame_bits / steps as f64,
                 downlink_bits_per_step: downlink_bits / steps as f64,
+                degenerate_covariance_fraction: degenerate / steps as f64,
                 per_trial: s.per_trial.clone(),
                 steady_state: SteadyState {
                     from_step: exp.steady_from,

@@ -145,3 +145,6 @@ impl Scheme for CensoredPfScheme {
         })
     }
 }
+
+#[cfg(test)]
+mod tests;

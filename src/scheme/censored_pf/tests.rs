@@ -1,0 +1,251 @@
+//! Properties of seed 000's censoring sensors and particle-filter fusion center.
+use super::censoring::nis_threshold;
+use super::*;
+use crate::filter::Gaussian;
+use crate::linalg::{matrix_from_rows, Matrix, Vector};
+use crate::link::{Received, Transmission};
+use crate::model::{presets, LinearSensor, MeasurementModel};
+use crate::scheme::{FusionCenter, SensorNode};
+use rand::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+fn system(n_sensors: usize) -> Arc<System> {
+    let transition = presets::constant_velocity_1d_discrete(1.0, 4.0).unwrap();
+    let sensors = (0..n_sensors)
+        .map(|_| {
+            Arc::new(
+                LinearSensor::new(
+                    matrix_from_rows(&[vec![1.0, 0.0]]),
+                    Matrix::from_element(1, 1, 1.0),
+                )
+                .unwrap(),
+            ) as Arc<dyn MeasurementModel>
+        })
+        .collect();
+    Arc::new(System {
+        transition,
+        sensors,
+        prior: Gaussian::new(Vector::from_vec(vec![0.0, 10.0]), Matrix::identity(2, 2)),
+    })
+}
+
+fn options(fusion: Fusion, feedback: FeedbackMode, eta: Option<f64>) -> PfOptions {
+    PfOptions {
+        particles: 500,
+        fusion,
+        feedback,
+        eta,
+        resampling: crate::filter::particle::Resampling::Systematic,
+        resample_policy: crate::filter::particle::ResamplePolicy::Always,
+        band: BandMethod::Exact,
+        prop3_samples: 50,
+    }
+}
+
+/// Runs one trial of `scheme` on data from `seed`; returns the fused estimates per step.
+fn run(scheme: &CensoredPfScheme, sys: &System, seed: u64, steps: usize) -> Vec<Gaussian> {
+    let mut data_rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut coin_rng = Xoshiro256PlusPlus::seed_from_u64(seed + 1);
+    let mut inst = scheme.build_with_seed(seed + 2).unwrap();
+    let mut x = sys.prior.mean.clone();
+    let mut fb = inst.center.feedback();
+    let mut out = Vec::new();
+    for k in 1..=steps {
+        x = sys.transition.sample_next(&x, &mut data_rng);
+        let inbox: Vec<Received> = inst
+            .sensors
+            .iter_mut()
+            .zip(&sys.sensors)
+            .map(|(node, s)| {
+                let z = s.sample(&x, &mut data_rng);
+                node.step(k, &z, fb.as_ref(), &mut coin_rng).unwrap().into()
+            })
+            .collect();
+        inst.center.step(k, &inbox).unwrap();
+        fb = inst.center.feedback();
+        out.push(inst.center.estimate().clone());
+    }
+    out
+}
+
+/// With l = N the threshold is 0, every sensor sends, and CFwMD, CFoMD and all-send weight
+/// the particles identically (the same estimates, bit for bit).
+#[test]
+fn everything_sent_makes_all_fusions_identical() {
+    let sys = system(3);
+    let eta = nis_threshold(1, 3.0, 3).unwrap();
+    assert_eq!(eta, 0.0);
+    let full = CensoredPfScheme::new(
+        sys.clone(),
+        SendRule::Nis { eta },
+        options(Fusion::Full, FeedbackMode::Prediction, Some(eta)),
+    )
+    .unwrap();
+    let simple = CensoredPfScheme::new(
+        sys.clone(),
+        SendRule::Nis { eta },
+        options(Fusion::Simple, FeedbackMode::Prediction, Some(eta)),
+    )
+    .unwrap();
+    let all = CensoredPfScheme::new(
+        sys.clone(),
+        SendRule::All,
+        options(Fusion::Simple, FeedbackMode::Prediction, None),
+    )
+    .unwrap();
+    let a = run(&full, &sys, 5, 15);
+    let b = run(&simple, &sys, 5, 15);
+    let c = run(&all, &sys, 5, 15);
+    assert_eq!(a, b);
+    assert_eq!(a, c);
+}
+
+/// Non-feedback sensors censor against their own KF, whose innovations are N(0, s) and white:
+/// the fraction of sends is Binomial(n, l/N), so it must lie within 4 standard errors of l/N.
+#[test]
+fn censoring_rate_matches_l_over_n_without_feedback() {
+    let sys = system(4);
+    for l in [1.0, 2.0, 3.0] {
+        let eta = nis_threshold(1, l, 4).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(l as u64);
+        let mut sends = 0usize;
+        let mut total = 0usize;
+        for _trial in 0..200 {
+            let mut x = sys.prior.mean.clone()
+                + crate::model::transition::psd_sqrt(&sys.prior.cov).unwrap()
+                    * Vector::from_fn(2, |_, _| {
+                        rand_distr::Distribution::<f64>::sample(
+                            &rand_distr::StandardNormal,
+                            &mut rng,
+                        )
+                    });
+            let mut node = CensoringSensor::new(
+                0,
+                sys.sensors[0].clone(),
+                Arc::new(sys.transition.clone()),
+                sys.prior.clone(),
+                SendRule::Nis { eta },
+                FeedbackMode::None,
+            );
+            for k in 1..=50 {
+                x = sys.transition.sample_next(&x, &mut rng);
+                let z = sys.sensors[0].sample(&x, &mut rng);
+                if let Transmission::Send(_) = node.step(k, &z, None, &mut rng).unwrap() {
+                    sends += 1;
+                }
+                total += 1;
+            }
+        }
+        let p = l / 4.0;
+        let rate = sends as f64 / total as f64;
+        let se = (p * (1.0 - p) / total as f64).sqrt();
+        assert!(
+            (rate - p).abs() < 4.0 * se,
+            "l = {l}: rate {rate} vs {p} (se {se})"
+        );
+    }
+}
+
+/// Theorem 1: the KL rule (24) with the threshold mapped from eta makes the same decisions as
+/// the NIS rule (4), measurement by measurement.
+#[test]
+fn kl_rule_decides_like_nis() {
+    let sys = system(1);
+    let eta = nis_threshold(1, 0.5, 1).unwrap();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
+    let mut nis_node = CensoringSensor::new(
+        0,
+        sys.sensors[0].clone(),
+        Arc::new(sys.transition.clone()),
+        sys.prior.clone(),
+        SendRule::Nis { eta },
+        FeedbackMode::None,
+    );
+    let mut kl_node = CensoringSensor::new(
+        0,
+        sys.sensors[0].clone(),
+        Arc::new(sys.transition.clone()),
+        sys.prior.clone(),
+        SendRule::KlDivergence { eta },
+        FeedbackMode::None,
+    );
+    let mut x = sys.prior.mean.clone();
+    let (mut sent, mut silent) = (0, 0);
+    for k in 1..=2000 {
+        x = sys.transition.sample_next(&x, &mut rng);
+        let z = sys.sensors[0].sample(&x, &mut rng);
+        let a = nis_node.step(k, &z, None, &mut rng).unwrap();
+        let b = kl_node.step(k, &z, None, &mut rng).unwrap();
+        assert_eq!(a, b, "step {k}: NIS {:?}", nis_node.last_decision());
+        if matches!(a, Transmission::Send(_)) {
+            sent += 1
+        } else {
+            silent += 1
+        }
+    }
+    assert!(
+        sent > 100 && silent > 100,
+        "both decisions must occur: {sent} sent, {silent} silent"
+    );
+}
+
+/// Under censoring with feedback the full likelihood beats ignoring the silences: over the
+/// same trials CFwMD's position MSE is below CFoMD's by more than 3 standard errors of the
+/// paired difference.
+#[test]
+fn silence_is_informative_with_feedback() {
+    let sys = system(2);
+    let eta = nis_threshold(1, 1.0, 2).unwrap();
+    let full = CensoredPfScheme::new(
+        sys.clone(),
+        SendRule::Nis { eta },
+        options(Fusion::Full, FeedbackMode::Prediction, Some(eta)),
+    )
+    .unwrap();
+    let simple = CensoredPfScheme::new(
+        sys.clone(),
+        SendRule::Nis { eta },
+        options(Fusion::Simple, FeedbackMode::Prediction, Some(eta)),
+    )
+    .unwrap();
+    let mut diffs = Vec::new();
+    for seed in 0..150u64 {
+        let truth_err = |est: &[Gaussian]| -> f64 {
+            // Same data seed, so the truth is the same; recompute it.
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed * 10);
+            let mut x = sys.prior.mean.clone();
+            est.iter()
+                .map(|e| {
+                    x = sys.transition.sample_next(&x, &mut rng);
+                    for s in &sys.sensors {
+                        let _ = s.sample(&x, &mut rng);
+                    }
+                    (e.mean[0] - x[0]).powi(2)
+                })
+                .sum::<f64>()
+        };
+        let a = truth_err(&run(&full, &sys, seed * 10, 20));
+        let b = truth_err(&run(&simple, &sys, seed * 10, 20));
+        diffs.push(a - b);
+    }
+    let n = diffs.len() as f64;
+    let mean = diffs.iter().sum::<f64>() / n;
+    let se = (diffs.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    assert!(mean < -3.0 * se, "CFwMD - CFoMD = {mean} ± {se}");
+}
+
+#[test]
+fn bad_configurations_are_errors() {
+    let sys = system(2);
+    assert!(nis_threshold(1, 3.0, 2).is_err());
+    let mut o = options(Fusion::Full, FeedbackMode::Prediction, Some(0.4));
+    o.particles = 0;
+    assert!(CensoredPfScheme::new(sys.clone(), SendRule::Nis { eta: 0.4 }, o).is_err());
+    // eta without a censoring rule.
+    assert!(CensoredPfScheme::new(
+        sys,
+        SendRule::All,
+        options(Fusion::Full, FeedbackMode::Prediction, Some(0.4))
+    )
+    .is_err());
+}
