@@ -5,7 +5,7 @@ use crate::filter::Gaussian;
 use crate::linalg::{matrix_from_rows, Matrix, Vector};
 use crate::link::{Received, Transmission};
 use crate::model::{presets, LinearSensor, MeasurementModel};
-use crate::scheme::{FusionCenter, SensorNode};
+use crate::scheme::SensorNode;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
