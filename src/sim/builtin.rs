@@ -18,6 +18,46 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/zheng-fig1.toml"),
     ),
     (
+        "zheng-fig2-table1",
+        "Seed 000 Fig. 2 / Table I: N = 4, l in {1, 1.2, 1.5, 2, 3}, CFwMD vs CFwMD2, transmissions vs Table I",
+        include_str!("../../scenarios/zheng-fig2-table1.toml"),
+    ),
+    (
+        "zheng-fig3",
+        "Seed 000 Fig. 3: non-feedback, N = 2, l = 1 (Prop. 3)",
+        include_str!("../../scenarios/zheng-fig3.toml"),
+    ),
+    (
+        "zheng-fig4",
+        "Seed 000 Fig. 4: vector observations with feedback, N = 2, l = 1",
+        include_str!("../../scenarios/zheng-fig4.toml"),
+    ),
+    (
+        "zheng-fig5-table2",
+        "Seed 000 Fig. 5 / Table II: vector observations, N = 4, CFwMD vs CFwMD2",
+        include_str!("../../scenarios/zheng-fig5-table2.toml"),
+    ),
+    (
+        "zheng-fig6",
+        "Seed 000 Fig. 6: vector observations without feedback (Prop. 6)",
+        include_str!("../../scenarios/zheng-fig6.toml"),
+    ),
+    (
+        "zheng-fig8",
+        "Seed 000 Fig. 8: 9 RSS sensors, l = 2, 10^4 particles, 200 trials",
+        include_str!("../../scenarios/zheng-fig8.toml"),
+    ),
+    (
+        "zheng-fig9",
+        "Seed 000 Fig. 9: RSS sensors, RMSE against l",
+        include_str!("../../scenarios/zheng-fig9.toml"),
+    ),
+    (
+        "zheng-fig10-table3",
+        "Seed 000 Fig. 10 / Table III: RSS sensors, CFwMD vs CFwMD2 for l in {2, 4, 6}",
+        include_str!("../../scenarios/zheng-fig10-table3.toml"),
+    ),
+    (
         "zhang-fig4",
         "Seed 003 Fig. 4: quantized-innovation fusion at 1 payload bit, 50 range sensors, 1000 runs",
         include_str!("../../scenarios/zhang-fig4.toml"),

@@ -159,6 +159,45 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                     format!("relative difference {:.1}% (criterion: <= {:.1}%)", 100.0 * rel, 100.0 * within),
                 )
             }),
+            ClaimSpec::CloserToTarget { text, a, b, param, metric } => {
+                let value = |s: &super::results::SchemeSummary| -> Option<f64> {
+                    match metric.as_str() {
+                        "transmissions_per_step" => Some(s.transmissions_per_step),
+                        "rate" => Some(s.rate),
+                        _ => None,
+                    }
+                };
+                let mut holds = true;
+                let mut evidence = Vec::new();
+                for sa in summary.schemes.iter().filter(|s| &s.name == a) {
+                    let Some(super::scenario::ParamValue::Number(target)) = sa.params.get(param) else {
+                        continue;
+                    };
+                    let Some(sb) = summary.schemes.iter().find(|s| {
+                        &s.name == b && s.params.get(param).is_some_and(|v| v.matches(&super::scenario::ParamValue::Number(*target)))
+                    }) else {
+                        continue;
+                    };
+                    let (Some(va), Some(vb)) = (value(sa), value(sb)) else {
+                        return missing(text, metric);
+                    };
+                    let ok = (va - target).abs() < (vb - target).abs();
+                    holds &= ok;
+                    evidence.push(format!(
+                        "{param} = {target}: {a} {va:.4}, {b} {vb:.4} ({})",
+                        if ok { "ok" } else { "FAILS" }
+                    ));
+                }
+                if evidence.is_empty() {
+                    holds = false;
+                    evidence.push(format!("no common values of {param}"));
+                }
+                ClaimResult {
+                    text: text.clone(),
+                    holds,
+                    evidence: format!("{metric}: {}", evidence.join("; ")),
+                }
+            }
             ClaimSpec::Consistent { text, schemes } => {
                 let mut holds = true;
                 let mut worst: Option<(f64, String)> = None;

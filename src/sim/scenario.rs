@@ -376,6 +376,16 @@ pub enum ClaimSpec {
         b_params: Params,
         metric: String,
     },
+    /// For every sweep value v of `param` shared by curves `a` and `b`, `a`'s `metric`
+    /// (`transmissions_per_step` or `rate`) is closer to the target v than `b`'s (seed 000
+    /// Tables I-III: CFwMD2's transmissions are closer to l than CFwMD's).
+    CloserToTarget {
+        text: String,
+        a: String,
+        b: String,
+        param: String,
+        metric: String,
+    },
     /// The steady-state `metric` of `a` is within the relative tolerance `within` of `b`'s.
     Close {
         text: String,
