@@ -130,10 +130,11 @@ impl CensoredPfCenter {
             let half_width = (eta * s[(0, 0)]).sqrt();
             let inv_sd = 1.0 / r[(0, 0)].sqrt();
             let h0 = h_ref[0];
-            for (l, h) in lw.iter_mut().zip(&self.hx[..n]) {
-                let mu = h - h0; // eq. (13) / Prop. 7: h(x) - h(x_{k|k-1})
-                *l += normal::log_q_band((-half_width - mu) * inv_sd, (half_width - mu) * inv_sd);
+            // mu = h(x) - h(x_{k|k-1}), eq. (13) / Prop. 7, in place of h(x).
+            for h in &mut self.hx[..n] {
+                *h -= h0;
             }
+            normal::add_log_band_probability(&self.hx[..n], half_width, inv_sd, lw);
             return Ok(());
         }
         // Vector: q = S^{-1/2} nu ~ N(S^{-1/2} (h(x) - h(x_ref)), S^{-1/2} R S^{-1/2}) (35)-(38).

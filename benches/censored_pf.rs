@@ -1,0 +1,53 @@
+//! Seed 000's particle-filter fusion center, exactly the work of the benchmarks:
+//! (b) the scalar censored filter, 1,000 particles, 2 sensors, 1,000 trials x 20 steps;
+//! (c) the nonlinear one, 10,000 particles, 9 RSS sensors, 200 trials x 20 steps;
+//! both CFwMD with feedback (the full likelihood of every silent sensor), one thread unless
+//! HUSHFUSE_BENCH_THREADS says otherwise. `cargo bench --bench censored_pf`.
+use hushfuse::sim::{build, builtin, runner};
+use std::time::Instant;
+
+fn scenario(name: &str, trials: usize, keep: &str) -> build::Experiment {
+    let text = builtin::get(name).unwrap();
+    let head = text.split("[[schemes]]").next().unwrap();
+    let scheme = text
+        .split("[[schemes]]")
+        .find(|s| s.contains(&format!("label = \"{keep}\"")))
+        .unwrap();
+    let scheme = scheme.split("[paper]").next().unwrap();
+    let mut exp = build::load(&format!("{head}[[schemes]]{scheme}"), name).unwrap();
+    exp.trials = trials;
+    exp
+}
+
+fn main() {
+    let threads: usize = std::env::var("HUSHFUSE_BENCH_THREADS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    let quick = !std::env::args().any(|a| a == "--bench");
+    let cases = [
+        (
+            "(b) scalar: 1000 particles, 2 sensors, 1000 trials x 20 steps",
+            scenario("zheng-fig1", if quick { 2 } else { 1000 }, "CFwMD"),
+        ),
+        (
+            "(c) nonlinear: 10^4 particles, 9 RSS sensors, 200 trials x 20 steps",
+            scenario("zheng-fig8", if quick { 1 } else { 200 }, "CFwMD"),
+        ),
+    ];
+    for (name, exp) in &cases {
+        let mut times = Vec::new();
+        for _ in 0..if quick { 1 } else { 3 } {
+            let t = Instant::now();
+            let sums = runner::run(exp, runner::RunOptions { threads }, &|_| {}).unwrap();
+            times.push(t.elapsed().as_secs_f64());
+            std::hint::black_box(sums);
+        }
+        times.sort_by(f64::total_cmp);
+        println!(
+            "{name}, threads={threads}: min {:.3} s, median {:.3} s",
+            times[0],
+            times[times.len() / 2]
+        );
+    }
+}
