@@ -803,10 +803,11 @@ fn censored_pf(
     {
         "full" => Fusion::Full,
         "simple" => Fusion::Simple,
+        "exact" => Fusion::Exact,
         other => {
             return Err(ctx.err(
                 field("fusion"),
-                format!("unknown fusion {other:?}; expected full or simple"),
+                format!("unknown fusion {other:?}; expected full, simple or exact"),
             ))
         }
     };

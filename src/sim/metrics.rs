@@ -176,7 +176,7 @@ impl TrialObserver<'_> {
             Ok(v) => (v, false),
             Err(crate::linalg::LinalgError::NotPositiveDefinite) => {
                 let n = est.cov.nrows();
-                let scale = (est.cov.trace().abs() / n as f64).max(1e-300);
+                let scale = (est.cov.trace().abs() / n as f64).max(1e-12);
                 let jittered = &est.cov + crate::linalg::Matrix::identity(n, n) * (1e-9 * scale);
                 (mahalanobis_sq(&err, &jittered)?, true)
             }

@@ -231,7 +231,8 @@ pub enum SchemeParams {
         /// `none`, `prediction` (CFwMD), `prediction-covariance` (CFwMD2). Default `prediction`.
         #[serde(default)]
         feedback: Option<String>,
-        /// `full` (CFwMD) or `simple` (CFoMD). Default `full`.
+        /// `full` (CFwMD), `simple` (CFoMD) or `exact` (CFwMD-exact, no feedback). Default
+        /// `full` for censoring, `simple` otherwise.
         #[serde(default)]
         fusion: Option<String>,
         #[serde(default)]

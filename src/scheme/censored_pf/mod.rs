@@ -7,6 +7,7 @@
 //! silences (CFoMD). Random selection and all-send are the baselines.
 pub mod censoring;
 pub mod center;
+pub mod exact;
 pub mod sensor;
 
 pub use center::CensoredPfCenter;
@@ -34,6 +35,9 @@ pub enum Fusion {
     Full,
     /// Received measurements only (CFoMD; also random selection and all-send).
     Simple,
+    /// CFwMD-exact (no feedback, linear sensors): particles carry copies of every sensor's
+    /// local KF and condition on what each copy would have sent ([`exact`]).
+    Exact,
 }
 
 /// How the probability that a vector innovation stayed inside the ellipsoid is computed.
@@ -98,6 +102,19 @@ impl CensoredPfScheme {
                 "the full likelihood without feedback needs linear sensors (seed 000 Remark 4 (III)); use feedback or fusion = \"simple\"".into(),
             ));
         }
+        if options.fusion == Fusion::Exact {
+            if options.feedback != FeedbackMode::None || !censoring {
+                return Err(SchemeError::Unsupported(
+                    "CFwMD-exact is for censoring sensors without feedback (feedback = \"none\")"
+                        .into(),
+                ));
+            }
+            if system.sensors.iter().any(|s| s.as_linear().is_none()) {
+                return Err(SchemeError::Unsupported(
+                    "CFwMD-exact needs linear sensors: an EKF's gain depends on its own estimate, which the fusion center would have to carry per particle".into(),
+                ));
+            }
+        }
         if let SendRule::KlDivergence { .. } = rule {
             if options.feedback != FeedbackMode::None
                 || system.sensors.iter().any(|s| s.meas_dim() != 1)
@@ -138,11 +155,21 @@ impl Scheme for CensoredPfScheme {
                 )) as Box<dyn SensorNode>
             })
             .collect();
-        let center = CensoredPfCenter::new(self.system.clone(), self.options, seed)?;
-        Ok(SchemeInstance {
-            sensors,
-            center: Box::new(center),
-        })
+        let center: Box<dyn crate::scheme::FusionCenter> =
+            match (self.options.fusion, self.options.eta) {
+                (Fusion::Exact, Some(eta)) => Box::new(exact::ExactCensoredCenter::new(
+                    self.system.clone(),
+                    self.options,
+                    eta,
+                    seed,
+                )?),
+                _ => Box::new(CensoredPfCenter::new(
+                    self.system.clone(),
+                    self.options,
+                    seed,
+                )?),
+            };
+        Ok(SchemeInstance { sensors, center })
     }
 }
 
