@@ -224,7 +224,7 @@ impl FusionCenter for ExactCensoredCenter {
         self.cloud
             .propagate(&self.transition, &mut self.rng)
             .map_err(pf_err)?;
-        for i in 0..n_sensors {
+        for (i, msg) in inbox.iter().enumerate() {
             let mut p_pred = f * &self.local_cov[i] * f.transpose() + q;
             symmetrize(&mut p_pred);
             let sensor = self.sensors[i].clone();
@@ -233,7 +233,7 @@ impl FusionCenter for ExactCensoredCenter {
             let m = sensor.h().nrows();
             let r = crate::model::MeasurementModel::noise_cov(&sensor).clone();
             self.project(i);
-            match &inbox[i] {
+            match msg {
                 Received::Measurement(z) => {
                     if z.len() != m || z.iter().any(|v| !v.is_finite()) {
                         return Err(SchemeError::Protocol {
