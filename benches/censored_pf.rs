@@ -1,13 +1,16 @@
 //! Seed 000's particle-filter fusion center, exactly the work of the benchmarks:
 //! (b) the scalar censored filter, 1,000 particles, 2 sensors, 1,000 trials x 20 steps;
 //! (c) the nonlinear one, 10,000 particles, 9 RSS sensors, 200 trials x 20 steps;
-//! both CFwMD with feedback (the full likelihood of every silent sensor), one thread unless
+//! both CFwMD with feedback (the full likelihood of every silent sensor); and (d) the cost of
+//! CFwMD-exact's augmented particles against CFoMD on the same non-feedback run. One thread unless
 //! HUSHFUSE_BENCH_THREADS says otherwise. `cargo bench --bench censored_pf`.
 use hushfuse::sim::{build, builtin, runner};
 use std::time::Instant;
 
 fn scenario(name: &str, trials: usize, keep: &str) -> build::Experiment {
-    let text = builtin::get(name).unwrap();
+    let text = builtin::get(name)
+        .unwrap()
+        .replace("sweep.l = [1.0, 2.0]", "l = 2.0");
     let head = text.split("[[schemes]]").next().unwrap();
     let scheme = text
         .split("[[schemes]]")
@@ -33,6 +36,14 @@ fn main() {
         (
             "(c) nonlinear: 10^4 particles, 9 RSS sensors, 200 trials x 20 steps",
             scenario("zheng-fig8", if quick { 1 } else { 200 }, "CFwMD"),
+        ),
+        (
+            "(d) CFoMD, no feedback, N = 4, l = 2, 1000 particles, 1000 trials x 20 steps",
+            scenario("zheng-nofb-n4", if quick { 2 } else { 1000 }, "CFoMD"),
+        ),
+        (
+            "(d) CFwMD-exact, same work with copies of the 4 sensors' filters",
+            scenario("zheng-nofb-n4", if quick { 2 } else { 1000 }, "CFwMD-exact"),
         ),
     ];
     for (name, exp) in &cases {

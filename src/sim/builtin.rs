@@ -58,6 +58,11 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/zheng-fig10-table3.toml"),
     ),
     (
+        "zheng-nofb-n4",
+        "Beyond seed 000: non-feedback N = 4, l in {1, 2}, with CFwMD-exact",
+        include_str!("../../scenarios/zheng-nofb-n4.toml"),
+    ),
+    (
         "zhang-fig4",
         "Seed 003 Fig. 4: quantized-innovation fusion at 1 payload bit, 50 range sensors, 1000 runs",
         include_str!("../../scenarios/zhang-fig4.toml"),

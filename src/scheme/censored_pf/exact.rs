@@ -246,8 +246,16 @@ impl FusionCenter for ExactCensoredCenter {
                     let s_inv = crate::linalg::spd_inverse(&s)
                         .map_err(|source| SchemeError::Matrix { what: "S", source })?;
                     // The send event for each particle's copy, then p(z | x).
+                    // Only particles still alive count: sensors are conditioned one after the
+                    // other, so a send event could otherwise kill the survivors of another.
                     let mut consistent = 0usize;
                     let mut nis = vec![0.0; n];
+                    let alive: Vec<bool> = self
+                        .cloud
+                        .log_weights()
+                        .iter()
+                        .map(|l| l.is_finite())
+                        .collect();
                     for (p, v) in nis.iter_mut().enumerate() {
                         let mut acc = 0.0;
                         for a in 0..m {
@@ -258,7 +266,7 @@ impl FusionCenter for ExactCensoredCenter {
                             }
                         }
                         *v = acc;
-                        consistent += usize::from(acc >= self.eta);
+                        consistent += usize::from(acc >= self.eta && alive[p]);
                     }
                     let use_event = consistent > 0;
                     if !use_event {
