@@ -43,6 +43,17 @@ pub fn truncated_standard_normal<R: Rng + ?Sized>(a: f64, b: f64, rng: &mut R) -
     if b <= 0.0 {
         return -truncated_standard_normal(-b, -a, rng);
     }
+    // A band that straddles 0 and is at least one standard deviation wide holds at least
+    // 38% of the mass: plain rejection from N(0, 1) is exact and needs < 2.6 draws on
+    // average, far cheaper than inverting the CDF.
+    if a < 0.0 && b - a >= 1.0 {
+        loop {
+            let t: f64 = StandardNormal.sample(rng);
+            if t > a && t < b {
+                return t;
+            }
+        }
+    }
     let u: f64 = rng.random();
     if a >= 0.0 {
         let (qa, qb) = (normal::q(a), normal::q(b));
