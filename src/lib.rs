@@ -4,6 +4,10 @@
 //! and what the silence says. Where each paper lives:
 //! - seed 004 (Dormann, Noack, Hanebeck, distributed KF with omitted estimates):
 //!   [`scheme::distributed_kf`];
+//! - seed 000 (Zheng, Niu, Varshney, censoring and a particle filter that listens to
+//!   silence): [`scheme::censored_pf`];
+//! - seed 003 (Zhang, Li, Liu, quantized innovations and 802.15.4 bits):
+//!   [`scheme::quantized_innovation`], [`link::quantizer`], [`link::codec802154`];
 //! - the baselines every scheme is measured against: [`scheme::centralized`].
 //!
 //! The simulator ([`sim`]) owns the only time loop; filters, sensor nodes and fusion centers do
