@@ -354,7 +354,10 @@ pub fn compare_published(exp: &Experiment, summary: &Summary) -> Vec<Comparison>
                         "mse" => (Some(ss.mse), Some(ss.mse_se)),
                         "trace" => (Some(ss.trace), Some(ss.trace_se)),
                         "rate" => (Some(ss.rate), Some(ss.rate_se)),
-                        "transmissions_per_step" => (Some(s.transmissions_per_step), None),
+                        "transmissions_per_step" => (
+                            Some(s.transmissions_per_step),
+                            Some(ss.rate_se * summary.sensors as f64),
+                        ),
                         m => match m.strip_prefix("rmse:") {
                             Some(g) => (s.mean_rmse.get(g).copied(), None),
                             None => (None, None),
