@@ -20,7 +20,11 @@ impl Layout {
     pub const DOWNLINK_BITS: usize = 6;
     /// Steps whose fused covariance was not positive definite (a collapsed particle cloud).
     pub const DEGENERATE: usize = 7;
-    const FIXED: usize = 8;
+    /// Steps whose NEES was below the 99% quantile of chi-square with n degrees of freedom
+    /// (a robust consistency check: 0.99 of the steps for a consistent filter, whatever a
+    /// few collapsed particle clouds do to the mean NEES).
+    pub const NEES_COVERED: usize = 8;
+    const FIXED: usize = 9;
 
     /// Entries per step.
     pub fn width(&self) -> usize {
@@ -64,6 +68,8 @@ impl TrialStat {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sums {
     pub layout_groups: usize,
+    /// State dimension (for the NEES bound).
+    pub state_dim: usize,
     pub steps: usize,
     /// steps x width, row-major.
     pub per_step: Vec<f64>,
@@ -83,16 +89,19 @@ pub struct TrialObserver<'a> {
     sums: &'a mut Sums,
     groups: &'a [(String, Vec<usize>)],
     steady_from: usize,
+    /// chi^2_n 99% quantile.
+    nees_bound: f64,
     acc: [f64; 4],
     group_acc: Vec<f64>,
     count: usize,
 }
 
 impl Sums {
-    pub fn new(groups: usize, steps: usize) -> Self {
+    pub fn new(groups: usize, steps: usize, state_dim: usize) -> Self {
         let layout = Layout { groups };
         Self {
             layout_groups: groups,
+            state_dim,
             steps,
             per_step: vec![0.0; steps * layout.width()],
             trials: 0,
@@ -116,10 +125,13 @@ impl Sums {
         groups: &'a [(String, Vec<usize>)],
         steady_from: usize,
     ) -> TrialObserver<'a> {
+        let nees_bound = crate::stats::chi2::upper_quantile(self.state_dim as f64, 0.01)
+            .unwrap_or(f64::INFINITY);
         TrialObserver {
             sums: self,
             groups,
             steady_from,
+            nees_bound,
             acc: [0.0; 4],
             group_acc: vec![0.0; groups.len()],
             count: 0,
@@ -191,6 +203,7 @@ impl TrialObserver<'_> {
         row[Layout::FRAME_BITS] += traffic.frame_bits as f64;
         row[Layout::DOWNLINK_BITS] += traffic.downlink_bits as f64;
         row[Layout::DEGENERATE] += f64::from(u8::from(degenerate));
+        row[Layout::NEES_COVERED] += f64::from(u8::from(nees <= self.nees_bound));
         if steady {
             self.acc[0] += total;
             self.acc[1] += trace;
@@ -224,7 +237,7 @@ mod tests {
     #[test]
     fn records_hand_computed_errors_and_merges() {
         let groups = vec![("a".to_string(), vec![0]), ("b".to_string(), vec![1])];
-        let mut s = Sums::new(2, 2);
+        let mut s = Sums::new(2, 2, 2);
         let truth = Vector::from_vec(vec![1.0, 2.0]);
         let est = Gaussian::new(
             Vector::from_vec(vec![2.0, 4.0]),

@@ -54,6 +54,10 @@ pub struct SchemeSummary {
     /// Fraction of (trial, step) pairs whose fused covariance was singular (collapsed
     /// particle clouds); their NEES used a 1e-9 relative jitter.
     pub degenerate_covariance_fraction: f64,
+    /// Fraction of (trial, step) pairs whose NEES was below the chi-square 99% quantile: 0.99
+    /// for a consistent filter. Robust where the mean NEES is ruined by a few collapsed
+    /// particle clouds.
+    pub nees_coverage_99: f64,
     pub steady_state: SteadyState,
     /// Per trial: steady-state MSE, total then per group (for paired comparisons; not
     /// written to summary.json).
@@ -104,6 +108,7 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
             let frame_bits: f64 = col(Layout::FRAME_BITS).iter().sum();
             let downlink_bits: f64 = col(Layout::DOWNLINK_BITS).iter().sum();
             let degenerate: f64 = col(Layout::DEGENERATE).iter().sum();
+            let covered: f64 = col(Layout::NEES_COVERED).iter().sum();
             let (mse_ss, mse_se) = s.steady_mse.mean_se(exp.trials);
             let (trace_ss, trace_se) = s.steady_trace.mean_se(exp.trials);
             let (nees_ss, _) = s.steady_nees.mean_se(exp.trials);
@@ -125,6 +130,7 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
                 frame_bits_per_step: frame_bits / steps as f64,
                 downlink_bits_per_step: downlink_bits / steps as f64,
                 degenerate_covariance_fraction: degenerate / steps as f64,
+                nees_coverage_99: covered / steps as f64,
                 per_trial: s.per_trial.clone(),
                 steady_state: SteadyState {
                     from_step: exp.steady_from,
@@ -199,6 +205,7 @@ pub fn table(summary: &Summary) -> String {
             "±se",
             "trace(ss)",
             "ANEES",
+            "NEES<99%",
             "rate",
             "tx/step",
             "bits/step",
@@ -215,7 +222,12 @@ pub fn table(summary: &Summary) -> String {
         r.push(format!("{:.4}", s.steady_state.mse));
         r.push(format!("{:.4}", s.steady_state.mse_se));
         r.push(format!("{:.4}", s.steady_state.trace));
-        r.push(format!("{:.3}", s.anees));
+        r.push(if s.anees.abs() < 1e6 {
+            format!("{:.3}", s.anees)
+        } else {
+            format!("{:.1e}", s.anees)
+        });
+        r.push(format!("{:.3}", s.nees_coverage_99));
         r.push(format!("{:.3}", s.rate));
         r.push(format!("{:.2}", s.transmissions_per_step));
         r.push(format!("{:.0}", s.bits_per_step));

@@ -171,7 +171,7 @@ pub fn run(
     let empty = || -> Vec<Sums> {
         exp.variants
             .iter()
-            .map(|_| Sums::new(exp.groups.len(), exp.steps))
+            .map(|_| Sums::new(exp.groups.len(), exp.steps, exp.system.state_dim()))
             .collect()
     };
     let blocks: Result<Vec<Vec<Sums>>, RunError> = pool.install(|| {
