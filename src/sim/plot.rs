@@ -188,11 +188,19 @@ fn per_step(
     // Every variant on one figure when that stays readable; otherwise the unswept schemes
     // together and each swept scheme on a figure of its own (one line per sweep point).
     let few = summary.schemes.len() <= 12;
+    // Label plus the swept parameters only (the fixed ones are the same for every line).
     let name = |s: &super::results::SchemeSummary| {
-        if s.params.is_empty() {
+        let swept = &exp.curves[s.curve].swept;
+        let shown: super::scenario::Params = s
+            .params
+            .iter()
+            .filter(|(k, _)| swept.contains(k))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
+        if shown.is_empty() {
             s.name.clone()
         } else {
-            format!("{} [{}]", s.name, super::results::params_text(&s.params))
+            format!("{} [{}]", s.name, super::results::params_text(&shown))
         }
     };
     let single: Vec<Line> = summary
