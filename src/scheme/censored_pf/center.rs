@@ -37,6 +37,8 @@ pub struct CensoredPfCenter {
     hx: Vec<f64>,
     /// Log of the Prop. 3 / 6 factor of the last step (the same for every particle).
     last_prop3_log_factor: f64,
+    /// R^{-1} of each sensor, computed once.
+    r_inv: Vec<Matrix>,
 }
 
 impl CensoredPfCenter {
@@ -53,7 +55,18 @@ impl CensoredPfCenter {
             .max()
             .unwrap_or(1);
         let prediction = kf::predict(&system.transition, &system.prior);
+        let r_inv = system
+            .sensors
+            .iter()
+            .map(|s| {
+                crate::linalg::spd_inverse(s.noise_cov()).map_err(|source| SchemeError::Matrix {
+                    what: "measurement noise R",
+                    source,
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
+            r_inv,
             local_cov: vec![system.prior.cov.clone(); n],
             cross_cov: vec![vec![system.prior.cov.clone(); n]; n],
             hx: vec![0.0; max_m * options.particles],
@@ -80,12 +93,7 @@ impl CensoredPfCenter {
         let m = sensor.meas_dim();
         let (states, lw) = self.cloud.states_and_log_weights_mut();
         sensor.predict_many(&|j| states.component(j), n, &mut self.hx[..m * n]);
-        let r_inv = crate::linalg::spd_inverse(sensor.noise_cov()).map_err(|source| {
-            SchemeError::Matrix {
-                what: "measurement noise R",
-                source,
-            }
-        })?;
+        let r_inv = &self.r_inv[i];
         if m == 1 {
             let (z0, w) = (z[0], 0.5 * r_inv[(0, 0)]);
             for (l, h) in lw.iter_mut().zip(&self.hx[..n]) {
