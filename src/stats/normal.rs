@@ -421,6 +421,24 @@ pub fn inv_cdf(p: f64) -> f64 {
     }
 }
 
+/// Seed 000's censored-sensor likelihood over many particles: for each `mu[p]` (the
+/// innovation mean h(x_p) - h(x_ref)), adds `log(Phi((c - mu) s) - Phi((-c - mu) s))` to
+/// `out[p]`, with `c = sqrt(eta s_k)` the half-width of the no-send band and `s = 1/sqrt(r)`
+/// (eq. (9), (14), (44), (45): `Q(xi_1) - Q(xi_2)`). This is the particle filter's hot loop.
+///
+/// # Panics
+/// If the slices differ in length.
+pub fn add_log_band_probability(mu: &[f64], half_width: f64, inv_sd: f64, out: &mut [f64]) {
+    assert_eq!(
+        mu.len(),
+        out.len(),
+        "add_log_band_probability: slice lengths differ"
+    );
+    for (o, m) in out.iter_mut().zip(mu) {
+        *o += log_q_band((-half_width - m) * inv_sd, (half_width - m) * inv_sd);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     // Reference values are quoted with all the digits the high-precision source gave.
@@ -702,23 +720,5 @@ mod tests {
             let p = i as f64 / 1000.0;
             assert!((cdf(inv_cdf(p)) - p).abs() < 2e-16 * p.max(1.0 - p) * 4.0);
         }
-    }
-}
-
-/// Seed 000's censored-sensor likelihood over many particles: for each `mu[p]` (the
-/// innovation mean h(x_p) - h(x_ref)), adds `log(Phi((c - mu) s) - Phi((-c - mu) s))` to
-/// `out[p]`, with `c = sqrt(eta s_k)` the half-width of the no-send band and `s = 1/sqrt(r)`
-/// (eq. (9), (14), (44), (45): `Q(xi_1) - Q(xi_2)`). This is the particle filter's hot loop.
-///
-/// # Panics
-/// If the slices differ in length.
-pub fn add_log_band_probability(mu: &[f64], half_width: f64, inv_sd: f64, out: &mut [f64]) {
-    assert_eq!(
-        mu.len(),
-        out.len(),
-        "add_log_band_probability: slice lengths differ"
-    );
-    for (o, m) in out.iter_mut().zip(mu) {
-        *o += log_q_band((-half_width - m) * inv_sd, (half_width - m) * inv_sd);
     }
 }
