@@ -1277,6 +1277,10 @@ const MAX_PIECES: usize = 64;
 
 /// A thread's lookup table and the scratch space of its construction, reused by every call.
 struct Workspace {
+    /// The (c, s) bit patterns the table was last built for: a particle filter calls the
+    /// kernel with the same band step after step once its covariances have converged, and
+    /// the table (a deterministic function of (c, s)) need not be rebuilt.
+    built_for: Option<(u64, u64)>,
     rows: [Row; TABLE_ROWS],
     piece_rows: [Row; MAX_PIECES],
     kind: [u8; MAX_PIECES],
@@ -1289,6 +1293,7 @@ struct Workspace {
 impl Workspace {
     fn new() -> Box<Workspace> {
         Box::new(Workspace {
+            built_for: None,
             rows: [ZERO_ROW; TABLE_ROWS],
             piece_rows: [ZERO_ROW; MAX_PIECES],
             kind: [0; MAX_PIECES],
@@ -1397,7 +1402,11 @@ pub fn add_log_band_probability(mu: &[f64], half_width: f64, inv_sd: f64, out: &
     let kernel = Kernel::get();
     WORKSPACE.with(|w| {
         let mut w = w.borrow_mut();
-        kernel.build(c, inv_sd, &mut w);
+        let key = (c.to_bits(), inv_sd.to_bits());
+        if w.built_for != Some(key) {
+            kernel.build(c, inv_sd, &mut w);
+            w.built_for = Some(key);
+        }
         add_from_table(&w.rows, mu, inv_sd, c, out);
     });
 }
