@@ -40,6 +40,19 @@ pub fn kl_divergence(p: &Gaussian, q: &Gaussian) -> Result<f64, SchemeError> {
     Ok(0.5 * (tr - (logdet(&cp) - logdet(&cq)) - d) + 0.5 * quad)
 }
 
+/// The whitened innovation of a vector sensor, q = S^{-1/2} nu, is
+/// N(S^{-1/2} E[nu | x], S^{-1/2} R S^{-1/2}) (seed 000 eq. (35)-(38)); returns S^{-1/2}
+/// (symmetric) and the covariance S^{-1/2} R S^{-1/2}, shared by every particle.
+pub fn whitened_band(s: &Matrix, r: &Matrix) -> (Matrix, Matrix) {
+    let eig = s.clone().symmetric_eigen();
+    let s_inv_sqrt = &eig.eigenvectors
+        * Matrix::from_diagonal(&eig.eigenvalues.map(|v| 1.0 / v.sqrt()))
+        * eig.eigenvectors.transpose();
+    let mut c = &s_inv_sqrt * r * &s_inv_sqrt;
+    crate::linalg::symmetrize(&mut c);
+    (s_inv_sqrt, c)
+}
+
 fn chol(m: &Matrix) -> Result<nalgebra::Cholesky<f64, nalgebra::Dyn>, SchemeError> {
     cholesky(m).map_err(|source| SchemeError::Matrix {
         what: "covariance",

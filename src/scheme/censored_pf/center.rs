@@ -1,6 +1,7 @@
 //! Fusion center of seed 000: a bootstrap particle filter whose weights use the received
 //! measurements and, with the full likelihood (CFwMD), the probability that each silent
 //! sensor's innovation stayed inside its no-send band.
+use super::censoring::whitened_band;
 use super::sensor::local_covariance_update;
 use super::{BandMethod, FeedbackMode, Fusion, PfOptions};
 use crate::filter::particle::{ParticleCloud, ParticleTransition};
@@ -146,12 +147,7 @@ impl CensoredPfCenter {
             return Ok(());
         }
         // Vector: q = S^{-1/2} nu ~ N(S^{-1/2} (h(x) - h(x_ref)), S^{-1/2} R S^{-1/2}) (35)-(38).
-        let eig = s.clone().symmetric_eigen();
-        let s_inv_sqrt = &eig.eigenvectors
-            * Matrix::from_diagonal(&eig.eigenvalues.map(|v| 1.0 / v.sqrt()))
-            * eig.eigenvectors.transpose();
-        let mut c = &s_inv_sqrt * &r * &s_inv_sqrt;
-        symmetrize(&mut c);
+        let (s_inv_sqrt, c) = whitened_band(s, &r);
         let mut mean = vec![0.0; m];
         match band_method {
             BandMethod::Exact => {
@@ -267,12 +263,7 @@ impl CensoredPfCenter {
                     let sd = sensor.noise_cov()[(0, 0)].sqrt();
                     logp += normal::log_q_band((-half - mu[0]) / sd, (half - mu[0]) / sd);
                 } else {
-                    let eig = s.clone().symmetric_eigen();
-                    let sis = &eig.eigenvectors
-                        * Matrix::from_diagonal(&eig.eigenvalues.map(|v| 1.0 / v.sqrt()))
-                        * eig.eigenvectors.transpose();
-                    let mut c = &sis * sensor.noise_cov() * &sis;
-                    symmetrize(&mut c);
+                    let (sis, c) = whitened_band(&s, sensor.noise_cov());
                     let p = crate::stats::quadform::prob_below(&(&sis * mu), &c, eta)
                         .map_err(|e| SchemeError::Unsupported(e.to_string()))?;
                     logp += p.max(f64::MIN_POSITIVE).ln();
@@ -384,13 +375,12 @@ impl FusionCenter for CensoredPfCenter {
         // Replicas of the local covariance updates (each sensor always uses its own z).
         let mut gains = Vec::with_capacity(n_sensors);
         for (i, sensor) in sys.sensors.iter().enumerate() {
-            let x_ref = match self.options.feedback {
-                FeedbackMode::None => self.prediction.mean.clone(), // linear: H does not depend on it
-                _ => self.prediction.mean.clone(),
-            };
-            let (p, gain, _) = local_covariance_update(sensor.as_ref(), &p_pred[i], &x_ref)?;
+            // With feedback the sensors linearize at the fed-back prediction (Remark 3);
+            // without, only linear sensors need replicas and H does not depend on the point.
+            let x_ref = &self.prediction.mean;
+            let (p, gain, _) = local_covariance_update(sensor.as_ref(), &p_pred[i], x_ref)?;
             self.local_cov[i] = p;
-            gains.push((gain, sensor.jacobian(&x_ref)));
+            gains.push((gain, sensor.jacobian(x_ref)));
         }
         if full_nofb {
             // Eq. (23): P^{i,j}_{k|k} = (I - w_i h_i^T) (F P^{i,j} F^T + Q) (I - w_j h_j^T)^T.

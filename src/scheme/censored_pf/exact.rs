@@ -19,7 +19,7 @@
 use super::sensor::local_covariance_update;
 use super::PfOptions;
 use crate::filter::particle::{ParticleCloud, ParticleTransition};
-use crate::filter::{kf, Gaussian};
+use crate::filter::Gaussian;
 use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::model::{LinearSensor, LinearTransition};
@@ -274,15 +274,10 @@ impl FusionCenter for ExactCensoredCenter {
                     // The send event for each particle's copy, then p(z | x).
                     // Only particles still alive count: sensors are conditioned one after the
                     // other, so a send event could otherwise kill the survivors of another.
+                    // NIS of each copy goes into the z scratch row (z is filled after use).
                     let mut consistent = 0usize;
-                    let mut nis = vec![0.0; n];
-                    let alive: Vec<bool> = self
-                        .cloud
-                        .log_weights()
-                        .iter()
-                        .map(|l| l.is_finite())
-                        .collect();
-                    for (p, v) in nis.iter_mut().enumerate() {
+                    let (nis, lw) = (&mut self.z[..n], self.cloud.log_weights());
+                    for (p, (v, l)) in nis.iter_mut().zip(lw).enumerate() {
                         let mut acc = 0.0;
                         for a in 0..m {
                             for b in 0..m {
@@ -292,7 +287,7 @@ impl FusionCenter for ExactCensoredCenter {
                             }
                         }
                         *v = acc;
-                        consistent += usize::from(acc >= self.eta && alive[p]);
+                        consistent += usize::from(acc >= self.eta && l.is_finite());
                     }
                     let use_event = consistent > 0;
                     if !use_event {
@@ -309,7 +304,7 @@ impl FusionCenter for ExactCensoredCenter {
                             }
                         }
                         *l -= 0.5 * quad;
-                        if use_event && nis[p] < self.eta {
+                        if use_event && self.z[p] < self.eta {
                             *l = f64::NEG_INFINITY;
                         }
                     }
@@ -322,12 +317,13 @@ impl FusionCenter for ExactCensoredCenter {
                         let half = (self.eta * s[(0, 0)]).sqrt();
                         let sd = r[(0, 0)].sqrt();
                         // mu = h (x - x_hat^i): band term, then the truncated draw of z.
-                        let mut mu = vec![0.0; n];
+                        // mu goes into the z scratch row; the draws below overwrite it.
+                        let mu = &mut self.z[..n];
                         for ((v, hx), pr) in mu.iter_mut().zip(&self.hx[..n]).zip(&self.pred[..n]) {
                             *v = hx - pr;
                         }
                         normal::add_log_band_probability(
-                            &mu,
+                            &self.z[..n],
                             half,
                             1.0 / sd,
                             self.cloud.log_weights_mut(),
@@ -343,12 +339,7 @@ impl FusionCenter for ExactCensoredCenter {
                         }
                     } else {
                         // q = S^{-1/2} (z - H x_hat) ~ N(S^{-1/2} H (x - x_hat), S^{-1/2} R S^{-1/2}).
-                        let eig = s.clone().symmetric_eigen();
-                        let s_inv_sqrt = &eig.eigenvectors
-                            * Matrix::from_diagonal(&eig.eigenvalues.map(|v| 1.0 / v.sqrt()))
-                            * eig.eigenvectors.transpose();
-                        let mut c = &s_inv_sqrt * &r * &s_inv_sqrt;
-                        symmetrize(&mut c);
+                        let (s_inv_sqrt, c) = super::censoring::whitened_band(&s, &r);
                         let qf = QuadFormCdf::new(&c)
                             .map_err(|e| SchemeError::Unsupported(e.to_string()))?;
                         let r_sqrt = crate::model::MeasurementModel::noise_sqrt(&sensor).clone();
@@ -373,7 +364,6 @@ impl FusionCenter for ExactCensoredCenter {
                             // particle whose band is nearly impossible (weight < 1e-6 of its
                             // prior share) keeps its last draw pulled radially into the band.
                             let tries = if prob > 1e-6 { 100_000 } else { 64 };
-                            let mut accepted = false;
                             for _ in 0..tries {
                                 for v in draw.iter_mut() {
                                     *v = StandardNormal.sample(&mut self.rng);
@@ -396,11 +386,9 @@ impl FusionCenter for ExactCensoredCenter {
                                     self.z[a * n + p] = self.pred[a * n + p] + scale * nu[a];
                                 }
                                 if nis < self.eta {
-                                    accepted = true;
                                     break;
                                 }
                             }
-                            let _ = accepted;
                         }
                     }
                 }
@@ -454,7 +442,6 @@ impl FusionCenter for ExactCensoredCenter {
                 &mut self.rng,
             )
             .map_err(pf_err)?;
-        let _ = kf::predict;
         Ok(())
     }
 

@@ -117,6 +117,11 @@ impl CensoringSensor {
         }
     }
 
+    /// The sensor's index in the system.
+    pub fn index(&self) -> usize {
+        self.index
+    }
+
     /// The decision of the last step.
     pub fn last_decision(&self) -> Option<&Decision> {
         self.last.as_ref()
@@ -177,7 +182,6 @@ impl SensorNode for CensoringSensor {
             nis: nis_value,
             s,
         });
-        let _ = self.index;
         Ok(if send {
             Transmission::Send(Message::Measurement(z.clone()))
         } else {
