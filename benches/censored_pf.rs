@@ -3,7 +3,7 @@
 //! (c) the nonlinear one, 10,000 particles, 9 RSS sensors, 200 trials x 20 steps;
 //! both CFwMD with feedback (the full likelihood of every silent sensor); and (d) the cost of
 //! CFwMD-exact's augmented particles against CFoMD on the same non-feedback run. One thread unless
-//! HUSHFUSE_BENCH_THREADS says otherwise. `cargo bench --bench censored_pf`.
+//! HUSHFUSE_BENCH_THREADS says otherwise. `cargo bench --bench censored_pf [-- b c d]`.
 use hushfuse::sim::{build, builtin, runner};
 use std::time::Instant;
 
@@ -46,7 +46,15 @@ fn main() {
             scenario("zheng-nofb-n4", if quick { 2 } else { 1000 }, "CFwMD-exact"),
         ),
     ];
+    // `cargo bench --bench censored_pf -- b` runs only the cases whose name starts with "(b)".
+    let only: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with('-'))
+        .collect();
     for (name, exp) in &cases {
+        if !only.is_empty() && !only.iter().any(|o| name.starts_with(&format!("({o})"))) {
+            continue;
+        }
         let mut times = Vec::new();
         for _ in 0..if quick { 1 } else { 3 } {
             let t = Instant::now();
