@@ -22,8 +22,10 @@ use super::Gaussian;
 use crate::linalg::{LinalgError, Matrix, Vector};
 use crate::model::transition::psd_sqrt;
 use crate::model::LinearTransition;
+use multiversion::multiversion;
 use rand::Rng;
 use rand_distr::{Distribution, Exp1, StandardNormal};
+use std::hint::select_unpredictable;
 
 /// Why a particle-filter operation failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -542,18 +544,16 @@ impl ParticleCloud {
         // particle and entry instead of five for sum w (x_j - m_j)(x_k - m_k).
         let n = self.n;
         for j in 0..self.dim {
-            let m = out.mean[j];
-            let x = &self.states[j * n..(j + 1) * n];
-            for (a, xi) in self.spare[j * n..(j + 1) * n].iter_mut().zip(x) {
-                *a = xi - m;
-            }
+            shift_into(
+                -out.mean[j],
+                &self.states[j * n..(j + 1) * n],
+                &mut self.spare[j * n..(j + 1) * n],
+            );
         }
         let t = &mut self.noise[..n];
         for j in 0..self.dim {
             let aj = &self.spare[j * n..(j + 1) * n];
-            for ((ti, wi), ai) in t.iter_mut().zip(&self.weights).zip(aj) {
-                *ti = wi * ai;
-            }
+            mul_into(&self.weights, aj, t);
             for k in j..self.dim {
                 let c = dot_lanes(t, &self.spare[k * n..(k + 1) * n]);
                 out.cov[(j, k)] = c;
@@ -623,11 +623,11 @@ impl ParticleCloud {
             )?,
         }
         for j in 0..self.dim {
-            let src = &self.states[j * n..(j + 1) * n];
-            let dst = &mut self.spare[j * n..(j + 1) * n];
-            for (d, &a) in dst.iter_mut().zip(&anc[..n]) {
-                *d = src[a];
-            }
+            gather(
+                &self.states[j * n..(j + 1) * n],
+                &anc[..n],
+                &mut self.spare[j * n..(j + 1) * n],
+            );
         }
         std::mem::swap(&mut self.states, &mut self.spare);
         self.set_equal_weights();
@@ -643,7 +643,7 @@ impl ParticleCloud {
 }
 
 /// `y += a x`.
-#[inline]
+#[multiversion(targets("x86_64+avx2"))]
 fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
     for (yi, xi) in y.iter_mut().zip(x) {
         *yi += a * xi;
@@ -651,10 +651,34 @@ fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
 }
 
 /// `y = a x`.
-#[inline]
+#[multiversion(targets("x86_64+avx2"))]
 fn scale_into(a: f64, x: &[f64], y: &mut [f64]) {
     for (yi, xi) in y.iter_mut().zip(x) {
         *yi = a * xi;
+    }
+}
+
+/// `y = x + a`.
+#[multiversion(targets("x86_64+avx2"))]
+fn shift_into(a: f64, x: &[f64], y: &mut [f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi = xi + a;
+    }
+}
+
+/// `z = x * y` elementwise.
+#[multiversion(targets("x86_64+avx2"))]
+fn mul_into(x: &[f64], y: &[f64], z: &mut [f64]) {
+    for ((zi, xi), yi) in z.iter_mut().zip(x).zip(y) {
+        *zi = xi * yi;
+    }
+}
+
+/// `dst[k] = src[index[k]]`.
+#[multiversion(targets("x86_64+avx2"))]
+fn gather(src: &[f64], index: &[usize], dst: &mut [f64]) {
+    for (d, &a) in dst.iter_mut().zip(index) {
+        *d = src[a];
     }
 }
 
@@ -681,6 +705,7 @@ fn reduce_lanes(acc: [f64; LANES]) -> f64 {
 }
 
 /// Largest element; NaNs are ignored (they are caught later by the sum they poison).
+#[multiversion(targets("x86_64+avx2"))]
 fn max_lanes(x: &[f64]) -> f64 {
     let mut acc = [f64::NEG_INFINITY; LANES];
     let mut chunks = x.chunks_exact(LANES);
@@ -697,6 +722,7 @@ fn max_lanes(x: &[f64]) -> f64 {
 }
 
 /// `sum_i x_i y_i`.
+#[multiversion(targets("x86_64+avx2"))]
 fn dot_lanes(x: &[f64], y: &[f64]) -> f64 {
     let mut acc = [0.0; LANES];
     let mut xc = x.chunks_exact(LANES);
@@ -716,6 +742,7 @@ fn dot_lanes(x: &[f64], y: &[f64]) -> f64 {
 }
 
 /// `out_i = exp(l_i - m)`, returning `sum_i out_i`.
+#[multiversion(targets("x86_64+avx2"))]
 fn exp_shifted_into(l: &[f64], m: f64, out: &mut [f64]) -> f64 {
     let mut acc = [0.0; LANES];
     let mut oc = out.chunks_exact_mut(LANES);
@@ -814,33 +841,34 @@ fn systematic(w: &[f64], v: f64, anc: &mut [usize]) {
         w.iter().map(|&wi| {
             c += wi;
             // n C_i + v >= 0, so the truncating conversion is the floor; `min` absorbs a total a
-            // few ulp above 1.
-            (wi > 0.0, ((c * nf + v) as usize).min(n))
+            // few ulp above 1. (Through i64: one conversion instruction, where usize takes two.)
+            (wi > 0.0, ((c * nf + v) as i64).min(n as i64) as usize)
         }),
     );
 }
 
 /// Writes sorted ancestor indices from the end of each particle's run of slots, given in
-/// particle order as `(has_copies, end)` with non-decreasing ends. Instead of filling runs (a
-/// loop whose trip count is random, hence mispredicted branches) each particle with copies
-/// adds `i - previous_owner` at the start of its run and a prefix sum turns these steps into
-/// the indices. A particle flagged without copies adds nothing, so a zero-weight particle
-/// never appears, even when rounding leaves the last runs short (those slots keep the last
-/// owner); one with positive weight but an empty run adds a step that the next owner's step
-/// at the same slot completes.
-///
-/// The alternatives measured slower: storing the owner and taking a running maximum, or
-/// storing `owner - previous_owner` with `previous_owner` switched when a run ends — the
-/// compiler turns those selects into branches that mispredict on every other particle.
+/// particle order as `(has_weight, end)` with non-decreasing ends. Instead of filling runs (a
+/// loop whose trip count is random, hence mispredicted branches) each particle whose run is
+/// not empty stores `i - previous_owner` at the start of its run and a prefix sum turns these
+/// steps into the indices. Non-empty runs start at distinct slots, so every store is a plain
+/// store to its own address (no read-modify-write chain through memory); a particle with an
+/// empty run stores into the scratch slot `n` instead (a select, not a branch). A zero-weight
+/// particle never owns a slot: its run is empty by construction, and `has_weight` guards
+/// against rounding. If rounding leaves the last runs short, the remaining slots keep the
+/// last owner. `anc` has `n + 1` slots.
 fn mark_run_starts(anc: &mut [usize], runs: impl Iterator<Item = (bool, usize)>) {
     let n = anc.len() - 1;
     anc.fill(0);
     let mut start = 0usize;
     let mut owner = 0usize;
-    for (i, (has_copies, end)) in runs.enumerate() {
-        let step = if has_copies { i - owner } else { 0 };
-        anc[start] += step;
-        owner = if has_copies { i } else { owner };
+    for (i, (has_weight, end)) in runs.enumerate() {
+        // Whether a particle owns slots is a coin flip for the branch predictor: as plain
+        // `if`s (or bit masks, which LLVM turns back into branches) these selects mispredict
+        // on every other particle.
+        let owns = has_weight & (end > start);
+        anc[select_unpredictable(owns, start, n)] = i - owner;
+        owner = select_unpredictable(owns, i, owner);
         start = end;
     }
     let mut s = 0usize;

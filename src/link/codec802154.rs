@@ -748,7 +748,7 @@ impl FixedLengthCodec {
         silent_centre: bool,
         link: LinkAddressing,
     ) -> Result<Self, CodecError> {
-        if silent_centre && levels % 2 == 0 {
+        if silent_centre && levels.is_multiple_of(2) {
             return Err(CodecError::UnsupportedLevels(levels));
         }
         let codes = levels - usize::from(silent_centre && levels > 0);

@@ -763,6 +763,7 @@ mod tests {
 // Accuracy (tests `kernel_tests`): within 2.3e-13 of `log_q_band` on a dense grid of exactly
 // representable inputs, narrow bands included, wherever `P >= 1e-300`.
 
+use multiversion::multiversion;
 use std::cell::RefCell;
 use std::sync::OnceLock;
 
@@ -1317,7 +1318,10 @@ fn add_from_table(rows: &[Row; TABLE_ROWS], mu: &[f64], s: f64, c: f64, out: &mu
 }
 
 /// [`add_from_table`], with the row index clamped below at 0 when `LOWER` (else `c <= 9` makes
-/// it at least 0 for every `x >= 0`).
+/// it at least 0 for every `x >= 0`). Compiled also for AVX2 and picked at run time: the
+/// same IEEE operations on wider registers (no FMA contraction), so the results are
+/// bit-identical on every x86-64 machine.
+#[multiversion(targets("x86_64+avx2"))]
 fn add_from_table_clamped<const LOWER: bool>(
     rows: &[Row; TABLE_ROWS],
     mu: &[f64],
