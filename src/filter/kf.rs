@@ -7,10 +7,17 @@ use crate::model::{LinearTransition, MeasurementModel};
 
 /// Prediction step: mean F x, covariance F P F^T + Q (seed 004, eq. (2) with N = 1).
 pub fn predict(model: &LinearTransition, est: &Gaussian) -> Gaussian {
-    let mean = model.f() * &est.mean;
-    let mut cov = model.f() * &est.cov * model.f().transpose() + model.q();
+    Gaussian {
+        mean: model.f() * &est.mean,
+        cov: predict_cov(model, &est.cov),
+    }
+}
+
+/// The covariance half of [`predict`]: `F P F^T + Q`, symmetrized.
+pub fn predict_cov(model: &LinearTransition, cov: &Matrix) -> Matrix {
+    let mut cov = model.f() * cov * model.f().transpose() + model.q();
     symmetrize(&mut cov);
-    Gaussian { mean, cov }
+    cov
 }
 
 /// Innovation nu = z - h(x), its covariance S = H P H^T + R and the Jacobian H used.

@@ -600,7 +600,9 @@ impl ParticleCloud {
         // The schemes overwrite the normalized weights with cumulative sums: they are not
         // needed after this step.
         match scheme {
-            Resampling::Systematic => systematic(&self.weights, rng.random(), anc),
+            Resampling::Systematic => {
+                systematic(&self.weights, rng.random(), &mut self.counts, anc)
+            }
             Resampling::Stratified => {
                 let (total, last) = cumulative_in_place(&mut self.weights)?;
                 let step = total / n as f64;
@@ -824,28 +826,65 @@ fn cumulative_in_place(w: &mut [f64]) -> Result<(f64, usize), ParticleError> {
     }
 }
 
-/// Systematic resampling in one pass over the normalized weights, with no data-dependent
-/// branch. With `v` uniform on [0, 1), the positions are `(k + 1 - v) / n`, `k = 0..n`, and
-/// particle `i` owns those in `(C_{i-1}, C_i]` (C the running sum of the weights): the first
+/// Systematic resampling over the normalized weights, with no data-dependent branch. With
+/// `v` uniform on [0, 1), the positions are `(k + 1 - v) / n`, `k = 0..n`, and particle `i`
+/// owns those in `(C_{i-1}, C_i]` (C the running sum of the weights): the first
 /// `N_i = floor(n C_i + v)` positions lie at or below `C_i`, so particle `i` gets slots
-/// `N_{i-1}..N_i` — `floor(n w_i)` or `ceil(n w_i)` of them. The runs are filled by
-/// [`mark_run_starts`]'s prefix sum. If rounding leaves `n C_n + v` a hair below `n`, the last
-/// slots go to the last particle with positive weight, never to a zero-weight one. `anc` has
-/// `n + 1` slots so a run may start at `n`.
-fn systematic(w: &[f64], v: f64, anc: &mut [usize]) {
+/// `N_{i-1}..N_i` — `floor(n w_i)` or `ceil(n w_i)` of them. The ends `N_i` go to `ends`, and
+/// [`mark_run_starts`] turns them into ancestors. If rounding leaves `n C_n + v` a hair below
+/// `n`, the last slots go to the last particle that owns any, never to a zero-weight one.
+/// `anc` has `n + 1` slots so a run may start at `n`.
+///
+/// The running sum is the slow part: one chain of dependent additions, 4 cycles each. It is
+/// computed as [`SEGMENTS`] chains in parallel, one per contiguous segment, each segment's
+/// partial sums added to its offset (the rounded sum of the totals before it): the last
+/// cumulative sum of a segment is then exactly the next segment's offset, so the `C_i` never
+/// decrease and no run overlaps another.
+fn systematic(w: &[f64], v: f64, ends: &mut [usize], anc: &mut [usize]) {
     let n = w.len();
     let nf = n as f64;
-    let mut c = 0.0;
+    // n C_i + v >= 0, so the truncating conversion is the floor; `min` absorbs a total a few
+    // ulp above 1. (Through i64: one conversion instruction, where usize takes two.)
+    let end_of = |c: f64| ((c * nf + v) as i64).min(n as i64) as usize;
+    let len = n / SEGMENTS;
+    let tail = len * SEGMENTS..n;
+    // Pass 1: each segment's partial sums (the last segment also takes the tail), in lanes.
+    let mut partial = [0.0; SEGMENTS];
+    for k in 0..len {
+        for (s, p) in partial.iter_mut().enumerate() {
+            *p += w[s * len + k];
+        }
+    }
+    for &wi in &w[tail.clone()] {
+        partial[SEGMENTS - 1] += wi;
+    }
+    let mut offset = [0.0; SEGMENTS];
+    for s in 1..SEGMENTS {
+        offset[s] = offset[s - 1] + partial[s - 1];
+    }
+    // Pass 2: the ends, the same partial sums recomputed in the same order.
+    let mut p = [0.0; SEGMENTS];
+    for k in 0..len {
+        for s in 0..SEGMENTS {
+            let i = s * len + k;
+            p[s] += w[i];
+            ends[i] = end_of(offset[s] + p[s]);
+        }
+    }
+    // The last segment's partial sum continues through the tail.
+    let last = SEGMENTS - 1;
+    for i in tail {
+        p[last] += w[i];
+        ends[i] = end_of(offset[last] + p[last]);
+    }
     mark_run_starts(
         anc,
-        w.iter().map(|&wi| {
-            c += wi;
-            // n C_i + v >= 0, so the truncating conversion is the floor; `min` absorbs a total a
-            // few ulp above 1. (Through i64: one conversion instruction, where usize takes two.)
-            (wi > 0.0, ((c * nf + v) as i64).min(n as i64) as usize)
-        }),
+        w.iter().zip(ends.iter()).map(|(&wi, &e)| (wi > 0.0, e)),
     );
 }
+
+/// Independent running sums in [`systematic`].
+const SEGMENTS: usize = 4;
 
 /// Writes sorted ancestor indices from the end of each particle's run of slots, given in
 /// particle order as `(has_weight, end)` with non-decreasing ends. Instead of filling runs (a

@@ -727,6 +727,7 @@ fn censored_pf(
     ctx: &Ctx,
     at: &str,
     system: &Arc<System>,
+    steps: usize,
     a: CensoredPfArgs,
 ) -> Result<Box<dyn Scheme>, ScenarioError> {
     use crate::filter::particle::{ResamplePolicy, Resampling};
@@ -860,6 +861,7 @@ fn censored_pf(
         prop3_samples: a.prop3_samples.unwrap_or(200),
     };
     CensoredPfScheme::new(system.clone(), rule, options)
+        .and_then(|s| s.with_horizon(steps))
         .map(|s| Box::new(s) as Box<dyn Scheme>)
         .map_err(|e| ctx.err(at, e.to_string()))
 }
@@ -978,6 +980,7 @@ fn scheme(
             ctx,
             at,
             system,
+            steps,
             CensoredPfArgs {
                 policy: policy.as_deref(),
                 l: *l,

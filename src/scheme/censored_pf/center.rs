@@ -2,6 +2,7 @@
 //! measurements and, with the full likelihood (CFwMD), the probability that each silent
 //! sensor's innovation stayed inside its no-send band.
 use super::censoring::whitened_band;
+use super::local_plan::{LocalPlan, LocalStep};
 use super::sensor::local_covariance_update;
 use super::{BandMethod, FeedbackMode, Fusion, PfOptions};
 use crate::filter::particle::{ParticleCloud, ParticleTransition};
@@ -17,6 +18,18 @@ use std::sync::Arc;
 
 fn pf_err(e: crate::filter::particle::ParticleError) -> SchemeError {
     SchemeError::Unsupported(format!("particle filter: {e}"))
+}
+
+/// Sensor `i`'s planned local matrices at step `k`, if it has any.
+fn planned(
+    plan: Option<&LocalPlan>,
+    i: usize,
+    k: usize,
+) -> Result<Option<&LocalStep>, SchemeError> {
+    match plan {
+        Some(plan) => plan.at(i, k),
+        None => Ok(None),
+    }
 }
 
 /// The particle-filter fusion center.
@@ -40,6 +53,11 @@ pub struct CensoredPfCenter {
     last_prop3_log_factor: f64,
     /// R^{-1} of each sensor, computed once.
     r_inv: Vec<Matrix>,
+    /// The shared local-covariance sequence of the linear sensors, if the scheme has one.
+    plan: Option<Arc<LocalPlan>>,
+    /// Scratch: the replicas' predicted covariances and the silent sensors of a step.
+    p_pred: Vec<Matrix>,
+    silent: Vec<usize>,
 }
 
 impl CensoredPfCenter {
@@ -69,6 +87,7 @@ impl CensoredPfCenter {
         Ok(Self {
             r_inv,
             local_cov: vec![system.prior.cov.clone(); n],
+            p_pred: vec![system.prior.cov.clone(); n],
             cross_cov: vec![vec![system.prior.cov.clone(); n]; n],
             hx: vec![0.0; max_m * options.particles],
             est: system.prior.clone(),
@@ -79,7 +98,17 @@ impl CensoredPfCenter {
             options,
             system,
             last_prop3_log_factor: 0.0,
+            plan: None,
+
+            silent: Vec::with_capacity(n),
         })
+    }
+
+    /// Takes the replicas' local covariances from `plan` (the one computed for this system)
+    /// instead of computing them every step.
+    pub fn with_plan(mut self, plan: Arc<LocalPlan>) -> Self {
+        self.plan = Some(plan);
+        self
     }
 
     /// The log of the Prop. 3 / 6 factor at the last step.
@@ -276,8 +305,9 @@ impl CensoredPfCenter {
 }
 
 impl FusionCenter for CensoredPfCenter {
-    fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
+    fn step(&mut self, k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
         let sys = self.system.clone();
+        let plan = self.plan.clone();
         let f = sys.transition.f();
         let q = sys.transition.q();
         let n_sensors = sys.n_sensors();
@@ -287,16 +317,15 @@ impl FusionCenter for CensoredPfCenter {
                 inbox.len()
             )));
         }
-        // Replicas of the local covariance predictions.
-        let p_pred: Vec<Matrix> = self
-            .local_cov
-            .iter()
-            .map(|p| {
-                let mut m = f * p * f.transpose() + q;
-                symmetrize(&mut m);
-                m
-            })
-            .collect();
+        // Replicas of the local covariance predictions (from the shared plan where there is
+        // one: the same numbers).
+        for i in 0..n_sensors {
+            match planned(plan.as_deref(), i, k)? {
+                Some(step) => self.p_pred[i].copy_from(&step.p_pred),
+                None => self.p_pred[i] = kf::predict_cov(&sys.transition, &self.local_cov[i]),
+            }
+        }
+        let p_pred = std::mem::take(&mut self.p_pred);
         let full_nofb = self.options.fusion == Fusion::Full
             && self.options.feedback == FeedbackMode::None
             && self.options.eta.is_some();
@@ -312,7 +341,8 @@ impl FusionCenter for CensoredPfCenter {
         self.cloud
             .propagate(&self.transition, &mut self.rng)
             .map_err(pf_err)?;
-        let mut silent = Vec::new();
+        let mut silent = std::mem::take(&mut self.silent);
+        silent.clear();
         for (i, msg) in inbox.iter().enumerate() {
             match msg {
                 Received::Measurement(z) => {
@@ -348,22 +378,30 @@ impl FusionCenter for CensoredPfCenter {
                 mode => {
                     let x_ref = self.prediction.mean.clone();
                     for &i in &silent {
-                        let sensor = sys.sensors[i].clone();
-                        let p_ref = if mode == FeedbackMode::Prediction {
-                            &p_pred[i]
-                        } else {
-                            &self.prediction.cov
+                        let planned = planned(plan.as_deref(), i, k)?;
+                        let s = match planned {
+                            Some(step) if mode == FeedbackMode::Prediction => step.s.clone(),
+                            _ => {
+                                let sensor = &sys.sensors[i];
+                                let p_ref = if mode == FeedbackMode::Prediction {
+                                    &p_pred[i]
+                                } else {
+                                    &self.prediction.cov
+                                };
+                                let h = sensor.jacobian(&x_ref);
+                                let mut s = &h * p_ref * h.transpose() + sensor.noise_cov();
+                                symmetrize(&mut s);
+                                s
+                            }
                         };
-                        let h = sensor.jacobian(&x_ref);
-                        let mut s = &h * p_ref * h.transpose() + sensor.noise_cov();
-                        symmetrize(&mut s);
                         self.add_band(i, &x_ref, &s, eta)?;
                     }
                 }
             }
         }
+        self.silent = silent;
         self.cloud.normalize().map_err(pf_err)?;
-        self.est = self.cloud.estimate().map_err(pf_err)?;
+        self.cloud.estimate_into(&mut self.est).map_err(pf_err)?;
         self.cloud
             .resample_if(
                 self.options.resample_policy,
@@ -373,15 +411,27 @@ impl FusionCenter for CensoredPfCenter {
             .map_err(pf_err)?;
 
         // Replicas of the local covariance updates (each sensor always uses its own z).
-        let mut gains = Vec::with_capacity(n_sensors);
+        let mut gains = Vec::new();
         for (i, sensor) in sys.sensors.iter().enumerate() {
             // With feedback the sensors linearize at the fed-back prediction (Remark 3);
             // without, only linear sensors need replicas and H does not depend on the point.
             let x_ref = &self.prediction.mean;
-            let (p, gain, _) = local_covariance_update(sensor.as_ref(), &p_pred[i], x_ref)?;
-            self.local_cov[i] = p;
-            gains.push((gain, sensor.jacobian(x_ref)));
+            let gain = match planned(plan.as_deref(), i, k)? {
+                Some(step) => {
+                    self.local_cov[i].copy_from(&step.p_post);
+                    full_nofb.then(|| step.gain.clone())
+                }
+                None => {
+                    let (p, gain, _) = local_covariance_update(sensor.as_ref(), &p_pred[i], x_ref)?;
+                    self.local_cov[i] = p;
+                    full_nofb.then_some(gain)
+                }
+            };
+            if let Some(gain) = gain {
+                gains.push((gain, sensor.jacobian(x_ref)));
+            }
         }
+        self.p_pred = p_pred;
         if full_nofb {
             // Eq. (23): P^{i,j}_{k|k} = (I - w_i h_i^T) (F P^{i,j} F^T + Q) (I - w_j h_j^T)^T.
             let d = sys.state_dim();

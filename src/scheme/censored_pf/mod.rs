@@ -8,9 +8,11 @@
 pub mod censoring;
 pub mod center;
 pub mod exact;
+pub mod local_plan;
 pub mod sensor;
 
 pub use center::CensoredPfCenter;
+pub use local_plan::LocalPlan;
 pub use sensor::{CensoringSensor, SendRule};
 
 use crate::filter::particle::{ResamplePolicy, Resampling};
@@ -72,6 +74,8 @@ pub struct CensoredPfScheme {
     transition: Arc<crate::model::LinearTransition>,
     rule: SendRule,
     options: PfOptions,
+    /// The linear sensors' local covariances for the horizon, shared by every instance.
+    plan: Option<Arc<LocalPlan>>,
 }
 
 impl CensoredPfScheme {
@@ -129,7 +133,16 @@ impl CensoredPfScheme {
             system,
             rule,
             options,
+            plan: None,
         })
+    }
+
+    /// Precomputes the linear sensors' local covariances for `horizon` steps, shared by the
+    /// sensors and the fusion center of every instance (the same numbers; a speed-up only).
+    /// Instances then refuse to run past the horizon unless the covariances converged.
+    pub fn with_horizon(mut self, horizon: usize) -> Result<Self, SchemeError> {
+        self.plan = Some(Arc::new(LocalPlan::new(&self.system, horizon)?));
+        Ok(self)
     }
 }
 
@@ -145,14 +158,18 @@ impl Scheme for CensoredPfScheme {
             .iter()
             .enumerate()
             .map(|(i, s)| {
-                Box::new(CensoringSensor::new(
+                let sensor = CensoringSensor::new(
                     i,
                     s.clone(),
                     self.transition.clone(),
                     self.system.prior.clone(),
                     self.rule,
                     self.options.feedback,
-                )) as Box<dyn SensorNode>
+                );
+                Box::new(match &self.plan {
+                    Some(plan) => sensor.with_plan(plan.clone()),
+                    None => sensor,
+                }) as Box<dyn SensorNode>
             })
             .collect();
         let center: Box<dyn crate::scheme::FusionCenter> =
@@ -163,11 +180,13 @@ impl Scheme for CensoredPfScheme {
                     eta,
                     seed,
                 )?),
-                _ => Box::new(CensoredPfCenter::new(
-                    self.system.clone(),
-                    self.options,
-                    seed,
-                )?),
+                _ => {
+                    let center = CensoredPfCenter::new(self.system.clone(), self.options, seed)?;
+                    Box::new(match &self.plan {
+                        Some(plan) => center.with_plan(plan.clone()),
+                        None => center,
+                    })
+                }
             };
         Ok(SchemeInstance { sensors, center })
     }

@@ -2,6 +2,7 @@
 //! KL rule (24), random selection, or all-send). The local filter always processes the
 //! sensor's own measurement; only what is sent depends on the rule.
 use super::censoring::{kl_divergence, kl_threshold_for_nis, nis};
+use super::local_plan::LocalPlan;
 use super::FeedbackMode;
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
@@ -43,6 +44,8 @@ pub struct CensoringSensor {
     transition: Arc<LinearTransition>,
     rule: SendRule,
     feedback: FeedbackMode,
+    /// The shared local-covariance sequence (linear sensors), if the scheme computed one.
+    plan: Option<Arc<LocalPlan>>,
     /// Local filter after the last update.
     local: Gaussian,
     last: Option<Decision>,
@@ -51,11 +54,12 @@ pub struct CensoringSensor {
 /// Reference point and covariance of the innovation of step k: the local prediction
 /// (no feedback), the global prediction with the local covariance (CFwMD, Prop. 1/4/7) or the
 /// global prediction and covariance (CFwMD2, Prop. 2/5/8).
-pub fn innovation_reference(
+pub fn innovation_reference<'a>(
     mode: FeedbackMode,
-    local_prediction: &Gaussian,
-    feedback: Option<&Feedback>,
-) -> Result<(Vector, Matrix), SchemeError> {
+    local_mean: &'a Vector,
+    local_cov: &'a Matrix,
+    feedback: Option<&'a Feedback>,
+) -> Result<(&'a Vector, &'a Matrix), SchemeError> {
     let global = || match feedback {
         Some(Feedback::Prediction { mean, cov }) => Ok((mean, cov)),
         _ => Err(SchemeError::Unsupported(
@@ -63,14 +67,14 @@ pub fn innovation_reference(
         )),
     };
     Ok(match mode {
-        FeedbackMode::None => (local_prediction.mean.clone(), local_prediction.cov.clone()),
-        FeedbackMode::Prediction => (global()?.0.clone(), local_prediction.cov.clone()),
+        FeedbackMode::None => (local_mean, local_cov),
+        FeedbackMode::Prediction => (global()?.0, local_cov),
         FeedbackMode::PredictionAndCovariance => {
             let (m, c) = global()?;
-            let c = c.clone().ok_or_else(|| {
+            let c = c.as_ref().ok_or_else(|| {
                 SchemeError::Unsupported("CFwMD2 needs the fed-back covariance".into())
             })?;
-            (m.clone(), c)
+            (m, c)
         }
     })
 }
@@ -112,9 +116,17 @@ impl CensoringSensor {
             transition,
             rule,
             feedback,
+            plan: None,
             local: prior,
             last: None,
         }
+    }
+
+    /// Takes the local covariances from `plan` (the one computed for this sensor's system and
+    /// prior) instead of computing them every step.
+    pub fn with_plan(mut self, plan: Arc<LocalPlan>) -> Self {
+        self.plan = Some(plan);
+        self
     }
 
     /// The sensor's index in the system.
@@ -136,25 +148,52 @@ impl CensoringSensor {
 impl SensorNode for CensoringSensor {
     fn step(
         &mut self,
-        _k: usize,
+        k: usize,
         z: &Vector,
         feedback: Option<&Feedback>,
         rng: &mut dyn RngCore,
     ) -> Result<Transmission, SchemeError> {
         kf::check_measurement(self.sensor.as_ref(), z)?;
-        let pred = kf::predict(&self.transition, &self.local);
-        let (x_ref, p_ref) = innovation_reference(self.feedback, &pred, feedback)?;
-        let h = self.sensor.jacobian(&x_ref);
-        let nu = z - self.sensor.predict(&x_ref);
-        let mut s = &h * &p_ref * h.transpose() + self.sensor.noise_cov();
-        symmetrize(&mut s);
-        let nis_value = nis(&nu, &s)?;
+        // A linear sensor's covariances come from the shared plan (the same numbers, computed
+        // once per scheme); otherwise they are computed here.
+        let planned = match &self.plan {
+            Some(plan) => plan.at(self.index, k)?,
+            None => None,
+        };
+        let pred_mean = self.transition.f() * &self.local.mean;
+        let computed_pred_cov;
+        let pred_cov = match planned {
+            Some(step) => &step.p_pred,
+            None => {
+                computed_pred_cov = kf::predict_cov(&self.transition, &self.local.cov);
+                &computed_pred_cov
+            }
+        };
+        let (x_ref, p_ref) = innovation_reference(self.feedback, &pred_mean, pred_cov, feedback)?;
+        let nu = z - self.sensor.predict(x_ref);
+        let computed_s;
+        let s = match planned {
+            Some(step) if self.feedback != FeedbackMode::PredictionAndCovariance => &step.s,
+            _ => {
+                let h = self.sensor.jacobian(x_ref);
+                let mut s = &h * p_ref * h.transpose() + self.sensor.noise_cov();
+                symmetrize(&mut s);
+                computed_s = s;
+                &computed_s
+            }
+        };
+        let nis_value = nis(&nu, s)?;
         let u: f64 = rng.random();
         // Local filter: covariance linearized at the reference point, mean from it.
-        let (p_post, gain, s_local) =
-            local_covariance_update(self.sensor.as_ref(), &pred.cov, &x_ref)?;
-        let nu_local = z - self.sensor.predict(&x_ref);
-        let posterior = Gaussian::new(&x_ref + &gain * &nu_local, p_post);
+        let computed_update;
+        let (p_post, gain, s_local) = match planned {
+            Some(step) => (&step.p_post, &step.gain, &step.s),
+            None => {
+                computed_update = local_covariance_update(self.sensor.as_ref(), pred_cov, x_ref)?;
+                (&computed_update.0, &computed_update.1, &computed_update.2)
+            }
+        };
+        let post_mean = x_ref + gain * &nu;
         let send = match self.rule {
             SendRule::Nis { eta } => nis_value >= eta,
             SendRule::KlDivergence { eta } => {
@@ -163,7 +202,8 @@ impl SensorNode for CensoringSensor {
                         "the KL rule (24) is defined for scalar measurements and the sensor's own prediction".into(),
                     ));
                 }
-                let prior = Gaussian::new(x_ref.clone(), pred.cov.clone());
+                let prior = Gaussian::new(x_ref.clone(), pred_cov.clone());
+                let posterior = Gaussian::new(post_mean.clone(), p_post.clone());
                 let zeta = kl_threshold_for_nis(
                     &prior,
                     &posterior.cov,
@@ -176,11 +216,12 @@ impl SensorNode for CensoringSensor {
             SendRule::Random { p } => u < p,
             SendRule::All => true,
         };
-        self.local = posterior;
+        self.local.mean = post_mean;
+        self.local.cov.copy_from(p_post);
         self.last = Some(Decision {
             send,
             nis: nis_value,
-            s,
+            s: s.clone(),
         });
         Ok(if send {
             Transmission::Send(Message::Measurement(z.clone()))

@@ -249,3 +249,47 @@ fn bad_configurations_are_errors() {
     )
     .is_err());
 }
+
+/// The shared local-covariance plan is a speed-up only: with and without it, every feedback
+/// mode and fusion gives the same estimates bit for bit, and a planned instance refuses to
+/// run past an unconverged horizon.
+#[test]
+fn local_plan_changes_no_number() {
+    let sys = system(3);
+    let eta = nis_threshold(1, 1.0, 3).unwrap();
+    for feedback in [
+        FeedbackMode::None,
+        FeedbackMode::Prediction,
+        FeedbackMode::PredictionAndCovariance,
+    ] {
+        for fusion in [Fusion::Full, Fusion::Simple] {
+            let o = options(fusion, feedback, Some(eta));
+            let plain = CensoredPfScheme::new(sys.clone(), SendRule::Nis { eta }, o).unwrap();
+            let planned = plain.clone().with_horizon(30).unwrap();
+            assert_eq!(
+                run(&plain, &sys, 11, 30),
+                run(&planned, &sys, 11, 30),
+                "{feedback:?} {fusion:?}"
+            );
+        }
+    }
+    let o = options(Fusion::Full, FeedbackMode::Prediction, Some(eta));
+    let short = CensoredPfScheme::new(sys.clone(), SendRule::Nis { eta }, o)
+        .unwrap()
+        .with_horizon(2)
+        .unwrap();
+    let mut inst = short.build_with_seed(1).unwrap();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+    let z = Vector::from_vec(vec![0.5]);
+    let fb = inst.center.feedback();
+    assert!(inst.sensors[0].step(2, &z, fb.as_ref(), &mut rng).is_ok());
+    assert!(matches!(
+        inst.sensors[0].step(3, &z, fb.as_ref(), &mut rng),
+        Err(SchemeError::HorizonExceeded { k: 3, horizon: 2 })
+    ));
+    let inbox = vec![Received::Silent; 3];
+    assert!(matches!(
+        inst.center.step(3, &inbox),
+        Err(SchemeError::HorizonExceeded { k: 3, horizon: 2 })
+    ));
+}
