@@ -25,7 +25,6 @@ use crate::model::LinearTransition;
 use multiversion::multiversion;
 use rand::Rng;
 use rand_distr::{Distribution, Exp1, StandardNormal};
-use std::hint::select_unpredictable;
 
 /// Why a particle-filter operation failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -831,8 +830,8 @@ fn cumulative_in_place(w: &mut [f64]) -> Result<(f64, usize), ParticleError> {
 /// owns those in `(C_{i-1}, C_i]` (C the running sum of the weights): the first
 /// `N_i = floor(n C_i + v)` positions lie at or below `C_i`, so particle `i` gets slots
 /// `N_{i-1}..N_i` — `floor(n w_i)` or `ceil(n w_i)` of them. The ends `N_i` go to `ends`, and
-/// [`mark_run_starts`] turns them into ancestors. If rounding leaves `n C_n + v` a hair below
-/// `n`, the last slots go to the last particle that owns any, never to a zero-weight one.
+/// [`ancestors_from_ends`] turns them into ancestors. If rounding leaves `n C_n + v` a hair
+/// below `n`, the last slots go to the last particle with positive weight.
 /// `anc` has `n + 1` slots so a run may start at `n`.
 ///
 /// The running sum is the slow part: one chain of dependent additions, 4 cycles each. It is
@@ -840,12 +839,18 @@ fn cumulative_in_place(w: &mut [f64]) -> Result<(f64, usize), ParticleError> {
 /// partial sums added to its offset (the rounded sum of the totals before it): the last
 /// cumulative sum of a segment is then exactly the next segment's offset, so the `C_i` never
 /// decrease and no run overlaps another.
+#[multiversion(targets("x86_64+avx2"))]
 fn systematic(w: &[f64], v: f64, ends: &mut [usize], anc: &mut [usize]) {
     let n = w.len();
     let nf = n as f64;
-    // n C_i + v >= 0, so the truncating conversion is the floor; `min` absorbs a total a few
-    // ulp above 1. (Through i64: one conversion instruction, where usize takes two.)
-    let end_of = |c: f64| ((c * nf + v) as i64).min(n as i64) as usize;
+    // floor(n C_i + v) for n C_i + v in [0, 2^52): adding 2^52 to the (integral) floor leaves
+    // it in the low mantissa bits, cheaper than a checked float-to-int conversion. `min`
+    // absorbs a total a few ulp above 1.
+    const TWO_52: f64 = 4_503_599_627_370_496.0;
+    let end_of = |c: f64| {
+        let bits = ((c * nf + v).floor() + TWO_52).to_bits() & ((1u64 << 52) - 1);
+        (bits as usize).min(n)
+    };
     let len = n / SEGMENTS;
     let tail = len * SEGMENTS..n;
     // Pass 1: each segment's partial sums (the last segment also takes the tail), in lanes.
@@ -877,43 +882,33 @@ fn systematic(w: &[f64], v: f64, ends: &mut [usize], anc: &mut [usize]) {
         p[last] += w[i];
         ends[i] = end_of(offset[last] + p[last]);
     }
-    mark_run_starts(
-        anc,
-        w.iter().zip(ends.iter()).map(|(&wi, &e)| (wi > 0.0, e)),
-    );
+    let last_positive = w.iter().rposition(|&wi| wi > 0.0).unwrap_or(0);
+    ancestors_from_ends(ends, last_positive, anc);
 }
 
 /// Independent running sums in [`systematic`].
 const SEGMENTS: usize = 4;
 
-/// Writes sorted ancestor indices from the end of each particle's run of slots, given in
-/// particle order as `(has_weight, end)` with non-decreasing ends. Instead of filling runs (a
-/// loop whose trip count is random, hence mispredicted branches) each particle whose run is
-/// not empty stores `i - previous_owner` at the start of its run and a prefix sum turns these
-/// steps into the indices. Non-empty runs start at distinct slots, so every store is a plain
-/// store to its own address (no read-modify-write chain through memory); a particle with an
-/// empty run stores into the scratch slot `n` instead (a select, not a branch). A zero-weight
-/// particle never owns a slot: its run is empty by construction, and `has_weight` guards
-/// against rounding. If rounding leaves the last runs short, the remaining slots keep the
-/// last owner. `anc` has `n + 1` slots.
-fn mark_run_starts(anc: &mut [usize], runs: impl Iterator<Item = (bool, usize)>) {
+/// Sorted ancestors from the ends of the particles' runs of slots (particle `i` owns slots
+/// `ends[i-1]..ends[i]`, ends non-decreasing and at most `n`): the owner of slot `k` is the
+/// first particle whose run ends after `k`, i.e. one more than the largest `i` with
+/// `ends[i] <= k`. Each particle stores `i + 1` at its end (plain stores in order, so the last
+/// writer of a slot is the largest such `i`) and a running maximum spreads the owners over the
+/// slots. No branch depends on the data (filling each run in a loop would mispredict on every
+/// other particle) and no store depends on a load (a read-modify-write per particle chains
+/// through memory when runs are empty). A particle with an empty run never owns a slot; if
+/// rounding leaves the runs short of `n`, the remaining slots go to `last`, the last particle
+/// with positive weight. `anc` has `n + 1` slots (a run may end at `n`).
+fn ancestors_from_ends(ends: &[usize], last: usize, anc: &mut [usize]) {
     let n = anc.len() - 1;
     anc.fill(0);
-    let mut start = 0usize;
-    let mut owner = 0usize;
-    for (i, (has_weight, end)) in runs.enumerate() {
-        // Whether a particle owns slots is a coin flip for the branch predictor: as plain
-        // `if`s (or bit masks, which LLVM turns back into branches) these selects mispredict
-        // on every other particle.
-        let owns = has_weight & (end > start);
-        anc[select_unpredictable(owns, start, n)] = i - owner;
-        owner = select_unpredictable(owns, i, owner);
-        start = end;
+    for (i, &e) in ends.iter().enumerate() {
+        anc[e] = i + 1;
     }
-    let mut s = 0usize;
+    let mut owner = 0usize;
     for a in anc[..n].iter_mut() {
-        s += *a;
-        *a = s;
+        owner = owner.max(*a);
+        *a = owner.min(last);
     }
 }
 
@@ -1012,16 +1007,15 @@ fn residual<R: Rng + ?Sized>(
     Ok(())
 }
 
-/// Sorted ancestors from copies per particle.
-fn expand_counts(counts: &[usize], anc: &mut [usize]) {
+/// Sorted ancestors from copies per particle (`counts` becomes the runs' ends).
+fn expand_counts(counts: &mut [usize], anc: &mut [usize]) {
+    let last = counts.iter().rposition(|&c| c > 0).unwrap_or(0);
     let mut end = 0usize;
-    mark_run_starts(
-        anc,
-        counts.iter().map(|&c| {
-            end += c;
-            (c > 0, end)
-        }),
-    );
+    for c in counts.iter_mut() {
+        end += *c;
+        *c = end;
+    }
+    ancestors_from_ends(counts, last, anc);
 }
 
 #[cfg(test)]
