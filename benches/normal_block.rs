@@ -10,8 +10,9 @@
 //! iteration sees fresh words (the fast-path misses happen at their natural rate).
 //!
 //! Measured on the shared 2-core development machine (AMD EPYC, x86-64 baseline target,
-//! i.e. SSE2), one thread, median ns per draw, n = 1,000 / 10,000:
-//! rand_distr 2.66 / 2.62, fill_standard_normal 1.30 / 1.29, raw_u64 0.85 / 0.85.
+//! i.e. SSE2), one thread, criterion medians in ns per draw over two runs, n = 1,000 / 10,000:
+//! rand_distr 2.59-2.65 / 2.58-2.59, fill_standard_normal 1.31 / 1.30, raw_u64 0.85-0.86 /
+//! 0.85.
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use hushfuse::stats::normal_block::fill_standard_normal;
 use rand::{RngCore, SeedableRng};
