@@ -4,4 +4,5 @@
 pub mod chi2;
 pub mod lloyd_max;
 pub mod normal;
+pub mod normal_block;
 pub mod quadform;
