@@ -11,7 +11,8 @@
 //!   compiler vectorizes;
 //! - every buffer (states, log-weights, normalized weights, normal draws, ancestor indices) is
 //!   owned by the cloud and sized at construction: no step allocates;
-//! - normal draws are made in blocks of `n` into a scratch slice and then applied to the state
+//! - normal draws are made in blocks of `n` into a scratch slice (a 1024-layer ziggurat,
+//!   [`crate::stats::normal_block`]) and then applied to the state
 //!   components with `axpy` loops;
 //! - the exponential in the normalization is a branch-free polynomial that vectorizes (the
 //!   libm `exp` is an opaque call per particle).
@@ -22,9 +23,10 @@ use super::Gaussian;
 use crate::linalg::{LinalgError, Matrix, Vector};
 use crate::model::transition::psd_sqrt;
 use crate::model::LinearTransition;
+use crate::stats::normal_block::fill_standard_normal;
 use multiversion::multiversion;
 use rand::Rng;
-use rand_distr::{Distribution, Exp1, StandardNormal};
+use rand_distr::{Distribution, Exp1};
 
 /// Why a particle-filter operation failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -680,15 +682,6 @@ fn mul_into(x: &[f64], y: &[f64], z: &mut [f64]) {
 fn gather(src: &[f64], index: &[usize], dst: &mut [f64]) {
     for (d, &a) in dst.iter_mut().zip(index) {
         *d = src[a];
-    }
-}
-
-/// Fills `out` with independent standard normals (ziggurat; one generator call per draw in
-/// 99% of cases).
-#[inline]
-fn fill_standard_normal<R: Rng + ?Sized>(out: &mut [f64], rng: &mut R) {
-    for v in out.iter_mut() {
-        *v = StandardNormal.sample(rng);
     }
 }
 
@@ -1466,7 +1459,7 @@ mod tests {
         .unwrap();
         let prior = Gaussian::new(Vector::zeros(1), Matrix::identity(1, 1));
         let mut truth_rng = rng(20);
-        let mut x = Vector::from_element(1, StandardNormal.sample(&mut truth_rng));
+        let mut x = Vector::from_element(1, rand_distr::StandardNormal.sample(&mut truth_rng));
         let zs: Vec<Vector> = (0..20)
             .map(|_| {
                 x = model.sample_next(&x, &mut truth_rng);
