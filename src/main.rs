@@ -253,6 +253,11 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     write("summary.json", &json)?;
     write("per_step.csv", &results::per_step_csv(&summary))?;
     let mut files = vec!["summary.json".to_string(), "per_step.csv".to_string()];
+    if let (true, Some(p)) = (reproduce, &out.paper) {
+        let md = report::render_markdown(&summary.scenario, elapsed, &p.published, &p.claims);
+        write("reproduction.md", &md)?;
+        files.push("reproduction.md".to_string());
+    }
     files.extend(plot::write_all(&exp, &summary, &dir).map_err(Failure::Run)?);
     text.push_str(&format!(
         "\nwrote {}: {}\n",

@@ -378,6 +378,47 @@ pub fn compare_published(exp: &Experiment, summary: &Summary) -> Vec<Comparison>
         .collect()
 }
 
+/// The reproduction as a Markdown section, as `docs/reproductions.md` collects them
+/// (`scripts/reproductions.sh` regenerates that file from these sections).
+pub fn render_markdown(
+    id: &str,
+    seconds: f64,
+    comparisons: &[Comparison],
+    claims: &[ClaimResult],
+) -> String {
+    let mut out = format!("## `{id}` ({seconds:.2} s)\n\n");
+    if !comparisons.is_empty() {
+        out.push_str("Published numbers beside ours:\n\n");
+        for c in comparisons {
+            let ours = match (c.ours, c.ours_se) {
+                (Some(v), Some(se)) => format!("{v:.4} ± {se:.4}"),
+                (Some(v), None) => format!("{v:.4}"),
+                _ => "not found".to_string(),
+            };
+            let _ = writeln!(
+                out,
+                "- {} [{}] {} ({}): paper {:.4}, ours {}",
+                c.scheme, c.params, c.metric, c.source, c.paper, ours
+            );
+        }
+        out.push('\n');
+    }
+    if !claims.is_empty() {
+        out.push_str("Claims:\n\n");
+        for c in claims {
+            let _ = writeln!(
+                out,
+                "- **{}** {}  \n  {}",
+                if c.holds { "holds" } else { "FAILS" },
+                c.text,
+                c.evidence
+            );
+        }
+        out.push('\n');
+    }
+    out
+}
+
 /// Human-readable reproduction report.
 pub fn render(exp: &Experiment, comparisons: &[Comparison], claims: &[ClaimResult]) -> String {
     let mut out = String::new();
