@@ -12,6 +12,7 @@ if [ ${#ids[@]} -eq 0 ]; then
 fi
 cargo build --release --quiet
 out=target/reproductions
+mkdir -p "$out"
 doc=docs/reproductions.md
 {
     cat <<'HEAD'
