@@ -378,13 +378,17 @@ pub fn compare_published(exp: &Experiment, summary: &Summary) -> Vec<Comparison>
         .collect()
 }
 
-/// Our value of a published number, with its Monte Carlo standard error when it has one.
-fn ours_text(c: &Comparison) -> String {
-    match (c.ours, c.ours_se) {
+/// A published number beside ours (with its Monte Carlo standard error when it has one).
+fn comparison_text(c: &Comparison) -> String {
+    let ours = match (c.ours, c.ours_se) {
         (Some(v), Some(se)) => format!("{v:.4} ± {se:.4}"),
         (Some(v), None) => format!("{v:.4}"),
         _ => "not found".to_string(),
-    }
+    };
+    format!(
+        "{} [{}] {} ({}): paper {:.4}, ours {ours}",
+        c.scheme, c.params, c.metric, c.source, c.paper
+    )
 }
 
 /// The reproduction as a Markdown section, as `docs/reproductions.md` collects them
@@ -399,16 +403,7 @@ pub fn render_markdown(
     if !comparisons.is_empty() {
         out.push_str("Published numbers beside ours:\n\n");
         for c in comparisons {
-            let _ = writeln!(
-                out,
-                "- {} [{}] {} ({}): paper {:.4}, ours {}",
-                c.scheme,
-                c.params,
-                c.metric,
-                c.source,
-                c.paper,
-                ours_text(c)
-            );
+            let _ = writeln!(out, "- {}", comparison_text(c));
         }
         out.push('\n');
     }
@@ -445,16 +440,7 @@ pub fn render(exp: &Experiment, comparisons: &[Comparison], claims: &[ClaimResul
     } else {
         let _ = writeln!(out, "\nPublished numbers vs ours:");
         for c in comparisons {
-            let _ = writeln!(
-                out,
-                "  {} [{}] {} ({}): paper {:.4}, ours {}",
-                c.scheme,
-                c.params,
-                c.metric,
-                c.source,
-                c.paper,
-                ours_text(c)
-            );
+            let _ = writeln!(out, "  {}", comparison_text(c));
         }
         let _ = writeln!(out, "\nClaims:");
     }
