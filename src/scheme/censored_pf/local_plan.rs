@@ -12,6 +12,10 @@ use crate::filter::{kf, Gaussian};
 use crate::linalg::{Matrix, Vector};
 use crate::scheme::{SchemeError, System};
 
+/// The most steps stored per sensor: a recursion that has not reached its fixed point by then
+/// is left to the sensors and the fusion center to compute step by step.
+const MAX_STORED_STEPS: usize = 10_000;
+
 /// One sensor's local-filter matrices at one step k.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LocalStep {
@@ -32,7 +36,8 @@ pub struct LocalStep {
 #[derive(Debug, Clone)]
 pub struct LocalPlan {
     /// Per sensor: steps 1..=len, and whether the last one repeats for ever; `None` for a
-    /// nonlinear sensor.
+    /// nonlinear sensor and for one whose recursion did not settle within
+    /// [`MAX_STORED_STEPS`] of a longer horizon.
     sensors: Vec<Option<(Vec<LocalStep>, bool)>>,
     horizon: usize,
 }
@@ -51,7 +56,7 @@ impl LocalPlan {
                 let x_ref = Vector::zeros(system.state_dim());
                 let mut est = Gaussian::new(x_ref.clone(), system.prior.cov.clone());
                 let mut steps: Vec<LocalStep> = Vec::new();
-                for _ in 0..horizon {
+                for _ in 0..horizon.min(MAX_STORED_STEPS + 1) {
                     let p_pred = kf::predict(&system.transition, &est).cov;
                     let (p_post, gain, s) =
                         local_covariance_update(sensor.as_ref(), &p_pred, &x_ref)?;
@@ -67,14 +72,16 @@ impl LocalPlan {
                     est.cov.copy_from(&step.p_post);
                     steps.push(step);
                 }
-                Ok(Some((steps, false)))
+                // A long horizon whose recursion never settles (a rounding cycle, or a
+                // diverging model) is not stored: that sensor computes as it goes.
+                Ok((steps.len() <= MAX_STORED_STEPS).then_some((steps, false)))
             })
             .collect::<Result<_, SchemeError>>()?;
         Ok(Self { sensors, horizon })
     }
 
-    /// Sensor `i`'s matrices at step `k` (1-based); `Ok(None)` for a nonlinear sensor, an error
-    /// past the horizon unless the sequence converged.
+    /// Sensor `i`'s matrices at step `k` (1-based); `Ok(None)` for a sensor without a plan, an
+    /// error past the horizon unless the sequence converged.
     pub fn at(&self, i: usize, k: usize) -> Result<Option<&LocalStep>, SchemeError> {
         let Some((steps, converged)) = self.sensors.get(i).and_then(Option::as_ref) else {
             return Ok(None);
@@ -145,6 +152,22 @@ mod tests {
             plan.at(2, 1).unwrap().is_none(),
             "the range sensor has no plan"
         );
+    }
+
+    #[test]
+    fn a_recursion_that_never_settles_is_not_stored_past_the_cap() {
+        // The second component is unobserved and slowly unstable: its variance grows for ever.
+        let mut sys = system(false);
+        sys.transition = LinearTransition::new(
+            matrix_from_rows(&[vec![1.0, 0.0], vec![0.0, 1.001]]),
+            Matrix::identity(2, 2) * 0.1,
+        )
+        .unwrap();
+        let long = LocalPlan::new(&sys, MAX_STORED_STEPS + 5).unwrap();
+        assert!(long.at(0, 1).unwrap().is_none());
+        assert!(long.at(0, MAX_STORED_STEPS + 5).unwrap().is_none());
+        let short = LocalPlan::new(&sys, 50).unwrap();
+        assert!(short.at(0, 50).unwrap().is_some());
     }
 
     #[test]
