@@ -325,7 +325,6 @@ impl FusionCenter for CensoredPfCenter {
                 None => self.p_pred[i] = kf::predict_cov(&sys.transition, &self.local_cov[i]),
             }
         }
-        let p_pred = std::mem::take(&mut self.p_pred);
         let full_nofb = self.options.fusion == Fusion::Full
             && self.options.feedback == FeedbackMode::None
             && self.options.eta.is_some();
@@ -368,6 +367,7 @@ impl FusionCenter for CensoredPfCenter {
         if let (Fusion::Full, Some(eta)) = (self.options.fusion, self.options.eta) {
             match self.options.feedback {
                 FeedbackMode::None => {
+                    let p_pred = self.p_pred.clone();
                     self.last_prop3_log_factor =
                         self.prop3_log_factor(&silent, &p_pred, &cross_pred, eta)?;
                     let c = self.last_prop3_log_factor;
@@ -384,7 +384,7 @@ impl FusionCenter for CensoredPfCenter {
                             _ => {
                                 let sensor = &sys.sensors[i];
                                 let p_ref = if mode == FeedbackMode::Prediction {
-                                    &p_pred[i]
+                                    &self.p_pred[i]
                                 } else {
                                     &self.prediction.cov
                                 };
@@ -422,7 +422,8 @@ impl FusionCenter for CensoredPfCenter {
                     full_nofb.then(|| step.gain.clone())
                 }
                 None => {
-                    let (p, gain, _) = local_covariance_update(sensor.as_ref(), &p_pred[i], x_ref)?;
+                    let (p, gain, _) =
+                        local_covariance_update(sensor.as_ref(), &self.p_pred[i], x_ref)?;
                     self.local_cov[i] = p;
                     full_nofb.then_some(gain)
                 }
@@ -431,7 +432,6 @@ impl FusionCenter for CensoredPfCenter {
                 gains.push((gain, sensor.jacobian(x_ref)));
             }
         }
-        self.p_pred = p_pred;
         if full_nofb {
             // Eq. (23): P^{i,j}_{k|k} = (I - w_i h_i^T) (F P^{i,j} F^T + Q) (I - w_j h_j^T)^T.
             let d = sys.state_dim();

@@ -293,3 +293,39 @@ fn local_plan_changes_no_number() {
         Err(SchemeError::HorizonExceeded { k: 3, horizon: 2 })
     ));
 }
+
+/// A corrupt message is refused with an error, and the fusion center stays usable: the next
+/// step with a valid inbox runs (library users may drop a bad packet and go on).
+#[test]
+fn center_recovers_after_a_refused_message() {
+    let sys = system(2);
+    let eta = nis_threshold(1, 1.0, 2).unwrap();
+    for planned in [false, true] {
+        let o = options(Fusion::Full, FeedbackMode::Prediction, Some(eta));
+        let mut scheme = CensoredPfScheme::new(sys.clone(), SendRule::Nis { eta }, o).unwrap();
+        if planned {
+            scheme = scheme.with_horizon(5).unwrap();
+        }
+        let mut inst = scheme.build_with_seed(4).unwrap();
+        let bad = vec![
+            Received::Measurement(Vector::from_vec(vec![f64::NAN])),
+            Received::Silent,
+        ];
+        assert!(matches!(
+            inst.center.step(1, &bad),
+            Err(SchemeError::Protocol { sensor: 0, .. })
+        ));
+        let good = vec![
+            Received::Measurement(Vector::from_vec(vec![10.0])),
+            Received::Silent,
+        ];
+        for k in 2..=5 {
+            inst.center.step(k, &good).unwrap();
+            let est = inst.center.estimate();
+            assert!(
+                est.mean.iter().all(|v| v.is_finite()),
+                "planned {planned}, k {k}"
+            );
+        }
+    }
+}
