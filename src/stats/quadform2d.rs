@@ -140,6 +140,8 @@ pub struct EllipseBand2 {
     a_max: f64,
     /// `(1/2) ln(lam_s / lam_b)`.
     half_ln_ratio: f64,
+    /// `(sqrt(eta) + sqrt(-2 LN_FAR lam_s))^2`: no mean with `|m|^2` below this is far.
+    r2_near: f64,
     /// Whether the series kernel is used (`t <= T_MAX`); otherwise the exact fallback.
     series: bool,
     /// `g_k = e^{-t} t^{k+1} / (k+1)!`.
@@ -205,6 +207,7 @@ impl EllipseBand2 {
             half_a: 0.0,
             a_max: 1.0,
             half_ln_ratio: 0.0,
+            r2_near: 0.0,
             series: false,
             g: Vec::new(),
             inv_k: Vec::new(),
@@ -224,6 +227,7 @@ impl EllipseBand2 {
         self.a = 1.0 - self.lam_s / self.lam_b;
         self.half_a = 0.5 * self.a;
         self.half_ln_ratio = 0.5 * (self.lam_s / self.lam_b).ln();
+        self.r2_near = (self.eta.sqrt() + (-2.0 * LN_FAR * self.lam_s).sqrt()).powi(2);
         // max_i (i+1) a^i: the sequence increases while (i+2) a > (i+1).
         let mut v = 1.0;
         let mut best: f64 = 1.0;
@@ -346,7 +350,8 @@ impl EllipseBand2 {
             }
             let bs = self.u_s[0] * x + self.u_s[1] * y;
             let bb = self.u_b[0] * x + self.u_b[1] * y;
-            if self.chernoff(bs, bb) < LN_FAR {
+            // The bound is at least -(|b| - sqrt(eta))^2 / (2 lam_s): skip it inside that.
+            if bs * bs + bb * bb > self.r2_near && self.chernoff(bs, bb) < LN_FAR {
                 direct[p] = Some(self.saddlepoint(bs, bb));
                 continue;
             }
@@ -440,7 +445,7 @@ impl EllipseBand2 {
             }
             let step = f / df;
             s += step;
-            if !(step > 1e-15 * s) {
+            if step.is_nan() || step <= 1e-15 * s {
                 break;
             }
         }
@@ -542,8 +547,9 @@ fn series_lanes<'t>(
         for l in 0..W {
             let rho = t2 * (1.0 + l_bound[l] * tb.inv_k1[0]);
             let term = g0 * cum[l];
-            let done = rho < 1.0 && term * rho <= TOL * (1.0 - rho) * sum[l];
-            let keep = if done { 0.0 } else { mask[l] };
+            // Non-short-circuit `|` and a select: one vector compare per condition.
+            let go_on = (rho >= 1.0) | (term * rho > TOL * (1.0 - rho) * sum[l]);
+            let keep = if go_on { mask[l] } else { 0.0 };
             c[l] *= keep;
             s[l] *= keep;
             u[l] *= keep;
@@ -568,8 +574,9 @@ fn series_lanes<'t>(
             let term = gk * cum[l];
             sum[l] += term;
             let rho = t2 * (1.0 + l_bound[l] * ik1);
-            let done = rho < 1.0 && term * rho <= TOL * (1.0 - rho) * sum[l];
-            let keep = if done { 0.0 } else { mask[l] };
+            // Non-short-circuit `|` and a select: one vector compare per condition.
+            let go_on = (rho >= 1.0) | (term * rho > TOL * (1.0 - rho) * sum[l]);
+            let keep = if go_on { mask[l] } else { 0.0 };
             c[l] *= keep;
             s[l] *= keep;
             u[l] *= keep;
@@ -673,7 +680,7 @@ mod tests {
             for &eta in &ETAS {
                 let k = EllipseBand2::new(&c, eta).unwrap();
                 for ia in 0..16 {
-                    let th = 0.3927 * ia as f64 + 0.01;
+                    let th = std::f64::consts::FRAC_PI_8 * ia as f64 + 0.01;
                     let (s, co) = th.sin_cos();
                     let mut rs: Vec<f64> = (0..4000)
                         .map(|i| 2.0 * eta.sqrt() + 0.5 + 0.01 * i as f64)
