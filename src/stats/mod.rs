@@ -6,3 +6,4 @@ pub mod lloyd_max;
 pub mod normal;
 pub mod normal_block;
 pub mod quadform;
+pub mod quadform2d;
