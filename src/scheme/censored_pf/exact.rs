@@ -345,8 +345,13 @@ impl FusionCenter for ExactCensoredCenter {
                         let r_sqrt = crate::model::MeasurementModel::noise_sqrt(&sensor).clone();
                         let s_chol = crate::linalg::cholesky(&s)
                             .map_err(|source| SchemeError::Matrix { what: "S", source })?;
+                        let s_l = s_chol.l();
                         let mut mean = vec![0.0; m];
-                        let mut draw = Vector::zeros(m);
+                        // Scratch of the rejection loop (it may try many times per particle:
+                        // no allocation in it): normals, R^{1/2} draw, innovation, L^{-1} nu.
+                        let mut draw = vec![0.0; m];
+                        let mut nu = vec![0.0; m];
+                        let mut y = vec![0.0; m];
                         for p in 0..n {
                             for (a, v) in mean.iter_mut().enumerate() {
                                 *v = (0..m)
@@ -368,15 +373,24 @@ impl FusionCenter for ExactCensoredCenter {
                                 for v in draw.iter_mut() {
                                     *v = StandardNormal.sample(&mut self.rng);
                                 }
-                                let e = &r_sqrt * &draw;
-                                let nu = Vector::from_fn(m, |a, _| {
-                                    self.hx[a * n + p] + e[a] - self.pred[a * n + p]
-                                });
-                                let y = s_chol
-                                    .l()
-                                    .solve_lower_triangular(&nu)
-                                    .unwrap_or_else(|| nu.clone());
-                                let nis = y.norm_squared();
+                                // nu = h(x) + R^{1/2} draw - H x_hat, then y = L^{-1} nu by
+                                // forward substitution (S = L L^T), NIS = |y|^2.
+                                for (a, v) in nu.iter_mut().enumerate() {
+                                    let mut e = 0.0;
+                                    for (b, d) in draw.iter().enumerate() {
+                                        e += r_sqrt[(a, b)] * d;
+                                    }
+                                    *v = self.hx[a * n + p] + e - self.pred[a * n + p];
+                                }
+                                let mut nis = 0.0;
+                                for a in 0..m {
+                                    let mut acc = nu[a];
+                                    for b in 0..a {
+                                        acc -= s_l[(a, b)] * y[b];
+                                    }
+                                    y[a] = acc / s_l[(a, a)];
+                                    nis += y[a] * y[a];
+                                }
                                 let scale = if nis < self.eta {
                                     1.0
                                 } else {
