@@ -383,10 +383,10 @@ impl FusionCenter for ExactCensoredCenter {
                                     *v = self.hx[a * n + p] + e - self.pred[a * n + p];
                                 }
                                 let mut nis = 0.0;
-                                for a in 0..m {
-                                    let mut acc = nu[a];
-                                    for b in 0..a {
-                                        acc -= s_l[(a, b)] * y[b];
+                                for (a, &nu_a) in nu.iter().enumerate() {
+                                    let mut acc = nu_a;
+                                    for (b, &y_b) in y[..a].iter().enumerate() {
+                                        acc -= s_l[(a, b)] * y_b;
                                     }
                                     y[a] = acc / s_l[(a, a)];
                                     nis += y[a] * y[a];
