@@ -396,8 +396,8 @@ impl FusionCenter for ExactCensoredCenter {
                                 } else {
                                     0.999 * (self.eta / nis).sqrt()
                                 };
-                                for a in 0..m {
-                                    self.z[a * n + p] = self.pred[a * n + p] + scale * nu[a];
+                                for (a, nu_a) in nu.iter().enumerate() {
+                                    self.z[a * n + p] = self.pred[a * n + p] + scale * nu_a;
                                 }
                                 if nis < self.eta {
                                     break;
