@@ -1355,14 +1355,21 @@ impl Workspace {
     }
 }
 
-/// The per-particle loop: `out[p] += f(|mu[p] s|)` from the table built for half-width `c` and
-/// scale `s`.
-fn add_from_table(rows: &[Row; TABLE_ROWS], mu: &[f64], s: f64, c: f64, out: &mut [f64]) {
+/// The per-particle loop: `out[p] += f(|h[p] - center| s)` from the table built for half-width
+/// `c` and scale `s`.
+fn add_from_table(
+    rows: &[Row; TABLE_ROWS],
+    h: &[f64],
+    center: f64,
+    s: f64,
+    c: f64,
+    out: &mut [f64],
+) {
     // Particles left of bin 1 (a < -9) exist only when c > 9.
     if c > -A_LO {
-        add_from_table_clamped::<true>(rows, mu, s, c, out);
+        add_from_table_clamped::<true>(rows, h, center, s, c, out);
     } else {
-        add_from_table_clamped::<false>(rows, mu, s, c, out);
+        add_from_table_clamped::<false>(rows, h, center, s, c, out);
     }
 }
 
@@ -1373,7 +1380,8 @@ fn add_from_table(rows: &[Row; TABLE_ROWS], mu: &[f64], s: f64, c: f64, out: &mu
 #[multiversion(targets("x86_64+avx2"))]
 fn add_from_table_clamped<const LOWER: bool>(
     rows: &[Row; TABLE_ROWS],
-    mu: &[f64],
+    h: &[f64],
+    center: f64,
     s: f64,
     c: f64,
     out: &mut [f64],
@@ -1390,8 +1398,9 @@ fn add_from_table_clamped<const LOWER: bool>(
         round_index(if y < cap { y } else { cap })
     };
     let x_max = KERNEL_X_MAX / s;
+    // mu = h - center is formed here, not in a pass of its own.
     let position = |m: f64| {
-        let x = m.abs();
+        let x = (m - center).abs();
         if x > x_max {
             x_max
         } else {
@@ -1399,7 +1408,7 @@ fn add_from_table_clamped<const LOWER: bool>(
         }
     };
     let mut oc = out.chunks_exact_mut(LANES);
-    let mut mc = mu.chunks_exact(LANES);
+    let mut mc = h.chunks_exact(LANES);
     for (o, m) in (&mut oc).zip(&mut mc) {
         let x: [f64; LANES] = std::array::from_fn(|k| position(m[k]));
         let p = eval_block(rows, &x, index);
@@ -1414,9 +1423,16 @@ fn add_from_table_clamped<const LOWER: bool>(
 }
 
 /// The kernel's reference loop (and its fallback): `log_q_band` per particle.
-fn add_log_band_probability_scalar(mu: &[f64], half_width: f64, inv_sd: f64, out: &mut [f64]) {
-    for (o, m) in out.iter_mut().zip(mu) {
-        *o += log_q_band((-half_width - m) * inv_sd, (half_width - m) * inv_sd);
+fn add_log_band_probability_scalar(
+    h: &[f64],
+    center: f64,
+    half_width: f64,
+    inv_sd: f64,
+    out: &mut [f64],
+) {
+    for (o, m) in out.iter_mut().zip(h) {
+        let mu = m - center;
+        *o += log_q_band((-half_width - mu) * inv_sd, (half_width - mu) * inv_sd);
     }
 }
 
@@ -1441,22 +1457,38 @@ fn add_log_band_probability_scalar(mu: &[f64], half_width: f64, inv_sd: f64, out
 /// # Panics
 /// If the slices differ in length.
 pub fn add_log_band_probability(mu: &[f64], half_width: f64, inv_sd: f64, out: &mut [f64]) {
+    add_log_band_probability_about(mu, 0.0, half_width, inv_sd, out);
+}
+
+/// [`add_log_band_probability`] with `mu[p] = h[p] - center` formed inside the kernel (the
+/// predicted measurements of the particles and that of the reference point): the same
+/// numbers, without a pass over the particles to subtract `center` first.
+///
+/// # Panics
+/// If the slices differ in length.
+pub fn add_log_band_probability_about(
+    h: &[f64],
+    center: f64,
+    half_width: f64,
+    inv_sd: f64,
+    out: &mut [f64],
+) {
     assert_eq!(
-        mu.len(),
+        h.len(),
         out.len(),
         "add_log_band_probability: slice lengths differ"
     );
     let c = half_width * inv_sd;
     let usable =
         half_width > 0.0 && (1e-100..=1e100).contains(&inv_sd) && c > 0.0 && c <= KERNEL_C_MAX;
-    if !usable || mu.len() < KERNEL_MIN_LEN {
-        add_log_band_probability_scalar(mu, half_width, inv_sd, out);
+    if !usable || h.len() < KERNEL_MIN_LEN {
+        add_log_band_probability_scalar(h, center, half_width, inv_sd, out);
         return;
     }
     let kernel = Kernel::get();
     WORKSPACE.with(|w| {
         let mut w = w.borrow_mut();
-        add_from_table(w.table(kernel, c, inv_sd), mu, inv_sd, c, out);
+        add_from_table(w.table(kernel, c, inv_sd), h, center, inv_sd, c, out);
     });
 }
 
@@ -1477,7 +1509,7 @@ mod kernel_tests {
 
     fn reference(mu: &[f64], c: f64, s: f64) -> Vec<f64> {
         let mut out = vec![0.0; mu.len()];
-        add_log_band_probability_scalar(mu, c, s, &mut out);
+        add_log_band_probability_scalar(mu, 0.0, c, s, &mut out);
         out
     }
 
@@ -1686,6 +1718,25 @@ mod kernel_tests {
     }
 
     #[test]
+    fn centering_inside_the_kernel_changes_no_bit() {
+        // Both the table path (>= 64 particles) and the scalar fallback (fewer).
+        for len in [40usize, 3000] {
+            let h: Vec<f64> = (0..len)
+                .map(|i| 7.3 + (i as f64 * 0.731).sin() * 9.0)
+                .collect();
+            let center = 7.9;
+            let mu: Vec<f64> = h.iter().map(|v| v - center).collect();
+            for (c, s) in [(0.8, 1.0), (2.5, 0.6), (0.004, 3.0)] {
+                let mut a = vec![0.5; len];
+                let mut b = vec![0.5; len];
+                add_log_band_probability(&mu, c, s, &mut a);
+                add_log_band_probability_about(&h, center, c, s, &mut b);
+                assert_eq!(a, b, "len {len}, c {c}, s {s}");
+            }
+        }
+    }
+
+    #[test]
     fn cached_tables_equal_fresh_ones_through_evictions() {
         // More bands than the cache holds, visited twice in an order that evicts every one:
         // the second visit (rebuilt or cached) must give the first visit's values bit for bit,
@@ -1707,7 +1758,7 @@ mod kernel_tests {
             let c_sd = c * s;
             k.build(c_sd, s, &mut scratch.scratch, &mut rows);
             let mut fresh = vec![0.0; mu.len()];
-            add_from_table(&rows, &mu, s, c_sd, &mut fresh);
+            add_from_table(&rows, &mu, 0.0, s, c_sd, &mut fresh);
             assert_eq!(fresh, first[b], "band {b}");
         }
     }

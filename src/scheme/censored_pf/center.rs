@@ -167,12 +167,8 @@ impl CensoredPfCenter {
         if m == 1 {
             let half_width = (eta * s[(0, 0)]).sqrt();
             let inv_sd = 1.0 / r[(0, 0)].sqrt();
-            let h0 = h_ref[0];
-            // mu = h(x) - h(x_{k|k-1}), eq. (13) / Prop. 7, in place of h(x).
-            for h in &mut self.hx[..n] {
-                *h -= h0;
-            }
-            normal::add_log_band_probability(&self.hx[..n], half_width, inv_sd, lw);
+            // mu = h(x) - h(x_{k|k-1}), eq. (13) / Prop. 7, formed inside the kernel.
+            normal::add_log_band_probability_about(&self.hx[..n], h_ref[0], half_width, inv_sd, lw);
             return Ok(());
         }
         // Vector: q = S^{-1/2} nu ~ N(S^{-1/2} (h(x) - h(x_ref)), S^{-1/2} R S^{-1/2}) (35)-(38).
