@@ -470,13 +470,7 @@ impl ParticleCloud {
             return Err(ParticleError::DegenerateWeights);
         }
         let ln_s = s.ln();
-        let inv_s = 1.0 / s;
-        for (w, l) in self.weights.iter_mut().zip(self.log_weights.iter_mut()) {
-            *w *= inv_s;
-            // (l - m) first: exact for the particles that matter (Sterbenz), so normalized
-            // log-weights keep full relative precision even when the raw ones are ~1e3.
-            *l = (*l - m) - ln_s;
-        }
+        normalize_in_place(&mut self.weights, &mut self.log_weights, 1.0 / s, m, ln_s);
         self.normalized = true;
         Ok(m + ln_s)
     }
@@ -658,6 +652,17 @@ fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
 fn scale_into(a: f64, x: &[f64], y: &mut [f64]) {
     for (yi, xi) in y.iter_mut().zip(x) {
         *yi = a * xi;
+    }
+}
+
+/// `w_i *= inv_s` and `l_i = (l_i - m) - ln_s`: the weights and log-weights after dividing
+/// by their sum. `(l - m)` first: exact for the particles that matter (Sterbenz), so
+/// normalized log-weights keep full relative precision even when the raw ones are ~1e3.
+#[multiversion(targets("x86_64+avx2"))]
+fn normalize_in_place(w: &mut [f64], l: &mut [f64], inv_s: f64, m: f64, ln_s: f64) {
+    for (w, l) in w.iter_mut().zip(l.iter_mut()) {
+        *w *= inv_s;
+        *l = (*l - m) - ln_s;
     }
 }
 

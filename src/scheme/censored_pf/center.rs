@@ -11,6 +11,7 @@ use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::scheme::{Feedback, FusionCenter, SchemeError, System};
 use crate::stats::{normal, quadform::QuadFormCdf, quadform2d::EllipseBand2};
+use multiversion::multiversion;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -18,6 +19,16 @@ use std::sync::Arc;
 
 fn pf_err(e: crate::filter::particle::ParticleError) -> SchemeError {
     SchemeError::Unsupported(format!("particle filter: {e}"))
+}
+
+/// `l_p -= w (z - h_p)^2`: a received scalar measurement's log-likelihood over the particles
+/// (`w = 1 / (2 r)`). Compiled also for AVX2 (same bits).
+#[multiversion(targets("x86_64+avx2"))]
+fn add_scalar_gaussian(z: f64, w: f64, h: &[f64], lw: &mut [f64]) {
+    for (l, h) in lw.iter_mut().zip(h) {
+        let e = z - h;
+        *l -= w * e * e;
+    }
 }
 
 /// Sensor `i`'s planned local matrices at step `k`, if it has any.
@@ -125,11 +136,7 @@ impl CensoredPfCenter {
         sensor.predict_many(&|j| states.component(j), n, &mut self.hx[..m * n]);
         let r_inv = &self.r_inv[i];
         if m == 1 {
-            let (z0, w) = (z[0], 0.5 * r_inv[(0, 0)]);
-            for (l, h) in lw.iter_mut().zip(&self.hx[..n]) {
-                let e = z0 - h;
-                *l -= w * e * e;
-            }
+            add_scalar_gaussian(z[0], 0.5 * r_inv[(0, 0)], &self.hx[..n], lw);
         } else {
             for (p, l) in lw.iter_mut().enumerate() {
                 let mut q = 0.0;
