@@ -637,7 +637,11 @@ mod tests {
                 let k = EllipseBand2::new(&c, eta).unwrap();
                 let mut m0 = Vec::new();
                 let mut m1 = Vec::new();
-                for ir in 0..=225 {
+                // The nearly singular C routes every mean to QuadFormCdf (milliseconds each at
+                // this conditioning), so it gets a coarser grid: the test there checks the
+                // routing, not the series.
+                let stride = if name.starts_with("nearly") { 5 } else { 1 };
+                for ir in (0..=225).step_by(stride) {
                     let r = 0.2 * ir as f64;
                     for ia in 0..29 {
                         let th = 0.2167 * ia as f64 + 0.05;
@@ -680,11 +684,17 @@ mod tests {
         for (name, c) in covariances() {
             for &eta in &ETAS {
                 let k = EllipseBand2::new(&c, eta).unwrap();
-                for ia in 0..16 {
-                    let th = std::f64::consts::FRAC_PI_8 * ia as f64 + 0.01;
+                // The nearly singular C takes the slow QuadFormCdf route: fewer, wider steps.
+                let (angles, points, step) = if name.starts_with("nearly") {
+                    (4, 800, 0.05)
+                } else {
+                    (16, 4000, 0.01)
+                };
+                for ia in 0..angles {
+                    let th = std::f64::consts::FRAC_PI_8 * (16 / angles * ia) as f64 + 0.01;
                     let (s, co) = th.sin_cos();
-                    let mut rs: Vec<f64> = (0..4000)
-                        .map(|i| 2.0 * eta.sqrt() + 0.5 + 0.01 * i as f64)
+                    let mut rs: Vec<f64> = (0..points)
+                        .map(|i| 2.0 * eta.sqrt() + 0.5 + step * i as f64)
                         .collect();
                     let last = *rs.last().unwrap();
                     rs.extend((1..=400).map(|i| last * (1e6 / last).powf(i as f64 / 400.0)));
