@@ -116,7 +116,8 @@ impl CensoredPfCenter {
     }
 
     /// Takes the replicas' local covariances from `plan` (the one computed for this system)
-    /// instead of computing them every step.
+    /// instead of computing them every step; `step` must then be called for k = 1, 2, 3, ...
+    /// in order (the plan's step k is the covariance after k updates).
     pub fn with_plan(mut self, plan: Arc<LocalPlan>) -> Self {
         self.plan = Some(plan);
         self

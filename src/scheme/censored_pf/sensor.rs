@@ -123,7 +123,9 @@ impl CensoringSensor {
     }
 
     /// Takes the local covariances from `plan` (the one computed for this sensor's system and
-    /// prior) instead of computing them every step.
+    /// prior) instead of computing them every step. The plan's step k is the covariance after
+    /// k updates, so `step` must be called for k = 1, 2, 3, ... in order, as the simulator
+    /// does.
     pub fn with_plan(mut self, plan: Arc<LocalPlan>) -> Self {
         self.plan = Some(plan);
         self
