@@ -5,6 +5,64 @@
 //! the received measurements and of the silences (CFwMD: eq. (9), (15), (33), (39), (44),
 //! (45); without feedback Prop. 3 / 6 with (21)-(23)), or the simple likelihood that ignores
 //! silences (CFoMD). Random selection and all-send are the baselines.
+//!
+//! The sensor side ([`CensoringSensor`]) and the fusion side ([`CensoredPfCenter`]) are
+//! separate pieces; a scheme builds a matched set:
+//!
+//! ```
+//! use hushfuse::filter::particle::{ResamplePolicy, Resampling};
+//! use hushfuse::filter::Gaussian;
+//! use hushfuse::linalg::{Matrix, Vector};
+//! use hushfuse::link::Received;
+//! use hushfuse::model::{presets, LinearSensor, MeasurementModel};
+//! use hushfuse::scheme::censored_pf::censoring::nis_threshold;
+//! use hushfuse::scheme::censored_pf::*;
+//! use hushfuse::scheme::{Scheme, System};
+//! use rand::SeedableRng;
+//! use std::sync::Arc;
+//!
+//! // Two position sensors (r = 1) on a 1-D constant-velocity target.
+//! let h = Matrix::from_row_slice(1, 2, &[1.0, 0.0]);
+//! let sensors: Vec<Arc<dyn MeasurementModel>> = (0..2)
+//!     .map(|_| {
+//!         let s = LinearSensor::new(h.clone(), Matrix::from_element(1, 1, 1.0)).unwrap();
+//!         Arc::new(s) as Arc<dyn MeasurementModel>
+//!     })
+//!     .collect();
+//! let system = Arc::new(System {
+//!     transition: presets::constant_velocity_1d_discrete(1.0, 0.01).unwrap(),
+//!     sensors,
+//!     prior: Gaussian::new(Vector::from_vec(vec![0.0, 10.0]), Matrix::identity(2, 2)),
+//! });
+//! // On average l = 1 of the N = 2 sensors talks: eta = chi^2_1 quantile of eq. (8).
+//! let eta = nis_threshold(1, 1.0, 2)?;
+//! let options = PfOptions {
+//!     particles: 500,
+//!     fusion: Fusion::Full,                // CFwMD: silences are data
+//!     feedback: FeedbackMode::Prediction,  // the fused prediction is fed back
+//!     eta: Some(eta),
+//!     resampling: Resampling::Systematic,
+//!     resample_policy: ResamplePolicy::Always,
+//!     band: BandMethod::Exact,
+//!     prop3_samples: 200,
+//! };
+//! let scheme = CensoredPfScheme::new(system, SendRule::Nis { eta }, options)?.with_horizon(20)?;
+//! let mut inst = scheme.build_with_seed(1)?;
+//! let mut coins = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(2);
+//! let mut feedback = inst.center.feedback();
+//! for k in 1..=20 {
+//!     let z = Vector::from_vec(vec![10.0 * k as f64]); // the target moves 10 per step
+//!     // Each sensor sends z or stays silent; the fusion center hears both.
+//!     let mut inbox = Vec::new();
+//!     for sensor in inst.sensors.iter_mut() {
+//!         inbox.push(Received::from(sensor.step(k, &z, feedback.as_ref(), &mut coins)?));
+//!     }
+//!     inst.center.step(k, &inbox)?;
+//!     feedback = inst.center.feedback();
+//! }
+//! assert!((inst.center.estimate().mean[0] - 200.0).abs() < 3.0);
+//! # Ok::<(), hushfuse::scheme::SchemeError>(())
+//! ```
 pub mod censoring;
 pub mod center;
 pub mod exact;
