@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerates docs/reproductions.md: runs the built-in paper reproductions with their full trial
 # counts (`hushfuse reproduce <id>`, all cores) and collects the Markdown section each run writes
-# (target/reproductions/<id>/reproduction.md). About 15 minutes on a 2-core machine.
+# (target/reproductions/<id>/reproduction.md). About 5 minutes on a 2-core machine.
 # Usage: scripts/reproductions.sh [id ...]
 #   With ids, only those are rerun; the other sections are taken from earlier runs of this
 #   script on this machine (and run if missing).
