@@ -17,6 +17,12 @@ pub struct Placement {
 }
 
 impl Placement {
+    /// The target's x and y components of a particle cloud (`component(j)` is state component
+    /// `j` of every particle).
+    fn target_xy<'a>(&self, component: &dyn Fn(usize) -> &'a [f64]) -> (&'a [f64], &'a [f64]) {
+        (component(self.indices[0]), component(self.indices[1]))
+    }
+
     fn check(&self) -> Result<(), ModelError> {
         if self.indices.iter().any(|&i| i >= self.state_dim) || self.indices[0] == self.indices[1] {
             return Err(ModelError::Dimension {
@@ -116,12 +122,8 @@ impl MeasurementModel for RangeSensor {
         Some(self.placement.indices)
     }
     fn predict_many<'a>(&self, component: &dyn Fn(usize) -> &'a [f64], n: usize, out: &mut [f64]) {
-        let [sx, sy] = self.placement.position;
-        let (xs, ys) = (
-            component(self.placement.indices[0]),
-            component(self.placement.indices[1]),
-        );
-        range_many([sx, sy], xs, ys, &mut out[..n]);
+        let (xs, ys) = self.placement.target_xy(component);
+        range_many(self.placement.position, xs, ys, &mut out[..n]);
     }
 }
 
@@ -251,13 +253,9 @@ impl MeasurementModel for RssSensor {
     /// The particle filter's hot loop: for the common exponent n = 2 no power function is
     /// needed, so the loop is a multiply-add, a division and a square root per particle.
     fn predict_many<'a>(&self, component: &dyn Fn(usize) -> &'a [f64], n: usize, out: &mut [f64]) {
-        let [sx, sy] = self.placement.position;
-        let (xs, ys) = (
-            component(self.placement.indices[0]),
-            component(self.placement.indices[1]),
-        );
+        let (xs, ys) = self.placement.target_xy(component);
         rss_many(
-            [sx, sy],
+            self.placement.position,
             self.p0,
             self.alpha,
             self.exponent,
