@@ -58,9 +58,8 @@ pub fn spd_inverse(a: &Matrix) -> Result<Matrix, LinalgError> {
     Ok(inv)
 }
 
-/// Check that `a` is a covariance: square, finite, symmetric to a relative tolerance of 1e-9,
-/// and positive definite.
-pub fn check_spd(a: &Matrix) -> Result<(), LinalgError> {
+/// Check that `a` is square, finite and symmetric to a relative tolerance of 1e-9.
+pub fn check_symmetric(a: &Matrix) -> Result<(), LinalgError> {
     if a.nrows() != a.ncols() {
         return Err(LinalgError::NotSquare {
             rows: a.nrows(),
@@ -86,6 +85,13 @@ pub fn check_spd(a: &Matrix) -> Result<(), LinalgError> {
             }
         }
     }
+    Ok(())
+}
+
+/// Check that `a` is a covariance: square, finite, symmetric to a relative tolerance of 1e-9,
+/// and positive definite.
+pub fn check_spd(a: &Matrix) -> Result<(), LinalgError> {
+    check_symmetric(a)?;
     cholesky(a).map(|_| ())
 }
 

@@ -58,7 +58,8 @@ pub enum ParticleError {
 /// How to draw the `n` ancestor indices from the normalized weights. All four are unbiased
 /// (each particle's expected number of copies is `n w_i`) and produce sorted indices, so the
 /// gather that follows reads memory in order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Resampling {
     /// One uniform `u`, positions `(k + u) / n`: copies are `floor(n w_i)` or `ceil(n w_i)`;
     /// the lowest-variance choice and the cheapest (one branch-free pass).

@@ -77,6 +77,9 @@ impl LinearTransition {
 /// Square root `L` with `L L^T = A` of a positive semi-definite matrix: Cholesky when `A` is
 /// definite, otherwise a symmetric eigen-decomposition (Q of a model may be singular).
 pub fn psd_sqrt(a: &Matrix) -> Result<Matrix, crate::linalg::LinalgError> {
+    // Cholesky reads one triangle only: an asymmetric matrix would be sampled from that
+    // triangle while filters use it as given.
+    crate::linalg::check_symmetric(a)?;
     if let Ok(chol) = cholesky(a) {
         return Ok(chol.l());
     }

@@ -9,6 +9,8 @@ use crate::link::{Message, Received, Transmission};
 use rand::{Rng, RngCore};
 use std::sync::Arc;
 
+pub mod params;
+
 /// Sensor that forwards its raw measurement with probability `send_probability`.
 #[derive(Debug, Clone)]
 pub struct ForwardingSensor {
@@ -106,8 +108,15 @@ pub struct CentralizedScheme {
 }
 
 impl CentralizedScheme {
-    pub fn new(system: Arc<System>, rate: f64) -> Self {
-        Self { system, rate }
+    /// `rate` in (0, 1]: the probability that each measurement is forwarded.
+    pub fn new(system: Arc<System>, rate: f64) -> Result<Self, SchemeError> {
+        if !(rate > 0.0 && rate <= 1.0) {
+            return Err(SchemeError::Invalid {
+                field: "rate",
+                message: format!("expected a rate in (0, 1], got {rate}"),
+            });
+        }
+        Ok(Self { system, rate })
     }
 }
 

@@ -4,6 +4,7 @@ pub mod censored_pf;
 pub mod centralized;
 pub mod distributed_kf;
 pub mod quantized_innovation;
+pub mod registry;
 
 use crate::filter::{FilterError, Gaussian};
 use crate::linalg::{LinalgError, Vector};
@@ -84,6 +85,13 @@ pub enum SchemeError {
     },
     #[error("{0}")]
     Unsupported(String),
+    /// A constructor argument out of its range; `field` is the parameter's name in scenario
+    /// files, so the scenario layer can point at it.
+    #[error("{message}")]
+    Invalid {
+        field: &'static str,
+        message: String,
+    },
     #[error("sensor {sensor}: {message}")]
     Protocol { sensor: usize, message: String },
     #[error(

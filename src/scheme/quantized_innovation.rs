@@ -6,6 +6,8 @@
 //! information form (eq. (9)-(14), with (13)'s denominator sqrt(h P h^T + R) as derived in
 //! (A24)). The same fusion runs with the baselines' quantizers (SOI-KF's sign, Msechu's 2^c
 //! levels, You's 2^c + 1 levels) and, for reference, with analog measurements (the EKF).
+pub mod params;
+
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::link::codec802154::{

@@ -1,16 +1,14 @@
 //! Scenario file -> validated experiment. Every check names the file, the field and what was
 //! expected, so a user can fix a file without reading Rust.
 use super::scenario::{
-    FrontierSpec, ModelSpec, PaperSpec, ParamValue, Params, ScenarioFile, SchemeParams,
-    SensorFieldSpec, SensorSpec,
+    FrontierSpec, ModelSpec, PaperSpec, ParamValue, Params, ScenarioFile, SensorFieldSpec,
+    SensorSpec,
 };
 use crate::filter::Gaussian;
 use crate::linalg::{check_spd, Matrix, Vector};
 use crate::model::{presets, LinearSensor, LinearTransition, MeasurementModel};
 use crate::model::{Placement, RangeSensor, RssSensor};
-use crate::scheme::centralized::CentralizedScheme;
-use crate::scheme::distributed_kf::{DistributedKfScheme, Trigger};
-use crate::scheme::quantized_innovation::{Activation, QuantizedInnovationScheme, QuantizerChoice};
+use crate::scheme::registry::{self, BuildContext};
 use crate::scheme::{Scheme, System};
 use rand::{Rng, SeedableRng};
 use std::fmt;
@@ -46,7 +44,8 @@ pub struct Variant {
     pub curve: usize,
     /// Parameters of this point, as written (kind-specific numbers).
     pub params: Params,
-    pub spec: SchemeParams,
+    /// The scheme's `kind`, as registered.
+    pub kind: &'static str,
     pub scheme: Box<dyn Scheme>,
 }
 
@@ -366,12 +365,31 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
             } else {
                 format!("{field} (sweep point {})", desc.join(", "))
             };
-            let spec: SchemeParams = toml::Value::Table(t.clone())
-                .try_into()
-                .map_err(|e: toml::de::Error| ctx.err(&at, scheme_message(&e)))?;
-            kind = spec.kind().to_string();
+            let kind_name = match t.get("kind") {
+                Some(toml::Value::String(k)) => k.clone(),
+                Some(_) => return Err(ctx.err(format!("{field}.kind"), "expected a string")),
+                None => {
+                    return Err(ctx.err(
+                        format!("{field}.kind"),
+                        format!(
+                            "missing the scheme `kind`; one of {}",
+                            registry::kinds().join(", ")
+                        ),
+                    ))
+                }
+            };
+            let entry = registry::find(&kind_name).ok_or_else(|| {
+                ctx.err(
+                    format!("{field}.kind"),
+                    format!(
+                        "unknown scheme kind {kind_name:?}; expected one of {}",
+                        registry::kinds().join(", ")
+                    ),
+                )
+            })?;
+            kind = entry.kind.to_string();
             if curve_label.is_none() {
-                curve_label = Some(spec.default_label().to_string());
+                curve_label = Some(entry.label.to_string());
             }
             let params: Params = t
                 .iter()
@@ -384,11 +402,20 @@ pub fn build(file_spec: ScenarioFile, file: &str) -> Result<Experiment, Scenario
                     _ => None,
                 })
                 .collect();
-            let scheme = scheme(&ctx, &at, &spec, &system, file_spec.steps)?;
+            let mut table = t.clone();
+            table.remove("kind");
+            let cx = BuildContext {
+                system: &system,
+                steps: file_spec.steps,
+            };
+            let scheme = (entry.build)(table, &cx).map_err(|e| match &e.field {
+                Some(f) => ctx.err(format!("{at}.{f}"), e.message.clone()),
+                None => ctx.err(&at, e.message.clone()),
+            })?;
             variants.push(Variant {
                 curve: ci,
                 params,
-                spec,
+                kind: entry.kind,
                 scheme,
             });
         }
@@ -708,164 +735,6 @@ fn sensor_field(
         .collect())
 }
 
-/// The `censored-pf` parameters as written.
-struct CensoredPfArgs<'a> {
-    policy: Option<&'a str>,
-    l: Option<f64>,
-    feedback: Option<&'a str>,
-    fusion: Option<&'a str>,
-    particles: Option<usize>,
-    resampling: Option<&'a str>,
-    ess_threshold: Option<f64>,
-    band: Option<&'a str>,
-    band_samples: Option<usize>,
-    prop3_samples: Option<usize>,
-}
-
-/// Seed 000's scheme from its parameters.
-fn censored_pf(
-    ctx: &Ctx,
-    at: &str,
-    system: &Arc<System>,
-    steps: usize,
-    a: CensoredPfArgs,
-) -> Result<Box<dyn Scheme>, ScenarioError> {
-    use crate::filter::particle::{ResamplePolicy, Resampling};
-    use crate::scheme::censored_pf::{
-        censoring::nis_threshold, BandMethod, CensoredPfScheme, FeedbackMode, Fusion, PfOptions,
-        SendRule,
-    };
-    let field = |name: &str| format!("{at}.{name}");
-    let n = system.n_sensors();
-    let policy = a.policy.unwrap_or("nis");
-    let need_l = || -> Result<f64, ScenarioError> {
-        let l = a.l.ok_or_else(|| {
-            ctx.err(
-                field("l"),
-                format!("policy {policy:?} needs `l`, the average number of sensors sending"),
-            )
-        })?;
-        if !(l > 0.0 && l <= n as f64) {
-            return Err(ctx.err(field("l"), format!("expected l in (0, N = {n}], got {l}")));
-        }
-        Ok(l)
-    };
-    let dims: Vec<usize> = system.sensors.iter().map(|s| s.meas_dim()).collect();
-    let eta = || -> Result<f64, ScenarioError> {
-        if dims.iter().any(|&m| m != dims[0]) {
-            return Err(ctx.err(at, "censoring with one threshold needs sensors of equal measurement dimension (eq. (32))"));
-        }
-        nis_threshold(dims[0], need_l()?, n).map_err(|e| ctx.err(field("l"), e.to_string()))
-    };
-    let (rule, eta_opt) = match policy {
-        "nis" => {
-            let e = eta()?;
-            (SendRule::Nis { eta: e }, Some(e))
-        }
-        "kl" => {
-            let e = eta()?;
-            (SendRule::KlDivergence { eta: e }, Some(e))
-        }
-        "random" => (
-            SendRule::Random {
-                p: need_l()? / n as f64,
-            },
-            None,
-        ),
-        "all" => {
-            if a.l.is_some() {
-                return Err(ctx.err(field("l"), "policy \"all\" sends everything; remove `l`"));
-            }
-            (SendRule::All, None)
-        }
-        other => {
-            return Err(ctx.err(
-                field("policy"),
-                format!("unknown policy {other:?}; expected nis, kl, random or all"),
-            ))
-        }
-    };
-    let feedback = match a.feedback.unwrap_or("prediction") {
-        "none" => FeedbackMode::None,
-        "prediction" => FeedbackMode::Prediction,
-        "prediction-covariance" => FeedbackMode::PredictionAndCovariance,
-        other => {
-            return Err(ctx.err(
-                field("feedback"),
-                format!(
-                "unknown feedback {other:?}; expected none, prediction or prediction-covariance"
-            ),
-            ))
-        }
-    };
-    let fusion = match a
-        .fusion
-        .unwrap_or(if eta_opt.is_some() { "full" } else { "simple" })
-    {
-        "full" => Fusion::Full,
-        "simple" => Fusion::Simple,
-        "exact" => Fusion::Exact,
-        other => {
-            return Err(ctx.err(
-                field("fusion"),
-                format!("unknown fusion {other:?}; expected full, simple or exact"),
-            ))
-        }
-    };
-    let particles = a.particles.unwrap_or(1000);
-    if particles == 0 {
-        return Err(ctx.err(field("particles"), "expected at least 1 particle"));
-    }
-    let resampling = match a.resampling.unwrap_or("systematic") {
-        "systematic" => Resampling::Systematic,
-        "stratified" => Resampling::Stratified,
-        "residual" => Resampling::Residual,
-        "multinomial" => Resampling::Multinomial,
-        other => return Err(ctx.err(field("resampling"), format!("unknown resampling {other:?}; expected systematic, stratified, residual or multinomial"))),
-    };
-    let resample_policy = match a.ess_threshold {
-        None => ResamplePolicy::Always,
-        Some(t) if (0.0..=1.0).contains(&t) => ResamplePolicy::EssBelow(t),
-        Some(t) => {
-            return Err(ctx.err(
-                field("ess_threshold"),
-                format!("expected a fraction in [0, 1], got {t}"),
-            ))
-        }
-    };
-    let band = match (a.band.unwrap_or("exact"), a.band_samples) {
-        ("exact", None) => BandMethod::Exact,
-        ("exact", Some(_)) => {
-            return Err(ctx.err(field("band_samples"), "only for band = \"monte-carlo\""))
-        }
-        ("monte-carlo", s) => BandMethod::MonteCarlo {
-            samples: s.filter(|&s| s > 0).ok_or_else(|| {
-                ctx.err(field("band_samples"), "expected a positive number of draws")
-            })?,
-        },
-        (other, _) => {
-            return Err(ctx.err(
-                field("band"),
-                format!("unknown band method {other:?}; expected exact or monte-carlo"),
-            ))
-        }
-    };
-    let options = PfOptions {
-        particles,
-        fusion,
-        feedback,
-        eta: eta_opt,
-        resampling,
-        resample_policy,
-        band,
-        prop3_samples: a.prop3_samples.unwrap_or(200),
-    };
-    CensoredPfScheme::new(system.clone(), rule, options)
-        .and_then(|s| s.with_horizon(steps))
-        .map(|s| Box::new(s) as Box<dyn Scheme>)
-        .map_err(|e| ctx.err(at, e.to_string()))
-}
-
 /// Cartesian product of the sweep lists, in file order.
 fn grid(sweep: &[(String, Vec<toml::Value>)]) -> Vec<Vec<(String, toml::Value)>> {
     let mut points: Vec<Vec<(String, toml::Value)>> = vec![Vec::new()];
@@ -881,212 +750,4 @@ fn grid(sweep: &[(String, Vec<toml::Value>)]) -> Vec<Vec<(String, toml::Value)>>
         points = next;
     }
     points
-}
-
-fn scheme_message(e: &toml::de::Error) -> String {
-    let m = e.message().to_string();
-    if m.contains("unknown variant") {
-        format!("unknown scheme kind: {m}")
-    } else {
-        m
-    }
-}
-
-fn scheme(
-    ctx: &Ctx,
-    at: &str,
-    spec: &SchemeParams,
-    system: &Arc<System>,
-    steps: usize,
-) -> Result<Box<dyn Scheme>, ScenarioError> {
-    let finite_nonneg = |name: &str, v: f64| {
-        if v.is_finite() && v >= 0.0 {
-            Ok(v)
-        } else {
-            Err(ctx.err(
-                format!("{at}.{name}"),
-                format!("expected a finite number >= 0, got {v}"),
-            ))
-        }
-    };
-    let dkf = |trigger: Trigger, bound: Option<Matrix>| -> Result<Box<dyn Scheme>, ScenarioError> {
-        DistributedKfScheme::new(system.clone(), steps, trigger, bound)
-            .map(|s| Box::new(s) as Box<dyn Scheme>)
-            .map_err(|e| ctx.err(at, e.to_string()))
-    };
-    match spec {
-        SchemeParams::CentralizedKf => Ok(Box::new(CentralizedScheme::new(system.clone(), 1.0))),
-        SchemeParams::CentralizedKfRandom { rate } => {
-            if !(*rate > 0.0 && *rate <= 1.0) {
-                return Err(ctx.err(
-                    format!("{at}.rate"),
-                    format!("expected a rate in (0, 1], got {rate}"),
-                ));
-            }
-            Ok(Box::new(CentralizedScheme::new(system.clone(), *rate)))
-        }
-        SchemeParams::Dkf => dkf(Trigger::Always, None),
-        SchemeParams::DkfAlg1Random { rate } => {
-            if !(*rate >= 0.5 && *rate <= 1.0) {
-                return Err(ctx.err(
-                    format!("{at}.rate"),
-                    format!("expected a rate in [0.5, 1] (Algorithm 1 needs a transmission at least every other step), got {rate}"),
-                ));
-            }
-            dkf(Trigger::random_for_rate(*rate), None)
-        }
-        SchemeParams::DkfAlg1Event { alpha } => dkf(
-            Trigger::Event {
-                alpha: finite_nonneg("alpha", *alpha)?,
-            },
-            None,
-        ),
-        SchemeParams::DkfAlg2Event { alpha, b, b_matrix } => {
-            let alpha = finite_nonneg("alpha", *alpha)?;
-            let n = system.state_dim();
-            let bm = match (b, b_matrix) {
-                (Some(b), None) => {
-                    if !(b.is_finite() && *b > 0.0) {
-                        return Err(ctx.err(
-                            format!("{at}.b"),
-                            format!("expected a positive number (B = b I), got {b}"),
-                        ));
-                    }
-                    Matrix::identity(n, n) * *b
-                }
-                (None, Some(rows)) => {
-                    let m = matrix(ctx, &format!("{at}.B"), rows)?;
-                    covariance(ctx, &format!("{at}.B"), &m, n)?;
-                    m
-                }
-                _ => return Err(ctx.err(at, "give exactly one of `b` (B = b I) and `B`")),
-            };
-            let b_inv = crate::linalg::spd_inverse(&bm)
-                .map_err(|e| ctx.err(format!("{at}.B"), e.to_string()))?;
-            dkf(Trigger::Bounded { alpha, b_inv }, Some(bm))
-        }
-        SchemeParams::CensoredPf {
-            policy,
-            l,
-            feedback,
-            fusion,
-            particles,
-            resampling,
-            ess_threshold,
-            band,
-            band_samples,
-            prop3_samples,
-        } => censored_pf(
-            ctx,
-            at,
-            system,
-            steps,
-            CensoredPfArgs {
-                policy: policy.as_deref(),
-                l: *l,
-                feedback: feedback.as_deref(),
-                fusion: fusion.as_deref(),
-                particles: *particles,
-                resampling: resampling.as_deref(),
-                ess_threshold: *ess_threshold,
-                band: band.as_deref(),
-                band_samples: *band_samples,
-                prop3_samples: *prop3_samples,
-            },
-        ),
-        SchemeParams::QuantizedInnovation {
-            quantizer,
-            bits,
-            levels,
-            flag_zone,
-            activate,
-        } => {
-            let need_bits = || -> Result<u8, ScenarioError> {
-                bits.ok_or_else(|| {
-                    ctx.err(
-                        format!("{at}.bits"),
-                        format!("quantizer {quantizer:?} needs `bits`"),
-                    )
-                })
-            };
-            let unused = |name: &str, present: bool| -> Result<(), ScenarioError> {
-                if present {
-                    Err(ctx.err(
-                        format!("{at}.{name}"),
-                        format!("not a parameter of quantizer {quantizer:?}"),
-                    ))
-                } else {
-                    Ok(())
-                }
-            };
-            let choice = match quantizer.as_str() {
-                "zhang" => {
-                    unused("levels", levels.is_some())?;
-                    QuantizerChoice::Zhang {
-                        bits: need_bits()?,
-                        flag_zone: flag_zone.unwrap_or(true),
-                    }
-                }
-                "you" | "msechu" | "sign" => {
-                    unused("levels", levels.is_some())?;
-                    unused("flag_zone", flag_zone.is_some())?;
-                    match quantizer.as_str() {
-                        "you" => QuantizerChoice::You { bits: need_bits()? },
-                        "msechu" => QuantizerChoice::Msechu { bits: need_bits()? },
-                        _ => {
-                            unused("bits", bits.is_some())?;
-                            QuantizerChoice::Msechu { bits: 1 }
-                        }
-                    }
-                }
-                "lloyd-max" => {
-                    unused("bits", bits.is_some())?;
-                    unused("flag_zone", flag_zone.is_some())?;
-                    QuantizerChoice::LloydMax {
-                        levels: levels.ok_or_else(|| {
-                            ctx.err(format!("{at}.levels"), "quantizer \"lloyd-max\" needs `levels`")
-                        })?,
-                    }
-                }
-                "analog" => {
-                    unused("bits", bits.is_some())?;
-                    unused("levels", levels.is_some())?;
-                    unused("flag_zone", flag_zone.is_some())?;
-                    QuantizerChoice::Analog
-                }
-                other => {
-                    return Err(ctx.err(
-                        format!("{at}.quantizer"),
-                        format!(
-                            "unknown quantizer {other:?}; expected zhang, you, msechu, sign, lloyd-max or analog"
-                        ),
-                    ))
-                }
-            };
-            let activation = match activate {
-                None => Activation::All,
-                Some(count) => {
-                    if *count == 0 || *count > system.n_sensors() {
-                        return Err(ctx.err(
-                            format!("{at}.activate"),
-                            format!("expected 1..={} sensors, got {count}", system.n_sensors()),
-                        ));
-                    }
-                    let indices = system.sensors[0].target_indices().ok_or_else(|| {
-                        ctx.err(
-                            format!("{at}.activate"),
-                            "nearest-sensor activation needs placed (range or rss) sensors",
-                        )
-                    })?;
-                    Activation::Nearest {
-                        count: *count,
-                        indices,
-                    }
-                }
-            };
-            QuantizedInnovationScheme::new(system.clone(), &choice, activation)
-                .map(|s| Box::new(s) as Box<dyn Scheme>)
-                .map_err(|e| ctx.err(at, e.to_string()))
-        }
-    }
 }

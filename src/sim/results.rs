@@ -115,7 +115,7 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
             let (msg_ss, msg_se) = s.steady_messages.mean_se(exp.trials);
             SchemeSummary {
                 name: exp.curves[v.curve].label.clone(),
-                kind: v.spec.kind().to_string(),
+                kind: v.kind.to_string(),
                 curve: v.curve,
                 params: v.params.clone(),
                 rmse,

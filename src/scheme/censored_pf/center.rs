@@ -4,7 +4,7 @@
 use super::censoring::whitened_band;
 use super::local_plan::{LocalPlan, LocalStep};
 use super::sensor::local_covariance_update;
-use super::{BandMethod, FeedbackMode, Fusion, PfOptions};
+use super::{BandMethod, FeedbackMode, Fusion, PfOptions, Protocol};
 use crate::filter::particle::{ParticleCloud, ParticleTransition};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{symmetrize, Matrix, Vector};
@@ -47,6 +47,8 @@ fn planned(
 pub struct CensoredPfCenter {
     system: Arc<System>,
     transition: ParticleTransition,
+    /// The send rule and feedback the sensors follow (shared with them by construction).
+    protocol: Protocol,
     options: PfOptions,
     cloud: ParticleCloud,
     rng: Xoshiro256PlusPlus,
@@ -72,7 +74,12 @@ pub struct CensoredPfCenter {
 }
 
 impl CensoredPfCenter {
-    pub fn new(system: Arc<System>, options: PfOptions, seed: u64) -> Result<Self, SchemeError> {
+    pub fn new(
+        system: Arc<System>,
+        protocol: Protocol,
+        options: PfOptions,
+        seed: u64,
+    ) -> Result<Self, SchemeError> {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
         let transition = ParticleTransition::new(&system.transition).map_err(pf_err)?;
         let cloud = ParticleCloud::from_gaussian(options.particles, &system.prior, &mut rng)
@@ -106,6 +113,7 @@ impl CensoredPfCenter {
             transition,
             cloud,
             rng,
+            protocol,
             options,
             system,
             last_prop3_log_factor: 0.0,
@@ -346,8 +354,8 @@ impl FusionCenter for CensoredPfCenter {
             }
         }
         let full_nofb = self.options.fusion == Fusion::Full
-            && self.options.feedback == FeedbackMode::None
-            && self.options.eta.is_some();
+            && self.protocol.feedback() == FeedbackMode::None
+            && self.protocol.eta().is_some();
         let cross_pred: Vec<Vec<Matrix>> = if full_nofb {
             self.cross_cov
                 .iter()
@@ -384,8 +392,8 @@ impl FusionCenter for CensoredPfCenter {
             }
         }
         // Silence is data only under censoring with the full likelihood.
-        if let (Fusion::Full, Some(eta)) = (self.options.fusion, self.options.eta) {
-            match self.options.feedback {
+        if let (Fusion::Full, Some(eta)) = (self.options.fusion, self.protocol.eta()) {
+            match self.protocol.feedback() {
                 FeedbackMode::None => {
                     let p_pred = self.p_pred.clone();
                     self.last_prop3_log_factor =
@@ -478,7 +486,7 @@ impl FusionCenter for CensoredPfCenter {
     }
 
     fn feedback(&self) -> Option<Feedback> {
-        match self.options.feedback {
+        match self.protocol.feedback() {
             FeedbackMode::None => None,
             FeedbackMode::Prediction => Some(Feedback::Prediction {
                 mean: self.prediction.mean.clone(),
@@ -516,14 +524,17 @@ mod tests {
         let options = PfOptions {
             particles: 3000,
             fusion: Fusion::Full,
-            feedback: FeedbackMode::Prediction,
-            eta: Some(1.4),
             resampling: Resampling::Systematic,
             resample_policy: ResamplePolicy::Always,
             band: BandMethod::Exact,
             prop3_samples: 1,
         };
-        let mut center = CensoredPfCenter::new(system, options, 5).unwrap();
+        let protocol = Protocol::new(
+            super::super::SendRule::Nis { eta: 1.4 },
+            FeedbackMode::Prediction,
+        )
+        .unwrap();
+        let mut center = CensoredPfCenter::new(system, protocol, options, 5).unwrap();
         let x_ref = Vector::from_vec(vec![1.0, 0.0, -2.0, 0.0]);
         let p = Matrix::identity(4, 4) * 3.0;
         let s = &h * &p * h.transpose() + sensor.noise_cov();

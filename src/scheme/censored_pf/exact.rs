@@ -17,7 +17,7 @@
 //! Resampling copies a particle's state together with its copies, so every particle carries
 //! a history that is consistent with everything the fusion center has seen.
 use super::sensor::local_covariance_update;
-use super::PfOptions;
+use super::{PfOptions, Protocol};
 use crate::filter::particle::{ParticleCloud, ParticleTransition};
 use crate::filter::Gaussian;
 use crate::linalg::{symmetrize, Matrix, Vector};
@@ -107,10 +107,13 @@ pub struct ExactCensoredCenter {
 impl ExactCensoredCenter {
     pub fn new(
         system: Arc<System>,
+        protocol: Protocol,
         options: PfOptions,
-        eta: f64,
         seed: u64,
     ) -> Result<Self, SchemeError> {
+        let eta = protocol.eta().ok_or_else(|| {
+            SchemeError::Unsupported("CFwMD-exact is for censoring sensors".into())
+        })?;
         let sensors: Vec<LinearSensor> = system
             .sensors
             .iter()
@@ -507,8 +510,6 @@ mod tests {
         PfOptions {
             particles,
             fusion: Fusion::Exact,
-            feedback: FeedbackMode::None,
-            eta: Some(0.0),
             resampling: Resampling::Systematic,
             resample_policy: ResamplePolicy::EssBelow(0.0),
             band: BandMethod::Exact,
@@ -571,7 +572,9 @@ mod tests {
             let sys = system(vector);
             let eta = nis_threshold(sys.sensors[0].meas_dim(), 2.0, 2).unwrap();
             assert_eq!(eta, 0.0);
-            let mut center = ExactCensoredCenter::new(sys.clone(), options(200), eta, 1).unwrap();
+            let protocol = Protocol::new(SendRule::Nis { eta }, FeedbackMode::None).unwrap();
+            let mut center =
+                ExactCensoredCenter::new(sys.clone(), protocol, options(200), 1).unwrap();
             let mut sensors: Vec<CensoringSensor> = sys
                 .sensors
                 .iter()
@@ -582,8 +585,7 @@ mod tests {
                         s.clone(),
                         Arc::new(sys.transition.clone()),
                         sys.prior.clone(),
-                        SendRule::Nis { eta },
-                        FeedbackMode::None,
+                        protocol,
                     )
                 })
                 .collect();

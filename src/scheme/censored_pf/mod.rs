@@ -15,7 +15,6 @@
 //! use hushfuse::linalg::{Matrix, Vector};
 //! use hushfuse::link::Received;
 //! use hushfuse::model::{presets, LinearSensor, MeasurementModel};
-//! use hushfuse::scheme::censored_pf::censoring::nis_threshold;
 //! use hushfuse::scheme::censored_pf::*;
 //! use hushfuse::scheme::{Scheme, System};
 //! use rand::SeedableRng;
@@ -34,19 +33,18 @@
 //!     sensors,
 //!     prior: Gaussian::new(Vector::from_vec(vec![0.0, 10.0]), Matrix::identity(2, 2)),
 //! });
-//! // On average l = 1 of the N = 2 sensors talks: eta = chi^2_1 quantile of eq. (8).
-//! let eta = nis_threshold(1, 1.0, 2)?;
+//! // On average l = 1 of the N = 2 sensors talks (eta = chi^2_1 quantile of eq. (8)), and
+//! // the fused prediction is fed back. Sensors and center share this one protocol.
+//! let protocol = Protocol::for_target(Policy::Nis, Some(1.0), FeedbackMode::Prediction, &system)?;
 //! let options = PfOptions {
 //!     particles: 500,
-//!     fusion: Fusion::Full,                // CFwMD: silences are data
-//!     feedback: FeedbackMode::Prediction,  // the fused prediction is fed back
-//!     eta: Some(eta),
+//!     fusion: Fusion::Full, // CFwMD: silences are data
 //!     resampling: Resampling::Systematic,
 //!     resample_policy: ResamplePolicy::Always,
 //!     band: BandMethod::Exact,
 //!     prop3_samples: 200,
 //! };
-//! let scheme = CensoredPfScheme::new(system, SendRule::Nis { eta }, options)?.with_horizon(20)?;
+//! let scheme = CensoredPfScheme::new(system, protocol, options)?.with_horizon(20)?;
 //! let mut inst = scheme.build_with_seed(1)?;
 //! let mut coins = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(2);
 //! let mut feedback = inst.center.feedback();
@@ -67,6 +65,7 @@ pub mod censoring;
 pub mod center;
 pub mod exact;
 pub mod local_plan;
+pub mod params;
 pub mod sensor;
 
 pub use center::CensoredPfCenter;
@@ -78,18 +77,21 @@ use crate::scheme::{Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use std::sync::Arc;
 
 /// What the fusion center feeds back before each step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum FeedbackMode {
     /// Nothing: sensors censor against their own KF prediction (Prop. 3 / 6).
     None,
     /// The fused prediction x_{k|k-1} (CFwMD, Prop. 1 / 4 / 7).
     Prediction,
     /// The fused prediction and its covariance (CFwMD2, Prop. 2 / 5 / 8).
+    #[serde(rename = "prediction-covariance")]
     PredictionAndCovariance,
 }
 
 /// Which likelihood the particle filter uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Fusion {
     /// Received measurements and silences (CFwMD).
     Full,
@@ -109,19 +111,141 @@ pub enum BandMethod {
     MonteCarlo { samples: usize },
 }
 
-/// Options of the particle-filter fusion center.
+/// Which send rule the sensors follow, as named in scenario files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Policy {
+    /// Censoring by the normalized innovation squared (eq. (4), (31)).
+    Nis,
+    /// Censoring by the KL divergence (eq. (24)), scalar measurements.
+    Kl,
+    /// Random selection with probability l / N.
+    Random,
+    /// Every sensor sends every measurement.
+    All,
+}
+
+/// What the sensors and the fusion center agree on: the send rule (with its threshold eta)
+/// and what is fed back. Both sides take it from here, so they cannot disagree.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Protocol {
+    rule: SendRule,
+    feedback: FeedbackMode,
+}
+
+impl Protocol {
+    /// A protocol from an explicit rule. The KL rule (24) is defined for scalar measurements
+    /// censored against the local prediction, so it needs `FeedbackMode::None`.
+    pub fn new(rule: SendRule, feedback: FeedbackMode) -> Result<Self, SchemeError> {
+        match rule {
+            SendRule::Nis { eta } | SendRule::KlDivergence { eta }
+                if !(eta.is_finite() && eta >= 0.0) =>
+            {
+                return Err(SchemeError::Invalid {
+                    field: "l",
+                    message: format!("the censoring threshold eta must be finite and >= 0, got {eta}"),
+                })
+            }
+            SendRule::Random { p } if !(0.0..=1.0).contains(&p) => {
+                return Err(SchemeError::Invalid {
+                    field: "l",
+                    message: format!("the send probability l/N must be in [0, 1], got {p}"),
+                })
+            }
+            SendRule::KlDivergence { .. } if feedback != FeedbackMode::None => {
+                return Err(SchemeError::Invalid {
+                    field: "feedback",
+                    message: "the KL rule (24) censors against the local prediction: it needs feedback = \"none\"".into(),
+                })
+            }
+            _ => {}
+        }
+        Ok(Self { rule, feedback })
+    }
+
+    /// The protocol that makes on average `l` of the N sensors send per step: eta from the
+    /// chi-square quantile of eq. (8) / (32) for censoring, probability l / N for random
+    /// selection. The one place where l becomes a threshold.
+    pub fn for_target(
+        policy: Policy,
+        l: Option<f64>,
+        feedback: FeedbackMode,
+        system: &System,
+    ) -> Result<Self, SchemeError> {
+        let n = system.n_sensors();
+        let need_l = || -> Result<f64, SchemeError> {
+            let l = l.ok_or_else(|| SchemeError::Invalid {
+                field: "l",
+                message: format!(
+                    "policy {policy:?} needs `l`, the average number of sensors sending per step"
+                ),
+            })?;
+            if !(l > 0.0 && l <= n as f64) {
+                return Err(SchemeError::Invalid {
+                    field: "l",
+                    message: format!("expected l in (0, N = {n}], got {l}"),
+                });
+            }
+            Ok(l)
+        };
+        let eta = || -> Result<f64, SchemeError> {
+            let dims: Vec<usize> = system.sensors.iter().map(|s| s.meas_dim()).collect();
+            if dims.iter().any(|&m| m != dims[0]) {
+                return Err(SchemeError::Unsupported(
+                    "censoring with one threshold needs sensors of equal measurement dimension (eq. (32))".into(),
+                ));
+            }
+            censoring::nis_threshold(dims[0], need_l()?, n).map_err(|e| SchemeError::Invalid {
+                field: "l",
+                message: e.to_string(),
+            })
+        };
+        let rule = match policy {
+            Policy::Nis => SendRule::Nis { eta: eta()? },
+            Policy::Kl => SendRule::KlDivergence { eta: eta()? },
+            Policy::Random => SendRule::Random {
+                p: need_l()? / n as f64,
+            },
+            Policy::All => {
+                if l.is_some() {
+                    return Err(SchemeError::Invalid {
+                        field: "l",
+                        message: "policy \"all\" sends everything; remove `l`".into(),
+                    });
+                }
+                SendRule::All
+            }
+        };
+        Self::new(rule, feedback)
+    }
+
+    pub fn rule(&self) -> SendRule {
+        self.rule
+    }
+
+    pub fn feedback(&self) -> FeedbackMode {
+        self.feedback
+    }
+
+    /// The censoring threshold when sensors censor by NIS or KL; `None` for random selection
+    /// and all-send (their silences carry no information).
+    pub fn eta(&self) -> Option<f64> {
+        match self.rule {
+            SendRule::Nis { eta } | SendRule::KlDivergence { eta } => Some(eta),
+            SendRule::Random { .. } | SendRule::All => None,
+        }
+    }
+}
+
+/// Options of the particle-filter fusion center (what only the center needs).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PfOptions {
     pub particles: usize,
     pub fusion: Fusion,
-    pub feedback: FeedbackMode,
-    /// The censoring threshold when sensors censor by NIS; `None` for random selection and
-    /// all-send (their silences carry no information).
-    pub eta: Option<f64>,
     pub resampling: Resampling,
     pub resample_policy: ResamplePolicy,
     pub band: BandMethod,
-    /// Monte Carlo draws for the Prop. 3 / 6 integral.
+    /// Monte Carlo draws for the Prop. 3 / 6 integral (at least 1).
     pub prop3_samples: usize,
 }
 
@@ -130,7 +254,7 @@ pub struct PfOptions {
 pub struct CensoredPfScheme {
     system: Arc<System>,
     transition: Arc<crate::model::LinearTransition>,
-    rule: SendRule,
+    protocol: Protocol,
     options: PfOptions,
     /// The linear sensors' local covariances for the horizon, shared by every instance.
     plan: Option<Arc<LocalPlan>>,
@@ -141,22 +265,31 @@ impl CensoredPfScheme {
     /// sensors (Remark 4 (III)); the KL rule needs scalar measurements.
     pub fn new(
         system: Arc<System>,
-        rule: SendRule,
+        protocol: Protocol,
         options: PfOptions,
     ) -> Result<Self, SchemeError> {
         if options.particles == 0 {
-            return Err(SchemeError::Unsupported(
-                "particles must be at least 1".into(),
-            ));
+            return Err(SchemeError::Invalid {
+                field: "particles",
+                message: "expected at least 1 particle".into(),
+            });
         }
-        let censoring = matches!(rule, SendRule::Nis { .. } | SendRule::KlDivergence { .. });
-        if censoring != options.eta.is_some() {
-            return Err(SchemeError::Unsupported(
-                "eta must be given exactly when sensors censor".into(),
-            ));
+        if options.prop3_samples == 0 {
+            return Err(SchemeError::Invalid {
+                field: "prop3_samples",
+                message: "expected at least 1 draw".into(),
+            });
         }
+        if let BandMethod::MonteCarlo { samples: 0 } = options.band {
+            return Err(SchemeError::Invalid {
+                field: "band_samples",
+                message: "expected a positive number of draws".into(),
+            });
+        }
+        let rule = protocol.rule();
+        let censoring = protocol.eta().is_some();
         if options.fusion == Fusion::Full
-            && options.feedback == FeedbackMode::None
+            && protocol.feedback() == FeedbackMode::None
             && censoring
             && system.sensors.iter().any(|s| s.as_linear().is_none())
         {
@@ -165,7 +298,7 @@ impl CensoredPfScheme {
             ));
         }
         if options.fusion == Fusion::Exact {
-            if options.feedback != FeedbackMode::None || !censoring {
+            if protocol.feedback() != FeedbackMode::None || !censoring {
                 return Err(SchemeError::Unsupported(
                     "CFwMD-exact is for censoring sensors without feedback (feedback = \"none\")"
                         .into(),
@@ -178,7 +311,7 @@ impl CensoredPfScheme {
             }
         }
         if let SendRule::KlDivergence { .. } = rule {
-            if options.feedback != FeedbackMode::None
+            if protocol.feedback() != FeedbackMode::None
                 || system.sensors.iter().any(|s| s.meas_dim() != 1)
             {
                 return Err(SchemeError::Unsupported(
@@ -189,7 +322,7 @@ impl CensoredPfScheme {
         Ok(Self {
             transition: Arc::new(system.transition.clone()),
             system,
-            rule,
+            protocol,
             options,
             plan: None,
         })
@@ -221,8 +354,7 @@ impl Scheme for CensoredPfScheme {
                     s.clone(),
                     self.transition.clone(),
                     self.system.prior.clone(),
-                    self.rule,
-                    self.options.feedback,
+                    self.protocol,
                 );
                 Box::new(match &self.plan {
                     Some(plan) => sensor.with_plan(plan.clone()),
@@ -230,22 +362,22 @@ impl Scheme for CensoredPfScheme {
                 }) as Box<dyn SensorNode>
             })
             .collect();
-        let center: Box<dyn crate::scheme::FusionCenter> =
-            match (self.options.fusion, self.options.eta) {
-                (Fusion::Exact, Some(eta)) => Box::new(exact::ExactCensoredCenter::new(
-                    self.system.clone(),
-                    self.options,
-                    eta,
-                    seed,
-                )?),
-                _ => {
-                    let center = CensoredPfCenter::new(self.system.clone(), self.options, seed)?;
-                    Box::new(match &self.plan {
-                        Some(plan) => center.with_plan(plan.clone()),
-                        None => center,
-                    })
-                }
-            };
+        let center: Box<dyn crate::scheme::FusionCenter> = match self.options.fusion {
+            Fusion::Exact => Box::new(exact::ExactCensoredCenter::new(
+                self.system.clone(),
+                self.protocol,
+                self.options,
+                seed,
+            )?),
+            _ => {
+                let center =
+                    CensoredPfCenter::new(self.system.clone(), self.protocol, self.options, seed)?;
+                Box::new(match &self.plan {
+                    Some(plan) => center.with_plan(plan.clone()),
+                    None => center,
+                })
+            }
+        };
         Ok(SchemeInstance { sensors, center })
     }
 }

@@ -42,6 +42,7 @@ pub struct CensoringSensor {
     index: usize,
     sensor: Arc<dyn MeasurementModel>,
     transition: Arc<LinearTransition>,
+    /// Both from the scheme's [`super::Protocol`], which the fusion center shares.
     rule: SendRule,
     feedback: FeedbackMode,
     /// The shared local-covariance sequence (linear sensors), if the scheme computed one.
@@ -107,15 +108,14 @@ impl CensoringSensor {
         sensor: Arc<dyn MeasurementModel>,
         transition: Arc<LinearTransition>,
         prior: Gaussian,
-        rule: SendRule,
-        feedback: FeedbackMode,
+        protocol: super::Protocol,
     ) -> Self {
         Self {
             index,
             sensor,
             transition,
-            rule,
-            feedback,
+            rule: protocol.rule(),
+            feedback: protocol.feedback(),
             plan: None,
             local: prior,
             last: None,

@@ -29,17 +29,19 @@ fn system(n_sensors: usize) -> Arc<System> {
     })
 }
 
-fn options(fusion: Fusion, feedback: FeedbackMode, eta: Option<f64>) -> PfOptions {
+fn options(fusion: Fusion) -> PfOptions {
     PfOptions {
         particles: 500,
         fusion,
-        feedback,
-        eta,
         resampling: crate::filter::particle::Resampling::Systematic,
         resample_policy: crate::filter::particle::ResamplePolicy::Always,
         band: BandMethod::Exact,
         prop3_samples: 50,
     }
+}
+
+fn protocol(rule: SendRule, feedback: FeedbackMode) -> Protocol {
+    Protocol::new(rule, feedback).unwrap()
 }
 
 /// Runs one trial of `scheme` on data from `seed`; returns the fused estimates per step.
@@ -77,20 +79,20 @@ fn everything_sent_makes_all_fusions_identical() {
     assert_eq!(eta, 0.0);
     let full = CensoredPfScheme::new(
         sys.clone(),
-        SendRule::Nis { eta },
-        options(Fusion::Full, FeedbackMode::Prediction, Some(eta)),
+        protocol(SendRule::Nis { eta }, FeedbackMode::Prediction),
+        options(Fusion::Full),
     )
     .unwrap();
     let simple = CensoredPfScheme::new(
         sys.clone(),
-        SendRule::Nis { eta },
-        options(Fusion::Simple, FeedbackMode::Prediction, Some(eta)),
+        protocol(SendRule::Nis { eta }, FeedbackMode::Prediction),
+        options(Fusion::Simple),
     )
     .unwrap();
     let all = CensoredPfScheme::new(
         sys.clone(),
-        SendRule::All,
-        options(Fusion::Simple, FeedbackMode::Prediction, None),
+        protocol(SendRule::All, FeedbackMode::Prediction),
+        options(Fusion::Simple),
     )
     .unwrap();
     let a = run(&full, &sys, 5, 15);
@@ -124,8 +126,7 @@ fn censoring_rate_matches_l_over_n_without_feedback() {
                 sys.sensors[0].clone(),
                 Arc::new(sys.transition.clone()),
                 sys.prior.clone(),
-                SendRule::Nis { eta },
-                FeedbackMode::None,
+                protocol(SendRule::Nis { eta }, FeedbackMode::None),
             );
             for k in 1..=50 {
                 x = sys.transition.sample_next(&x, &mut rng);
@@ -158,16 +159,14 @@ fn kl_rule_decides_like_nis() {
         sys.sensors[0].clone(),
         Arc::new(sys.transition.clone()),
         sys.prior.clone(),
-        SendRule::Nis { eta },
-        FeedbackMode::None,
+        protocol(SendRule::Nis { eta }, FeedbackMode::None),
     );
     let mut kl_node = CensoringSensor::new(
         0,
         sys.sensors[0].clone(),
         Arc::new(sys.transition.clone()),
         sys.prior.clone(),
-        SendRule::KlDivergence { eta },
-        FeedbackMode::None,
+        protocol(SendRule::KlDivergence { eta }, FeedbackMode::None),
     );
     let mut x = sys.prior.mean.clone();
     let (mut sent, mut silent) = (0, 0);
@@ -198,14 +197,14 @@ fn silence_is_informative_with_feedback() {
     let eta = nis_threshold(1, 1.0, 2).unwrap();
     let full = CensoredPfScheme::new(
         sys.clone(),
-        SendRule::Nis { eta },
-        options(Fusion::Full, FeedbackMode::Prediction, Some(eta)),
+        protocol(SendRule::Nis { eta }, FeedbackMode::Prediction),
+        options(Fusion::Full),
     )
     .unwrap();
     let simple = CensoredPfScheme::new(
         sys.clone(),
-        SendRule::Nis { eta },
-        options(Fusion::Simple, FeedbackMode::Prediction, Some(eta)),
+        protocol(SendRule::Nis { eta }, FeedbackMode::Prediction),
+        options(Fusion::Simple),
     )
     .unwrap();
     let mut diffs = Vec::new();
@@ -238,16 +237,63 @@ fn silence_is_informative_with_feedback() {
 fn bad_configurations_are_errors() {
     let sys = system(2);
     assert!(nis_threshold(1, 3.0, 2).is_err());
-    let mut o = options(Fusion::Full, FeedbackMode::Prediction, Some(0.4));
+    let nis = protocol(SendRule::Nis { eta: 0.4 }, FeedbackMode::Prediction);
+    let mut o = options(Fusion::Full);
     o.particles = 0;
-    assert!(CensoredPfScheme::new(sys.clone(), SendRule::Nis { eta: 0.4 }, o).is_err());
-    // eta without a censoring rule.
+    assert!(matches!(
+        CensoredPfScheme::new(sys.clone(), nis, o),
+        Err(SchemeError::Invalid {
+            field: "particles",
+            ..
+        })
+    ));
+    let mut o = options(Fusion::Full);
+    o.prop3_samples = 0;
+    assert!(matches!(
+        CensoredPfScheme::new(sys.clone(), nis, o),
+        Err(SchemeError::Invalid {
+            field: "prop3_samples",
+            ..
+        })
+    ));
+    // The KL rule censors against the local prediction: feedback is refused.
+    assert!(matches!(
+        Protocol::new(
+            SendRule::KlDivergence { eta: 0.4 },
+            FeedbackMode::Prediction
+        ),
+        Err(SchemeError::Invalid {
+            field: "feedback",
+            ..
+        })
+    ));
+    assert!(Protocol::new(SendRule::Nis { eta: f64::NAN }, FeedbackMode::None).is_err());
+    // l outside (0, N], and `l` with all-send.
+    for l in [0.0, 2.5, f64::INFINITY] {
+        assert!(Protocol::for_target(Policy::Nis, Some(l), FeedbackMode::None, &sys).is_err());
+    }
+    assert!(Protocol::for_target(Policy::All, Some(1.0), FeedbackMode::None, &sys).is_err());
+    assert!(Protocol::for_target(Policy::Random, None, FeedbackMode::None, &sys).is_err());
+    // CFwMD-exact needs censoring without feedback.
     assert!(CensoredPfScheme::new(
         sys,
-        SendRule::All,
-        options(Fusion::Full, FeedbackMode::Prediction, Some(0.4))
+        protocol(SendRule::All, FeedbackMode::None),
+        options(Fusion::Exact)
     )
     .is_err());
+}
+
+/// The sensors and the fusion center take eta and the feedback mode from one protocol, which
+/// `for_target` derives from l: eta is the chi-square quantile of eq. (8) for l / N.
+#[test]
+fn protocol_for_target_derives_eta_once() {
+    let sys = system(2);
+    let p = Protocol::for_target(Policy::Nis, Some(1.0), FeedbackMode::Prediction, &sys).unwrap();
+    assert_eq!(p.eta(), Some(nis_threshold(1, 1.0, 2).unwrap()));
+    assert_eq!(p.feedback(), FeedbackMode::Prediction);
+    let r = Protocol::for_target(Policy::Random, Some(0.5), FeedbackMode::None, &sys).unwrap();
+    assert_eq!(r.rule(), SendRule::Random { p: 0.25 });
+    assert_eq!(r.eta(), None);
 }
 
 /// The shared local-covariance plan is a speed-up only: with and without it, every feedback
@@ -263,8 +309,10 @@ fn local_plan_changes_no_number() {
         FeedbackMode::PredictionAndCovariance,
     ] {
         for fusion in [Fusion::Full, Fusion::Simple] {
-            let o = options(fusion, feedback, Some(eta));
-            let plain = CensoredPfScheme::new(sys.clone(), SendRule::Nis { eta }, o).unwrap();
+            let o = options(fusion);
+            let plain =
+                CensoredPfScheme::new(sys.clone(), protocol(SendRule::Nis { eta }, feedback), o)
+                    .unwrap();
             let planned = plain.clone().with_horizon(30).unwrap();
             assert_eq!(
                 run(&plain, &sys, 11, 30),
@@ -273,8 +321,9 @@ fn local_plan_changes_no_number() {
             );
         }
     }
-    let o = options(Fusion::Full, FeedbackMode::Prediction, Some(eta));
-    let short = CensoredPfScheme::new(sys.clone(), SendRule::Nis { eta }, o)
+    let o = options(Fusion::Full);
+    let nis = protocol(SendRule::Nis { eta }, FeedbackMode::Prediction);
+    let short = CensoredPfScheme::new(sys.clone(), nis, o)
         .unwrap()
         .with_horizon(2)
         .unwrap();
@@ -301,8 +350,9 @@ fn center_recovers_after_a_refused_message() {
     let sys = system(2);
     let eta = nis_threshold(1, 1.0, 2).unwrap();
     for planned in [false, true] {
-        let o = options(Fusion::Full, FeedbackMode::Prediction, Some(eta));
-        let mut scheme = CensoredPfScheme::new(sys.clone(), SendRule::Nis { eta }, o).unwrap();
+        let o = options(Fusion::Full);
+        let nis = protocol(SendRule::Nis { eta }, FeedbackMode::Prediction);
+        let mut scheme = CensoredPfScheme::new(sys.clone(), nis, o).unwrap();
         if planned {
             scheme = scheme.with_horizon(5).unwrap();
         }

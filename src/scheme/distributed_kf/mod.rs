@@ -7,6 +7,7 @@
 //! they share only the data-independent [`GlobalizedPlan`], which each side could compute on
 //! its own.
 pub mod center;
+pub mod params;
 pub mod plan;
 pub mod sensor;
 
@@ -63,6 +64,67 @@ impl DistributedKfScheme {
         })
     }
 
+    /// The globalized DKF at full rate (Section II).
+    pub fn full_rate(system: Arc<System>, horizon: usize) -> Result<Self, SchemeError> {
+        Self::new(system, horizon, Trigger::Always, None)
+    }
+
+    /// Algorithm 1 with random communication at the average rate `rate` in [0.5, 1].
+    pub fn alg1_random(
+        system: Arc<System>,
+        horizon: usize,
+        rate: f64,
+    ) -> Result<Self, SchemeError> {
+        if !(0.5..=1.0).contains(&rate) {
+            return Err(SchemeError::Invalid {
+                field: "rate",
+                message: format!("expected a rate in [0.5, 1] (Algorithm 1 needs a transmission at least every other step), got {rate}"),
+            });
+        }
+        Self::new(system, horizon, Trigger::random_for_rate(rate), None)
+    }
+
+    /// Algorithm 1 with the event test (12) at threshold `alpha` >= 0.
+    pub fn alg1_event(
+        system: Arc<System>,
+        horizon: usize,
+        alpha: f64,
+    ) -> Result<Self, SchemeError> {
+        Self::new(
+            system,
+            horizon,
+            Trigger::Event {
+                alpha: check_alpha(alpha)?,
+            },
+            None,
+        )
+    }
+
+    /// Algorithm 2: test (13) with threshold `alpha` >= 0 and the bound `b` (symmetric
+    /// positive definite, n x n).
+    pub fn alg2_event(
+        system: Arc<System>,
+        horizon: usize,
+        alpha: f64,
+        b: Matrix,
+    ) -> Result<Self, SchemeError> {
+        let alpha = check_alpha(alpha)?;
+        let n = system.state_dim();
+        if b.nrows() != n || b.ncols() != n {
+            return Err(SchemeError::Invalid {
+                field: "B",
+                message: format!("expected a {n}x{n} matrix, got {}x{}", b.nrows(), b.ncols()),
+            });
+        }
+        let b_inv = crate::linalg::check_spd(&b)
+            .and_then(|()| crate::linalg::spd_inverse(&b))
+            .map_err(|e| SchemeError::Invalid {
+                field: "B",
+                message: format!("expected a symmetric positive definite bound: {e}"),
+            })?;
+        Self::new(system, horizon, Trigger::Bounded { alpha, b_inv }, Some(b))
+    }
+
     /// The shared plan.
     pub fn plan(&self) -> &Arc<GlobalizedPlan> {
         &self.plan
@@ -93,6 +155,17 @@ impl Scheme for DistributedKfScheme {
             self.fusion.clone(),
         ));
         Ok(SchemeInstance { sensors, center })
+    }
+}
+
+fn check_alpha(alpha: f64) -> Result<f64, SchemeError> {
+    if alpha.is_finite() && alpha >= 0.0 {
+        Ok(alpha)
+    } else {
+        Err(SchemeError::Invalid {
+            field: "alpha",
+            message: format!("expected a finite number >= 0, got {alpha}"),
+        })
     }
 }
 

@@ -1,0 +1,204 @@
+//! Scenario-file parameters of seed 000's scheme. The send rule and its threshold come from
+//! [`Protocol::for_target`], the only place where `l` becomes eta.
+use super::{BandMethod, CensoredPfScheme, FeedbackMode, Fusion, PfOptions, Policy, Protocol};
+use crate::filter::particle::{ResamplePolicy, Resampling};
+use crate::scheme::registry::{
+    self, BuildContext, ParamDoc, ParamError, SchemeEntry, SchemeParams,
+};
+use crate::scheme::Scheme;
+use serde::{Deserialize, Serialize};
+
+/// How the probability of a vector silence is computed, as written in files.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum BandName {
+    /// The exact generalized chi-square probability.
+    #[default]
+    Exact,
+    /// The paper's counting of `band_samples` Monte Carlo draws.
+    MonteCarlo,
+}
+
+/// `censored-pf`.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CensoredPfParams {
+    #[serde(default = "default_policy")]
+    pub policy: Policy,
+    /// The average number of sensors sending per step (not for `all`).
+    #[serde(default)]
+    pub l: Option<f64>,
+    #[serde(default = "default_feedback")]
+    pub feedback: FeedbackMode,
+    /// Default: `full` under censoring, `simple` otherwise.
+    #[serde(default)]
+    pub fusion: Option<Fusion>,
+    #[serde(default = "default_particles")]
+    pub particles: usize,
+    #[serde(default)]
+    pub resampling: Resampling,
+    /// Resample only when ESS < ess_threshold * particles (default: every step).
+    #[serde(default)]
+    pub ess_threshold: Option<f64>,
+    #[serde(default)]
+    pub band: BandName,
+    #[serde(default)]
+    pub band_samples: Option<usize>,
+    #[serde(default = "default_prop3_samples")]
+    pub prop3_samples: usize,
+}
+
+fn default_policy() -> Policy {
+    Policy::Nis
+}
+fn default_feedback() -> FeedbackMode {
+    FeedbackMode::Prediction
+}
+fn default_particles() -> usize {
+    1000
+}
+fn default_prop3_samples() -> usize {
+    200
+}
+
+/// Largest particle count a scenario may ask for: 10^7 particles of a 6-D state are about
+/// 1 GB per fusion center and thread.
+pub const MAX_PARTICLES: usize = 10_000_000;
+
+impl CensoredPfParams {
+    /// The protocol (send rule, eta, feedback) these parameters describe.
+    pub fn protocol(&self, cx: &BuildContext) -> Result<Protocol, ParamError> {
+        Ok(Protocol::for_target(
+            self.policy,
+            self.l,
+            self.feedback,
+            cx.system,
+        )?)
+    }
+
+    /// The fusion center's options.
+    pub fn options(&self, censoring: bool) -> Result<PfOptions, ParamError> {
+        if self.particles > MAX_PARTICLES {
+            return Err(ParamError::at(
+                "particles",
+                format!("at most {MAX_PARTICLES} particles, got {}", self.particles),
+            ));
+        }
+        let resample_policy = match self.ess_threshold {
+            None => ResamplePolicy::Always,
+            Some(t) if (0.0..=1.0).contains(&t) => ResamplePolicy::EssBelow(t),
+            Some(t) => {
+                return Err(ParamError::at(
+                    "ess_threshold",
+                    format!("expected a fraction in [0, 1], got {t}"),
+                ))
+            }
+        };
+        let band = match (self.band, self.band_samples) {
+            (BandName::Exact, None) => BandMethod::Exact,
+            (BandName::Exact, Some(_)) => {
+                return Err(ParamError::at(
+                    "band_samples",
+                    "only for band = \"monte-carlo\"",
+                ))
+            }
+            (BandName::MonteCarlo, s) => BandMethod::MonteCarlo {
+                samples: s.filter(|&s| s > 0).ok_or_else(|| {
+                    ParamError::at("band_samples", "expected a positive number of draws")
+                })?,
+            },
+        };
+        Ok(PfOptions {
+            particles: self.particles,
+            fusion: self.fusion.unwrap_or(if censoring {
+                Fusion::Full
+            } else {
+                Fusion::Simple
+            }),
+            resampling: self.resampling,
+            resample_policy,
+            band,
+            prop3_samples: self.prop3_samples,
+        })
+    }
+}
+
+impl SchemeParams for CensoredPfParams {
+    fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
+        let protocol = self.protocol(cx)?;
+        let options = self.options(protocol.eta().is_some())?;
+        let scheme =
+            CensoredPfScheme::new(cx.system.clone(), protocol, options)?.with_horizon(cx.steps)?;
+        Ok(Box::new(scheme))
+    }
+}
+
+pub const ENTRY: SchemeEntry = SchemeEntry {
+    kind: "censored-pf",
+    label: "Censored PF",
+    summary: "seed 000: local KF/EKF sensors send z when the NIS reaches eta = chi^2(l/N) (eq. (4)/(8)/(31)/(43)); particle-filter fusion center with the likelihood of silences",
+    params: &[
+        ParamDoc {
+            name: "policy",
+            values: "nis|kl|random|all",
+            default: "nis",
+            meaning: "nis: censoring by NIS (eq. (4)); kl: by the KL rule (eq. (24), scalar, needs feedback = \"none\"); random: send with probability l/N; all: always",
+        },
+        ParamDoc {
+            name: "l",
+            values: "number in (0, N]",
+            default: "required*",
+            meaning: "the average number of sensors sending per step (not for policy = \"all\")",
+        },
+        ParamDoc {
+            name: "feedback",
+            values: "none|prediction|prediction-covariance",
+            default: "prediction",
+            meaning: "what the center feeds back: nothing (Prop. 3/6), x_{k|k-1} (CFwMD), and P_{k|k-1} (CFwMD2)",
+        },
+        ParamDoc {
+            name: "fusion",
+            values: "full|simple|exact",
+            default: "full*",
+            meaning: "full: likelihood of silences (CFwMD; default under censoring); simple: ignore silences (CFoMD; default otherwise); exact: CFwMD-exact (needs feedback = \"none\", linear sensors)",
+        },
+        ParamDoc {
+            name: "particles",
+            values: "integer in 1..=10^7",
+            default: "1000",
+            meaning: "particles of the fusion center",
+        },
+        ParamDoc {
+            name: "resampling",
+            values: "systematic|stratified|residual|multinomial",
+            default: "systematic",
+            meaning: "resampling scheme",
+        },
+        ParamDoc {
+            name: "ess_threshold",
+            values: "number in [0, 1]",
+            default: "none",
+            meaning: "resample only when ESS < threshold x particles (default: every step)",
+        },
+        ParamDoc {
+            name: "band",
+            values: "exact|monte-carlo",
+            default: "exact",
+            meaning: "vector silences: exact generalized chi-square, or the paper's counting with band_samples",
+        },
+        ParamDoc {
+            name: "band_samples",
+            values: "integer >= 1",
+            default: "required*",
+            meaning: "draws of the counting estimate (band = \"monte-carlo\" only)",
+        },
+        ParamDoc {
+            name: "prop3_samples",
+            values: "integer >= 1",
+            default: "200",
+            meaning: "Monte Carlo draws of the Prop. 3 / 6 integral (no feedback)",
+        },
+    ],
+    knob: Some("l"),
+    build: registry::parse_and_build::<CensoredPfParams>,
+};

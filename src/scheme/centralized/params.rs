@@ -1,0 +1,59 @@
+//! Scenario-file parameters of the centralized baselines.
+use super::CentralizedScheme;
+use crate::scheme::registry::{
+    self, BuildContext, ParamDoc, ParamError, SchemeEntry, SchemeParams,
+};
+use crate::scheme::Scheme;
+use serde::{Deserialize, Serialize};
+
+/// `centralized-kf`: no parameters.
+#[derive(Debug, Clone, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AllParams {}
+
+impl SchemeParams for AllParams {
+    fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
+        Ok(Box::new(CentralizedScheme::new(cx.system.clone(), 1.0)?))
+    }
+}
+
+/// `centralized-kf-random`.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RandomParams {
+    /// Probability that each measurement is sent, in (0, 1].
+    pub rate: f64,
+}
+
+impl SchemeParams for RandomParams {
+    fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
+        Ok(Box::new(CentralizedScheme::new(
+            cx.system.clone(),
+            self.rate,
+        )?))
+    }
+}
+
+pub const ALL: SchemeEntry = SchemeEntry {
+    kind: "centralized-kf",
+    label: "Centralized KF (all data)",
+    summary:
+        "KF at the fusion center with every raw measurement (32 bits per component): the bound",
+    params: &[],
+    knob: None,
+    build: registry::parse_and_build::<AllParams>,
+};
+
+pub const RANDOM: SchemeEntry = SchemeEntry {
+    kind: "centralized-kf-random",
+    label: "Centralized KF (random)",
+    summary: "each measurement sent with probability `rate`, otherwise lost (seed 004 Section V)",
+    params: &[ParamDoc {
+        name: "rate",
+        values: "number in (0, 1]",
+        default: "required",
+        meaning: "probability that a sensor sends its measurement at a step",
+    }],
+    knob: Some("rate"),
+    build: registry::parse_and_build::<RandomParams>,
+};

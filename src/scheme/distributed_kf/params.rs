@@ -1,0 +1,158 @@
+//! Scenario-file parameters of seed 004's schemes.
+use super::DistributedKfScheme;
+use crate::linalg::Matrix;
+use crate::scheme::registry::{
+    self, BuildContext, ParamDoc, ParamError, SchemeEntry, SchemeParams,
+};
+use crate::scheme::Scheme;
+use serde::{Deserialize, Serialize};
+
+/// `dkf`: no parameters.
+#[derive(Debug, Clone, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FullRateParams {}
+
+impl SchemeParams for FullRateParams {
+    fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
+        Ok(Box::new(DistributedKfScheme::full_rate(
+            cx.system.clone(),
+            cx.steps,
+        )?))
+    }
+}
+
+/// `dkf-alg1-random`.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Alg1RandomParams {
+    pub rate: f64,
+}
+
+impl SchemeParams for Alg1RandomParams {
+    fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
+        Ok(Box::new(DistributedKfScheme::alg1_random(
+            cx.system.clone(),
+            cx.steps,
+            self.rate,
+        )?))
+    }
+}
+
+/// `dkf-alg1-event`.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Alg1EventParams {
+    pub alpha: f64,
+}
+
+impl SchemeParams for Alg1EventParams {
+    fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
+        Ok(Box::new(DistributedKfScheme::alg1_event(
+            cx.system.clone(),
+            cx.steps,
+            self.alpha,
+        )?))
+    }
+}
+
+/// `dkf-alg2-event`: the bound as `b` (B = b I) or as the matrix `B`.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Alg2EventParams {
+    pub alpha: f64,
+    #[serde(default)]
+    pub b: Option<f64>,
+    #[serde(default, rename = "B")]
+    pub b_matrix: Option<Vec<Vec<f64>>>,
+}
+
+impl SchemeParams for Alg2EventParams {
+    fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
+        let n = cx.system.state_dim();
+        let b = match (self.b, &self.b_matrix) {
+            (Some(b), None) => {
+                if !(b.is_finite() && b > 0.0) {
+                    return Err(ParamError::at(
+                        "b",
+                        format!("expected a positive number (B = b I), got {b}"),
+                    ));
+                }
+                Matrix::identity(n, n) * b
+            }
+            (None, Some(rows)) => registry::matrix_param("B", rows)?,
+            _ => {
+                return Err(ParamError::whole(
+                    "give exactly one of `b` (B = b I) and `B`",
+                ))
+            }
+        };
+        Ok(Box::new(DistributedKfScheme::alg2_event(
+            cx.system.clone(),
+            cx.steps,
+            self.alpha,
+            b,
+        )?))
+    }
+}
+
+const ALPHA: ParamDoc = ParamDoc {
+    name: "alpha",
+    values: "number >= 0",
+    default: "required",
+    meaning: "event threshold on the norm of the estimate change",
+};
+
+pub const FULL_RATE: SchemeEntry = SchemeEntry {
+    kind: "dkf",
+    label: "Globalized DKF (full rate)",
+    summary: "globalized distributed KF, every sensor sends its estimate every step (seed 004 Section II)",
+    params: &[],
+    knob: None,
+    build: registry::parse_and_build::<FullRateParams>,
+};
+
+pub const ALG1_RANDOM: SchemeEntry = SchemeEntry {
+    kind: "dkf-alg1-random",
+    label: "Algorithm 1 (random)",
+    summary: "Algorithm 1 (eq. (10)-(11)): a sensor silent at k-1 must send, otherwise sends with p = 2 - 1/rate",
+    params: &[ParamDoc {
+        name: "rate",
+        values: "number in [0.5, 1]",
+        default: "required",
+        meaning: "average communication rate",
+    }],
+    knob: Some("rate"),
+    build: registry::parse_and_build::<Alg1RandomParams>,
+};
+
+pub const ALG1_EVENT: SchemeEntry = SchemeEntry {
+    kind: "dkf-alg1-event",
+    label: "Algorithm 1 (event-based)",
+    summary: "Algorithm 1 with the event test (12) on the standard local KF (seed 004)",
+    params: &[ALPHA],
+    knob: Some("alpha"),
+    build: registry::parse_and_build::<Alg1EventParams>,
+};
+
+pub const ALG2_EVENT: SchemeEntry = SchemeEntry {
+    kind: "dkf-alg2-event",
+    label: "Algorithm 2 (event-based)",
+    summary: "Algorithm 2 (Section IV): test (13), debiasing (14), inflated covariance; needs an invertible F",
+    params: &[
+        ALPHA,
+        ParamDoc {
+            name: "b",
+            values: "number > 0",
+            default: "none",
+            meaning: "the bound B = b I (give `b` or `B`)",
+        },
+        ParamDoc {
+            name: "B",
+            values: "n x n SPD matrix",
+            default: "none",
+            meaning: "the bound B as a matrix (give `b` or `B`)",
+        },
+    ],
+    knob: Some("alpha"),
+    build: registry::parse_and_build::<Alg2EventParams>,
+};
