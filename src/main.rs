@@ -34,6 +34,9 @@ struct RunArgs {
     /// Output folder (default: hushfuse-out/<scenario>/).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Run even if the estimated memory or work is above the limits (16 GiB, 10^14 operations).
+    #[arg(long)]
+    allow_large: bool,
 }
 
 #[derive(Subcommand)]
@@ -47,6 +50,8 @@ enum Command {
     },
     /// List the built-in scenarios.
     List,
+    /// List every scheme kind with its parameters and defaults.
+    ListSchemes,
     /// Run a built-in paper scenario and print our numbers beside the paper's, and its claims.
     Reproduce {
         /// Built-in scenario id (e.g. dormann-fig1) or a scenario file with a [paper] section.
@@ -75,6 +80,10 @@ fn main() -> ExitCode {
             } else {
                 run(&id, &args, true)
             }
+        }
+        Some(Command::ListSchemes) => {
+            print_out(&hushfuse::scheme::registry::describe());
+            Ok(())
         }
         Some(Command::List) => {
             let text: String = builtin::BUILTIN
@@ -140,6 +149,8 @@ fn scenario_text(scenario: &str) -> Result<(String, String), Failure> {
 fn table_report(text: &str, source: &str, args: &RunArgs) -> Result<(), Failure> {
     let file: tables::TableReportFile =
         toml::from_str(text).map_err(|e| Failure::Input(format!("{source}: {}", e.message())))?;
+    build::check_name(&file.name)
+        .map_err(|m| Failure::Input(format!("{source}: field `name`: {m}")))?;
     let rows = tables::compare(&file).map_err(|e| Failure::Input(format!("{source}: {e}")))?;
     let mut out = tables::render(&file, &rows);
     let dir = args
@@ -163,19 +174,18 @@ fn table_report(text: &str, source: &str, args: &RunArgs) -> Result<(), Failure>
 
 fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     let (text, source) = scenario_text(scenario)?;
-    if text.lines().any(|l| l.trim_start().starts_with("report =")) {
+    let kind = build::file_kind(&text, &source).map_err(|e| Failure::Input(e.to_string()))?;
+    if kind == build::FileKind::TableReport {
         return table_report(&text, &source, args);
     }
-    let mut exp = build::load(&text, &source).map_err(|e| Failure::Input(e.to_string()))?;
-    if let Some(t) = args.trials {
-        if t == 0 {
-            return Err(Failure::Input("--trials must be at least 1".into()));
-        }
-        exp.trials = t;
-    }
-    if let Some(s) = args.seed {
-        exp.seed = s;
-    }
+    let options = build::LoadOptions {
+        trials: args.trials,
+        seed: args.seed,
+        threads: args.threads,
+        limits: args.allow_large.then(hushfuse::sim::limits::Limits::none),
+    };
+    let exp =
+        build::load_with(&text, &source, &options).map_err(|e| Failure::Input(e.to_string()))?;
     let start = Instant::now();
     let bar = ProgressBar::with_draw_target(Some(exp.trials as u64), ProgressDrawTarget::hidden());
     bar.set_style(
@@ -265,5 +275,12 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         files.join(", ")
     ));
     print_out(&text);
+    let bad = results::non_finite(&summary);
+    if !bad.is_empty() {
+        return Err(Failure::Run(format!(
+            "the run produced numbers that are not finite (written as null in summary.json), so its results cannot be trusted:\n  {}\nrescale the scenario's units or check its noise levels",
+            bad.join("\n  ")
+        )));
+    }
     Ok(())
 }

@@ -145,4 +145,19 @@ pub trait Scheme: Send + Sync + Debug {
     fn schedule(&self) -> Schedule {
         Schedule::All
     }
+    /// What one instance costs beyond the Kalman-filter baseline that the simulator assumes for
+    /// every scheme (particles, banks of filters), so that runs that cannot fit are refused
+    /// before they start. `None`: nothing beyond the baseline.
+    fn footprint(&self) -> Option<Footprint> {
+        None
+    }
+}
+
+/// Rough resources of one scheme instance.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Footprint {
+    /// Bytes the instance holds while it runs.
+    pub bytes: f64,
+    /// Floating-point operations per time step.
+    pub flops_per_step: f64,
 }

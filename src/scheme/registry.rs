@@ -70,6 +70,9 @@ pub trait SchemeParams: DeserializeOwned {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError>;
 }
 
+/// Parses a scheme table and builds the scheme.
+pub type BuildFn = fn(toml::Table, &BuildContext) -> Result<Box<dyn Scheme>, ParamError>;
+
 /// One registered scheme kind.
 #[derive(Clone, Copy)]
 pub struct SchemeEntry {
@@ -85,7 +88,7 @@ pub struct SchemeEntry {
     pub knob: Option<&'static str>,
     /// Parses a scheme table (its parameters only: no `kind`, `label`, `sweep`, `frontier`)
     /// and builds the scheme.
-    pub build: fn(toml::Table, &BuildContext) -> Result<Box<dyn Scheme>, ParamError>,
+    pub build: BuildFn,
 }
 
 impl std::fmt::Debug for SchemeEntry {

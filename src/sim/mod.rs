@@ -2,10 +2,15 @@
 //! reports. The simulator owns the only time loop.
 pub mod build;
 pub mod builtin;
+pub mod limits;
 pub mod metrics;
+pub mod paper_check;
 pub mod plot;
 pub mod report;
 pub mod results;
 pub mod runner;
 pub mod scenario;
+pub mod schemes;
+pub mod sweep;
+pub mod system;
 pub mod tables;

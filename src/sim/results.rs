@@ -292,7 +292,10 @@ pub fn curve_points(exp: &Experiment, summary: &Summary, curve: usize) -> Vec<Cu
         let mut best: BTreeMap<i64, CurvePoint> = BTreeMap::new();
         for p in pts {
             let bin = (p.rate / f.bin_width).floor() as i64;
-            let key = |q: &CurvePoint| if f.metric == "mse" { q.mse } else { q.trace };
+            let key = |q: &CurvePoint| match f.metric {
+                super::scenario::FrontierMetric::Mse => q.mse,
+                super::scenario::FrontierMetric::Trace => q.trace,
+            };
             match best.get(&bin) {
                 Some(b) if key(b) <= key(&p) => {}
                 _ => {
@@ -304,4 +307,50 @@ pub fn curve_points(exp: &Experiment, summary: &Summary, curve: usize) -> Vec<Cu
     }
     pts.sort_by(|a, b| a.rate.total_cmp(&b.rate));
     pts
+}
+
+/// Where a summary holds a number that is not finite (an overflow or a collapsed filter):
+/// `scheme (params): metric` for each. A run that produces one must not look like a success.
+pub fn non_finite(summary: &Summary) -> Vec<String> {
+    let mut out = Vec::new();
+    for s in &summary.schemes {
+        let value = serde_json::to_value(s).unwrap_or(serde_json::Value::Null);
+        let mut bad = Vec::new();
+        find_nulls(&value, "", &mut bad);
+        bad.dedup();
+        if !bad.is_empty() {
+            out.push(format!(
+                "{} ({}): {}",
+                s.name,
+                params_text(&s.params),
+                bad.join(", ")
+            ));
+        }
+    }
+    out
+}
+
+/// JSON has no NaN or infinity: serde writes them as `null`, and nothing else in a scheme's
+/// summary is optional.
+fn find_nulls(v: &serde_json::Value, path: &str, out: &mut Vec<String>) {
+    match v {
+        serde_json::Value::Null => out.push(path.to_string()),
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                let p = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                find_nulls(x, &p, out);
+            }
+        }
+        // A per-step or per-trial list is named once, not once per entry.
+        serde_json::Value::Array(a) => {
+            for x in a {
+                find_nulls(x, path, out);
+            }
+        }
+        _ => {}
+    }
 }

@@ -1,8 +1,30 @@
-//! Scenario files as written by users: plain serde structs that mirror the TOML, with no
-//! validation. [`super::build`] turns them into runtime objects that cannot be wrong.
-//! Documented field by field in `docs/scenarios.md`.
-use serde::{Deserialize, Serialize};
+//! Scenario files as written by users: serde structs that mirror the TOML. Serde rejects unknown
+//! keys, wrong types, unknown names of choices and lists of the wrong length; [`super::build`]
+//! checks the rest (ranges, dimensions, consistency) and turns them into runtime objects that
+//! cannot be wrong. Documented field by field in `docs/scenarios.md`.
+use serde::{Deserialize, Deserializer, Serialize};
 use std::collections::BTreeMap;
+
+/// A fixed-length list (`position = [x, y]`): serde's arrays would silently drop extra entries.
+fn exact<'de, D, T, const N: usize>(d: D) -> Result<[T; N], D::Error>
+where
+    D: Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    let v: Vec<T> = Vec::deserialize(d)?;
+    let len = v.len();
+    v.try_into().map_err(|_| {
+        serde::de::Error::custom(format!("expected a list of exactly {N} entries, got {len}"))
+    })
+}
+
+fn exact_opt<'de, D, T, const N: usize>(d: D) -> Result<Option<[T; N]>, D::Error>
+where
+    D: Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    exact::<D, T, N>(d).map(Some)
+}
 
 /// A scheme parameter's value as written in a file.
 #[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
@@ -91,7 +113,7 @@ pub enum ModelSpec {
         dt: f64,
         sigma2: f64,
         #[serde(default)]
-        noise: Option<String>,
+        noise: NoiseForm,
     },
     /// State (x, vx, y, vy).
     #[serde(rename = "constant-velocity-2d")]
@@ -99,7 +121,7 @@ pub enum ModelSpec {
         dt: f64,
         sigma2: f64,
         #[serde(default)]
-        noise: Option<String>,
+        noise: NoiseForm,
     },
     /// State (x, vx, ax, y, vy, ay), white-noise jerk (seed 004 Section V).
     #[serde(rename = "near-constant-acceleration-2d")]
@@ -113,6 +135,48 @@ pub enum ModelSpec {
         #[serde(rename = "Q")]
         q: Vec<Vec<f64>>,
     },
+}
+
+/// How white-noise acceleration enters a constant-velocity model.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoiseForm {
+    /// Continuous white-noise acceleration, Q = sigma2 [[D^3/3, D^2/2], [D^2/2, D]].
+    #[default]
+    Continuous,
+    /// Discrete white-noise acceleration, Q = sigma2 [[D^4/4, D^3/2], [D^3/2, D^2]].
+    Discrete,
+}
+
+/// Kinds of sensor.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum SensorKind {
+    /// z = H x + v.
+    #[default]
+    Linear,
+    /// Distance to the sensor (seed 003 eq. (17)).
+    Range,
+    /// Received signal strength (seed 000 Section VII-C).
+    Rss,
+}
+
+/// Kinds of placed sensor in a field.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum PlacedKind {
+    Range,
+    Rss,
+}
+
+/// How a field's sensors are placed.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Layout {
+    /// Uniform over the area, from the field's own seed.
+    Random,
+    /// Cell centres of an nx x ny grid.
+    Grid,
 }
 
 /// Prior of x_0: the truth is drawn from it and every filter starts from it.
@@ -136,12 +200,12 @@ pub struct SensorSpec {
     pub name: Option<String>,
     /// `linear` (default), `range` (seed 003 eq. (17)) or `rss` (seed 000 Section VII-C).
     #[serde(default)]
-    pub kind: Option<String>,
+    pub kind: SensorKind,
     /// Sensor position (x, y), for `range` and `rss`.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact_opt")]
     pub position: Option<[f64; 2]>,
     /// State indices of the target's (x, y), for `range` and `rss`.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact_opt")]
     pub position_indices: Option<[usize; 2]>,
     /// RSS signal power P0.
     #[serde(default)]
@@ -170,11 +234,12 @@ pub struct SensorSpec {
 #[serde(deny_unknown_fields)]
 pub struct SensorFieldSpec {
     /// `range` or `rss`.
-    pub kind: String,
+    pub kind: PlacedKind,
     /// `random` (uniform over `area`, drawn from `seed`) or `grid` (cell centres of an
     /// nx x ny grid over `area`).
-    pub layout: String,
+    pub layout: Layout,
     /// [x_min, x_max, y_min, y_max].
+    #[serde(deserialize_with = "exact")]
     pub area: [f64; 4],
     /// Number of sensors (random layout).
     #[serde(default)]
@@ -184,8 +249,9 @@ pub struct SensorFieldSpec {
     #[serde(default)]
     pub seed: Option<u64>,
     /// [nx, ny] (grid layout).
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact_opt")]
     pub grid: Option<[usize; 2]>,
+    #[serde(deserialize_with = "exact")]
     pub position_indices: [usize; 2],
     /// Measurement noise variance of every sensor.
     pub r: f64,
@@ -203,9 +269,17 @@ pub struct SensorFieldSpec {
 #[serde(deny_unknown_fields)]
 pub struct FrontierSpec {
     /// `trace` or `mse` (steady state).
-    pub metric: String,
+    pub metric: FrontierMetric,
     /// Width of a rate bin.
     pub bin_width: f64,
+}
+
+/// What a frontier keeps the best of.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum FrontierMetric {
+    Trace,
+    Mse,
 }
 
 /// Published results and claims.
@@ -252,6 +326,7 @@ pub enum ClaimSpec {
         a: String,
         b: String,
         metric: String,
+        #[serde(deserialize_with = "exact")]
         rate_range: [f64; 2],
     },
     /// Some variant of `scheme` communicates at a rate below `rate`.

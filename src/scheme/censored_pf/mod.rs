@@ -342,6 +342,22 @@ impl Scheme for CensoredPfScheme {
         self.build_with_seed(0)
     }
 
+    /// The cloud (state, weights, resampling scratch) and one likelihood pass per sensor; the
+    /// exact fusion carries a copy of every sensor's filter per particle.
+    fn footprint(&self) -> Option<crate::scheme::Footprint> {
+        let n = self.system.state_dim() as f64;
+        let sensors = self.system.n_sensors() as f64;
+        let per_particle = match self.options.fusion {
+            Fusion::Exact => n * (sensors + 1.0),
+            _ => n,
+        };
+        let p = self.options.particles as f64;
+        Some(crate::scheme::Footprint {
+            bytes: p * 8.0 * (3.0 * per_particle + sensors + 4.0),
+            flops_per_step: p * (per_particle * per_particle + 20.0 * sensors),
+        })
+    }
+
     fn build_with_seed(&self, seed: u64) -> Result<SchemeInstance, SchemeError> {
         let sensors = self
             .system

@@ -1,0 +1,214 @@
+//! Checks a scenario's `[paper]` section against the scenario itself before anything runs: every
+//! label names a curve, every parameter set picks exactly one variant, every metric and group
+//! exists, tolerances and ranges make sense. A typo is an error, never a `FAILS` or a `null`.
+use super::build::{Ctx, Curve, ScenarioError, Variant};
+use super::scenario::{ClaimSpec, PaperSpec, Params};
+
+struct Scope<'a> {
+    ctx: &'a Ctx<'a>,
+    curves: &'a [Curve],
+    variants: &'a [Variant],
+    groups: &'a [(String, Vec<usize>)],
+}
+
+impl Scope<'_> {
+    fn curve(&self, field: &str, label: &str) -> Result<usize, ScenarioError> {
+        self.curves
+            .iter()
+            .position(|c| c.label == label)
+            .ok_or_else(|| {
+                let labels: Vec<&str> = self.curves.iter().map(|c| c.label.as_str()).collect();
+                self.ctx.err(
+                    field,
+                    format!("no scheme is labelled {label:?}; the labels are {labels:?}"),
+                )
+            })
+    }
+
+    /// The curve must exist and `params` must pick exactly one of its variants.
+    fn variant(
+        &self,
+        field: &str,
+        label: &str,
+        params_field: &str,
+        params: &Params,
+    ) -> Result<(), ScenarioError> {
+        let c = self.curve(field, label)?;
+        let n = self
+            .variants
+            .iter()
+            .filter(|v| {
+                v.curve == c
+                    && params
+                        .iter()
+                        .all(|(k, p)| v.params.get(k).is_some_and(|x| x.matches(p)))
+            })
+            .count();
+        match n {
+            1 => Ok(()),
+            0 => Err(self.ctx.err(
+                params_field,
+                format!("no variant of {label:?} has these parameters"),
+            )),
+            n => Err(self.ctx.err(
+                params_field,
+                format!(
+                    "{n} variants of {label:?} match; give its swept parameters ({})",
+                    self.curves[c].swept.join(", ")
+                ),
+            )),
+        }
+    }
+
+    fn group_metric(&self, field: &str, metric: &str, prefix: &str) -> Result<(), ScenarioError> {
+        let group = metric.strip_prefix(prefix).unwrap_or_default();
+        if self.groups.iter().any(|(g, _)| g == group) {
+            Ok(())
+        } else {
+            let names: Vec<&str> = self.groups.iter().map(|(g, _)| g.as_str()).collect();
+            Err(self.ctx.err(
+                field,
+                format!("unknown group {group:?} in {metric:?}; the groups are {names:?}"),
+            ))
+        }
+    }
+
+    fn one_of(&self, field: &str, metric: &str, allowed: &[&str]) -> Result<(), ScenarioError> {
+        if allowed.contains(&metric) {
+            Ok(())
+        } else {
+            Err(self.ctx.err(
+                field,
+                format!("unknown metric {metric:?}; expected one of {allowed:?}"),
+            ))
+        }
+    }
+}
+
+fn finite_nonneg(ctx: &Ctx, field: &str, v: f64) -> Result<(), ScenarioError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(ctx.err(field, format!("expected a finite number >= 0, got {v}")))
+    }
+}
+
+/// Validates the `[paper]` section.
+pub(crate) fn check(
+    ctx: &Ctx,
+    paper: &PaperSpec,
+    curves: &[Curve],
+    variants: &[Variant],
+    groups: &[(String, Vec<usize>)],
+) -> Result<(), ScenarioError> {
+    let s = Scope {
+        ctx,
+        curves,
+        variants,
+        groups,
+    };
+    for (i, p) in paper.published.iter().enumerate() {
+        let at = |f: &str| format!("paper.published[{i}].{f}");
+        s.variant(&at("scheme"), &p.scheme, &at("params"), &p.params)?;
+        if p.metric.starts_with("rmse:") {
+            s.group_metric(&at("metric"), &p.metric, "rmse:")?;
+        } else {
+            s.one_of(
+                &at("metric"),
+                &p.metric,
+                &[
+                    "mse",
+                    "trace",
+                    "rate",
+                    "transmissions_per_step",
+                    "rmse:<group>",
+                ],
+            )?;
+        }
+        if !p.value.is_finite() {
+            return Err(ctx.err(at("value"), "expected a finite number"));
+        }
+    }
+    for (i, c) in paper.claims.iter().enumerate() {
+        let at = |f: &str| format!("paper.claims[{i}].{f}");
+        match c {
+            ClaimSpec::Below {
+                a,
+                b,
+                metric,
+                rate_range,
+                ..
+            } => {
+                s.curve(&at("a"), a)?;
+                s.curve(&at("b"), b)?;
+                s.one_of(&at("metric"), metric, &["mse", "trace"])?;
+                let [lo, hi] = *rate_range;
+                if !(lo.is_finite() && hi.is_finite() && lo < hi && lo >= 0.0) {
+                    return Err(ctx.err(
+                        at("rate_range"),
+                        format!("expected [lo, hi] with 0 <= lo < hi, got [{lo}, {hi}]"),
+                    ));
+                }
+            }
+            ClaimSpec::ReachesRateBelow { scheme, rate, .. } => {
+                s.curve(&at("scheme"), scheme)?;
+                if !(rate.is_finite() && *rate > 0.0) {
+                    return Err(ctx.err(at("rate"), format!("expected a rate > 0, got {rate}")));
+                }
+            }
+            ClaimSpec::Consistent { schemes, .. } => {
+                if schemes.is_empty() {
+                    return Err(ctx.err(at("schemes"), "expected at least one label"));
+                }
+                for (j, l) in schemes.iter().enumerate() {
+                    s.curve(&format!("paper.claims[{i}].schemes[{j}]"), l)?;
+                }
+            }
+            ClaimSpec::Better {
+                a,
+                a_params,
+                b,
+                b_params,
+                metric,
+                ..
+            }
+            | ClaimSpec::Close {
+                a,
+                a_params,
+                b,
+                b_params,
+                metric,
+                ..
+            } => {
+                s.variant(&at("a"), a, &at("a_params"), a_params)?;
+                s.variant(&at("b"), b, &at("b_params"), b_params)?;
+                if metric.starts_with("mse:") {
+                    s.group_metric(&at("metric"), metric, "mse:")?;
+                } else {
+                    s.one_of(&at("metric"), metric, &["mse", "mse:<group>"])?;
+                }
+                if let ClaimSpec::Close { within, .. } = c {
+                    finite_nonneg(ctx, &at("within"), *within)?;
+                }
+            }
+            ClaimSpec::CloserToTarget {
+                a,
+                b,
+                param,
+                metric,
+                ..
+            } => {
+                for (f, l) in [("a", a), ("b", b)] {
+                    let ci = s.curve(&at(f), l)?;
+                    if !curves[ci].swept.iter().any(|p| p == param) {
+                        return Err(
+                            ctx.err(at("param"), format!("curve {l:?} does not sweep `{param}`"))
+                        );
+                    }
+                }
+                s.one_of(&at("metric"), metric, &["transmissions_per_step", "rate"])?;
+            }
+        }
+    }
+    Ok(())
+}

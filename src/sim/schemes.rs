@@ -1,0 +1,153 @@
+//! Scheme construction: each `[[schemes]]` entry is one curve; each point of its sweep one
+//! variant, parsed and built by the scheme's registry entry. This file knows no scheme by name.
+use super::build::{Ctx, Curve, ScenarioError, Variant};
+use super::scenario::{FrontierSpec, ParamValue, Params};
+use super::sweep;
+use crate::scheme::registry::{self, BuildContext};
+use crate::scheme::System;
+use std::sync::Arc;
+
+/// Most variants a scenario may define (every variant runs every trial).
+pub const MAX_VARIANTS: usize = 10_000;
+
+/// Builds every curve and variant of the `[[schemes]]` entries.
+pub(crate) fn build_schemes(
+    ctx: &Ctx,
+    tables: &[toml::Table],
+    system: &Arc<System>,
+    steps: usize,
+) -> Result<(Vec<Curve>, Vec<Variant>), ScenarioError> {
+    if tables.is_empty() {
+        return Err(ctx.err("schemes", "expected at least one [[schemes]] entry"));
+    }
+    let mut curves = Vec::new();
+    let mut variants = Vec::new();
+    for (ci, table) in tables.iter().enumerate() {
+        let field = format!("schemes[{ci}]");
+        let mut base = table.clone();
+        let label = match base.remove("label") {
+            Some(toml::Value::String(s)) => Some(s),
+            Some(_) => return Err(ctx.err(format!("{field}.label"), "expected a string")),
+            None => None,
+        };
+        let entry = match base.remove("kind") {
+            Some(toml::Value::String(k)) => registry::find(&k).ok_or_else(|| {
+                ctx.err(
+                    format!("{field}.kind"),
+                    format!(
+                        "unknown scheme kind {k:?}; expected one of {} (`hushfuse list-schemes`)",
+                        registry::kinds().join(", ")
+                    ),
+                )
+            })?,
+            Some(_) => return Err(ctx.err(format!("{field}.kind"), "expected a string")),
+            None => {
+                return Err(ctx.err(
+                    format!("{field}.kind"),
+                    format!(
+                        "missing the scheme `kind`; one of {}",
+                        registry::kinds().join(", ")
+                    ),
+                ))
+            }
+        };
+        let frontier = frontier(ctx, &field, base.remove("frontier"))?;
+        let swept = sweep::parse(ctx, &field, base.remove("sweep"), &base)?;
+        if variants.len().saturating_add(sweep::count(&swept)) > MAX_VARIANTS {
+            return Err(ctx.err(
+                format!("{field}.sweep"),
+                format!("at most {MAX_VARIANTS} variants in a scenario"),
+            ));
+        }
+        for point in sweep::points(&swept) {
+            let mut t = base.clone();
+            let mut desc = Vec::new();
+            for (k, v) in &point {
+                t.insert(k.clone(), v.clone());
+                desc.push(format!("{k} = {v}"));
+            }
+            let at = if desc.is_empty() {
+                field.clone()
+            } else {
+                format!("{field} (sweep point {})", desc.join(", "))
+            };
+            let params = params_of(&t);
+            let cx = BuildContext { system, steps };
+            let scheme = (entry.build)(t, &cx).map_err(|e| match &e.field {
+                Some(f) => ctx.err(format!("{at}.{f}"), e.message.clone()),
+                None => ctx.err(&at, e.message.clone()),
+            })?;
+            variants.push(Variant {
+                curve: ci,
+                params,
+                kind: entry.kind,
+                scheme,
+            });
+        }
+        curves.push(Curve {
+            label: label.unwrap_or_else(|| entry.label.to_string()),
+            kind: entry.kind.to_string(),
+            swept: swept.iter().map(|(k, _)| k.clone()).collect(),
+            frontier,
+        });
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    for (ci, c) in curves.iter().enumerate() {
+        if !seen.insert(c.label.clone()) {
+            return Err(ctx.err(
+                format!("schemes[{ci}].label"),
+                format!(
+                    "two schemes share the label {:?}; give each a distinct `label`",
+                    c.label
+                ),
+            ));
+        }
+    }
+    Ok((curves, variants))
+}
+
+/// The parameters of a variant as written (numbers, flags and names; lists are left out of
+/// the summary's `params`).
+fn params_of(t: &toml::Table) -> Params {
+    t.iter()
+        .filter_map(|(k, v)| match v {
+            toml::Value::Float(x) => Some((k.clone(), ParamValue::Number(*x))),
+            toml::Value::Integer(x) => Some((k.clone(), ParamValue::Number(*x as f64))),
+            toml::Value::Boolean(b) => Some((k.clone(), ParamValue::Flag(*b))),
+            toml::Value::String(s) => Some((k.clone(), ParamValue::Text(s.clone()))),
+            _ => None,
+        })
+        .collect()
+}
+
+fn frontier(
+    ctx: &Ctx,
+    field: &str,
+    value: Option<toml::Value>,
+) -> Result<Option<FrontierSpec>, ScenarioError> {
+    let Some(v) = value else {
+        return Ok(None);
+    };
+    let f: FrontierSpec = registry::parse(v.try_into().map_err(|_| {
+        ctx.err(
+            format!("{field}.frontier"),
+            "expected a table { metric = \"trace\" or \"mse\", bin_width = w }",
+        )
+    })?)
+    .map_err(|e| {
+        ctx.err(
+            format!(
+                "{field}.frontier{}",
+                e.field.map(|f| format!(".{f}")).unwrap_or_default()
+            ),
+            e.message,
+        )
+    })?;
+    if !(f.bin_width.is_finite() && f.bin_width > 0.0) {
+        return Err(ctx.err(
+            format!("{field}.frontier.bin_width"),
+            "expected a positive number",
+        ));
+    }
+    Ok(Some(f))
+}
