@@ -1,9 +1,9 @@
 //! The vectorized slice loops the particle cloud is made of: `axpy`-style updates, the
 //! gather of resampled states, lane-parallel reductions (maximum, dot product) with a fixed
-//! summation order, and the branch-free exponential of the weight normalization. Each is a
-//! plain loop over slices compiled also for AVX2 and picked at run time (`multiversion`): the
-//! same IEEE operations in the same order on wider registers, so results are bit-identical on
-//! every x86-64 machine. Separate from `cloud` because they are the hot inner loops, written
+//! summation order, and the branch-free exponential of the weight normalization. The loops are
+//! plain loops over slices, compiled also for AVX2 and picked at run time (`multiversion`):
+//! the same IEEE operations in the same order on wider registers, so results are bit-identical
+//! on every x86-64 machine. Separate from `cloud` because they are the hot inner loops, written
 //! for the vectorizer rather than for the reader of the filter.
 use multiversion::multiversion;
 
