@@ -27,6 +27,50 @@ impl Information {
         Ok(Self { matrix, vector })
     }
 
+    /// Converts a covariance-form estimate by inverting its covariance: `Y = P^{-1}` (from the
+    /// Cholesky factor, symmetrized) and `y = Y x` as a product. [`from_gaussian`](Self::from_gaussian)
+    /// forms `y` by a solve instead; the two agree to rounding, and this one is what seed 003's
+    /// fusion center starts from in eq. (9) and (12) (`P^{-1}` and `P^{-1} x` of the prediction).
+    pub fn from_inverted_covariance(g: &Gaussian) -> Result<Self, FilterError> {
+        let chol = cholesky(&g.cov).map_err(|source| FilterError::Matrix {
+            what: "predicted covariance",
+            source,
+        })?;
+        let mut matrix = chol.inverse();
+        symmetrize(&mut matrix);
+        let vector = &matrix * &g.mean;
+        Ok(Self { matrix, vector })
+    }
+
+    /// Adds the information of a rank-one covariance-form update of `prior`, made along the
+    /// row `h` (a `1 x n` Jacobian): `P' = P - c g g^T` and `x' = x + b g`, `g = P h^T`. The
+    /// update enters as `P'^{-1} - P^{-1}` and `P'^{-1} x' - P^{-1} x`, which Sherman-Morrison
+    /// gives without inverting `P'`:
+    ///
+    /// ```text
+    /// Y += h^T h c / (1 - c s),   y += h^T (c h x + b) / (1 - c s),   s = h P h^T.
+    /// ```
+    ///
+    /// A scalar measurement `z` with noise variance `r` is `c = 1 / (s + r)`,
+    /// `b = (z - h x) / (s + r)` (then `Y += h^T h / r`, `y += h^T z / r`); seed 003's quantized
+    /// innovation (eq. (10), (13) with the (A24) denominator) is `c = eta / Delta^2`,
+    /// `b = sigma / Delta`.
+    ///
+    /// Returns `false`, leaving `self` unchanged, when `1 - c s <= 0`: the update would remove
+    /// at least the prior's whole variance along `g` (`P'` not positive definite).
+    #[must_use]
+    pub fn add_rank_one_update(&mut self, prior: &Gaussian, h: &Matrix, c: f64, b: f64) -> bool {
+        let s = (h * &prior.cov * h.transpose())[(0, 0)];
+        let denom = 1.0 - c * s;
+        if denom <= 0.0 {
+            return false;
+        }
+        let hx = (h * &prior.mean)[(0, 0)];
+        self.matrix += h.transpose() * h * (c / denom);
+        self.vector += h.transpose() * ((c * hx + b) / denom);
+        true
+    }
+
     /// Back to covariance form.
     pub fn to_gaussian(&self) -> Result<Gaussian, FilterError> {
         let chol = cholesky(&self.matrix).map_err(|source| FilterError::Matrix {
@@ -82,6 +126,36 @@ mod tests {
     use crate::linalg::{matrix_from_rows, relative_difference};
     use crate::model::presets;
     use proptest::prelude::*;
+
+    /// A scalar measurement as a rank-one update (`c = 1 / (s + r)`, `b = (z - h x) / (s + r)`)
+    /// adds the same information as `add_measurement`, and an update removing the whole
+    /// variance along `g` is refused.
+    #[test]
+    fn rank_one_update_of_a_scalar_measurement_is_the_measurement() {
+        let prior = Gaussian::new(
+            Vector::from_vec(vec![1.0, -2.0]),
+            matrix_from_rows(&[vec![4.0, 1.0], vec![1.0, 2.0]]),
+        );
+        let (h, r, z) = (matrix_from_rows(&[vec![0.6, 0.8]]), 0.5, 3.0);
+        let sensor = LinearSensor::new(h.clone(), Matrix::from_element(1, 1, r)).unwrap();
+        let mut want = Information::from_inverted_covariance(&prior).unwrap();
+        want.add_measurement(&sensor, &Vector::from_element(1, z))
+            .unwrap();
+        let s = (&h * &prior.cov * h.transpose())[(0, 0)];
+        let hx = (&h * &prior.mean)[(0, 0)];
+        let mut got = Information::from_inverted_covariance(&prior).unwrap();
+        assert!(got.add_rank_one_update(&prior, &h, 1.0 / (s + r), (z - hx) / (s + r)));
+        assert!(relative_difference(&got.matrix, &want.matrix) < 1e-12);
+        assert!((&got.vector - &want.vector).amax() < 1e-12 * want.vector.amax());
+        let before = got.clone();
+        assert!(!got.add_rank_one_update(&prior, &h, 1.0 / s, 0.0));
+        assert_eq!(got, before);
+        // The inverted-covariance form agrees with the solved one.
+        let solved = Information::from_gaussian(&prior).unwrap();
+        let inverted = Information::from_inverted_covariance(&prior).unwrap();
+        assert!((&solved.vector - &inverted.vector).amax() < 1e-14);
+        assert_eq!(solved.matrix, inverted.matrix);
+    }
 
     proptest! {
         /// Information form equals covariance form (Joseph update) for random priors and

@@ -88,6 +88,37 @@ pub fn update(
     Ok(Gaussian { mean, cov })
 }
 
+/// The covariance half of [`update`], linearized at `x_ref` instead of the predicted mean:
+/// `H` = the sensor's Jacobian at `x_ref`, `S = H P H^T + R`, the gain `K = P H^T S^{-1}` and
+/// the Joseph-form `(I - K H) P (I - K H)^T + K R K^T`, symmetrized. Returns
+/// `(P_{k|k}, K, S)`.
+///
+/// This is a local filter's update when only the covariance is wanted (the mean is formed by
+/// the caller, `x_ref + K nu`): seed 000's sensors linearize an EKF at the fed-back estimate
+/// (Remark 3), and the data-independent covariance sequence of a linear sensor
+/// (`scheme::censored_pf::local_plan`) is this recursion with any `x_ref`. At `x_ref` = the
+/// predicted mean it performs the operations of [`update`] in the same order: its covariance
+/// is the same bits.
+pub fn update_cov(
+    sensor: &dyn MeasurementModel,
+    p_pred: &Matrix,
+    x_ref: &Vector,
+) -> Result<(Matrix, Matrix, Matrix), FilterError> {
+    let h = sensor.jacobian(x_ref);
+    let mut s = &h * p_pred * h.transpose() + sensor.noise_cov();
+    symmetrize(&mut s);
+    let chol = cholesky(&s).map_err(|source| FilterError::Matrix {
+        what: "local innovation covariance",
+        source,
+    })?;
+    let gain = chol.solve(&(&h * p_pred)).transpose();
+    let n = p_pred.nrows();
+    let i_kh = Matrix::identity(n, n) - &gain * &h;
+    let mut p = &i_kh * p_pred * i_kh.transpose() + &gain * sensor.noise_cov() * gain.transpose();
+    symmetrize(&mut p);
+    Ok((p, gain, s))
+}
+
 /// One full KF step: predict with `model`, then update with each available measurement in
 /// turn (sequential updates equal the joint update for independent sensor noises).
 pub fn step(

@@ -8,8 +8,9 @@
 //! levels, You's 2^c + 1 levels) and, for reference, with analog measurements (the EKF).
 pub mod params;
 
+use crate::filter::information::Information;
 use crate::filter::{kf, Gaussian};
-use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
+use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::link::codec802154::{
     DynamicCodec, FixedLengthCodec, LevelCodec, LinkAddressing, Strategy,
 };
@@ -327,23 +328,12 @@ impl QuantizedFusionCenter {
 impl FusionCenter for QuantizedFusionCenter {
     fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
         let pred = &self.prediction;
-        let pred_info = {
-            let chol = cholesky(&pred.cov).map_err(|source| SchemeError::Matrix {
-                what: "predicted covariance",
-                source,
-            })?;
-            let mut m = chol.inverse();
-            symmetrize(&mut m);
-            m
-        };
         // Eq. (9) and (12): each activated sensor's individual update from the common
         // prediction enters as (P^i)^{-1} - P^{-1} and (P^i)^{-1} x^i - P^{-1} x. With
-        // P^i = P - c g g^T, g = P h^T, c = eta / Delta^2 (eq. (10)), Sherman-Morrison gives
-        // (P^i)^{-1} - P^{-1} = c h^T h / (1 - c s) and, with x^i = x + sigma g / Delta (eq.
-        // (13) with the (A24) denominator),
-        // (P^i)^{-1} x^i - P^{-1} x = h^T (c h x + sigma / Delta) / (1 - c s), s = h P h^T.
-        let mut info = pred_info.clone();
-        let mut info_vec = &pred_info * &pred.mean;
+        // P^i = P - c g g^T, g = P h^T, c = eta / Delta^2 (eq. (10)), and x^i = x + sigma g /
+        // Delta (eq. (13) with the (A24) denominator), Sherman-Morrison gives both without
+        // inverting P^i: Information::add_rank_one_update with b = sigma / Delta.
+        let mut info = Information::from_inverted_covariance(pred)?;
         for a in &self.active {
             let msg = inbox.get(a.index).ok_or_else(|| SchemeError::Protocol {
                 sensor: a.index,
@@ -370,29 +360,16 @@ impl FusionCenter for QuantizedFusionCenter {
                     }
                 },
             };
-            let s = (&a.h * &pred.cov * a.h.transpose())[(0, 0)];
-            let denom = 1.0 - c * s;
-            if denom <= 0.0 {
+            if !info.add_rank_one_update(pred, &a.h, c, sigma / a.delta) {
                 return Err(SchemeError::Unsupported(format!(
                     "sensor {}: quantized update would remove more than the prior covariance",
                     a.index
                 )));
             }
-            let hx = (&a.h * &pred.mean)[(0, 0)];
-            info += a.h.transpose() * &a.h * (c / denom);
-            info_vec += a.h.transpose() * ((c * hx + sigma / a.delta) / denom);
         }
-        symmetrize(&mut info);
-        let chol = cholesky(&info).map_err(|source| SchemeError::Matrix {
-            what: "fused information matrix (9)",
-            source,
-        })?;
-        let mut cov = chol.inverse();
-        symmetrize(&mut cov);
-        self.est = Gaussian {
-            mean: chol.solve(&info_vec),
-            cov,
-        };
+        // The fused information matrix (9), back to covariance form.
+        symmetrize(&mut info.matrix);
+        self.est = info.to_gaussian()?;
         self.prepare()
     }
 

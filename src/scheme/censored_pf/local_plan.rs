@@ -5,9 +5,8 @@
 //! per scheme and share it: the per-step matrix algebra (and its allocations) leaves the
 //! Monte Carlo loop. EKF sensors linearize at a data-dependent point and keep computing.
 //!
-//! The arithmetic is exactly that of [`kf::predict`] and [`local_covariance_update`], so a
+//! The arithmetic is exactly that of [`kf::predict`] and [`kf::update_cov`], so a
 //! run with the plan gives bit-identical numbers to a run without.
-use super::sensor::local_covariance_update;
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{Matrix, Vector};
 use crate::scheme::{SchemeError, System};
@@ -58,8 +57,7 @@ impl LocalPlan {
                 let mut steps: Vec<LocalStep> = Vec::new();
                 for _ in 0..horizon.min(MAX_STORED_STEPS + 1) {
                     let p_pred = kf::predict(&system.transition, &est).cov;
-                    let (p_post, gain, s) =
-                        local_covariance_update(sensor.as_ref(), &p_pred, &x_ref)?;
+                    let (p_post, gain, s) = kf::update_cov(sensor.as_ref(), &p_pred, &x_ref)?;
                     let step = LocalStep {
                         p_pred,
                         p_post,
@@ -139,7 +137,7 @@ mod tests {
             for k in 1..=400 {
                 let p_pred = kf::predict(&sys.transition, &est).cov;
                 let (p_post, gain, s) =
-                    local_covariance_update(sys.sensors[i].as_ref(), &p_pred, &x_ref).unwrap();
+                    kf::update_cov(sys.sensors[i].as_ref(), &p_pred, &x_ref).unwrap();
                 let step = plan.at(i, k).unwrap().expect("linear sensor");
                 assert_eq!(step.p_pred, p_pred, "sensor {i}, k = {k}");
                 assert_eq!(step.p_post, p_post, "sensor {i}, k = {k}");

@@ -5,7 +5,7 @@ use super::censoring::{kl_divergence, kl_threshold_for_nis, nis};
 use super::local_plan::LocalPlan;
 use super::FeedbackMode;
 use crate::filter::{kf, Gaussian};
-use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
+use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::link::{Message, Transmission};
 use crate::model::{LinearTransition, MeasurementModel};
 use crate::scheme::{Feedback, SchemeError, SensorNode};
@@ -81,26 +81,9 @@ pub fn innovation_reference<'a>(
 }
 
 /// Covariance-only local update linearized at `x_ref` (the EKF linearizes at the fed-back
-/// estimate in feedback systems, Remark 3), Joseph form; returns (P_{k|k}, gain, S).
-pub fn local_covariance_update(
-    sensor: &dyn MeasurementModel,
-    p_pred: &Matrix,
-    x_ref: &Vector,
-) -> Result<(Matrix, Matrix, Matrix), SchemeError> {
-    let h = sensor.jacobian(x_ref);
-    let mut s = &h * p_pred * h.transpose() + sensor.noise_cov();
-    symmetrize(&mut s);
-    let chol = cholesky(&s).map_err(|source| SchemeError::Matrix {
-        what: "local innovation covariance",
-        source,
-    })?;
-    let gain = chol.solve(&(&h * p_pred)).transpose();
-    let n = p_pred.nrows();
-    let i_kh = Matrix::identity(n, n) - &gain * &h;
-    let mut p = &i_kh * p_pred * i_kh.transpose() + &gain * sensor.noise_cov() * gain.transpose();
-    symmetrize(&mut p);
-    Ok((p, gain, s))
-}
+/// estimate in feedback systems, Remark 3), Joseph form; returns (P_{k|k}, gain, S). Now
+/// [`kf::update_cov`]; kept under this name for the fusion-center code that replicates it.
+pub use crate::filter::kf::update_cov as local_covariance_update;
 
 impl CensoringSensor {
     pub fn new(
@@ -191,7 +174,7 @@ impl SensorNode for CensoringSensor {
         let (p_post, gain, s_local) = match planned {
             Some(step) => (&step.p_post, &step.gain, &step.s),
             None => {
-                computed_update = local_covariance_update(self.sensor.as_ref(), pred_cov, x_ref)?;
+                computed_update = kf::update_cov(self.sensor.as_ref(), pred_cov, x_ref)?;
                 (&computed_update.0, &computed_update.1, &computed_update.2)
             }
         };
