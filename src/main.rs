@@ -34,7 +34,7 @@ struct RunArgs {
     /// Output folder (default: hushfuse-out/<scenario>/).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Run even if the estimated memory or work is above the limits (16 GiB, 10^14 operations).
+    /// Run even if the estimated memory or run time is above the limits (16 GiB, 24 hours).
     #[arg(long)]
     allow_large: bool,
 }
@@ -51,7 +51,11 @@ enum Command {
     /// List the built-in scenarios.
     List,
     /// List every scheme kind with its parameters and defaults.
-    ListSchemes,
+    ListSchemes {
+        /// Print the reference as Markdown (the text of docs/scenarios.md).
+        #[arg(long)]
+        markdown: bool,
+    },
     /// Run a built-in paper scenario and print our numbers beside the paper's, and its claims.
     Reproduce {
         /// Built-in scenario id (e.g. dormann-fig1) or a scenario file with a [paper] section.
@@ -81,8 +85,12 @@ fn main() -> ExitCode {
                 run(&id, &args, true)
             }
         }
-        Some(Command::ListSchemes) => {
-            print_out(&hushfuse::scheme::registry::describe());
+        Some(Command::ListSchemes { markdown }) => {
+            print_out(&if markdown {
+                hushfuse::scheme::registry::markdown()
+            } else {
+                hushfuse::scheme::registry::describe()
+            });
             Ok(())
         }
         Some(Command::List) => {

@@ -10,21 +10,25 @@ use crate::scheme::{Scheme, System};
 pub struct Limits {
     /// Bytes the run may hold at once.
     pub max_memory_bytes: f64,
-    /// Estimated floating-point operations of the whole run.
-    pub max_flops: f64,
+    /// Estimated wall-clock seconds of the whole run.
+    pub max_seconds: f64,
 }
 
 /// 16 GiB: two thirds of the 24 GiB machines this project runs on.
 pub const DEFAULT_MAX_MEMORY: f64 = 16.0 * 1024.0 * 1024.0 * 1024.0;
-/// 10^14 operations: more than a day of this code on one core (which reaches a few 10^8
-/// useful operations per second on these workloads).
-pub const DEFAULT_MAX_FLOPS: f64 = 1e14;
+/// 24 hours.
+pub const DEFAULT_MAX_SECONDS: f64 = 24.0 * 3600.0;
+/// Cost of one scheme step beyond its arithmetic (dispatch, small allocations, metrics),
+/// measured on the built-in linear scenarios: about a microsecond.
+const STEP_OVERHEAD_SECONDS: f64 = 1e-6;
+/// Useful floating-point operations per second and thread on these workloads.
+const FLOPS_PER_SECOND: f64 = 5e8;
 
 impl Default for Limits {
     fn default() -> Self {
         Self {
             max_memory_bytes: DEFAULT_MAX_MEMORY,
-            max_flops: DEFAULT_MAX_FLOPS,
+            max_seconds: DEFAULT_MAX_SECONDS,
         }
     }
 }
@@ -34,7 +38,7 @@ impl Limits {
     pub fn none() -> Self {
         Self {
             max_memory_bytes: f64::INFINITY,
-            max_flops: f64::INFINITY,
+            max_seconds: f64::INFINITY,
         }
     }
 }
@@ -43,7 +47,10 @@ impl Limits {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Estimate {
     pub memory_bytes: f64,
-    pub flops: f64,
+    /// Wall-clock seconds with all threads busy.
+    pub seconds: f64,
+    /// Worker threads the estimate assumes.
+    pub threads: f64,
 }
 
 /// Accumulator columns per step and variant (groups, errors, traffic, consistency).
@@ -52,8 +59,9 @@ fn columns(groups: usize) -> f64 {
 }
 
 /// What the run needs apart from the schemes themselves: the per-trial truth and measurements
-/// (one trial per worker), the per-step sums of every variant (one set per block in flight and
-/// the total) and the per-trial steady-state values kept for paired comparisons.
+/// (one trial per worker, each a heap vector), the per-step sums of every variant (the runner
+/// keeps one set per block of 4 trials until it merges them in order) and the per-trial
+/// steady-state values kept for paired comparisons.
 pub fn baseline(
     system: &System,
     groups: usize,
@@ -64,16 +72,20 @@ pub fn baseline(
 ) -> Estimate {
     let n = system.state_dim() as f64;
     let m: f64 = system.sensors.iter().map(|s| s.meas_dim() as f64).sum();
+    let vectors = 1.0 + system.n_sensors() as f64;
     let (steps, trials, variants) = (steps as f64, trials as f64, variants as f64);
     let workers = threads.max(1) as f64;
-    let trial_data = steps * (n + m + 2.0 * system.n_sensors() as f64) * 8.0 * workers;
-    let sums = steps * columns(groups) * variants * 8.0 * (2.0 * workers + 1.0);
-    let per_trial = trials * variants * columns(groups) * 8.0;
+    let blocks = (trials / 4.0).ceil();
+    let trial_data = steps * (8.0 * (n + m) + 64.0 * vectors) * workers;
+    let sums = steps * columns(groups) * variants * 8.0 * (blocks + 1.0);
+    let per_trial = trials * variants * (columns(groups) * 8.0 + 24.0);
     // A Kalman step: prediction n^3 plus an update per measured component.
     let kf_flops = 2.0 * n * n * n + 4.0 * n * n * m.max(1.0);
+    let per_step = STEP_OVERHEAD_SECONDS + kf_flops / FLOPS_PER_SECOND;
     Estimate {
         memory_bytes: trial_data + sums + per_trial,
-        flops: trials * steps * variants * kf_flops,
+        seconds: trials * steps * (variants * per_step + m * 1e-7) / workers,
+        threads: workers,
     }
 }
 
@@ -88,7 +100,8 @@ pub fn with_schemes<'a>(
     for s in schemes {
         if let Some(f) = s.footprint() {
             e.memory_bytes += f.bytes * threads.max(1) as f64;
-            e.flops += f.flops_per_step * steps as f64 * trials as f64;
+            e.seconds += f.flops_per_step / FLOPS_PER_SECOND * steps as f64 * trials as f64
+                / threads.max(1) as f64;
         }
     }
     e
@@ -113,10 +126,12 @@ pub fn check(e: &Estimate, limits: &Limits, file: &str) -> Result<(), ScenarioEr
             gib(limits.max_memory_bytes)
         )));
     }
-    if e.flops.is_nan() || e.flops > limits.max_flops {
+    if e.seconds.is_nan() || e.seconds > limits.max_seconds {
         return Err(err(format!(
-            "this run would take about {:.1e} floating-point operations (days of computing), more than the limit of {:.0e}; lower `steps`, `trials` (or --trials), the number of variants or particles, or pass --allow-large",
-            e.flops, limits.max_flops
+            "this run would take about {:.0} hours on {} threads, more than the limit of {:.0} hours; lower `steps`, `trials` (or --trials), the number of variants or particles, or pass --allow-large",
+            e.seconds / 3600.0,
+            e.threads,
+            limits.max_seconds / 3600.0
         )));
     }
     Ok(())

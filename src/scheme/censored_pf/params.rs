@@ -201,4 +201,5 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     ],
     knob: Some("l"),
     build: registry::parse_and_build::<CensoredPfParams>,
+    example: "l = 1.0\nparticles = 200",
 };

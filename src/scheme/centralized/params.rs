@@ -42,6 +42,7 @@ pub const ALL: SchemeEntry = SchemeEntry {
     params: &[],
     knob: None,
     build: registry::parse_and_build::<AllParams>,
+    example: "",
 };
 
 pub const RANDOM: SchemeEntry = SchemeEntry {
@@ -56,4 +57,5 @@ pub const RANDOM: SchemeEntry = SchemeEntry {
     }],
     knob: Some("rate"),
     build: registry::parse_and_build::<RandomParams>,
+    example: "rate = 0.5",
 };

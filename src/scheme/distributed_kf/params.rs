@@ -109,6 +109,7 @@ pub const FULL_RATE: SchemeEntry = SchemeEntry {
     params: &[],
     knob: None,
     build: registry::parse_and_build::<FullRateParams>,
+    example: "",
 };
 
 pub const ALG1_RANDOM: SchemeEntry = SchemeEntry {
@@ -123,6 +124,7 @@ pub const ALG1_RANDOM: SchemeEntry = SchemeEntry {
     }],
     knob: Some("rate"),
     build: registry::parse_and_build::<Alg1RandomParams>,
+    example: "rate = 0.75",
 };
 
 pub const ALG1_EVENT: SchemeEntry = SchemeEntry {
@@ -132,6 +134,7 @@ pub const ALG1_EVENT: SchemeEntry = SchemeEntry {
     params: &[ALPHA],
     knob: Some("alpha"),
     build: registry::parse_and_build::<Alg1EventParams>,
+    example: "alpha = 0.3",
 };
 
 pub const ALG2_EVENT: SchemeEntry = SchemeEntry {
@@ -155,4 +158,5 @@ pub const ALG2_EVENT: SchemeEntry = SchemeEntry {
     ],
     knob: Some("alpha"),
     build: registry::parse_and_build::<Alg2EventParams>,
+    example: "alpha = 0.4\nb = 10.0",
 };

@@ -176,4 +176,5 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     ],
     knob: Some("bits"),
     build: registry::parse_and_build::<QuantizedParams>,
+    example: "quantizer = \"zhang\"\nbits = 1",
 };
