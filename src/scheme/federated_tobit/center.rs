@@ -70,7 +70,10 @@ impl FtkfModel {
         if thresholds.len() != p {
             return Err(SchemeError::Invalid {
                 field: "tau_l",
-                message: format!("expected {p} thresholds (one per sensor), got {}", thresholds.len()),
+                message: format!(
+                    "expected {p} thresholds (one per sensor), got {}",
+                    thresholds.len()
+                ),
             });
         }
         let sharing = sharing.unwrap_or_else(|| vec![1.0 / p as f64; p]);
@@ -94,7 +97,12 @@ impl FtkfModel {
             }
         }
         let (transition, sensors, prior, bias_blind) = match bias_blind {
-            None => (system.transition.clone(), sensors, system.prior.clone(), None),
+            None => (
+                system.transition.clone(),
+                sensors,
+                system.prior.clone(),
+                None,
+            ),
             Some(b_idx) => {
                 let mut seen = vec![false; n];
                 for &b in &b_idx {
@@ -279,11 +287,8 @@ impl FtkfCenter {
                 (pred.clone(), a, b, tl)
             }
         };
-        if let Some(rec) = self.records.as_mut() {
-            if rec.last().is_none_or(|r| r.len() == self.model.n_sensors()) {
-                rec.push(Vec::with_capacity(self.model.n_sensors()));
-            }
-            rec.last_mut().expect("pushed").push(LocalRecord {
+        if let Some(rec) = self.records.as_mut().and_then(|r| r.last_mut()) {
+            rec.push(LocalRecord {
                 scheduled: fresh.is_some(),
                 alpha,
                 beta,
@@ -344,7 +349,8 @@ impl FusionCenter for FtkfCenter {
         // Common prediction of the fused estimate: P^- = F P F^T + Q; the locals' (19) after the
         // reset (27) are (F xi, P^- / epsilon_m) since Q_m = Q / epsilon_m.
         let pred = kf::predict(&model.transition, &self.fused);
-        if self.records.is_some() {
+        if let Some(r) = self.records.as_mut() {
+            r.push(Vec::with_capacity(p));
             self.fused_pred.push(pred.cov.clone());
         }
         let report = match model.fusion {
@@ -377,4 +383,3 @@ impl FusionCenter for FtkfCenter {
         &self.out
     }
 }
-

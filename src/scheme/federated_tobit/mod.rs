@@ -53,9 +53,14 @@ use rand::RngCore;
 use std::sync::Arc;
 
 /// The sensor of seed 002: when scheduled it sends its raw reading. With a noise override
-/// (`noise_var` above the sensor's R) it first adds independent `N(0, noise_var - R)` noise from
-/// the scheme's own stream, so one scenario can compare noise variances (Table III) on common
-/// truths.
+/// (`noise_var` above the sensor's R) it first adds independent `N(0, noise_var - R)` noise, so
+/// one scenario can compare noise variances (Table III) on common truths.
+///
+/// The added noise is a deterministic function of the base reading (a SplitMix64 hash of its
+/// bits, mapped to a standard normal by Box-Muller): it derives from the runner's seeded
+/// measurement stream and is the *same* for every scheme variant, so schemes at one noise
+/// variance see identical readings (common random numbers; the scheme's own coin stream would
+/// give each variant different readings).
 #[derive(Debug, Clone)]
 pub struct RoundRobinSensor {
     extra_sd: f64,
@@ -68,19 +73,32 @@ impl RoundRobinSensor {
     }
 }
 
+fn splitmix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// A standard normal determined by `v`'s bits (Box-Muller on two hashed uniforms in (0, 1)).
+pub fn hashed_normal(v: f64) -> f64 {
+    let a = splitmix64(v.to_bits() ^ 0x5EED_0002_7AB1_7000);
+    let b = splitmix64(a);
+    let u1 = ((a >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+    let u2 = ((b >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
 impl SensorNode for RoundRobinSensor {
     fn step(
         &mut self,
         _k: usize,
         z: &Vector,
         _feedback: Option<&super::Feedback>,
-        rng: &mut dyn RngCore,
+        _rng: &mut dyn RngCore,
     ) -> Result<Transmission, SchemeError> {
         let z = if self.extra_sd > 0.0 {
-            z.map(|v| {
-                v + self.extra_sd
-                    * rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
-            })
+            z.map(|v| v + self.extra_sd * hashed_normal(v))
         } else {
             z.clone()
         };
@@ -100,11 +118,14 @@ pub fn scalar_sensors(
         .iter()
         .enumerate()
         .map(|(i, s)| {
-            let lin = s.as_linear().filter(|l| l.h().nrows() == 1).ok_or_else(|| {
-                SchemeError::Unsupported(format!(
-                    "seed 002's schemes need scalar linear sensors; sensor {i} is not one"
-                ))
-            })?;
+            let lin = s
+                .as_linear()
+                .filter(|l| l.h().nrows() == 1)
+                .ok_or_else(|| {
+                    SchemeError::Unsupported(format!(
+                        "seed 002's schemes need scalar linear sensors; sensor {i} is not one"
+                    ))
+                })?;
             let r0 = lin.noise_cov()[(0, 0)];
             let r = noise_var.map_or(r0, |v| v[i]);
             if !(r.is_finite() && r >= r0) {

@@ -22,7 +22,10 @@ impl PerSensor {
             PerSensor::Each(v) if v.len() == p => Ok(v.clone()),
             PerSensor::Each(v) => Err(ParamError::at(
                 field,
-                format!("expected one number or {p} (one per sensor), got {}", v.len()),
+                format!(
+                    "expected one number or {p} (one per sensor), got {}",
+                    v.len()
+                ),
             )),
         }
     }
@@ -156,16 +159,15 @@ impl SchemeParams for FtkfParams {
             FusionParam::Local => Fusion::Local(local(true)?),
             FusionParam::LocalInLoop => Fusion::LocalInLoop(local(true)?),
         };
-        let bias_blind = match (self.bias_model, self.bias_states.is_empty()) {
-            (true, _) => None,
-            (false, false) => Some(self.bias_states.clone()),
-            (false, true) => {
-                return Err(ParamError::at(
+        let bias_blind =
+            match (self.bias_model, self.bias_states.is_empty()) {
+                (true, _) => None,
+                (false, false) => Some(self.bias_states.clone()),
+                (false, true) => return Err(ParamError::at(
                     "bias_states",
                     "`bias_model = false` needs the bias's state indices, e.g. bias_states = [2]",
-                ))
-            }
-        };
+                )),
+            };
         let opts = TobitOptions {
             theta_denominator: match self.theta_denominator {
                 ThetaDenominatorParam::SqrtR => ThetaDenominator::SqrtR,
@@ -210,7 +212,7 @@ const NOISE_VAR: ParamDoc = ParamDoc {
     name: "noise_var",
     values: "number or list (one per sensor), >= R",
     default: "sensor R",
-    meaning: "run at this noise variance: the sensor adds N(0, noise_var - R) from the scheme's stream",
+    meaning: "run at this noise variance: the sensor adds N(0, noise_var - R), the same for every variant",
 };
 
 pub const ENTRY: SchemeEntry = SchemeEntry {
@@ -243,7 +245,8 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
             name: "fusion",
             values: "\"federated\" | \"local\" | \"local-in-loop\"",
             default: "federated",
-            meaning: "fused (26); one local filter alone (eps = 1, no reset); or local m inside the loop",
+            meaning:
+                "fused (26); one local filter alone (eps = 1, no reset); or local m inside the loop",
         },
         ParamDoc {
             name: "local",
