@@ -360,9 +360,8 @@ impl FusionCenter for FtkfCenter {
             }
             Fusion::Federated | Fusion::LocalInLoop(_) => {
                 let mut locals = Vec::with_capacity(p);
-                for m in 0..p {
-                    let local_pred = reset(&pred, model.sharing[m]);
-                    locals.push(self.local_step(m, local_pred, fresh[m])?);
+                for (m, (&eps, &y)) in model.sharing.iter().zip(&fresh).enumerate() {
+                    locals.push(self.local_step(m, reset(&pred, eps), y)?);
                 }
                 self.fused = federated_fusion(&locals)?;
                 // LocalInLoop reports local m; the loop continues from the fused estimate.

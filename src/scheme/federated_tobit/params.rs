@@ -107,7 +107,7 @@ impl SchemeParams for FtkfParams {
                 ))
             }
             (Some(t), None, None) => {
-                if !(t > 0.0) {
+                if t.is_nan() || t <= 0.0 {
                     return Err(ParamError::at("tau", format!("expected tau > 0, got {t}")));
                 }
                 (vec![-t; p], vec![t; p])
