@@ -3,6 +3,7 @@
 pub mod information;
 pub mod kf;
 pub mod particle;
+pub mod tobit;
 
 use crate::linalg::{LinalgError, Matrix, Vector};
 

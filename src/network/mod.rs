@@ -54,6 +54,86 @@ pub fn deliver(
     traffic
 }
 
+/// What a remote estimator holds for one sensor after a step under a zero-order hold
+/// (seed 002 eq. (4)-(5)): a fresh value, the last one held over, or nothing yet.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Held {
+    /// Arrived at this step (it was counted as a transmission by [`deliver`]).
+    Fresh(crate::linalg::Vector),
+    /// The value that arrived at step `since`, held over (`age` = k - since >= 1 steps ago).
+    /// Not a transmission: nothing crossed the network for it.
+    Held {
+        value: crate::linalg::Vector,
+        since: usize,
+        age: usize,
+    },
+    /// Nothing has arrived from this sensor yet (before its first transmission).
+    Empty,
+}
+
+impl Held {
+    /// The value the estimator sees (fresh or held), if any.
+    pub fn value(&self) -> Option<&crate::linalg::Vector> {
+        match self {
+            Held::Fresh(v) | Held::Held { value: v, .. } => Some(v),
+            Held::Empty => None,
+        }
+    }
+    /// Whether the value arrived at this step.
+    pub fn is_fresh(&self) -> bool {
+        matches!(self, Held::Fresh(_))
+    }
+}
+
+/// Zero-order hold at the receiving side of a network (seed 002 eq. (4)): for each sensor, the
+/// last measurement that arrived is held until the next one. It sits after [`deliver`], so
+/// traffic is counted once, when a value arrives; a held value is never a new transmission.
+/// Only [`Received::Measurement`] refreshes the hold; silences and unscheduled steps keep it.
+#[derive(Debug, Clone, Default)]
+pub struct ZeroOrderHold {
+    last: Vec<Option<(crate::linalg::Vector, usize)>>,
+    held: Vec<Held>,
+}
+
+impl ZeroOrderHold {
+    /// A hold for `n` sensors, empty.
+    pub fn new(n: usize) -> Self {
+        Self {
+            last: vec![None; n],
+            held: vec![Held::Empty; n],
+        }
+    }
+
+    /// Takes the inbox of step `k` and returns, per sensor, what the estimator holds.
+    pub fn step(&mut self, k: usize, inbox: &[Received]) -> &[Held] {
+        if self.last.len() != inbox.len() {
+            *self = Self::new(inbox.len());
+        }
+        for (i, r) in inbox.iter().enumerate() {
+            self.held[i] = match r {
+                Received::Measurement(z) => {
+                    self.last[i] = Some((z.clone(), k));
+                    Held::Fresh(z.clone())
+                }
+                _ => match &self.last[i] {
+                    Some((v, since)) => Held::Held {
+                        value: v.clone(),
+                        since: *since,
+                        age: k - since,
+                    },
+                    None => Held::Empty,
+                },
+            };
+        }
+        &self.held
+    }
+
+    /// What the estimator held after the last step.
+    pub fn current(&self) -> &[Held] {
+        &self.held
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -81,5 +161,45 @@ mod tests {
         let s = Schedule::RoundRobin;
         assert!(s.allows(1, 0, 3) && s.allows(2, 1, 3) && s.allows(4, 0, 3));
         assert!(!s.allows(1, 1, 3));
+    }
+
+    #[test]
+    fn zero_order_hold_holds_without_counting() {
+        let s = Schedule::RoundRobin;
+        let mut hold = ZeroOrderHold::new(2);
+        let mut inbox = Vec::new();
+        let mut sent = 0;
+        for k in 1..=5 {
+            let tx = (0..2).map(|i| {
+                if s.allows(k, i, 2) {
+                    Transmission::Send(Message::Measurement(Vector::from_element(1, k as f64)))
+                } else {
+                    Transmission::Silent
+                }
+            });
+            sent += deliver(tx, &mut inbox).messages;
+            for (i, r) in inbox.iter_mut().enumerate() {
+                if !s.allows(k, i, 2) {
+                    *r = Received::NotScheduled;
+                }
+            }
+            let h = hold.step(k, &inbox).to_vec();
+            let other = k % 2; // the sensor not scheduled at k
+            assert!(h[1 - other].is_fresh());
+            if k == 1 {
+                assert_eq!(h[1], Held::Empty);
+            } else {
+                assert_eq!(
+                    h[other],
+                    Held::Held {
+                        value: Vector::from_element(1, (k - 1) as f64),
+                        since: k - 1,
+                        age: 1
+                    }
+                );
+            }
+        }
+        // One transmission per step: the held values were not counted.
+        assert_eq!(sent, 5);
     }
 }

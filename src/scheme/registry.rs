@@ -140,6 +140,8 @@ pub const SCHEMES: &[SchemeEntry] = &[
     super::distributed_kf::params::ALG2_EVENT,
     super::quantized_innovation::params::ENTRY,
     super::censored_pf::params::ENTRY,
+    super::federated_tobit::params::ENTRY,
+    super::federated_tobit::params::ROUND_ROBIN_KF,
 ];
 
 /// The entry of a kind.

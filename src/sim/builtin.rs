@@ -82,6 +82,16 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         "Seed 003 Tables 1-6: quantization levels against payload bits (computed)",
         include_str!("../../scenarios/zhang-tables.toml"),
     ),
+    (
+        "geng-oscillator",
+        "Seed 002 Section IV-A / Tables II-III: federated Tobit KF, round-robin, censoring regions and noise variances, information bound",
+        include_str!("../../scenarios/geng-oscillator.toml"),
+    ),
+    (
+        "geng-tracking",
+        "Seed 002 Section IV-B / Figs. 10-11: target tracking with acceleration bias, FTKF-DB vs FTKF",
+        include_str!("../../scenarios/geng-tracking.toml"),
+    ),
 ];
 
 /// The TOML text of a built-in scenario.

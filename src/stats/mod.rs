@@ -8,3 +8,4 @@ pub mod normal;
 pub mod normal_block;
 pub mod quadform;
 pub mod quadform2d;
+pub mod truncated_normal;
