@@ -229,10 +229,16 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
             meaning: "censoring region [-tau, tau] for every sensor",
         },
         ParamDoc {
-            name: "tau_l, tau_r",
+            name: "tau_l",
             values: "number or list (one per sensor)",
-            default: "-inf, +inf",
-            meaning: "left / right censoring thresholds of eq. (6) (instead of tau)",
+            default: "-inf",
+            meaning: "left censoring thresholds of eq. (6) (instead of tau)",
+        },
+        ParamDoc {
+            name: "tau_r",
+            values: "number or list (one per sensor)",
+            default: "+inf",
+            meaning: "right censoring thresholds of eq. (6) (instead of tau)",
         },
         NOISE_VAR,
         ParamDoc {
@@ -281,6 +287,7 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     ],
     knob: None,
     build: registry::parse_and_build::<FtkfParams>,
+    example: "tau = 5.0",
 };
 
 pub const ROUND_ROBIN_KF: SchemeEntry = SchemeEntry {
@@ -291,4 +298,5 @@ pub const ROUND_ROBIN_KF: SchemeEntry = SchemeEntry {
     params: &[NOISE_VAR],
     knob: None,
     build: registry::parse_and_build::<RoundRobinKfParams>,
+    example: "",
 };
