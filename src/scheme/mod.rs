@@ -3,6 +3,7 @@
 pub mod censored_pf;
 pub mod centralized;
 pub mod distributed_kf;
+pub mod federated_tobit;
 pub mod quantized_innovation;
 pub mod registry;
 

@@ -133,6 +133,7 @@ pub const SCHEMES: &[SchemeEntry] = &[
     super::distributed_kf::params::ALG2_EVENT,
     super::quantized_innovation::params::ENTRY,
     super::censored_pf::params::ENTRY,
+    super::federated_tobit::exact_pf::ENTRY,
 ];
 
 /// The entry of a kind.
