@@ -252,7 +252,7 @@ fn without_censoring_the_pf_approaches_the_round_robin_kf() {
         for (t, trial) in trials.iter().enumerate() {
             let mut kf = CentralizedKf::new(sys.clone());
             let kf_est = run(&mut kf, trial);
-            for rep in 0..3u64 {
+            for rep in 0..6u64 {
                 let mut center = pf(&sys, inf, particles, 1000 * t as u64 + rep);
                 let pf_est = run(&mut center, trial);
                 for (a, b) in pf_est.iter().zip(&kf_est) {
@@ -273,9 +273,11 @@ fn without_censoring_the_pf_approaches_the_round_robin_kf() {
         4000.0 * d_large / 3.0
     );
     // Monte Carlo error of a weighted mean: E d^2 = n c / N with an inflation c >= 1 from the
-    // weights and the resampling history (measured ~2-4 here); allow c up to 15.
-    assert!(4000.0 * d_large / 3.0 < 15.0, "{d_large}");
-    assert!(250.0 * d_small / 3.0 < 15.0, "{d_small}");
+    // weights and the resampling history. Measured on these trials: c = 11.6, 13.5, 13.9, 14.7
+    // at N = 250, 1000, 4000, 16000 (standard error ~15%): 1/N with no floor. Allow c < 40; a
+    // wrong likelihood gives an O(1) distance that does not shrink.
+    assert!(4000.0 * d_large / 3.0 < 40.0, "{d_large}");
+    assert!(250.0 * d_small / 3.0 < 40.0, "{d_small}");
     // 16 times the particles: at least 6 times closer (1/N gives 16).
     assert!(d_large * 6.0 < d_small, "{d_small} -> {d_large}");
     assert!(c_large < 0.1 && c_large < c_small, "{c_small} -> {c_large}");
