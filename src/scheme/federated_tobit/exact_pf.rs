@@ -36,6 +36,33 @@
 //! # Sharing
 //! [`censor`] and [`Censored`] are eq. (6) as a function; the federated Tobit KF uses the same
 //! one, so both filters see the same censored readings.
+//!
+//! ```
+//! use hushfuse::filter::Gaussian;
+//! use hushfuse::linalg::{Matrix, Vector};
+//! use hushfuse::link::Received;
+//! use hushfuse::model::{LinearSensor, LinearTransition, MeasurementModel};
+//! use hushfuse::scheme::federated_tobit::exact_pf::{censor, Censored, TobitPfCenter, TobitPfOptions};
+//! use hushfuse::scheme::{FusionCenter, System};
+//! use std::sync::Arc;
+//!
+//! // A scalar random walk seen by one sensor (R = 0.5) whose readings are censored to (-1, 1).
+//! let sensor = LinearSensor::new(Matrix::from_element(1, 1, 1.0), Matrix::from_element(1, 1, 0.5))?;
+//! let system = Arc::new(System {
+//!     transition: LinearTransition::new(Matrix::from_element(1, 1, 1.0), Matrix::from_element(1, 1, 0.1))?,
+//!     sensors: vec![Arc::new(sensor) as Arc<dyn MeasurementModel>],
+//!     prior: Gaussian::new(Vector::zeros(1), Matrix::from_element(1, 1, 1.0)),
+//! });
+//! assert_eq!(censor(3.2, -1.0, 1.0), Censored::Right);
+//! let mut center = TobitPfCenter::new(system, &[-1.0], &[1.0], TobitPfOptions::default(), 7)?;
+//! // The state sits near 3: every reading is right-censored, and the filter still moves up.
+//! for k in 1..=20 {
+//!     center.step(k, &[Received::Measurement(Vector::from_element(1, 3.0))])?;
+//! }
+//! assert_eq!(center.last_censored(), 1);
+//! assert!(center.estimate().mean[0] > 1.0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 use super::super::centralized::ForwardingSensor;
 use crate::filter::particle::{
     ParticleCloud, ParticleError, ParticleTransition, ResamplePolicy, Resampling,
