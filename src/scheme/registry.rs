@@ -142,6 +142,7 @@ pub const SCHEMES: &[SchemeEntry] = &[
     super::censored_pf::params::ENTRY,
     super::federated_tobit::params::ENTRY,
     super::federated_tobit::params::ROUND_ROBIN_KF,
+    super::federated_tobit::exact_pf::ENTRY,
 ];
 
 /// The entry of a kind.

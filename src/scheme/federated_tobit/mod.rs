@@ -32,10 +32,12 @@
 //! scheduled sensor (the test `federated_equals_the_centralized_tobit_kf`): the fused filter
 //! does not depend on the sharing coefficients.
 //!
-//! The exact-likelihood particle filter of issue 10 item 5 lives in `exact_pf.rs` (another
-//! helper's file; the integrator wires `pub mod exact_pf;` here).
+//! [`exact_pf`] is the exact-likelihood particle filter shown beside the Tobit KF (issue 10
+//! item 5): one particle filter on the augmented state weighing the scheduled reading by its
+//! exact censored likelihood, the Bayes-optimal answer on the same data.
 pub mod bounds;
 pub mod center;
+pub mod exact_pf;
 pub mod params;
 #[cfg(test)]
 mod tests;
