@@ -133,6 +133,12 @@ pub const SCHEMES: &[SchemeEntry] = &[
     super::distributed_kf::params::ALG2_EVENT,
     super::quantized_innovation::params::ENTRY,
     super::censored_pf::params::ENTRY,
+    super::event_triggered::params::INNOVATION,
+    super::event_triggered::params::STOCHASTIC_OPEN,
+    super::event_triggered::params::STOCHASTIC_CLOSED,
+    super::event_triggered::params::SEND_ON_DELTA,
+    super::estimate_fusion::params::CI,
+    super::estimate_fusion::params::NAIVE,
 ];
 
 /// The entry of a kind.
