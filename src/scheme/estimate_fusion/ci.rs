@@ -106,7 +106,7 @@ fn ci_weights_of(infos: &[Information]) -> Vec<f64> {
                     .map(|info| -(&p * &info.matrix * &p).trace())
                     .collect();
                 let scale = grad.iter().fold(0.0_f64, |a, g| a.max(g.abs()));
-                if !(scale > 0.0) {
+                if scale.is_nan() || scale <= 0.0 {
                     break;
                 }
                 let mut improved = false;
@@ -140,7 +140,9 @@ fn ci_weights_of(infos: &[Information]) -> Vec<f64> {
 
 /// Covariance intersection of `estimates` with the trace-minimizing weights; returns the
 /// fused estimate and the weights.
-pub fn covariance_intersection(estimates: &[Gaussian]) -> Result<(Gaussian, Vec<f64>), FilterError> {
+pub fn covariance_intersection(
+    estimates: &[Gaussian],
+) -> Result<(Gaussian, Vec<f64>), FilterError> {
     let infos = informations(estimates)?;
     let w = ci_weights_of(&infos);
     Ok((weighted(&infos, &w).to_gaussian()?, w))

@@ -63,13 +63,21 @@ fn ci_weights_minimize_the_trace() {
     let n = 200;
     for i in 0..=n {
         for j in 0..=(n - i) {
-            let w = [i as f64 / n as f64, j as f64 / n as f64, (n - i - j) as f64 / n as f64];
+            let w = [
+                i as f64 / n as f64,
+                j as f64 / n as f64,
+                (n - i - j) as f64 / n as f64,
+            ];
             if let Ok(g) = covariance_intersection_with(&est, &w) {
                 best = best.min(g.cov.trace());
             }
         }
     }
-    assert!(fused.cov.trace() <= best + 1e-6, "{} vs grid {best}", fused.cov.trace());
+    assert!(
+        fused.cov.trace() <= best + 1e-6,
+        "{} vs grid {best}",
+        fused.cov.trace()
+    );
 }
 
 /// Two position sensors on a 1-D constant-velocity target with strong process noise: their
@@ -153,8 +161,15 @@ fn ci_is_never_below_the_true_error_covariance_and_the_naive_sum_is() {
     for j in 0..at.len() {
         let l_ci = whitened_max_eig(&p_ci[j], &s_ci[j]);
         let l_naive = whitened_max_eig(&p_naive[j], &s_naive[j]);
-        eprintln!("step {}: lambda_max CI {l_ci:.3}, naive {l_naive:.3}", at[j]);
-        assert!(l_ci < 1.0 + tol, "step {}: CI below the true covariance ({l_ci})", at[j]);
+        eprintln!(
+            "step {}: lambda_max CI {l_ci:.3}, naive {l_naive:.3}",
+            at[j]
+        );
+        assert!(
+            l_ci < 1.0 + tol,
+            "step {}: CI below the true covariance ({l_ci})",
+            at[j]
+        );
         assert!(
             l_naive > 1.0 + tol,
             "step {}: naive sum not overconfident ({l_naive})",
@@ -176,7 +191,8 @@ fn replica_covariance_and_send_rate() {
             let mut nodes: Vec<LocalKfSensor> = (0..2)
                 .map(|i| LocalKfSensor::new(system.clone(), i, delta).unwrap())
                 .collect();
-            let mut c = EstimateFusionCenter::new(system.clone(), FusionRule::CovarianceIntersection);
+            let mut c =
+                EstimateFusionCenter::new(system.clone(), FusionRule::CovarianceIntersection);
             for k in 1..=30 {
                 x = system.transition.sample_next(&x, &mut rng);
                 let mut inbox = Vec::new();
@@ -237,13 +253,14 @@ fn nonlinear_sensors_send_their_covariance() {
         sensors: linear
             .sensors
             .iter()
-            .map(|s| {
-                Arc::new(Opaque(s.as_linear().unwrap().clone())) as Arc<dyn MeasurementModel>
-            })
+            .map(|s| Arc::new(Opaque(s.as_linear().unwrap().clone())) as Arc<dyn MeasurementModel>)
             .collect(),
         prior: linear.prior.clone(),
     });
-    let g = gaussian(&[1.0, 2.0], Matrix::from_row_slice(2, 2, &[3.0, 0.5, 0.5, 2.0]));
+    let g = gaussian(
+        &[1.0, 2.0],
+        Matrix::from_row_slice(2, 2, &[3.0, 0.5, 0.5, 2.0]),
+    );
     assert_eq!(pack(&g).as_slice(), &[1.0, 2.0, 3.0, 0.5, 2.0]);
     assert_eq!(unpack(&pack(&g), 2).unwrap(), g);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
@@ -272,7 +289,10 @@ fn nonlinear_sensors_send_their_covariance() {
     }
     // A bare x where x and P are expected is a protocol error.
     let err = c_opaque
-        .step(11, &[Received::Estimate(Vector::zeros(2)), Received::Silent])
+        .step(
+            11,
+            &[Received::Estimate(Vector::zeros(2)), Received::Silent],
+        )
         .unwrap_err();
     assert!(matches!(err, SchemeError::Protocol { sensor: 0, .. }));
 }
@@ -291,10 +311,19 @@ fn params_and_validation() {
     for kind in ["ci-fusion", "naive-fusion"] {
         let entry = registry::find(kind).unwrap();
         assert_eq!(entry.knob, Some("delta"));
-        assert!((entry.build)(toml::Table::new(), &cx).is_ok(), "delta defaults to 0");
+        assert!(
+            (entry.build)(toml::Table::new(), &cx).is_ok(),
+            "delta defaults to 0"
+        );
         let t: toml::Table = toml::from_str("delta = -1.0").unwrap();
-        assert_eq!((entry.build)(t, &cx).unwrap_err().field.as_deref(), Some("delta"));
+        assert_eq!(
+            (entry.build)(t, &cx).unwrap_err().field.as_deref(),
+            Some("delta")
+        );
         let t: toml::Table = toml::from_str("omega = 0.5").unwrap();
-        assert_eq!((entry.build)(t, &cx).unwrap_err().field.as_deref(), Some("omega"));
+        assert_eq!(
+            (entry.build)(t, &cx).unwrap_err().field.as_deref(),
+            Some("omega")
+        );
     }
 }

@@ -138,7 +138,7 @@ impl InnovationTriggerCenter {
     /// R' = R + (1/β - 1) Z (module note), or `None` when β underflows (δ so large that a
     /// silence says nothing).
     pub fn silence_noise(&self, i: usize, pred: &Gaussian) -> Option<Matrix> {
-        if !(self.beta > 1e-300) {
+        if self.beta.is_nan() || self.beta <= 1e-300 {
             return None;
         }
         let sensor = self.system.sensors[i].as_ref();
@@ -208,7 +208,10 @@ impl Scheme for InnovationTriggerScheme {
             .collect::<Result<_, _>>()?;
         Ok(SchemeInstance {
             sensors,
-            center: Box::new(InnovationTriggerCenter::new(self.system.clone(), self.delta)?),
+            center: Box::new(InnovationTriggerCenter::new(
+                self.system.clone(),
+                self.delta,
+            )?),
         })
     }
 }

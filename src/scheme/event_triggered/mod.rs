@@ -97,7 +97,11 @@ pub enum Evidence {
 /// step, the same operations as [`crate::scheme::centralized::CentralizedKf`], so all-send
 /// runs agree bit for bit) when every sensor is linear, else by sequential EKF updates
 /// linearized at the running estimate.
-pub fn fuse(system: &System, pred: Gaussian, evidence: &[Evidence]) -> Result<Gaussian, SchemeError> {
+pub fn fuse(
+    system: &System,
+    pred: Gaussian,
+    evidence: &[Evidence],
+) -> Result<Gaussian, SchemeError> {
     let all_linear = system.sensors.iter().all(|s| s.as_linear().is_some());
     if all_linear {
         let mut info = Information::from_gaussian(&pred)?;

@@ -82,7 +82,11 @@ pub struct SendOnDeltaCenter {
 }
 
 impl SendOnDeltaCenter {
-    pub fn new(system: Arc<System>, delta: f64, silence: SilenceModel) -> Result<Self, SchemeError> {
+    pub fn new(
+        system: Arc<System>,
+        delta: f64,
+        silence: SilenceModel,
+    ) -> Result<Self, SchemeError> {
         nonnegative("delta", delta)?;
         let est = system.prior.clone();
         Ok(Self {
@@ -141,7 +145,11 @@ pub struct SendOnDeltaScheme {
 
 impl SendOnDeltaScheme {
     /// `delta` >= 0 (0: send everything).
-    pub fn new(system: Arc<System>, delta: f64, silence: SilenceModel) -> Result<Self, SchemeError> {
+    pub fn new(
+        system: Arc<System>,
+        delta: f64,
+        silence: SilenceModel,
+    ) -> Result<Self, SchemeError> {
         nonnegative("delta", delta)?;
         Ok(Self {
             system,

@@ -93,7 +93,13 @@ fn simulate(system: &System, steps: usize, seed: u64) -> Trial {
     let (mut truth, mut z) = (Vec::new(), Vec::new());
     for _ in 0..steps {
         x = system.transition.sample_next(&x, &mut rng);
-        z.push(system.sensors.iter().map(|s| s.sample(&x, &mut rng)).collect());
+        z.push(
+            system
+                .sensors
+                .iter()
+                .map(|s| s.sample(&x, &mut rng))
+                .collect(),
+        );
         truth.push(x.clone());
     }
     Trial { truth, z }
@@ -214,11 +220,17 @@ fn truncated_variance_matches_quadrature_and_its_limits() {
     assert_eq!(truncated_variance(0.0), 0.0);
     // The series and the closed form meet at 1e-3 (v' = 2 delta / 3 accounts for 1.3e-12
     // of the difference, the closed form's cancellation for ~1e-13).
-    let (a, b) = (truncated_variance(0.999_999e-3), truncated_variance(1.000_001e-3));
+    let (a, b) = (
+        truncated_variance(0.999_999e-3),
+        truncated_variance(1.000_001e-3),
+    );
     assert!((b - a).abs() < 3e-12 && b > a, "{a} vs {b}");
     assert!((truncated_variance(40.0) - 1.0).abs() < 1e-15);
     // By hand: v(1) = 1 - 2 phi(1) / (1 - 2 Q(1)) = 1 - 0.4839414490 / 0.6826894921.
-    assert!((truncated_variance(1.0) - (1.0 - 0.483_941_449_038_286_7 / 0.682_689_492_137_085_9)).abs() < 1e-12);
+    assert!(
+        (truncated_variance(1.0) - (1.0 - 0.483_941_449_038_286_7 / 0.682_689_492_137_085_9)).abs()
+            < 1e-12
+    );
 }
 
 /// One silent step of Wu et al.'s estimator with numbers: P^- = 2, Z = 3, delta = 1.
@@ -248,7 +260,10 @@ fn innovation_trigger_single_step_by_hand() {
     let beta = 0.483_941_449_038_286_7 / 0.682_689_492_137_085_9;
     let e = center.estimate();
     assert!((e.cov[(0, 0)] - (2.0 - beta * 4.0 / 3.0)).abs() < 1e-12);
-    assert!((e.mean[0] - 0.5).abs() < 1e-15, "a silence does not move the mean");
+    assert!(
+        (e.mean[0] - 0.5).abs() < 1e-15,
+        "a silence does not move the mean"
+    );
     // Without feedback the sensor cannot trigger.
     assert!(matches!(
         sensor.step(2, &z_at(0.0), None, &mut rng),
@@ -291,7 +306,10 @@ fn stochastic_trigger_single_step_by_hand() {
         .count() as f64
         / n as f64;
     let p = (-0.5f64).exp();
-    assert!((silent - p).abs() < 4.0 * (p * (1.0 - p) / n as f64).sqrt(), "{silent}");
+    assert!(
+        (silent - p).abs() < 4.0 * (p * (1.0 - p) / n as f64).sqrt(),
+        "{silent}"
+    );
 }
 
 /// Send-on-delta with numbers: delta = 1.5, R = 1.
@@ -301,10 +319,22 @@ fn send_on_delta_single_steps_by_hand() {
     let mut s = SendOnDeltaSensor::new(1.5).unwrap();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(0);
     let z = |v: f64| Vector::from_element(1, v);
-    assert!(matches!(s.step(1, &z(1.0), None, &mut rng).unwrap(), Transmission::Send(_)));
-    assert_eq!(s.step(2, &z(2.4), None, &mut rng).unwrap(), Transmission::Silent);
-    assert_eq!(s.step(3, &z(-0.4), None, &mut rng).unwrap(), Transmission::Silent);
-    assert!(matches!(s.step(4, &z(2.6), None, &mut rng).unwrap(), Transmission::Send(_)));
+    assert!(matches!(
+        s.step(1, &z(1.0), None, &mut rng).unwrap(),
+        Transmission::Send(_)
+    ));
+    assert_eq!(
+        s.step(2, &z(2.4), None, &mut rng).unwrap(),
+        Transmission::Silent
+    );
+    assert_eq!(
+        s.step(3, &z(-0.4), None, &mut rng).unwrap(),
+        Transmission::Silent
+    );
+    assert!(matches!(
+        s.step(4, &z(2.6), None, &mut rng).unwrap(),
+        Transmission::Send(_)
+    ));
     let mut c = SendOnDeltaCenter::new(system.clone(), 1.5, SilenceModel::Uniform).unwrap();
     c.step(1, &[Received::Measurement(z(1.0))]).unwrap();
     // Step 1: P^- = 2, K = 2/3, x = 0.5 + 2/3 * 0.5, P = 2/3.
@@ -364,7 +394,10 @@ fn stochastic_trigger_filters_are_consistent() {
         let trigger = StochasticTrigger::with_tau(&system, kind, tau).unwrap();
         let scheme = StochasticTriggerScheme::new(system.clone(), trigger);
         let (sums, rate) = nees_at(&system, &scheme, trials, 30, &at);
-        assert!(rate > 0.05 && rate < 0.95, "{kind:?} tau {tau}: rate {rate} tests nothing");
+        assert!(
+            rate > 0.05 && rate < 0.95,
+            "{kind:?} tau {tau}: rate {rate} tests nothing"
+        );
         let dof = (trials * system.state_dim()) as f64;
         let lo = chi2::upper_quantile(dof, 0.9995).unwrap();
         let hi = chi2::upper_quantile(dof, 0.0005).unwrap();
@@ -386,7 +419,9 @@ fn innovation_trigger_anees_is_reported() {
         let scheme = InnovationTriggerScheme::new(system.clone(), delta).unwrap();
         let (sums, rate) = nees_at(&system, &scheme, 200, 30, &[10, 20, 30]);
         let anees: Vec<f64> = sums.iter().map(|s| s / 200.0 / 2.0).collect();
-        eprintln!("innovation trigger delta {delta}: rate {rate:.3}, ANEES/n at k=10,20,30 {anees:.3?}");
+        eprintln!(
+            "innovation trigger delta {delta}: rate {rate:.3}, ANEES/n at k=10,20,30 {anees:.3?}"
+        );
         assert!(anees.iter().all(|a| a.is_finite()));
     }
 }
@@ -445,7 +480,10 @@ fn send_rate_falls_as_the_knob_grows() {
             rates.windows(2).all(|w| w[1] < w[0]),
             "{name}: rates {rates:?} do not fall"
         );
-        assert!(rates[0] > rates[4] + 0.1, "{name}: rates {rates:?} barely move");
+        assert!(
+            rates[0] > rates[4] + 0.1,
+            "{name}: rates {rates:?} barely move"
+        );
     }
 }
 
@@ -456,7 +494,10 @@ fn constructors_and_params_name_the_field() {
         SchemeError::Invalid { field, .. } => field,
         other => panic!("{other:?}"),
     };
-    assert_eq!(field(InnovationTriggerScheme::new(system.clone(), -1.0).unwrap_err()), "delta");
+    assert_eq!(
+        field(InnovationTriggerScheme::new(system.clone(), -1.0).unwrap_err()),
+        "delta"
+    );
     assert_eq!(
         field(SendOnDeltaScheme::new(system.clone(), f64::NAN, SilenceModel::Ignore).unwrap_err()),
         "delta"
@@ -499,6 +540,9 @@ fn constructors_and_params_name_the_field() {
         "stochastic-trigger-closed",
         "send-on-delta",
     ] {
-        assert!(registry::find(kind).unwrap().knob.is_some(), "{kind} declares its knob");
+        assert!(
+            registry::find(kind).unwrap().knob.is_some(),
+            "{kind} declares its knob"
+        );
     }
 }
