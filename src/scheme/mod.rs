@@ -3,6 +3,8 @@
 pub mod censored_pf;
 pub mod centralized;
 pub mod distributed_kf;
+pub mod estimate_fusion;
+pub mod event_triggered;
 pub mod federated_tobit;
 pub mod quantized_innovation;
 pub mod registry;

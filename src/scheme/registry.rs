@@ -143,6 +143,12 @@ pub const SCHEMES: &[SchemeEntry] = &[
     super::federated_tobit::params::ENTRY,
     super::federated_tobit::params::ROUND_ROBIN_KF,
     super::federated_tobit::exact_pf::ENTRY,
+    super::event_triggered::params::INNOVATION,
+    super::event_triggered::params::STOCHASTIC_OPEN,
+    super::event_triggered::params::STOCHASTIC_CLOSED,
+    super::event_triggered::params::SEND_ON_DELTA,
+    super::estimate_fusion::params::CI,
+    super::estimate_fusion::params::NAIVE,
 ];
 
 /// The entry of a kind.

@@ -1,0 +1,277 @@
+//! Stochastic event triggers (Han, Mo, Wu, Weerakkody, Sinopoli, Shi, "Stochastic
+//! event-triggered sensor schedule for remote state estimation", IEEE TAC 60(10), 2015).
+//!
+//! At each step the sensor draws ζ_k uniform on (0, 1] and stays silent (γ_k = 0) iff
+//! ζ_k <= φ(·), with
+//!
+//! - **open loop** (their Section III-A): φ(z_k) = exp(-½ z_k^T Y z_k), on the measurement;
+//! - **closed loop** (Section III-B): φ(ν_k) = exp(-½ ν_k^T Y ν_k), ν_k = z_k - C x̂_k^-, on
+//!   the innovation against the estimator's prediction.
+//!
+//! A silence then has the likelihood ∫ N(z; Cx, R) φ(z) dz ∝ N(0; Cx, R + Y^{-1}) (open loop)
+//! or ∝ N(C x̂^-; Cx, R + Y^{-1}) (closed loop): Gaussian in x, so the posterior stays
+//! Gaussian and the KF with the silence read as the pseudo-measurement 0 (open loop) or
+//! C x̂_k^- (closed loop) with noise R + Y^{-1} is the exact MMSE estimator (their Theorem 1,
+//! open loop: x̂_k = x̂_k^- - P^- C^T (C P^- C^T + R + Y^{-1})^{-1} C x̂_k^- on silence;
+//! Theorem 2, closed loop: x̂_k = x̂_k^-, and in both P_k = P^- - P^- C^T (C P^- C^T + R +
+//! Y^{-1})^{-1} C P^-). With several sensors the silence likelihoods multiply (independent
+//! noises and coins), so the fused filter stays exact for linear sensors; nonlinear sensors
+//! are linearized at the prediction (then it is an EKF, not exact).
+//!
+//! **Knob.** Y_i = R_i^{-1} / τ² per sensor (or one matrix `Y` for all): τ is a threshold in
+//! units of the sensor's noise standard deviation, the send rate falls as τ grows, τ = 0 is
+//! "Y = ∞": always send, and R + Y^{-1} = (1 + τ²) R.
+//!
+//! **Feedback.** Open loop: none. Closed loop: the center feeds back x̂_k^- only (n reals,
+//! downlink), since Y is fixed and the trigger needs no covariance. With one sensor a replica
+//! of the estimator at the sensor would do without it (the paper's setting), not with N.
+//!
+//! The coin ζ_k comes from the `rng` given to [`SensorNode::step`] and is drawn at every step,
+//! so the coin stream does not depend on the knob (common random numbers across knob values).
+use super::{check_inbox, fuse, nonnegative, prediction_feedback, received_measurement, Evidence};
+use crate::filter::{kf, Gaussian};
+use crate::linalg::{check_spd, spd_inverse, Matrix, Vector};
+use crate::link::{Message, Received, Transmission};
+use crate::scheme::{
+    Feedback, FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System,
+};
+use rand::{Rng, RngCore};
+use std::sync::Arc;
+
+/// Open loop (on z_k) or closed loop (on the innovation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TriggerLoop {
+    Open,
+    Closed,
+}
+
+/// The trigger matrices every sensor and the center share: per sensor Y_i and the effective
+/// silence noise R_i + Y_i^{-1}; `None` for Y = ∞ (always send).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StochasticTrigger {
+    pub kind: TriggerLoop,
+    per_sensor: Option<Vec<(Matrix, Matrix)>>,
+}
+
+impl StochasticTrigger {
+    /// Y_i = R_i^{-1} / τ² (τ >= 0; τ = 0 always sends).
+    pub fn with_tau(system: &System, kind: TriggerLoop, tau: f64) -> Result<Self, SchemeError> {
+        nonnegative("tau", tau)?;
+        if tau == 0.0 {
+            return Ok(Self {
+                kind,
+                per_sensor: None,
+            });
+        }
+        let per_sensor = system
+            .sensors
+            .iter()
+            .map(|s| {
+                let r = s.noise_cov();
+                let y = spd_inverse(r).map_err(|source| SchemeError::Matrix {
+                    what: "sensor noise R",
+                    source,
+                })? / (tau * tau);
+                Ok((y, r * (1.0 + tau * tau)))
+            })
+            .collect::<Result<_, SchemeError>>()?;
+        Ok(Self {
+            kind,
+            per_sensor: Some(per_sensor),
+        })
+    }
+
+    /// One symmetric positive definite Y for every sensor (all of Y's dimension).
+    pub fn with_matrix(system: &System, kind: TriggerLoop, y: Matrix) -> Result<Self, SchemeError> {
+        check_spd(&y).map_err(|e| SchemeError::Invalid {
+            field: "Y",
+            message: format!("Y must be symmetric positive definite: {e}"),
+        })?;
+        let y_inv = spd_inverse(&y).map_err(|e| SchemeError::Invalid {
+            field: "Y",
+            message: e.to_string(),
+        })?;
+        let per_sensor = system
+            .sensors
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                if s.meas_dim() != y.nrows() {
+                    return Err(SchemeError::Invalid {
+                        field: "Y",
+                        message: format!(
+                            "Y is {}x{} but sensor {i} measures {} components",
+                            y.nrows(),
+                            y.ncols(),
+                            s.meas_dim()
+                        ),
+                    });
+                }
+                Ok((y.clone(), s.noise_cov() + &y_inv))
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            kind,
+            per_sensor: Some(per_sensor),
+        })
+    }
+
+    /// Y of sensor `i` (`None`: always send).
+    pub fn y(&self, i: usize) -> Option<&Matrix> {
+        self.per_sensor.as_ref().map(|p| &p[i].0)
+    }
+
+    /// R_i + Y_i^{-1}, the effective noise of a silence (`None`: silences do not happen).
+    pub fn silence_noise(&self, i: usize) -> Option<&Matrix> {
+        self.per_sensor.as_ref().map(|p| &p[i].1)
+    }
+
+    /// φ = exp(-½ u^T Y_i u): the probability of staying silent given u (0 for Y = ∞).
+    pub fn silence_probability(&self, i: usize, u: &Vector) -> f64 {
+        match self.y(i) {
+            None => 0.0,
+            Some(y) => (-0.5 * u.dot(&(y * u))).exp(),
+        }
+    }
+}
+
+/// Sensor side: one coin per step against φ of the measurement (open loop) or of the
+/// innovation against the fed-back x̂_k^- (closed loop).
+#[derive(Debug, Clone)]
+pub struct StochasticTriggerSensor {
+    system: Arc<System>,
+    index: usize,
+    trigger: StochasticTrigger,
+}
+
+impl StochasticTriggerSensor {
+    pub fn new(system: Arc<System>, index: usize, trigger: StochasticTrigger) -> Self {
+        Self {
+            system,
+            index,
+            trigger,
+        }
+    }
+}
+
+impl SensorNode for StochasticTriggerSensor {
+    fn step(
+        &mut self,
+        _k: usize,
+        z: &Vector,
+        feedback: Option<&Feedback>,
+        rng: &mut dyn RngCore,
+    ) -> Result<Transmission, SchemeError> {
+        // ζ in (0, 1]: with Y = ∞ (φ = 0) the sensor always sends.
+        let zeta = 1.0 - rng.random::<f64>();
+        let u = match self.trigger.kind {
+            TriggerLoop::Open => z.clone(),
+            TriggerLoop::Closed => {
+                let (mean, _) = prediction_feedback(self.index, feedback, false)?;
+                z - self.system.sensors[self.index].predict(mean)
+            }
+        };
+        if zeta <= self.trigger.silence_probability(self.index, &u) {
+            Ok(Transmission::Silent)
+        } else {
+            Ok(Transmission::Send(Message::Measurement(z.clone())))
+        }
+    }
+}
+
+/// Fusion side: the exact MMSE estimator of Theorems 1 / 2, fused over sensors.
+#[derive(Debug, Clone)]
+pub struct StochasticTriggerCenter {
+    system: Arc<System>,
+    trigger: StochasticTrigger,
+    est: Gaussian,
+}
+
+impl StochasticTriggerCenter {
+    pub fn new(system: Arc<System>, trigger: StochasticTrigger) -> Self {
+        let est = system.prior.clone();
+        Self {
+            system,
+            trigger,
+            est,
+        }
+    }
+}
+
+impl FusionCenter for StochasticTriggerCenter {
+    fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
+        check_inbox(&self.system, inbox)?;
+        let pred = kf::predict(&self.system.transition, &self.est);
+        let mut evidence = Vec::with_capacity(inbox.len());
+        for (i, msg) in inbox.iter().enumerate() {
+            evidence.push(match (received_measurement(i, msg)?, msg) {
+                (Some(z), _) => Evidence::Measurement(z.clone()),
+                (None, Received::Silent) => match self.trigger.silence_noise(i) {
+                    Some(r) => Evidence::Pseudo {
+                        z: match self.trigger.kind {
+                            TriggerLoop::Open => Vector::zeros(r.nrows()),
+                            TriggerLoop::Closed => self.system.sensors[i].predict(&pred.mean),
+                        },
+                        r: r.clone(),
+                    },
+                    None => {
+                        return Err(SchemeError::Protocol {
+                            sensor: i,
+                            message: "silent although Y = infinity (tau = 0) always sends".into(),
+                        })
+                    }
+                },
+                (None, _) => Evidence::Nothing,
+            });
+        }
+        self.est = fuse(&self.system, pred, &evidence)?;
+        Ok(())
+    }
+
+    fn estimate(&self) -> &Gaussian {
+        &self.est
+    }
+
+    fn feedback(&self) -> Option<Feedback> {
+        match self.trigger.kind {
+            TriggerLoop::Open => None,
+            TriggerLoop::Closed => Some(Feedback::Prediction {
+                mean: self.system.transition.f() * &self.est.mean,
+                cov: None,
+            }),
+        }
+    }
+}
+
+/// The stochastic event-triggered scheme of Han et al. 2015.
+#[derive(Debug, Clone)]
+pub struct StochasticTriggerScheme {
+    system: Arc<System>,
+    trigger: StochasticTrigger,
+}
+
+impl StochasticTriggerScheme {
+    pub fn new(system: Arc<System>, trigger: StochasticTrigger) -> Self {
+        Self { system, trigger }
+    }
+}
+
+impl Scheme for StochasticTriggerScheme {
+    fn build(&self) -> Result<SchemeInstance, SchemeError> {
+        Ok(SchemeInstance {
+            sensors: (0..self.system.n_sensors())
+                .map(|i| {
+                    Box::new(StochasticTriggerSensor::new(
+                        self.system.clone(),
+                        i,
+                        self.trigger.clone(),
+                    )) as Box<dyn SensorNode>
+                })
+                .collect(),
+            center: Box::new(StochasticTriggerCenter::new(
+                self.system.clone(),
+                self.trigger.clone(),
+            )),
+        })
+    }
+}
