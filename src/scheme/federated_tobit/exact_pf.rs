@@ -24,7 +24,7 @@
 //! estimator: that value was already used when it arrived, so it carries no new information
 //! and is not weighed again. The runner delivers it as [`Received::NotScheduled`] and the
 //! center skips it; a scheduled sensor that sent nothing ([`Received::Silent`], which
-//! [`ForwardingSensor::new(1.0)`](ForwardingSensor::new) never does) is skipped as well.
+//! [`super::RoundRobinSensor`] never does) is skipped as well.
 //! Every measurement that does arrive is used, whatever the schedule: the readings are
 //! conditionally independent given the state, so the filter stays exact under
 //! [`Schedule::All`] too.
@@ -63,7 +63,6 @@
 //! assert!(center.estimate().mean[0] > 1.0);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
-use super::super::centralized::ForwardingSensor;
 use crate::filter::particle::{
     ParticleCloud, ParticleError, ParticleTransition, ResamplePolicy, Resampling,
 };
@@ -461,7 +460,7 @@ impl FusionCenter for TobitPfCenter {
 }
 
 /// Seed 002's network with the exact Bayesian fusion center: sensors forward their raw
-/// measurement when round-robin schedules them ([`ForwardingSensor`] with probability 1), the
+/// measurement when round-robin schedules them ([`super::RoundRobinSensor`]), the
 /// center censors and fuses it with [`TobitPfCenter`].
 #[derive(Debug, Clone)]
 pub struct TobitPfScheme {
@@ -469,6 +468,9 @@ pub struct TobitPfScheme {
     channels: Arc<[Channel]>,
     transition: ParticleTransition,
     options: TobitPfOptions,
+    /// Extra noise each sensor adds before sending (seed 002's Table III on one scenario, as
+    /// [`super::RoundRobinSensor`]); zero by default.
+    extra_sd: Vec<f64>,
 }
 
 impl TobitPfScheme {
@@ -485,11 +487,38 @@ impl TobitPfScheme {
         let channels: Arc<[Channel]> = validate(&system, tau_l, tau_r, &options)?.into();
         let transition = ParticleTransition::new(&system.transition).map_err(pf_err)?;
         Ok(Self {
+            extra_sd: vec![0.0; system.n_sensors()],
             system,
             channels,
             transition,
             options,
         })
+    }
+
+    /// The scheme at other noise variances than the sensors' own (`noise_var[i] >= R_i`): each
+    /// sensor adds the same extra noise as the federated Tobit KF's sensors, and the filter
+    /// weighs with the new variances.
+    pub fn with_noise_var(
+        system: Arc<System>,
+        noise_var: &[f64],
+        tau_l: &[f64],
+        tau_r: &[f64],
+        options: TobitPfOptions,
+    ) -> Result<Self, SchemeError> {
+        let sensors = super::scalar_sensors(&system, Some(noise_var))?;
+        let extra_sd = sensors.iter().map(|s| s.2).collect();
+        let mut sys = (*system).clone();
+        sys.sensors = sensors
+            .into_iter()
+            .map(|(h, r, _)| {
+                crate::model::LinearSensor::new(h, crate::linalg::Matrix::from_element(1, 1, r))
+                    .map(|s| Arc::new(s) as Arc<dyn crate::model::MeasurementModel>)
+                    .map_err(|e| SchemeError::Unsupported(e.to_string()))
+            })
+            .collect::<Result<_, _>>()?;
+        let mut scheme = Self::new(Arc::new(sys), tau_l, tau_r, options)?;
+        scheme.extra_sd = extra_sd;
+        Ok(scheme)
     }
 
     /// Sensor `i`'s thresholds `(tau_l, tau_r)`.
@@ -521,8 +550,10 @@ impl Scheme for TobitPfScheme {
 
     fn build_with_seed(&self, seed: u64) -> Result<SchemeInstance, SchemeError> {
         Ok(SchemeInstance {
-            sensors: (0..self.system.n_sensors())
-                .map(|_| Box::new(ForwardingSensor::new(1.0)) as Box<dyn SensorNode>)
+            sensors: self
+                .extra_sd
+                .iter()
+                .map(|&sd| Box::new(super::RoundRobinSensor::new(sd)) as Box<dyn SensorNode>)
                 .collect(),
             center: Box::new(self.center(seed)?),
         })

@@ -38,10 +38,18 @@ impl Thresholds {
 #[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct TobitPfParams {
-    /// Left-censoring thresholds (eq. (6)).
-    pub tau_l: Thresholds,
-    /// Right-censoring thresholds (eq. (6)).
-    pub tau_r: Thresholds,
+    /// Symmetric region `[-tau, tau]` for every sensor (exclusive with `tau_l`/`tau_r`).
+    #[serde(default)]
+    pub tau: Option<f64>,
+    /// Left-censoring thresholds (eq. (6)); default none.
+    #[serde(default)]
+    pub tau_l: Option<Thresholds>,
+    /// Right-censoring thresholds (eq. (6)); default none.
+    #[serde(default)]
+    pub tau_r: Option<Thresholds>,
+    /// Noise variance the sensors run at (as the federated Tobit KF's `noise_var`).
+    #[serde(default)]
+    pub noise_var: Option<Thresholds>,
     #[serde(default = "default_particles")]
     pub particles: usize,
     #[serde(default)]
@@ -72,8 +80,25 @@ impl TobitPfParams {
 impl SchemeParams for TobitPfParams {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
         let n = cx.system.n_sensors();
-        let tau_l = self.tau_l.resolve("tau_l", n)?;
-        let tau_r = self.tau_r.resolve("tau_r", n)?;
+        let (tau_l, tau_r) = match (self.tau, &self.tau_l, &self.tau_r) {
+            (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+                return Err(ParamError::whole(
+                    "give `tau` (region [-tau, tau]) or `tau_l`/`tau_r`, not both",
+                ))
+            }
+            (Some(t), None, None) => {
+                if t.is_nan() || t <= 0.0 {
+                    return Err(ParamError::at("tau", format!("expected tau > 0, got {t}")));
+                }
+                (vec![-t; n], vec![t; n])
+            }
+            (None, l, r) => (
+                l.as_ref()
+                    .map_or(Ok(vec![f64::NEG_INFINITY; n]), |v| v.resolve("tau_l", n))?,
+                r.as_ref()
+                    .map_or(Ok(vec![f64::INFINITY; n]), |v| v.resolve("tau_r", n))?,
+            ),
+        };
         if self.particles > MAX_PARTICLES {
             // Checked here too so the message names the limit before any allocation.
             return Err(ParamError::at(
@@ -81,7 +106,16 @@ impl SchemeParams for TobitPfParams {
                 format!("at most {MAX_PARTICLES} particles, got {}", self.particles),
             ));
         }
-        let scheme = TobitPfScheme::new(cx.system.clone(), &tau_l, &tau_r, self.options())?;
+        let scheme = match &self.noise_var {
+            None => TobitPfScheme::new(cx.system.clone(), &tau_l, &tau_r, self.options())?,
+            Some(v) => TobitPfScheme::with_noise_var(
+                cx.system.clone(),
+                &v.resolve("noise_var", n)?,
+                &tau_l,
+                &tau_r,
+                self.options(),
+            )?,
+        };
         Ok(Box::new(scheme))
     }
 }
@@ -92,16 +126,28 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     summary: "seed 002, beyond the paper: round-robin raw measurements censored two-sided at the center (eq. (6)); bootstrap particle filter on the augmented state with the exact Tobit likelihood, the Bayes-optimal reference for the Tobit KF",
     params: &[
         ParamDoc {
+            name: "tau",
+            values: "number > 0",
+            default: "none",
+            meaning: "censoring region [-tau, tau] for every sensor (instead of tau_l, tau_r)",
+        },
+        ParamDoc {
             name: "tau_l",
             values: "number or list (one per sensor)",
-            default: "required",
+            default: "-inf",
             meaning: "left-censoring thresholds (z <= tau_l reads tau_l); -inf for none; a number applies to every sensor",
         },
         ParamDoc {
             name: "tau_r",
             values: "number or list (one per sensor)",
-            default: "required",
+            default: "+inf",
             meaning: "right-censoring thresholds (z >= tau_r reads tau_r), each above its tau_l; inf for none",
+        },
+        ParamDoc {
+            name: "noise_var",
+            values: "number or list (one per sensor), >= R",
+            default: "sensor R",
+            meaning: "run at this noise variance: the sensor adds the same N(0, noise_var - R) as federated-tobit's",
         },
         ParamDoc {
             name: "particles",
@@ -124,5 +170,5 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     ],
     knob: None,
     build: registry::parse_and_build::<TobitPfParams>,
-    example: "tau_l = -5.0\ntau_r = 5.0\nparticles = 200",
+    example: "tau = 5.0\nparticles = 200",
 };
