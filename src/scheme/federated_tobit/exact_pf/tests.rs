@@ -532,7 +532,10 @@ fn build(text: &str) -> Result<Box<dyn Scheme>, registry::ParamError> {
 fn params_parse_broadcast_and_point_at_fields() {
     let p: TobitPfParams =
         registry::parse(toml::from_str("tau_l = -5\ntau_r = 5.0").unwrap()).unwrap();
-    assert_eq!(p.tau_l.resolve("tau_l", 2).unwrap(), vec![-5.0, -5.0]);
+    assert_eq!(
+        p.tau_l.as_ref().unwrap().resolve("tau_l", 2).unwrap(),
+        vec![-5.0, -5.0]
+    );
     assert_eq!(p.particles, 2000);
     assert_eq!(p.options(), TobitPfOptions::default());
     let p: TobitPfParams = registry::parse(
@@ -543,7 +546,7 @@ fn params_parse_broadcast_and_point_at_fields() {
     )
     .unwrap();
     assert_eq!(
-        p.tau_l.resolve("tau_l", 2).unwrap(),
+        p.tau_l.as_ref().unwrap().resolve("tau_l", 2).unwrap(),
         vec![f64::NEG_INFINITY, -1.0]
     );
     assert_eq!(
@@ -562,7 +565,14 @@ fn params_parse_broadcast_and_point_at_fields() {
     assert_eq!(field("tau_l = -5\ntau_r = [5, 5, 5]"), Some("tau_r".into()));
     assert_eq!(field("tau_l = 5\ntau_r = 5"), Some("tau_r".into()));
     assert_eq!(field("tau_l = nan\ntau_r = 5"), Some("tau_l".into()));
-    assert_eq!(field("tau_r = 5"), Some("tau_l".into()));
+    // A missing side is not censored; `tau` and a side together are refused.
+    assert!(build("tau_r = 5").is_ok());
+    assert_eq!(field("tau = -1"), Some("tau".into()));
+    assert!(build("tau = 5\ntau_l = -5").is_err());
+    assert_eq!(
+        field("tau = 5\nnoise_var = 0.001"),
+        Some("noise_var".into())
+    );
     assert_eq!(
         field("tau_l = -5\ntau_r = 5\nparticles = 0"),
         Some("particles".into())
@@ -575,7 +585,10 @@ fn params_parse_broadcast_and_point_at_fields() {
         field("tau_l = -5\ntau_r = 5\ness_threshold = 2"),
         Some("ess_threshold".into())
     );
-    assert_eq!(field("tau_l = -5\ntau_r = 5\ntau = 1"), Some("tau".into()));
+    assert_eq!(
+        field("tau_l = -5\ntau_r = 5\nsigma = 1"),
+        Some("sigma".into())
+    );
     assert_eq!(
         field("tau_l = -5\ntau_r = 5\nresampling = \"bogus\""),
         Some("resampling".into())
