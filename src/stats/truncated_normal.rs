@@ -122,10 +122,21 @@ fn upper_tail_cf(x: f64) -> (f64, f64) {
 /// Moments of the standard normal truncated to `(a, b)` (Lemma 1's `lambda`, `varphi`; eq.
 /// (14)-(15) with `a = theta_l`, `b = theta_r`). `a = -inf` and/or `b = +inf` are allowed.
 ///
-/// # Panics
-/// If `a >= b` or either is NaN (callers validate thresholds).
+/// Callers pass `a < b`; a band that rounding collapsed (`a == b` when the thresholds are tiny
+/// next to the mean, e.g. a state of 1e18) is treated as its edge: mean `a`, variance 0, mass
+/// 0. NaN gives NaN moments, which the filter's covariance checks then refuse.
 pub fn truncated_standard(a: f64, b: f64) -> TruncatedMoments {
-    assert!(a < b, "truncated_standard: empty band ({a}, {b})");
+    if !(a < b) {
+        return TruncatedMoments {
+            log_mass: f64::NEG_INFINITY,
+            mean: if a.is_nan() || b.is_nan() {
+                f64::NAN
+            } else {
+                a
+            },
+            var: 0.0,
+        };
+    }
     let log_p = log_mass(a, b);
     // A far edge that carries no mass relative to the near one is dropped, so that a band deep
     // in a tail is treated by the cancellation-free one-sided formulas.

@@ -61,6 +61,10 @@ fn default_prop3_samples() -> usize {
     200
 }
 
+/// Most Monte Carlo draws per particle and silence (`band_samples`) or per step
+/// (`prop3_samples`): beyond this the counting estimates cost more than any run can afford.
+pub const MAX_SAMPLES: usize = 1_000_000;
+
 /// Largest particle count a scenario may ask for: 10^7 particles of a 6-D state are about
 /// 1 GB per fusion center and thread.
 pub const MAX_PARTICLES: usize = 10_000_000;
@@ -83,6 +87,17 @@ impl CensoredPfParams {
                 "particles",
                 format!("at most {MAX_PARTICLES} particles, got {}", self.particles),
             ));
+        }
+        for (field, v) in [
+            ("prop3_samples", Some(self.prop3_samples)),
+            ("band_samples", self.band_samples),
+        ] {
+            if v.is_some_and(|v| v > MAX_SAMPLES) {
+                return Err(ParamError::at(
+                    field,
+                    format!("at most {MAX_SAMPLES} draws, got {}", v.unwrap_or(0)),
+                ));
+            }
         }
         let resample_policy = match self.ess_threshold {
             None => ResamplePolicy::Always,
@@ -188,13 +203,13 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
         },
         ParamDoc {
             name: "band_samples",
-            values: "integer >= 1",
+            values: "integer in 1..=10^6",
             default: "required*",
             meaning: "draws of the counting estimate (band = \"monte-carlo\" only)",
         },
         ParamDoc {
             name: "prop3_samples",
-            values: "integer >= 1",
+            values: "integer in 1..=10^6",
             default: "200",
             meaning: "Monte Carlo draws of the Prop. 3 / 6 integral (no feedback)",
         },
