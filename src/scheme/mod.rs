@@ -9,6 +9,28 @@ pub mod federated_tobit;
 pub mod quantized_innovation;
 pub mod registry;
 
+/// Every scheme kind, in the order `hushfuse list-schemes` prints them: the one list of
+/// schemes. Adding a scheme = its module (declared above) + one line here.
+pub const SCHEMES: &[registry::SchemeEntry] = &[
+    centralized::params::ALL,
+    centralized::params::RANDOM,
+    distributed_kf::params::FULL_RATE,
+    distributed_kf::params::ALG1_RANDOM,
+    distributed_kf::params::ALG1_EVENT,
+    distributed_kf::params::ALG2_EVENT,
+    quantized_innovation::params::ENTRY,
+    censored_pf::params::ENTRY,
+    federated_tobit::params::ENTRY,
+    federated_tobit::params::ROUND_ROBIN_KF,
+    federated_tobit::exact_pf::ENTRY,
+    event_triggered::params::INNOVATION,
+    event_triggered::params::STOCHASTIC_OPEN,
+    event_triggered::params::STOCHASTIC_CLOSED,
+    event_triggered::params::SEND_ON_DELTA,
+    estimate_fusion::params::CI,
+    estimate_fusion::params::NAIVE,
+];
+
 use crate::filter::{FilterError, Gaussian};
 use crate::linalg::{LinalgError, Vector};
 use crate::link::{Received, Transmission};

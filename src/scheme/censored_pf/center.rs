@@ -3,8 +3,8 @@
 //! sensor's innovation stayed inside its no-send band.
 use super::censoring::whitened_band;
 use super::local_plan::{LocalPlan, LocalStep};
-use super::sensor::local_covariance_update;
 use super::{BandMethod, FeedbackMode, Fusion, PfOptions, Protocol};
+use crate::filter::kf::update_cov;
 use crate::filter::particle::{ParticleCloud, ParticleTransition};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{symmetrize, Matrix, Vector};
@@ -450,8 +450,7 @@ impl FusionCenter for CensoredPfCenter {
                     full_nofb.then(|| step.gain.clone())
                 }
                 None => {
-                    let (p, gain, _) =
-                        local_covariance_update(sensor.as_ref(), &self.p_pred[i], x_ref)?;
+                    let (p, gain, _) = update_cov(sensor.as_ref(), &self.p_pred[i], x_ref)?;
                     self.local_cov[i] = p;
                     full_nofb.then_some(gain)
                 }

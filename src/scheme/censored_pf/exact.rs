@@ -16,8 +16,8 @@
 //!
 //! Resampling copies a particle's state together with its copies, so every particle carries
 //! a history that is consistent with everything the fusion center has seen.
-use super::sensor::local_covariance_update;
 use super::{PfOptions, Protocol};
+use crate::filter::kf::update_cov;
 use crate::filter::particle::{ParticleCloud, ParticleTransition};
 use crate::filter::Gaussian;
 use crate::linalg::{symmetrize, Matrix, Vector};
@@ -257,7 +257,7 @@ impl FusionCenter for ExactCensoredCenter {
             let mut p_pred = f * &self.local_cov[i] * f.transpose() + q;
             symmetrize(&mut p_pred);
             let sensor = self.sensors[i].clone();
-            let (p_post, gain, s) = local_covariance_update(&sensor, &p_pred, &sys.prior.mean)?;
+            let (p_post, gain, s) = update_cov(&sensor, &p_pred, &sys.prior.mean)?;
             self.local_cov[i] = p_post;
             let m = sensor.h().nrows();
             let r = crate::model::MeasurementModel::noise_cov(&sensor).clone();

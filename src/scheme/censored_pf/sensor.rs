@@ -80,11 +80,6 @@ pub fn innovation_reference<'a>(
     })
 }
 
-/// Covariance-only local update linearized at `x_ref` (the EKF linearizes at the fed-back
-/// estimate in feedback systems, Remark 3), Joseph form; returns (P_{k|k}, gain, S). Now
-/// [`kf::update_cov`]; kept under this name for the fusion-center code that replicates it.
-pub use crate::filter::kf::update_cov as local_covariance_update;
-
 impl CensoringSensor {
     pub fn new(
         index: usize,
