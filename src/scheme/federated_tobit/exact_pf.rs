@@ -81,7 +81,7 @@ pub mod params;
 #[cfg(test)]
 mod tests;
 
-pub use params::{Thresholds, TobitPfParams, ENTRY};
+pub use params::{TobitPfParams, ENTRY};
 
 /// Largest particle count: 10^7 particles of a 3-D augmented state are about 0.5 GB per
 /// fusion center and thread.

@@ -16,7 +16,7 @@ pub enum PerSensor {
 }
 
 impl PerSensor {
-    fn expand(&self, field: &str, p: usize) -> Result<Vec<f64>, ParamError> {
+    pub fn expand(&self, field: &str, p: usize) -> Result<Vec<f64>, ParamError> {
         match self {
             PerSensor::All(v) => Ok(vec![*v; p]),
             PerSensor::Each(v) if v.len() == p => Ok(v.clone()),
@@ -93,32 +93,42 @@ fn yes() -> bool {
     true
 }
 
-fn noise_var(nv: &Option<PerSensor>, p: usize) -> Result<Option<Vec<f64>>, ParamError> {
+/// The censoring region of every sensor from `tau` (symmetric, for all) or `tau_l` / `tau_r`
+/// (each a number for all or one per sensor; a side not given is not censored). Shared by
+/// `federated-tobit` and `tobit-pf`, so both read a file the same way.
+pub fn region(
+    tau: Option<f64>,
+    tau_l: &Option<PerSensor>,
+    tau_r: &Option<PerSensor>,
+    p: usize,
+) -> Result<(Vec<f64>, Vec<f64>), ParamError> {
+    match (tau, tau_l, tau_r) {
+        (Some(_), Some(_), _) | (Some(_), _, Some(_)) => Err(ParamError::whole(
+            "give `tau` (region [-tau, tau]) or `tau_l`/`tau_r`, not both",
+        )),
+        (Some(t), None, None) => {
+            if t.is_nan() || t <= 0.0 {
+                return Err(ParamError::at("tau", format!("expected tau > 0, got {t}")));
+            }
+            Ok((vec![-t; p], vec![t; p]))
+        }
+        (None, l, r) => Ok((
+            l.as_ref()
+                .map_or(Ok(vec![f64::NEG_INFINITY; p]), |v| v.expand("tau_l", p))?,
+            r.as_ref()
+                .map_or(Ok(vec![f64::INFINITY; p]), |v| v.expand("tau_r", p))?,
+        )),
+    }
+}
+
+pub(crate) fn noise_var(nv: &Option<PerSensor>, p: usize) -> Result<Option<Vec<f64>>, ParamError> {
     nv.as_ref().map(|v| v.expand("noise_var", p)).transpose()
 }
 
 impl SchemeParams for FtkfParams {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
         let p = cx.system.n_sensors();
-        let (lo, hi) = match (self.tau, &self.tau_l, &self.tau_r) {
-            (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
-                return Err(ParamError::whole(
-                    "give `tau` (region [-tau, tau]) or `tau_l`/`tau_r`, not both",
-                ))
-            }
-            (Some(t), None, None) => {
-                if t.is_nan() || t <= 0.0 {
-                    return Err(ParamError::at("tau", format!("expected tau > 0, got {t}")));
-                }
-                (vec![-t; p], vec![t; p])
-            }
-            (None, l, r) => (
-                l.as_ref()
-                    .map_or(Ok(vec![f64::NEG_INFINITY; p]), |v| v.expand("tau_l", p))?,
-                r.as_ref()
-                    .map_or(Ok(vec![f64::INFINITY; p]), |v| v.expand("tau_r", p))?,
-            ),
-        };
+        let (lo, hi) = region(self.tau, &self.tau_l, &self.tau_r, p)?;
         let thresholds = lo
             .iter()
             .zip(&hi)

@@ -2,37 +2,12 @@
 //! threshold names `tau_l` / `tau_r` are the federated Tobit KF's too.
 use super::{TobitPfOptions, TobitPfScheme, MAX_PARTICLES};
 use crate::filter::particle::{ResamplePolicy, Resampling};
+use crate::scheme::federated_tobit::params::{noise_var, region, PerSensor};
 use crate::scheme::registry::{
     self, BuildContext, ParamDoc, ParamError, SchemeEntry, SchemeParams,
 };
 use crate::scheme::Scheme;
 use serde::{Deserialize, Serialize};
-
-/// Censoring thresholds as written in files: one number for every sensor (so a sweep over a
-/// number works), or a list with one per sensor. `-inf` / `inf` mean no censoring on that side.
-#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
-#[serde(untagged)]
-pub enum Thresholds {
-    All(f64),
-    PerSensor(Vec<f64>),
-}
-
-impl Thresholds {
-    /// One threshold per sensor of `n`; a list of another length is an error at `field`.
-    pub fn resolve(&self, field: &str, n: usize) -> Result<Vec<f64>, ParamError> {
-        match self {
-            Thresholds::All(t) => Ok(vec![*t; n]),
-            Thresholds::PerSensor(v) if v.len() == n => Ok(v.clone()),
-            Thresholds::PerSensor(v) => Err(ParamError::at(
-                field,
-                format!(
-                    "expected one threshold per sensor ({n}) or a single number, got a list of {}",
-                    v.len()
-                ),
-            )),
-        }
-    }
-}
 
 /// `tobit-pf`.
 #[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
@@ -43,13 +18,13 @@ pub struct TobitPfParams {
     pub tau: Option<f64>,
     /// Left-censoring thresholds (eq. (6)); default none.
     #[serde(default)]
-    pub tau_l: Option<Thresholds>,
+    pub tau_l: Option<PerSensor>,
     /// Right-censoring thresholds (eq. (6)); default none.
     #[serde(default)]
-    pub tau_r: Option<Thresholds>,
+    pub tau_r: Option<PerSensor>,
     /// Noise variance the sensors run at (as the federated Tobit KF's `noise_var`).
     #[serde(default)]
-    pub noise_var: Option<Thresholds>,
+    pub noise_var: Option<PerSensor>,
     #[serde(default = "default_particles")]
     pub particles: usize,
     #[serde(default)]
@@ -80,25 +55,7 @@ impl TobitPfParams {
 impl SchemeParams for TobitPfParams {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
         let n = cx.system.n_sensors();
-        let (tau_l, tau_r) = match (self.tau, &self.tau_l, &self.tau_r) {
-            (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
-                return Err(ParamError::whole(
-                    "give `tau` (region [-tau, tau]) or `tau_l`/`tau_r`, not both",
-                ))
-            }
-            (Some(t), None, None) => {
-                if t.is_nan() || t <= 0.0 {
-                    return Err(ParamError::at("tau", format!("expected tau > 0, got {t}")));
-                }
-                (vec![-t; n], vec![t; n])
-            }
-            (None, l, r) => (
-                l.as_ref()
-                    .map_or(Ok(vec![f64::NEG_INFINITY; n]), |v| v.resolve("tau_l", n))?,
-                r.as_ref()
-                    .map_or(Ok(vec![f64::INFINITY; n]), |v| v.resolve("tau_r", n))?,
-            ),
-        };
+        let (tau_l, tau_r) = region(self.tau, &self.tau_l, &self.tau_r, n)?;
         if self.particles > MAX_PARTICLES {
             // Checked here too so the message names the limit before any allocation.
             return Err(ParamError::at(
@@ -106,11 +63,11 @@ impl SchemeParams for TobitPfParams {
                 format!("at most {MAX_PARTICLES} particles, got {}", self.particles),
             ));
         }
-        let scheme = match &self.noise_var {
+        let scheme = match noise_var(&self.noise_var, n)? {
             None => TobitPfScheme::new(cx.system.clone(), &tau_l, &tau_r, self.options())?,
             Some(v) => TobitPfScheme::with_noise_var(
                 cx.system.clone(),
-                &v.resolve("noise_var", n)?,
+                &v,
                 &tau_l,
                 &tau_r,
                 self.options(),

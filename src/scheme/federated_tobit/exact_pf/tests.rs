@@ -533,7 +533,7 @@ fn params_parse_broadcast_and_point_at_fields() {
     let p: TobitPfParams =
         registry::parse(toml::from_str("tau_l = -5\ntau_r = 5.0").unwrap()).unwrap();
     assert_eq!(
-        p.tau_l.as_ref().unwrap().resolve("tau_l", 2).unwrap(),
+        p.tau_l.as_ref().unwrap().expand("tau_l", 2).unwrap(),
         vec![-5.0, -5.0]
     );
     assert_eq!(p.particles, 2000);
@@ -546,7 +546,7 @@ fn params_parse_broadcast_and_point_at_fields() {
     )
     .unwrap();
     assert_eq!(
-        p.tau_l.as_ref().unwrap().resolve("tau_l", 2).unwrap(),
+        p.tau_l.as_ref().unwrap().expand("tau_l", 2).unwrap(),
         vec![f64::NEG_INFINITY, -1.0]
     );
     assert_eq!(
