@@ -17,6 +17,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// and hence every bit of the result, is the same for 1 or many threads.
 const BLOCK: usize = 4;
 
+/// Blocks in flight at once. Only memory depends on it, never the result: blocks are merged in
+/// block order whatever the window.
+const WINDOW: usize = 64;
+
 /// Stream 0 of a trial draws truth and measurements; stream 1 + v is variant v's coins.
 pub fn trial_rng(seed: u64, trial: u64, stream: u64) -> Xoshiro256PlusPlus {
     Xoshiro256PlusPlus::seed_from_u64(trial_seed(seed, trial, stream))
@@ -174,24 +178,32 @@ pub fn run(
             .map(|_| Sums::new(exp.groups.len(), exp.steps, exp.system.state_dim()))
             .collect()
     };
-    let blocks: Result<Vec<Vec<Sums>>, RunError> = pool.install(|| {
-        (0..n_blocks)
-            .into_par_iter()
-            .map(|b| {
-                let mut sums = empty();
-                for trial in b * BLOCK..((b + 1) * BLOCK).min(exp.trials) {
-                    run_trial(exp, trial, &mut sums)?;
-                    progress(done.fetch_add(1, Ordering::Relaxed) + 1);
-                }
-                Ok(sums)
-            })
-            .collect()
-    });
+    // Blocks run in parallel a window at a time and are merged into the total in block order
+    // as each window finishes: memory stays flat in the number of trials (at most WINDOW
+    // blocks' sums are alive), and the summation order is the one of a sequential run.
     let mut total = empty();
-    for block in blocks? {
-        for (t, b) in total.iter_mut().zip(&block) {
-            t.merge(b);
+    let mut start = 0;
+    while start < n_blocks {
+        let end = (start + WINDOW).min(n_blocks);
+        let blocks: Result<Vec<Vec<Sums>>, RunError> = pool.install(|| {
+            (start..end)
+                .into_par_iter()
+                .map(|b| {
+                    let mut sums = empty();
+                    for trial in b * BLOCK..((b + 1) * BLOCK).min(exp.trials) {
+                        run_trial(exp, trial, &mut sums)?;
+                        progress(done.fetch_add(1, Ordering::Relaxed) + 1);
+                    }
+                    Ok(sums)
+                })
+                .collect()
+        });
+        for block in blocks? {
+            for (t, b) in total.iter_mut().zip(&block) {
+                t.merge(b);
+            }
         }
+        start = end;
     }
     Ok(total)
 }

@@ -10,7 +10,7 @@ pub mod center;
 pub mod plan;
 pub mod sensor;
 
-pub use center::{DkfCenter, Fusion};
+pub use center::{CovarianceMemo, DkfCenter, Fusion};
 pub use plan::GlobalizedPlan;
 pub use sensor::{DkfSensor, Trigger};
 
@@ -26,6 +26,8 @@ pub struct DistributedKfScheme {
     plan: Arc<GlobalizedPlan>,
     trigger: Trigger,
     fusion: Fusion,
+    /// Fused covariances by (step, silent set, inexact count), shared by the trials' centers.
+    memo: Arc<CovarianceMemo>,
 }
 
 impl DistributedKfScheme {
@@ -37,7 +39,7 @@ impl DistributedKfScheme {
         trigger: Trigger,
         bound: Option<Matrix>,
     ) -> Result<Self, SchemeError> {
-        let plan = Arc::new(GlobalizedPlan::new(&system, horizon)?);
+        let plan = GlobalizedPlan::shared(&system, horizon)?;
         let fusion = match (&trigger, bound) {
             (Trigger::Bounded { .. }, Some(b)) => {
                 if plan.a_inv().is_none() {
@@ -60,6 +62,7 @@ impl DistributedKfScheme {
             plan,
             trigger,
             fusion,
+            memo: Arc::new(CovarianceMemo::new()),
         })
     }
 
@@ -86,11 +89,12 @@ impl Scheme for DistributedKfScheme {
                 )) as Box<dyn SensorNode>
             })
             .collect();
-        let center = Box::new(DkfCenter::new(
+        let center = Box::new(DkfCenter::with_memo(
             self.plan.clone(),
             self.system.sensors.clone(),
             self.system.prior.clone(),
             self.fusion.clone(),
+            self.memo.clone(),
         ));
         Ok(SchemeInstance { sensors, center })
     }

@@ -5,6 +5,8 @@
 //! fusion center compute them identically; we compute them once and share them.
 use crate::linalg::{relative_difference, spd_inverse, symmetrize, Matrix};
 use crate::scheme::{SchemeError, System};
+use nalgebra::{Dyn, LU};
+use std::sync::{Arc, Mutex, RwLock, Weak};
 
 /// Matrices of one time step k.
 #[derive(Debug, Clone)]
@@ -44,6 +46,28 @@ pub struct GlobalizedPlan {
     a: Matrix,
     a_inv: Option<Matrix>,
     n_sensors: usize,
+    /// Predicted debiasing matrices, filled on demand (see [`GlobalizedPlan::predicted_delta`]).
+    deltas: Arc<DeltaMemo>,
+}
+
+/// Δ^{pp,i} = A^j Δ^{e,i}_s A^{-j}: sensor i's debiasing matrix sent at step s, predicted j
+/// times (Section IV), with its LU factors for the debiased extrapolation. It depends on
+/// (i, s, j) only, never on measurements, so it is computed once and shared by the sensor, its
+/// replica in the fusion center, every trial and every variant that shares the plan. It is
+/// computed by exactly the products the per-trial recursion `Δ <- A Δ A^{-1}` performs, so the
+/// numbers are the same bit for bit.
+#[derive(Debug)]
+pub struct PredictedDelta {
+    /// Δ^{pp,i}.
+    pub delta: Matrix,
+    /// Its LU factorization (as `Δ.clone().lu()`).
+    pub lu: LU<f64, Dyn, Dyn>,
+}
+
+/// One growable row of [`PredictedDelta`]s per (sensor, plan step of the send).
+#[derive(Debug, Default)]
+struct DeltaMemo {
+    rows: Vec<RwLock<Vec<Arc<PredictedDelta>>>>,
 }
 
 impl GlobalizedPlan {
@@ -152,13 +176,77 @@ impl GlobalizedPlan {
                 break;
             }
         }
+        let rows = if a_inv.is_some() {
+            (0..sensors.len() * steps.len())
+                .map(|_| RwLock::new(Vec::new()))
+                .collect()
+        } else {
+            Vec::new()
+        };
         Ok(Self {
             steps,
             converged,
             a,
             a_inv,
             n_sensors: sensors.len(),
+            deltas: Arc::new(DeltaMemo { rows }),
         })
+    }
+
+    /// The plan of `system` for `horizon` steps, shared with every other caller that asked for
+    /// the same system (same `Arc`) and horizon while that plan is alive. A sweep builds many
+    /// variants of one system; the plan (and its memo of predicted debiasing matrices) depends
+    /// on the system only, so one copy serves them all instead of one per variant.
+    pub fn shared(system: &Arc<System>, horizon: usize) -> Result<Arc<Self>, SchemeError> {
+        type Entry = (Weak<System>, usize, Weak<GlobalizedPlan>);
+        static CACHE: Mutex<Vec<Entry>> = Mutex::new(Vec::new());
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        cache.retain(|(s, _, p)| s.strong_count() > 0 && p.strong_count() > 0);
+        for (s, h, p) in cache.iter() {
+            if *h == horizon && s.upgrade().is_some_and(|s| Arc::ptr_eq(&s, system)) {
+                if let Some(p) = p.upgrade() {
+                    return Ok(p);
+                }
+            }
+        }
+        let plan = Arc::new(Self::new(system, horizon)?);
+        cache.push((Arc::downgrade(system), horizon, Arc::downgrade(&plan)));
+        Ok(plan)
+    }
+
+    /// Index into the precomputed steps of step k: k itself, or the converged last step.
+    pub fn index(&self, k: usize) -> Result<usize, SchemeError> {
+        if k < self.steps.len() {
+            Ok(k)
+        } else if self.converged {
+            Ok(self.steps.len() - 1)
+        } else {
+            Err(SchemeError::HorizonExceeded {
+                k,
+                horizon: self.steps.len() - 1,
+            })
+        }
+    }
+
+    /// Sensor i's debiasing matrix Δ^{e,i} of plan step `p` (an [`GlobalizedPlan::index`]),
+    /// predicted `j` times: Δ^{pp,i} = A (... (A Δ^{e,i} A^{-1}) ...) A^{-1}, with its LU factors.
+    /// `None` when A is singular (no debiasing).
+    pub fn predicted_delta(&self, i: usize, p: usize, j: usize) -> Option<Arc<PredictedDelta>> {
+        let a_inv = self.a_inv.as_ref()?;
+        let row = &self.deltas.rows[i * self.steps.len() + p];
+        if let Some(d) = row.read().unwrap_or_else(|e| e.into_inner()).get(j) {
+            return Some(d.clone());
+        }
+        let mut row = row.write().unwrap_or_else(|e| e.into_inner());
+        while row.len() <= j {
+            let delta = match row.last() {
+                None => self.steps[p].delta_e[i].clone(),
+                Some(prev) => &self.a * &prev.delta * a_inv,
+            };
+            let lu = delta.clone().lu();
+            row.push(Arc::new(PredictedDelta { delta, lu }));
+        }
+        Some(row[j].clone())
     }
 
     /// Matrices of step k (k = 0 is the initialization).

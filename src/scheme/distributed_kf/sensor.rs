@@ -8,6 +8,7 @@ use crate::linalg::{Matrix, Vector};
 use crate::link::{Message, Transmission};
 use crate::model::MeasurementModel;
 use crate::scheme::{Feedback, SchemeError, SensorNode};
+use nalgebra::{Dyn, LU};
 use rand::{Rng, RngCore};
 use std::sync::Arc;
 
@@ -45,6 +46,10 @@ impl Trigger {
 }
 
 /// One sensor of the globalized distributed KF.
+///
+/// A step allocates nothing but the message it sends: every matrix it needs is in the shared
+/// plan, the vectors live in buffers of the node, and each product is the same gemv the
+/// expression form `a * &x` runs, so the numbers are those of the textbook form bit for bit.
 #[derive(Debug, Clone)]
 pub struct DkfSensor {
     plan: Arc<GlobalizedPlan>,
@@ -57,12 +62,20 @@ pub struct DkfSensor {
     kf: Vector,
     /// Replica of the center: last sent globalized estimate, predicted since (x̄^{pp,i}).
     held: Vector,
-    /// Debiasing matrix of the last sent estimate, predicted since (Δ^{pp,i}).
-    held_delta: Matrix,
+    /// Debiasing matrix of the last sent estimate, predicted since (Δ^{pp,i}), as the plan
+    /// step of the send and the number of predictions since: the matrix itself depends on
+    /// nothing else and is looked up in the plan ([`GlobalizedPlan::predicted_delta`]).
+    held_delta: (usize, usize),
     /// Standard KF estimate at the last transmission, predicted since (x̂^{pp,i}).
     kf_held: Vector,
     /// Consecutive silent steps before the current one.
     silent_steps: usize,
+    /// Work space: x̄^{p,i}_k, and state- and measurement-sized temporaries.
+    xbar_p: Vector,
+    tmp: Vector,
+    tmp2: Vector,
+    zbuf: Vector,
+    zbuf2: Vector,
 }
 
 impl DkfSensor {
@@ -75,6 +88,7 @@ impl DkfSensor {
         trigger: Trigger,
     ) -> Self {
         let n = prior_mean.len();
+        let m = sensor.meas_dim();
         Self {
             plan,
             index,
@@ -83,9 +97,14 @@ impl DkfSensor {
             xbar: prior_mean.clone(),
             kf: prior_mean.clone(),
             held: prior_mean.clone(),
-            held_delta: Matrix::identity(n, n),
+            held_delta: (0, 0),
             kf_held: prior_mean,
             silent_steps: 0,
+            xbar_p: Vector::zeros(n),
+            tmp: Vector::zeros(n),
+            tmp2: Vector::zeros(n),
+            zbuf: Vector::zeros(m),
+            zbuf2: Vector::zeros(m),
         }
     }
 
@@ -100,6 +119,12 @@ impl DkfSensor {
     }
 }
 
+/// `x <- a x` through the buffer `tmp` (the same gemv as `a * &x`).
+pub(crate) fn predict_in_place(a: &Matrix, x: &mut Vector, tmp: &mut Vector) {
+    tmp.gemv(1.0, a, x, 0.0);
+    std::mem::swap(x, tmp);
+}
+
 impl SensorNode for DkfSensor {
     fn step(
         &mut self,
@@ -109,25 +134,38 @@ impl SensorNode for DkfSensor {
         rng: &mut dyn RngCore,
     ) -> Result<Transmission, SchemeError> {
         check_measurement(self.sensor.as_ref(), z)?;
+        let p = self.plan.index(k)?;
         let m = self.plan.at(k)?;
         let a = self.plan.a();
         let i = self.index;
-        // Globalized prediction (2) and local filtering step (Section II).
-        let xbar_p = a * &self.xbar;
-        self.xbar = &m.prediction_weight * &xbar_p + &m.measurement_weight[i] * z;
-        // Standard KF beside it.
-        let kf_p = a * &self.kf;
-        let correction = &m.kf_gain[i] * (z - self.sensor.predict(&kf_p));
-        self.kf = &kf_p + &correction;
+        // Globalized prediction (2) and local filtering step (Section II):
+        // x̄^e = C̄^e (C̄^p)^{-1} x̄^p + C̄^e H^T R^{-1} z.
+        self.xbar_p.gemv(1.0, a, &self.xbar, 0.0);
+        self.xbar.gemv(1.0, &m.prediction_weight, &self.xbar_p, 0.0);
+        self.tmp.gemv(1.0, &m.measurement_weight[i], z, 0.0);
+        self.xbar += &self.tmp;
+        // Standard KF beside it: x̂^e = x̂^p + K (z - h(x̂^p)); `kf` holds x̂^p, `tmp2` the
+        // correction.
+        predict_in_place(a, &mut self.kf, &mut self.tmp);
+        match self.sensor.as_linear() {
+            Some(lin) => self.zbuf2.gemv(1.0, lin.h(), &self.kf, 0.0),
+            None => self.zbuf2.copy_from(&self.sensor.predict(&self.kf)),
+        }
+        self.zbuf.copy_from(z);
+        self.zbuf -= &self.zbuf2;
+        self.tmp2.gemv(1.0, &m.kf_gain[i], &self.zbuf, 0.0);
+        self.kf += &self.tmp2;
         // Replica of the center's extrapolation.
-        self.held = a * &self.held;
-        self.kf_held = a * &self.kf_held;
+        predict_in_place(a, &mut self.held, &mut self.tmp);
+        predict_in_place(a, &mut self.kf_held, &mut self.tmp);
         let bounded = matches!(self.trigger, Trigger::Bounded { .. });
         if bounded {
-            let a_inv = self.plan.a_inv().ok_or_else(|| {
-                SchemeError::Unsupported("Algorithm 2 needs an invertible system matrix".into())
-            })?;
-            self.held_delta = a * &self.held_delta * a_inv;
+            if self.plan.a_inv().is_none() {
+                return Err(SchemeError::Unsupported(
+                    "Algorithm 2 needs an invertible system matrix".into(),
+                ));
+            }
+            self.held_delta.1 += 1;
         }
 
         let u: f64 = rng.random();
@@ -136,18 +174,37 @@ impl SensorNode for DkfSensor {
             || match &self.trigger {
                 Trigger::Always => true,
                 Trigger::Random { send_probability } => u < *send_probability,
-                Trigger::Event { alpha } => correction.norm() > *alpha,
+                Trigger::Event { alpha } => self.tmp2.norm() > *alpha,
                 Trigger::Bounded { alpha, b_inv } => {
-                    let d =
-                        debiased_difference(&m.delta_p[i], &self.held_delta, &self.held, &xbar_p)?;
-                    (&self.kf_held - &self.kf).norm() > *alpha || d.dot(&(b_inv * &d)) > 1.0
+                    let (hp, hj) = self.held_delta;
+                    let pd = self
+                        .plan
+                        .predicted_delta(i, hp, hj)
+                        .expect("checked invertible");
+                    // d̃ = x̃^{pp} - x̄^p, into `tmp`.
+                    debiased_extrapolation_into(
+                        &m.delta_p[i],
+                        &pd.lu,
+                        &self.held,
+                        &mut self.tmp2,
+                        &mut self.tmp,
+                    )?;
+                    self.tmp -= &self.xbar_p;
+                    // kf_held - kf, into `tmp2`.
+                    self.tmp2.copy_from(&self.kf_held);
+                    self.tmp2 -= &self.kf;
+                    let far = self.tmp2.norm() > *alpha;
+                    far || {
+                        self.tmp2.gemv(1.0, b_inv, &self.tmp, 0.0);
+                        self.tmp.dot(&self.tmp2) > 1.0
+                    }
                 }
             };
         if send {
             self.held.copy_from(&self.xbar);
             self.kf_held.copy_from(&self.kf);
             if bounded {
-                self.held_delta.copy_from(&m.delta_e[i]);
+                self.held_delta = (p, 0);
             }
             self.silent_steps = 0;
             Ok(Transmission::Send(Message::Estimate(self.xbar.clone())))
@@ -156,6 +213,25 @@ impl SensorNode for DkfSensor {
             Ok(Transmission::Silent)
         }
     }
+}
+
+/// `out = Δ^{p,i}_k (Δ^{pp,i}_k)^{-1} x̄^{pp,i}_k` with the LU factors of Δ^{pp,i} given and
+/// `work` as scratch: [`debiased_extrapolation`] without allocating, same operations.
+pub fn debiased_extrapolation_into(
+    delta_p: &Matrix,
+    delta_pp_lu: &LU<f64, Dyn, Dyn>,
+    held: &Vector,
+    work: &mut Vector,
+    out: &mut Vector,
+) -> Result<(), SchemeError> {
+    work.copy_from(held);
+    if !delta_pp_lu.solve_mut(work) {
+        return Err(SchemeError::Unsupported(
+            "debiasing matrix Δ^pp is singular".into(),
+        ));
+    }
+    out.gemv(1.0, delta_p, work, 0.0);
+    Ok(())
 }
 
 /// x̃^{pp,i}_k = Δ^{p,i}_k (Δ^{pp,i}_k)^{-1} x̄^{pp,i}_k (Section IV).
@@ -170,14 +246,4 @@ pub fn debiased_extrapolation(
         .solve(held)
         .ok_or_else(|| SchemeError::Unsupported("debiasing matrix Δ^pp is singular".into()))?;
     Ok(delta_p * solved)
-}
-
-/// d̃^i_k = x̃^{pp,i}_k - x̄^{p,i}_k (Section IV).
-fn debiased_difference(
-    delta_p: &Matrix,
-    delta_pp: &Matrix,
-    held: &Vector,
-    xbar_p: &Vector,
-) -> Result<Vector, SchemeError> {
-    Ok(debiased_extrapolation(delta_p, delta_pp, held)? - xbar_p)
 }
