@@ -7,7 +7,8 @@ use crate::link::Received;
 use crate::model::MeasurementModel;
 use crate::scheme::{FusionCenter, SchemeError};
 use nalgebra::{Cholesky, Dyn};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::sync::RwLock;
 
@@ -39,9 +40,38 @@ pub struct FusedCovariance {
 type CovKey = (usize, u64, usize);
 
 /// Memo of [`FusedCovariance`]s of one fusion rule, shared by the centers of all trials.
+///
+/// A key is admitted on its second sighting: most silence patterns of a long sweep occur
+/// once, and keeping them would cost memory (hundreds of MB for `dormann-fig1`) for no reuse.
+/// Both sets are capped; beyond the caps the covariance is simply recomputed. Which entries
+/// are kept never changes a number, only how often one is recomputed.
 #[derive(Debug, Default)]
 pub struct CovarianceMemo {
-    entries: RwLock<HashMap<CovKey, Arc<FusedCovariance>>>,
+    entries: RwLock<Memo>,
+}
+
+#[derive(Debug, Default)]
+struct Memo {
+    kept: HashMap<CovKey, Arc<FusedCovariance>>,
+    seen: HashSet<CovKey>,
+}
+
+/// Bytes all [`CovarianceMemo`]s of the process may keep together (kept entries are ~700
+/// bytes for a 6-D state), and keys seen once one memo may remember.
+const MEMO_BUDGET: usize = 32 << 20;
+const MEMO_SEEN: usize = 1 << 13;
+static MEMO_BYTES: AtomicUsize = AtomicUsize::new(0);
+
+/// Approximate heap bytes of one kept entry of an n-D state: two n x n matrices and overhead.
+fn memo_entry_bytes(n: usize) -> usize {
+    2 * 8 * n * n + 160
+}
+
+impl Drop for Memo {
+    fn drop(&mut self) {
+        let n = self.kept.values().next().map_or(0, |c| c.cov.nrows());
+        MEMO_BYTES.fetch_sub(self.kept.len() * memo_entry_bytes(n), Ordering::Relaxed);
+    }
 }
 
 impl CovarianceMemo {
@@ -69,6 +99,9 @@ pub struct DkfCenter {
     /// Per sensor: consecutive silent steps including the current one.
     silent_steps: Vec<usize>,
     memo: Arc<CovarianceMemo>,
+    /// Per sensor: the first sensor whose information matrix H^T R^{-1} H is bitwise the
+    /// same (identical sensors remove identical information, see [`canonical_silence`]).
+    class: Vec<usize>,
     /// Work space.
     info_vec: Vector,
     tmp: Vector,
@@ -106,6 +139,15 @@ impl DkfCenter {
         let held = vec![prior.mean.clone(); sensors.len()];
         let held_delta = vec![(0, 0); sensors.len()];
         let silent_steps = vec![0; sensors.len()];
+        let info = |s: &Arc<dyn MeasurementModel>| s.as_linear().map(|l| l.information().clone());
+        let class = (0..sensors.len())
+            .map(|i| {
+                let mine = info(&sensors[i]);
+                (0..i)
+                    .find(|&j| mine.is_some() && info(&sensors[j]).is_some_and(|o| Some(o) == mine))
+                    .unwrap_or(i)
+            })
+            .collect();
         Self {
             plan,
             sensors,
@@ -115,6 +157,7 @@ impl DkfCenter {
             held_delta,
             silent_steps,
             memo,
+            class,
             info_vec: Vector::zeros(n),
             tmp: Vector::zeros(n),
             tmp2: Vector::zeros(n),
@@ -134,17 +177,24 @@ impl DkfCenter {
         let key = (p, silent, inexact);
         if memoized {
             let entries = self.memo.entries.read().unwrap_or_else(|e| e.into_inner());
-            if let Some(c) = entries.get(&key) {
+            if let Some(c) = entries.kept.get(&key) {
                 return Ok(c.clone());
             }
         }
         let c = Arc::new(self.compute_fused_covariance(p, |i| silent >> i & 1 == 1, inexact)?);
         if memoized {
-            self.memo
-                .entries
-                .write()
-                .unwrap_or_else(|e| e.into_inner())
-                .insert(key, c.clone());
+            let mut memo = self.memo.entries.write().unwrap_or_else(|e| e.into_inner());
+            if memo.seen.remove(&key) {
+                let bytes = memo_entry_bytes(c.cov.nrows());
+                let budget = MEMO_BYTES.fetch_add(bytes, Ordering::Relaxed);
+                if budget + bytes <= MEMO_BUDGET {
+                    memo.kept.insert(key, c.clone());
+                } else {
+                    MEMO_BYTES.fetch_sub(bytes, Ordering::Relaxed);
+                }
+            } else if memo.seen.len() < MEMO_SEEN {
+                memo.seen.insert(key);
+            }
         }
         Ok(c)
     }
@@ -288,6 +338,7 @@ impl FusionCenter for DkfCenter {
             }
         }
         let fused = if self.sensors.len() <= 64 {
+            let silent = canonical_silence(&self.class, silent);
             self.fused_covariance(p, silent, inexact)?
         } else {
             // Too many sensors for the bit set: the direct form, one silence set at a time.
@@ -306,4 +357,24 @@ impl FusionCenter for DkfCenter {
     fn estimate(&self) -> &Gaussian {
         &self.est
     }
+}
+
+/// The silence set that removes the same sequence of information matrices as `silent` (bit i
+/// = sensor i silent): each silent sensor, in order, is replaced by the first sensor of its
+/// class after the previous choice. (10) subtracts H_i^T R_i^{-1} H_i in sensor order, so two
+/// sets with the same sequence of (bitwise equal) matrices give the same covariance bit for
+/// bit; seed 004's Fig. 1 has its sensors in identical pairs, and the memo keys halve.
+fn canonical_silence(class: &[usize], silent: u64) -> u64 {
+    let mut out = 0u64;
+    let mut next = 0usize;
+    for (i, &c) in class.iter().enumerate() {
+        if silent >> i & 1 == 1 {
+            let j = (next..=i)
+                .find(|&j| class[j] == c)
+                .expect("sensor i itself is of class c");
+            out |= 1 << j;
+            next = j + 1;
+        }
+    }
+    out
 }
