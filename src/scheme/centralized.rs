@@ -4,10 +4,12 @@
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use crate::filter::information::Information;
 use crate::filter::{kf, Gaussian};
-use crate::linalg::Vector;
+use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
+use nalgebra::{Cholesky, Dyn};
 use rand::{Rng, RngCore};
 use std::sync::Arc;
+use std::sync::RwLock;
 
 /// Sensor that forwards its raw measurement with probability `send_probability`.
 #[derive(Debug, Clone)]
@@ -47,17 +49,43 @@ impl SensorNode for ForwardingSensor {
 pub struct CentralizedKf {
     system: Arc<System>,
     est: Gaussian,
+    /// The shared covariance schedule when every measurement of every step is known to arrive
+    /// (linear sensors, rate 1); `None` once a step deviates from it.
+    schedule: Option<Arc<AllDataSchedule>>,
+    /// Steps taken (the schedule is indexed by it, not by the caller's k, as the direct step
+    /// depends on the history only).
+    steps_done: usize,
+    /// Work space of the scheduled step.
+    pred_mean: Vector,
+    tmp: Vector,
 }
 
 impl CentralizedKf {
     pub fn new(system: Arc<System>) -> Self {
-        let est = system.prior.clone();
-        Self { system, est }
+        Self::build(system, None)
     }
-}
 
-impl FusionCenter for CentralizedKf {
-    fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
+    /// A center that follows `schedule` while every sensor's measurement arrives, and falls
+    /// back to the direct form (from the same estimate) at the first step one does not.
+    pub fn with_schedule(system: Arc<System>, schedule: Arc<AllDataSchedule>) -> Self {
+        Self::build(system, Some(schedule))
+    }
+
+    fn build(system: Arc<System>, schedule: Option<Arc<AllDataSchedule>>) -> Self {
+        let est = system.prior.clone();
+        let n = est.dim();
+        Self {
+            system,
+            est,
+            schedule,
+            steps_done: 0,
+            pred_mean: Vector::zeros(n),
+            tmp: Vector::zeros(n),
+        }
+    }
+
+    /// The direct step: predict, fuse in information form (or EKF updates), back.
+    fn direct_step(&mut self, inbox: &[Received]) -> Result<(), SchemeError> {
         let pred = kf::predict(&self.system.transition, &self.est);
         let all_linear = self.system.sensors.iter().all(|s| s.as_linear().is_some());
         if all_linear {
@@ -81,9 +109,141 @@ impl FusionCenter for CentralizedKf {
         Ok(())
     }
 
+    /// The scheduled step: the mean half of [`CentralizedKf::direct_step`] with the step's
+    /// precomputed Cholesky factors, the covariance copied. `Ok(false)` when the step is not
+    /// on the schedule (a measurement missing, or the schedule could not be computed).
+    fn scheduled_step(&mut self, inbox: &[Received]) -> Result<bool, SchemeError> {
+        let Some(schedule) = &self.schedule else {
+            return Ok(false);
+        };
+        let all_arrived = inbox.len() == self.system.n_sensors()
+            && inbox.iter().all(|m| matches!(m, Received::Measurement(_)));
+        if !all_arrived {
+            return Ok(false);
+        }
+        let Some(step) = schedule.step(&self.system, self.steps_done + 1) else {
+            return Ok(false);
+        };
+        // Information vector of the prediction, P^{-1} (F x) (from_gaussian) ...
+        self.pred_mean
+            .gemv(1.0, self.system.transition.f(), &self.est.mean, 0.0);
+        step.pred_chol.solve_mut(&mut self.pred_mean);
+        // ... plus H_i^T R_i^{-1} z_i of each sensor, in sensor order (add_measurement) ...
+        for (i, msg) in inbox.iter().enumerate() {
+            let Received::Measurement(z) = msg else {
+                unreachable!("checked above")
+            };
+            let sensor = self.system.sensors[i].as_linear().expect("checked linear");
+            kf::check_measurement(sensor, z)?;
+            self.tmp.gemv(1.0, sensor.ht_rinv(), z, 0.0);
+            self.pred_mean += &self.tmp;
+        }
+        // ... and back to covariance form (to_gaussian).
+        self.est.mean.copy_from(&self.pred_mean);
+        step.fused_chol.solve_mut(&mut self.est.mean);
+        self.est.cov.copy_from(&step.cov);
+        Ok(true)
+    }
+}
+
+impl FusionCenter for CentralizedKf {
+    fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
+        let scheduled = self.scheduled_step(inbox)?;
+        self.steps_done += 1;
+        if scheduled {
+            return Ok(());
+        }
+        // Off the schedule for good: the covariance now depends on which data arrived.
+        self.schedule = None;
+        self.direct_step(inbox)
+    }
+
     fn estimate(&self) -> &Gaussian {
         &self.est
     }
+}
+
+/// One step of [`AllDataSchedule`].
+#[derive(Debug)]
+pub struct ScheduledStep {
+    /// Cholesky factor of the predicted covariance F P F^T + Q.
+    pub pred_chol: Cholesky<f64, Dyn>,
+    /// Cholesky factor of the fused information matrix P^{-1}_pred + Σ_i H_i^T R_i^{-1} H_i.
+    pub fused_chol: Cholesky<f64, Dyn>,
+    /// The filtered covariance.
+    pub cov: Matrix,
+}
+
+/// The covariance recursion of the centralized KF that receives every measurement of every
+/// step. For a linear-Gaussian model it does not depend on the data — P_k is a function of
+/// P_0, F, Q, H_i and R_i only (the Riccati recursion) — so it is computed once per scheme
+/// and shared by all trials; a trial only runs the mean recursion. It is computed by the very
+/// operations of the direct step (predict_cov, from_gaussian, add_measurement, to_gaussian),
+/// so the numbers are the same bit for bit. (With random losses P_k depends on which
+/// measurements arrived, and the direct step runs.) Grown on demand: the scheme does not know
+/// the horizon.
+#[derive(Debug, Default)]
+pub struct AllDataSchedule {
+    steps: RwLock<ScheduleSteps>,
+}
+
+#[derive(Debug, Default)]
+struct ScheduleSteps {
+    /// steps[k - 1] is step k.
+    steps: Vec<Arc<ScheduledStep>>,
+    /// The recursion failed at this step (the direct step then reports the error).
+    failed_at: Option<usize>,
+}
+
+impl AllDataSchedule {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Step k (k >= 1) of the schedule of `system`, computed up to k if needed; `None` if the
+    /// recursion fails at or before k.
+    pub fn step(&self, system: &System, k: usize) -> Option<Arc<ScheduledStep>> {
+        {
+            let s = self.steps.read().unwrap_or_else(|e| e.into_inner());
+            if let Some(step) = s.steps.get(k.checked_sub(1)?) {
+                return Some(step.clone());
+            }
+            if s.failed_at.is_some_and(|f| f <= k) {
+                return None;
+            }
+        }
+        let mut s = self.steps.write().unwrap_or_else(|e| e.into_inner());
+        while s.steps.len() < k && s.failed_at.is_none() {
+            let prev = s.steps.last().map_or(&system.prior.cov, |p| &p.cov);
+            match schedule_step(system, prev) {
+                Some(next) => s.steps.push(Arc::new(next)),
+                None => s.failed_at = Some(s.steps.len() + 1),
+            }
+        }
+        s.steps.get(k - 1).cloned()
+    }
+}
+
+/// The covariance half of the direct all-data step, keeping the two Cholesky factors.
+fn schedule_step(system: &System, prev: &Matrix) -> Option<ScheduledStep> {
+    let pred_cov = kf::predict_cov(&system.transition, prev);
+    // Information::from_gaussian
+    let pred_chol = cholesky(&pred_cov).ok()?;
+    let mut matrix = pred_chol.inverse();
+    symmetrize(&mut matrix);
+    // Information::add_measurement, every sensor in order
+    for s in &system.sensors {
+        matrix += s.as_linear()?.information();
+    }
+    // Information::to_gaussian
+    let fused_chol = cholesky(&matrix).ok()?;
+    let mut cov = fused_chol.inverse();
+    symmetrize(&mut cov);
+    Some(ScheduledStep {
+        pred_chol,
+        fused_chol,
+        cov,
+    })
 }
 
 fn measurement(i: usize, msg: &Received) -> Result<Option<&Vector>, SchemeError> {
@@ -103,11 +263,20 @@ fn measurement(i: usize, msg: &Received) -> Result<Option<&Vector>, SchemeError>
 pub struct CentralizedScheme {
     system: Arc<System>,
     rate: f64,
+    /// At rate 1 with linear sensors every measurement arrives: the shared covariance schedule.
+    schedule: Option<Arc<AllDataSchedule>>,
 }
 
 impl CentralizedScheme {
     pub fn new(system: Arc<System>, rate: f64) -> Self {
-        Self { system, rate }
+        // The coin u is in [0, 1): at rate >= 1 every measurement is forwarded.
+        let all_data = rate >= 1.0 && system.sensors.iter().all(|s| s.as_linear().is_some());
+        let schedule = all_data.then(|| Arc::new(AllDataSchedule::new()));
+        Self {
+            system,
+            rate,
+            schedule,
+        }
     }
 }
 
@@ -117,7 +286,10 @@ impl Scheme for CentralizedScheme {
             sensors: (0..self.system.n_sensors())
                 .map(|_| Box::new(ForwardingSensor::new(self.rate)) as Box<dyn SensorNode>)
                 .collect(),
-            center: Box::new(CentralizedKf::new(self.system.clone())),
+            center: Box::new(match &self.schedule {
+                Some(s) => CentralizedKf::with_schedule(self.system.clone(), s.clone()),
+                None => CentralizedKf::new(self.system.clone()),
+            }),
         })
     }
 }
