@@ -69,30 +69,102 @@ pub struct TrialData {
 
 /// Draws x_0 from the prior, then x_k and every z_k^i, all from one stream.
 pub fn draw_trial(exp: &Experiment, trial: usize) -> TrialData {
-    let sys = &exp.system;
-    let mut rng = trial_rng(exp.seed, trial as u64, 0);
-    let x0 = &exp.initial_truth;
-    let x0_sqrt = crate::model::transition::psd_sqrt(&x0.cov).expect("validated initial truth");
-    let n0 = Vector::from_fn(sys.state_dim(), |_, _| {
-        rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, &mut rng)
-    });
-    let mut x = &x0.mean + x0_sqrt * n0;
-    let mut truth = Vec::with_capacity(exp.steps);
-    let mut measurements = Vec::with_capacity(exp.steps);
-    for _ in 0..exp.steps {
-        x = sys.transition.sample_next(&x, &mut rng);
-        measurements.push(sys.sensors.iter().map(|s| s.sample(&x, &mut rng)).collect());
-        truth.push(x.clone());
+    let mut drawer = Drawer::new(exp);
+    drawer.draw(exp, trial);
+    drawer.data
+}
+
+/// Draws trials into buffers reused from trial to trial: the same numbers as drawing each
+/// vector afresh (`F x + Q^{1/2} w`, `H x + R^{1/2} v`, the same gemv products and the same
+/// order of normal draws), without allocating per step.
+struct Drawer {
+    data: TrialData,
+    /// Square root of the initial-truth covariance, once per run instead of once per trial.
+    x0_sqrt: crate::linalg::Matrix,
+    x: Vector,
+    normals: Vector,
+    a: Vector,
+    b: Vector,
+    /// Per sensor: its noise draw v and R^{1/2} v.
+    v: Vec<Vector>,
+    rv: Vec<Vector>,
+}
+
+impl Drawer {
+    fn new(exp: &Experiment) -> Self {
+        let sys = &exp.system;
+        let n = sys.state_dim();
+        let x0_sqrt = crate::model::transition::psd_sqrt(&exp.initial_truth.cov)
+            .expect("validated initial truth");
+        let zeros = |d: usize| Vector::zeros(d);
+        Self {
+            data: TrialData {
+                truth: (0..exp.steps).map(|_| zeros(n)).collect(),
+                measurements: (0..exp.steps)
+                    .map(|_| sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect())
+                    .collect(),
+            },
+            x0_sqrt,
+            x: zeros(n),
+            normals: zeros(n),
+            a: zeros(n),
+            b: zeros(n),
+            v: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
+            rv: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
+        }
     }
-    TrialData {
-        truth,
-        measurements,
+
+    fn draw(&mut self, exp: &Experiment, trial: usize) {
+        let sys = &exp.system;
+        let mut rng = trial_rng(exp.seed, trial as u64, 0);
+        let normal = |rng: &mut Xoshiro256PlusPlus| -> f64 {
+            rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
+        };
+        // x_0 = mean + S n_0.
+        self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
+        self.a.gemv(1.0, &self.x0_sqrt, &self.normals, 0.0);
+        self.x.copy_from(&exp.initial_truth.mean);
+        self.x += &self.a;
+        let t = &sys.transition;
+        for k in 0..exp.steps {
+            // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
+            self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
+            self.a.gemv(1.0, t.f(), &self.x, 0.0);
+            self.b.gemv(1.0, t.q_sqrt(), &self.normals, 0.0);
+            self.a += &self.b;
+            std::mem::swap(&mut self.x, &mut self.a);
+            for (i, (s, z)) in sys
+                .sensors
+                .iter()
+                .zip(self.data.measurements[k].iter_mut())
+                .enumerate()
+            {
+                match s.as_linear() {
+                    // z = H x + R^{1/2} v (MeasurementModel::sample).
+                    Some(lin) => {
+                        let (v, rv) = (&mut self.v[i], &mut self.rv[i]);
+                        v.iter_mut().for_each(|e| *e = normal(&mut rng));
+                        z.gemv(1.0, lin.h(), &self.x, 0.0);
+                        rv.gemv(1.0, s.noise_sqrt(), v, 0.0);
+                        *z += &*rv;
+                    }
+                    None => *z = s.sample(&self.x, &mut rng),
+                }
+            }
+            self.data.truth[k].copy_from(&self.x);
+        }
     }
 }
 
 /// Runs one trial of every variant, adding into `sums` (one per variant).
-fn run_trial(exp: &Experiment, trial: usize, sums: &mut [Sums]) -> Result<(), RunError> {
-    let data = draw_trial(exp, trial);
+fn run_trial(
+    exp: &Experiment,
+    trial: usize,
+    sums: &mut [Sums],
+    drawer: &mut Drawer,
+) -> Result<(), RunError> {
+    drawer.draw(exp, trial);
+    let data = &drawer.data;
     let n_sensors = exp.system.n_sensors();
     let mut inbox = Vec::with_capacity(n_sensors);
     let mut transmissions = Vec::with_capacity(n_sensors);
@@ -190,8 +262,9 @@ pub fn run(
                 .into_par_iter()
                 .map(|b| {
                     let mut sums = empty();
+                    let mut drawer = Drawer::new(exp);
                     for trial in b * BLOCK..((b + 1) * BLOCK).min(exp.trials) {
-                        run_trial(exp, trial, &mut sums)?;
+                        run_trial(exp, trial, &mut sums, &mut drawer)?;
                         progress(done.fetch_add(1, Ordering::Relaxed) + 1);
                     }
                     Ok(sums)
