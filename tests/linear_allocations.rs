@@ -83,7 +83,12 @@ fn linear_schemes_allocate_nothing_per_step() {
         let steps = per_step(&exp, variant);
         for (k, &(sensors, sent, center)) in steps.iter().enumerate() {
             // One allocation per message: the vector the message owns.
-            assert_eq!(sensors, sent, "{label} ({kind}) step {}: sensor side", k + 1);
+            assert_eq!(
+                sensors,
+                sent,
+                "{label} ({kind}) step {}: sensor side",
+                k + 1
+            );
             if kind == "centralized-kf-random" {
                 // The direct form (its covariance depends on which data arrived): a constant
                 // number per step for a given set of arrivals, bounded whatever the step.

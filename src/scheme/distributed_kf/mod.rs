@@ -101,4 +101,6 @@ impl Scheme for DistributedKfScheme {
 }
 
 #[cfg(test)]
+mod reference;
+#[cfg(test)]
 mod tests;

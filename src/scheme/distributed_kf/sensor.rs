@@ -40,7 +40,7 @@ impl Trigger {
     }
 
     /// Whether this trigger enforces Algorithm 1's "every other step" rule.
-    fn every_other_step(&self) -> bool {
+    pub(crate) fn every_other_step(&self) -> bool {
         matches!(self, Trigger::Random { .. } | Trigger::Event { .. })
     }
 }
