@@ -260,15 +260,18 @@ pub fn run(
         let blocks: Result<Vec<Vec<Sums>>, RunError> = pool.install(|| {
             (start..end)
                 .into_par_iter()
-                .map(|b| {
-                    let mut sums = empty();
-                    let mut drawer = Drawer::new(exp);
-                    for trial in b * BLOCK..((b + 1) * BLOCK).min(exp.trials) {
-                        run_trial(exp, trial, &mut sums, &mut drawer)?;
-                        progress(done.fetch_add(1, Ordering::Relaxed) + 1);
-                    }
-                    Ok(sums)
-                })
+                // One drawer (trial buffers) per worker task, not per block.
+                .map_init(
+                    || Drawer::new(exp),
+                    |drawer, b| {
+                        let mut sums = empty();
+                        for trial in b * BLOCK..((b + 1) * BLOCK).min(exp.trials) {
+                            run_trial(exp, trial, &mut sums, drawer)?;
+                            progress(done.fetch_add(1, Ordering::Relaxed) + 1);
+                        }
+                        Ok(sums)
+                    },
+                )
                 .collect()
         });
         for block in blocks? {
