@@ -1,5 +1,5 @@
 //! Fusion center of the globalized distributed KF (seed 004).
-use super::plan::GlobalizedPlan;
+use super::plan::{GlobalizedPlan, PredictedDelta};
 use super::sensor::debiased_extrapolation_into;
 use crate::filter::Gaussian;
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
@@ -93,9 +93,9 @@ pub struct DkfCenter {
     est: Gaussian,
     /// Per sensor: last received globalized estimate, predicted since (x̄^{pp,i}).
     held: Vec<Vector>,
-    /// Per sensor: its debiasing matrix, predicted since (Δ^{pp,i}), as (plan step of the
-    /// last reception, predictions since); Algorithm 2 only.
-    held_delta: Vec<(usize, usize)>,
+    /// Per sensor: its debiasing matrix, predicted since (Δ^{pp,i}), a link of the plan's
+    /// shared chain; Algorithm 2 only (`None` when A is singular).
+    held_delta: Vec<Option<Arc<PredictedDelta>>>,
     /// Per sensor: consecutive silent steps including the current one.
     silent_steps: Vec<usize>,
     memo: Arc<CovarianceMemo>,
@@ -137,7 +137,7 @@ impl DkfCenter {
     ) -> Self {
         let n = prior.dim();
         let held = vec![prior.mean.clone(); sensors.len()];
-        let held_delta = vec![(0, 0); sensors.len()];
+        let held_delta = (0..sensors.len()).map(|i| plan.delta_head(i, 0)).collect();
         let silent_steps = vec![0; sensors.len()];
         let info = |s: &Arc<dyn MeasurementModel>| s.as_linear().map(|l| l.information().clone());
         let class = (0..sensors.len())
@@ -264,7 +264,8 @@ impl FusionCenter for DkfCenter {
                         "Algorithm 2 needs an invertible system matrix".into(),
                     ));
                 }
-                self.held_delta[i].1 += 1;
+                let next = self.held_delta[i].as_ref().map(|d| d.next(&self.plan));
+                self.held_delta[i] = next;
             }
             match msg {
                 Received::Estimate(x) => {
@@ -279,7 +280,7 @@ impl FusionCenter for DkfCenter {
                     self.info_vec += &self.tmp;
                     self.held[i].copy_from(x);
                     if bounded {
-                        self.held_delta[i] = (p, 0);
+                        self.held_delta[i] = self.plan.delta_head(i, p);
                     }
                     self.silent_steps[i] = 0;
                 }
@@ -310,11 +311,7 @@ impl FusionCenter for DkfCenter {
                             }
                             Fusion::Bounded { .. } => {
                                 inexact += 1;
-                                let (hp, hj) = self.held_delta[i];
-                                let pd = self
-                                    .plan
-                                    .predicted_delta(i, hp, hj)
-                                    .expect("checked invertible");
+                                let pd = self.held_delta[i].as_ref().expect("checked invertible");
                                 debiased_extrapolation_into(
                                     &m.delta_p[i],
                                     &pd.lu,

@@ -6,7 +6,7 @@
 use crate::linalg::{relative_difference, spd_inverse, symmetrize, Matrix};
 use crate::scheme::{SchemeError, System};
 use nalgebra::{Dyn, LU};
-use std::sync::{Arc, Mutex, RwLock, Weak};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 
 /// Matrices of one time step k.
 #[derive(Debug, Clone)]
@@ -46,7 +46,7 @@ pub struct GlobalizedPlan {
     a: Matrix,
     a_inv: Option<Matrix>,
     n_sensors: usize,
-    /// Predicted debiasing matrices, filled on demand (see [`GlobalizedPlan::predicted_delta`]).
+    /// Predicted debiasing matrices, filled on demand (see [`GlobalizedPlan::delta_head`]).
     deltas: Arc<DeltaMemo>,
 }
 
@@ -55,19 +55,60 @@ pub struct GlobalizedPlan {
 /// (i, s, j) only, never on measurements, so it is computed once and shared by the sensor, its
 /// replica in the fusion center, every trial and every variant that shares the plan. It is
 /// computed by exactly the products the per-trial recursion `Δ <- A Δ A^{-1}` performs, so the
-/// numbers are the same bit for bit.
+/// numbers are the same bit for bit. The predictions of one Δ^{e,i}_s form a chain: a holder
+/// steps to [`PredictedDelta::next`] each step (a lock-free read once computed).
 #[derive(Debug)]
 pub struct PredictedDelta {
     /// Δ^{pp,i}.
     pub delta: Matrix,
     /// Its LU factorization (as `Δ.clone().lu()`).
     pub lu: LU<f64, Dyn, Dyn>,
+    next: OnceLock<Arc<PredictedDelta>>,
 }
 
-/// One growable row of [`PredictedDelta`]s per (sensor, plan step of the send).
+impl PredictedDelta {
+    fn new(delta: Matrix) -> Self {
+        let lu = delta.clone().lu();
+        Self {
+            delta,
+            lu,
+            next: OnceLock::new(),
+        }
+    }
+
+    /// A Δ A^{-1}: the matrix one step later, computed on first use. `plan` must be the plan
+    /// this matrix came from (its A is invertible, or there would be no chain).
+    pub fn next(&self, plan: &GlobalizedPlan) -> Arc<PredictedDelta> {
+        self.next
+            .get_or_init(|| {
+                let a_inv = plan
+                    .a_inv
+                    .as_ref()
+                    .expect("a chain exists only for invertible A");
+                Arc::new(Self::new(&plan.a * &self.delta * a_inv))
+            })
+            .clone()
+    }
+}
+
+impl Drop for PredictedDelta {
+    /// Unlinks the chain iteratively: a long silence makes a long chain, and the default
+    /// recursive drop could exhaust the stack.
+    fn drop(&mut self) {
+        let mut next = self.next.take();
+        while let Some(n) = next {
+            next = match Arc::try_unwrap(n) {
+                Ok(mut node) => node.next.take(),
+                Err(_) => None,
+            };
+        }
+    }
+}
+
+/// The head of each chain: sensor i's Δ^{e,i} of plan step p at index i * steps + p.
 #[derive(Debug, Default)]
 struct DeltaMemo {
-    rows: Vec<RwLock<Vec<Arc<PredictedDelta>>>>,
+    heads: Vec<OnceLock<Arc<PredictedDelta>>>,
 }
 
 impl GlobalizedPlan {
@@ -176,9 +217,9 @@ impl GlobalizedPlan {
                 break;
             }
         }
-        let rows = if a_inv.is_some() {
+        let heads = if a_inv.is_some() {
             (0..sensors.len() * steps.len())
-                .map(|_| RwLock::new(Vec::new()))
+                .map(|_| OnceLock::new())
                 .collect()
         } else {
             Vec::new()
@@ -189,7 +230,7 @@ impl GlobalizedPlan {
             a,
             a_inv,
             n_sensors: sensors.len(),
-            deltas: Arc::new(DeltaMemo { rows }),
+            deltas: Arc::new(DeltaMemo { heads }),
         })
     }
 
@@ -229,24 +270,15 @@ impl GlobalizedPlan {
     }
 
     /// Sensor i's debiasing matrix Δ^{e,i} of plan step `p` (an [`GlobalizedPlan::index`]),
-    /// predicted `j` times: Δ^{pp,i} = A (... (A Δ^{e,i} A^{-1}) ...) A^{-1}, with its LU factors.
-    /// `None` when A is singular (no debiasing).
-    pub fn predicted_delta(&self, i: usize, p: usize, j: usize) -> Option<Arc<PredictedDelta>> {
-        let a_inv = self.a_inv.as_ref()?;
-        let row = &self.deltas.rows[i * self.steps.len() + p];
-        if let Some(d) = row.read().unwrap_or_else(|e| e.into_inner()).get(j) {
-            return Some(d.clone());
-        }
-        let mut row = row.write().unwrap_or_else(|e| e.into_inner());
-        while row.len() <= j {
-            let delta = match row.last() {
-                None => self.steps[p].delta_e[i].clone(),
-                Some(prev) => &self.a * &prev.delta * a_inv,
-            };
-            let lu = delta.clone().lu();
-            row.push(Arc::new(PredictedDelta { delta, lu }));
-        }
-        Some(row[j].clone())
+    /// the head of its chain of predictions ([`PredictedDelta::next`]). `None` when A is
+    /// singular (no debiasing).
+    pub fn delta_head(&self, i: usize, p: usize) -> Option<Arc<PredictedDelta>> {
+        self.a_inv.as_ref()?;
+        let head = &self.deltas.heads[i * self.steps.len() + p];
+        Some(
+            head.get_or_init(|| Arc::new(PredictedDelta::new(self.steps[p].delta_e[i].clone())))
+                .clone(),
+        )
     }
 
     /// Matrices of step k (k = 0 is the initialization).

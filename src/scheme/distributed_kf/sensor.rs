@@ -2,7 +2,7 @@
 //! (eq. (2) and the local filtering step of Section II), a standard KF beside it for the event
 //! tests, and a replica of what the fusion center holds about it, so it can decide whether the
 //! center's extrapolation is still good enough.
-use super::plan::GlobalizedPlan;
+use super::plan::{GlobalizedPlan, PredictedDelta};
 use crate::filter::kf::check_measurement;
 use crate::linalg::{Matrix, Vector};
 use crate::link::{Message, Transmission};
@@ -62,10 +62,9 @@ pub struct DkfSensor {
     kf: Vector,
     /// Replica of the center: last sent globalized estimate, predicted since (x̄^{pp,i}).
     held: Vector,
-    /// Debiasing matrix of the last sent estimate, predicted since (Δ^{pp,i}), as the plan
-    /// step of the send and the number of predictions since: the matrix itself depends on
-    /// nothing else and is looked up in the plan ([`GlobalizedPlan::predicted_delta`]).
-    held_delta: (usize, usize),
+    /// Debiasing matrix of the last sent estimate, predicted since (Δ^{pp,i}): a link of the
+    /// plan's shared chain ([`GlobalizedPlan::delta_head`]); `None` when A is singular.
+    held_delta: Option<Arc<PredictedDelta>>,
     /// Standard KF estimate at the last transmission, predicted since (x̂^{pp,i}).
     kf_held: Vector,
     /// Consecutive silent steps before the current one.
@@ -90,6 +89,7 @@ impl DkfSensor {
         let n = prior_mean.len();
         let m = sensor.meas_dim();
         Self {
+            held_delta: plan.delta_head(index, 0),
             plan,
             index,
             sensor,
@@ -97,7 +97,6 @@ impl DkfSensor {
             xbar: prior_mean.clone(),
             kf: prior_mean.clone(),
             held: prior_mean.clone(),
-            held_delta: (0, 0),
             kf_held: prior_mean,
             silent_steps: 0,
             xbar_p: Vector::zeros(n),
@@ -165,7 +164,8 @@ impl SensorNode for DkfSensor {
                     "Algorithm 2 needs an invertible system matrix".into(),
                 ));
             }
-            self.held_delta.1 += 1;
+            let next = self.held_delta.as_ref().map(|d| d.next(&self.plan));
+            self.held_delta = next;
         }
 
         let u: f64 = rng.random();
@@ -176,11 +176,7 @@ impl SensorNode for DkfSensor {
                 Trigger::Random { send_probability } => u < *send_probability,
                 Trigger::Event { alpha } => self.tmp2.norm() > *alpha,
                 Trigger::Bounded { alpha, b_inv } => {
-                    let (hp, hj) = self.held_delta;
-                    let pd = self
-                        .plan
-                        .predicted_delta(i, hp, hj)
-                        .expect("checked invertible");
+                    let pd = self.held_delta.as_ref().expect("checked invertible");
                     // d̃ = x̃^{pp} - x̄^p, into `tmp`.
                     debiased_extrapolation_into(
                         &m.delta_p[i],
@@ -204,7 +200,7 @@ impl SensorNode for DkfSensor {
             self.held.copy_from(&self.xbar);
             self.kf_held.copy_from(&self.kf);
             if bounded {
-                self.held_delta = (p, 0);
+                self.held_delta = self.plan.delta_head(i, p);
             }
             self.silent_steps = 0;
             Ok(Transmission::Send(Message::Estimate(self.xbar.clone())))
