@@ -125,8 +125,11 @@ impl CentralizedKf {
             return Ok(false);
         };
         // Information vector of the prediction, P^{-1} (F x) (from_gaussian) ...
-        self.pred_mean
-            .gemv(1.0, self.system.transition.f(), &self.est.mean, 0.0);
+        crate::filter::fixed::gemv(
+            &mut self.pred_mean,
+            self.system.transition.f(),
+            &self.est.mean,
+        );
         step.pred_chol.solve_mut(&mut self.pred_mean);
         // ... plus H_i^T R_i^{-1} z_i of each sensor, in sensor order (add_measurement) ...
         for (i, msg) in inbox.iter().enumerate() {
@@ -135,7 +138,7 @@ impl CentralizedKf {
             };
             let sensor = self.system.sensors[i].as_linear().expect("checked linear");
             kf::check_measurement(sensor, z)?;
-            self.tmp.gemv(1.0, sensor.ht_rinv(), z, 0.0);
+            crate::filter::fixed::gemv(&mut self.tmp, sensor.ht_rinv(), z);
             self.pred_mean += &self.tmp;
         }
         // ... and back to covariance form (to_gaussian).

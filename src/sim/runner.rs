@@ -122,15 +122,15 @@ impl Drawer {
         };
         // x_0 = mean + S n_0.
         self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
-        self.a.gemv(1.0, &self.x0_sqrt, &self.normals, 0.0);
+        crate::filter::fixed::gemv(&mut self.a, &self.x0_sqrt, &self.normals);
         self.x.copy_from(&exp.initial_truth.mean);
         self.x += &self.a;
         let t = &sys.transition;
         for k in 0..exp.steps {
             // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
             self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
-            self.a.gemv(1.0, t.f(), &self.x, 0.0);
-            self.b.gemv(1.0, t.q_sqrt(), &self.normals, 0.0);
+            crate::filter::fixed::gemv(&mut self.a, t.f(), &self.x);
+            crate::filter::fixed::gemv(&mut self.b, t.q_sqrt(), &self.normals);
             self.a += &self.b;
             std::mem::swap(&mut self.x, &mut self.a);
             for (i, (s, z)) in sys
@@ -144,8 +144,8 @@ impl Drawer {
                     Some(lin) => {
                         let (v, rv) = (&mut self.v[i], &mut self.rv[i]);
                         v.iter_mut().for_each(|e| *e = normal(&mut rng));
-                        z.gemv(1.0, lin.h(), &self.x, 0.0);
-                        rv.gemv(1.0, s.noise_sqrt(), v, 0.0);
+                        crate::filter::fixed::gemv(z, lin.h(), &self.x);
+                        crate::filter::fixed::gemv(rv, s.noise_sqrt(), v);
                         *z += &*rv;
                     }
                     None => *z = s.sample(&self.x, &mut rng),

@@ -276,7 +276,7 @@ impl FusionCenter for DkfCenter {
                         });
                     }
                     // (11), first sum.
-                    self.tmp.gemv(1.0, &m.cbar_e_inv, x, 0.0);
+                    crate::filter::fixed::gemv(&mut self.tmp, &m.cbar_e_inv, x);
                     self.info_vec += &self.tmp;
                     self.held[i].copy_from(x);
                     if bounded {
@@ -323,7 +323,7 @@ impl FusionCenter for DkfCenter {
                             }
                         }
                     };
-                    self.tmp.gemv(1.0, &m.cbar_p_inv, contribution, 0.0);
+                    crate::filter::fixed::gemv(&mut self.tmp, &m.cbar_p_inv, contribution);
                     self.info_vec += &self.tmp;
                 }
                 Received::Measurement(_) | Received::Frame(_) => {
