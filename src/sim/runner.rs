@@ -17,9 +17,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// and hence every bit of the result, is the same for 1 or many threads.
 const BLOCK: usize = 4;
 
-/// Blocks in flight at once. Only memory depends on it, never the result: blocks are merged in
-/// block order whatever the window.
-const WINDOW: usize = 64;
+/// Blocks in flight at once, per worker thread. Only memory and load balance depend on it,
+/// never the result: blocks are merged in block order whatever the window.
+const WINDOW_PER_THREAD: usize = 4;
 
 /// Stream 0 of a trial draws truth and measurements; stream 1 + v is variant v's coins.
 pub fn trial_rng(seed: u64, trial: u64, stream: u64) -> Xoshiro256PlusPlus {
@@ -251,12 +251,13 @@ pub fn run(
             .collect()
     };
     // Blocks run in parallel a window at a time and are merged into the total in block order
-    // as each window finishes: memory stays flat in the number of trials (at most WINDOW
+    // as each window finishes: memory stays flat in the number of trials (at most `window`
     // blocks' sums are alive), and the summation order is the one of a sequential run.
+    let window = WINDOW_PER_THREAD * pool.current_num_threads().max(1);
     let mut total = empty();
     let mut start = 0;
     while start < n_blocks {
-        let end = (start + WINDOW).min(n_blocks);
+        let end = (start + window).min(n_blocks);
         let blocks: Result<Vec<Vec<Sums>>, RunError> = pool.install(|| {
             (start..end)
                 .into_par_iter()
