@@ -68,7 +68,10 @@ pub fn gemv(y: &mut Vector, a: &Matrix, x: &Vector) {
 }
 
 /// `y = a x` for an R x C column-major `a`: nalgebra's operation order (see the module).
+/// `acc = p + acc`, not `acc += p`: the product is the left operand, as in nalgebra's axpy,
+/// which decides the payload when both are NaN.
 #[inline(always)]
+#[allow(clippy::assign_op_pattern)]
 fn gemv_fixed<const R: usize, const C: usize>(y: &mut [f64], a: &[f64], x: &[f64]) {
     let (y, a, x): (&mut [f64; R], &[f64], &[f64; C]) = (
         y.try_into().expect("R rows"),
