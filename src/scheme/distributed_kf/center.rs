@@ -8,6 +8,7 @@ use crate::model::MeasurementModel;
 use crate::scheme::{FusionCenter, SchemeError};
 use nalgebra::{Cholesky, Dyn};
 use std::collections::{HashMap, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::sync::RwLock;
@@ -52,9 +53,33 @@ pub struct CovarianceMemo {
 
 #[derive(Debug, Default)]
 struct Memo {
-    kept: HashMap<CovKey, Arc<FusedCovariance>>,
-    seen: HashSet<CovKey>,
+    kept: HashMap<CovKey, Arc<FusedCovariance>, KeyHash>,
+    seen: HashSet<CovKey, KeyHash>,
 }
+
+/// A multiplicative hash of the three words of a [`CovKey`] (the keys are not adversarial;
+/// SipHash would cost more than the lookup it guards).
+#[derive(Debug, Default, Clone, Copy)]
+struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+type KeyHash = BuildHasherDefault<KeyHasher>;
 
 /// Bytes all [`CovarianceMemo`]s of the process may keep together (kept entries are ~700
 /// bytes for a 6-D state), and keys seen once one memo may remember.
