@@ -57,8 +57,9 @@ pub struct CentralizedKf {
     /// Work space of the scheduled step.
     pred_mean: Vector,
     tmp: Vector,
-    /// Work space of the direct linear step.
-    work: DirectWork,
+    /// Work space of the direct linear step, made at its first use (a center on the schedule
+    /// never needs it).
+    work: Option<Box<DirectWork>>,
 }
 
 /// Buffers of [`CentralizedKf::direct_linear_step`]: F^T (as `F.transpose()` makes it), F P,
@@ -105,7 +106,6 @@ impl CentralizedKf {
     fn build(system: Arc<System>, schedule: Option<Arc<AllDataSchedule>>) -> Self {
         let est = system.prior.clone();
         let n = est.dim();
-        let system_ft = system.transition.f().transpose();
         Self {
             system,
             est,
@@ -113,13 +113,7 @@ impl CentralizedKf {
             steps_done: 0,
             pred_mean: Vector::zeros(n),
             tmp: Vector::zeros(n),
-            work: DirectWork {
-                ft: system_ft.clone(),
-                fp: Matrix::zeros(n, n),
-                pred_cov: Matrix::zeros(n, n),
-                info: Matrix::zeros(n, n),
-                chol: None,
-            },
+            work: None,
         }
     }
 
@@ -130,7 +124,16 @@ impl CentralizedKf {
     /// H_i^T R_i^{-1} H_i and H_i^T R_i^{-1} z_i (eq. (8)-(9) for a subset).
     fn direct_linear_step(&mut self, inbox: &[Received]) -> Result<(), SchemeError> {
         let t = &self.system.transition;
-        let w = &mut self.work;
+        let n = self.est.dim();
+        let w = self.work.get_or_insert_with(|| {
+            Box::new(DirectWork {
+                ft: t.f().transpose(),
+                fp: Matrix::zeros(n, n),
+                pred_cov: Matrix::zeros(n, n),
+                info: Matrix::zeros(n, n),
+                chol: None,
+            })
+        });
         // kf::predict: F x, and F P F^T + Q symmetrized.
         crate::filter::fixed::gemv(&mut self.pred_mean, t.f(), &self.est.mean);
         w.fp.gemm(1.0, t.f(), &self.est.cov, 0.0);

@@ -19,7 +19,7 @@ const BLOCK: usize = 4;
 
 /// Blocks in flight at once, per worker thread. Only memory and load balance depend on it,
 /// never the result: blocks are merged in block order whatever the window.
-const WINDOW_PER_THREAD: usize = 4;
+const WINDOW_PER_THREAD: usize = 8;
 
 /// Stream 0 of a trial draws truth and measurements; stream 1 + v is variant v's coins.
 pub fn trial_rng(seed: u64, trial: u64, stream: u64) -> Xoshiro256PlusPlus {
@@ -156,6 +156,38 @@ impl Drawer {
     }
 }
 
+/// A [`Drawer`] borrowed from a pool and returned to it when dropped.
+struct PooledDrawer<'a> {
+    drawer: Option<Drawer>,
+    pool: &'a std::sync::Mutex<Vec<Drawer>>,
+}
+
+impl<'a> PooledDrawer<'a> {
+    fn take(pool: &'a std::sync::Mutex<Vec<Drawer>>, exp: &Experiment) -> Self {
+        let drawer = pool
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .pop()
+            .unwrap_or_else(|| Drawer::new(exp));
+        Self {
+            drawer: Some(drawer),
+            pool,
+        }
+    }
+
+    fn get(&mut self) -> &mut Drawer {
+        self.drawer.as_mut().expect("present until dropped")
+    }
+}
+
+impl Drop for PooledDrawer<'_> {
+    fn drop(&mut self) {
+        if let Some(d) = self.drawer.take() {
+            self.pool.lock().unwrap_or_else(|e| e.into_inner()).push(d);
+        }
+    }
+}
+
 /// Runs one trial of every variant, adding into `sums` (one per variant).
 fn run_trial(
     exp: &Experiment,
@@ -254,6 +286,7 @@ pub fn run(
     // as each window finishes: memory stays flat in the number of trials (at most `window`
     // blocks' sums are alive), and the summation order is the one of a sequential run.
     let window = WINDOW_PER_THREAD * pool.current_num_threads().max(1);
+    let drawers = std::sync::Mutex::new(Vec::new());
     let mut total = empty();
     let mut start = 0;
     while start < n_blocks {
@@ -261,10 +294,12 @@ pub fn run(
         let blocks: Result<Vec<Vec<Sums>>, RunError> = pool.install(|| {
             (start..end)
                 .into_par_iter()
-                // One drawer (trial buffers) per worker task, not per block.
+                // One drawer (trial buffers) per worker task, not per block, recycled
+                // from window to window.
                 .map_init(
-                    || Drawer::new(exp),
+                    || PooledDrawer::take(&drawers, exp),
                     |drawer, b| {
+                        let drawer = drawer.get();
                         let mut sums = empty();
                         for trial in b * BLOCK..((b + 1) * BLOCK).min(exp.trials) {
                             run_trial(exp, trial, &mut sums, drawer)?;
