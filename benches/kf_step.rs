@@ -1,12 +1,16 @@
-//! Micro-benchmarks of single steps on seed 004's system (6-D state, 2-D measurements):
+//! Micro-benchmarks of single steps on seed 004's system (6-D state, 2-D measurements), and
+//! issue 12's workload (a) end to end at one thread — the centralized KF Monte Carlo of the
+//! numpy peers (`/work/shared/peers/kf_mc.py`, 5000 trials x 20 steps):
 //! `cargo bench --bench kf_step`.
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use hushfuse::filter::{information, kf, Gaussian};
 use hushfuse::linalg::{Matrix, Vector};
 use hushfuse::link::Received;
 use hushfuse::model::{presets, LinearSensor, MeasurementModel};
+use hushfuse::scheme::centralized::CentralizedScheme;
 use hushfuse::scheme::distributed_kf::{DistributedKfScheme, Trigger};
 use hushfuse::scheme::{Scheme, System};
+use hushfuse::sim::{build, runner};
 use rand::SeedableRng;
 use std::sync::Arc;
 
@@ -67,5 +71,43 @@ fn benches(c: &mut Criterion) {
     });
 }
 
-criterion_group!(kf_benches, benches);
+fn step_benches(c: &mut Criterion) {
+    let sys = system();
+    let z = Vector::from_vec(vec![0.3, -0.2]);
+    let inbox: Vec<Received> = (0..6).map(|_| Received::Measurement(z.clone())).collect();
+    for (name, rate) in [
+        (
+            "centralized KF step, all data (shared covariance schedule)",
+            1.0,
+        ),
+        ("centralized KF step, direct form (random-rate path)", 0.999),
+    ] {
+        let scheme = CentralizedScheme::new(sys.clone(), rate).unwrap();
+        c.bench_function(name, |b| {
+            let mut center = scheme.build().unwrap().center;
+            let mut k = 0usize;
+            b.iter(|| {
+                k = k % 100 + 1;
+                if k == 1 {
+                    center = scheme.build().unwrap().center;
+                }
+                center.step(k, black_box(&inbox)).unwrap();
+            })
+        });
+    }
+}
+
+/// Workload (a) of issue 12, whole runs at one thread (compare: `kf_mc.py --variants
+/// np_batched,np_sharedP`).
+fn kfmc(c: &mut Criterion) {
+    let exp = build::load(include_str!("data/kfmc.toml"), "kfmc").unwrap();
+    let mut g = c.benchmark_group("kfmc");
+    g.sample_size(10);
+    g.bench_function("5000 trials x 20 steps, 1 thread", |b| {
+        b.iter(|| runner::run(&exp, runner::RunOptions { threads: 1 }, &|_| {}).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(kf_benches, benches, step_benches, kfmc);
 criterion_main!(kf_benches);

@@ -1,10 +1,17 @@
-//! Wall time of whole built-in scenario runs, all cores: `cargo bench --bench scenarios`.
-//! Default: the `dormann-fig1` sweep (93 scheme variants x 500 trials x 100 steps) and the
-//! `zhang-fig5` run (4 schemes x 1000 trials x 100 steps, 50 range sensors).
-//! Environment: HUSHFUSE_BENCH_SCENARIOS (comma-separated built-in names),
-//! HUSHFUSE_BENCH_THREADS (pin the thread count), HUSHFUSE_BENCH_REPEATS (default 3).
+//! Wall time of whole built-in scenario runs: `cargo bench --bench scenarios`.
+//! Default: issue 12's workloads at one thread — `kfmc` (the peers' centralized KF Monte Carlo,
+//! 5000 trials x 20 steps, `benches/data/kfmc.toml` = `/work/shared/peers/kfmc.toml`) and the
+//! `dormann-fig1` sweep (93 scheme variants x 500 trials x 100 steps) — then `dormann-fig1`
+//! and the `zhang-fig5` run (4 schemes x 1000 trials x 100 steps, 50 range sensors) on all
+//! cores. Compare with the numpy peers (`/work/shared/peers/README.md`) in the same minute.
+//! Environment: HUSHFUSE_BENCH_SCENARIOS (comma-separated names, `name@threads` pins the
+//! thread count of one entry), HUSHFUSE_BENCH_THREADS (pin the thread count of the others),
+//! HUSHFUSE_BENCH_REPEATS (default 3).
 use hushfuse::sim::{build, builtin, runner};
 use std::time::Instant;
+
+/// The peers' workload (a): centralized KF, 1-D constant velocity, 2 position sensors.
+const KFMC: &str = include_str!("data/kfmc.toml");
 
 fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
     std::env::var(name)
@@ -18,12 +25,20 @@ fn main() {
     let repeats: usize = env("HUSHFUSE_BENCH_REPEATS", 3);
     let names: String = env(
         "HUSHFUSE_BENCH_SCENARIOS",
-        "dormann-fig1,zhang-fig5".to_string(),
+        "kfmc@1,dormann-fig1@1,dormann-fig1,zhang-fig5".to_string(),
     );
     // Under `cargo test --benches` (no --bench flag) do one tiny run of each only.
     let quick = !std::env::args().any(|a| a == "--bench");
-    for name in names.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-        let text = builtin::get(name).unwrap_or_else(|| panic!("no built-in scenario {name}"));
+    for entry in names.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let (name, threads) = match entry.split_once('@') {
+            Some((n, t)) => (n, t.parse().expect("name@threads")),
+            None => (entry, threads),
+        };
+        let text = if name == "kfmc" {
+            KFMC
+        } else {
+            builtin::get(name).unwrap_or_else(|| panic!("no built-in scenario {name}"))
+        };
         let mut exp = build::load(text, name).unwrap();
         if quick {
             exp.trials = 2;

@@ -67,6 +67,11 @@ impl LinearTransition {
         &self.f * x
     }
 
+    /// Lower square root of Q (w_k = Q^{1/2} n, n standard normal).
+    pub fn q_sqrt(&self) -> &Matrix {
+        &self.q_sqrt
+    }
+
     /// Draw `x_{k+1} = F x_k + w_k`.
     pub fn sample_next(&self, x: &Vector, rng: &mut dyn RngCore) -> Vector {
         let w = Vector::from_fn(self.dim(), |_, _| StandardNormal.sample(rng));

@@ -60,8 +60,9 @@ fn columns(groups: usize) -> f64 {
 
 /// What the run needs apart from the schemes themselves: the per-trial truth and measurements
 /// (one trial per worker, each a heap vector), the per-step sums of every variant (the runner
-/// keeps one set per block of 4 trials until it merges them in order) and the per-trial
-/// steady-state values kept for paired comparisons.
+/// keeps one set per block of a window of 8 blocks per thread, merged in block order as the
+/// window finishes, plus the total) and the per-trial steady-state values kept for paired
+/// comparisons.
 pub fn baseline(
     system: &System,
     groups: usize,
@@ -75,7 +76,7 @@ pub fn baseline(
     let vectors = 1.0 + system.n_sensors() as f64;
     let (steps, trials, variants) = (steps as f64, trials as f64, variants as f64);
     let workers = threads.max(1) as f64;
-    let blocks = (trials / 4.0).ceil();
+    let blocks = (trials / 4.0).ceil().min(8.0 * workers);
     let trial_data = steps * (8.0 * (n + m) + 64.0 * vectors) * workers;
     let sums = steps * columns(groups) * variants * 8.0 * (blocks + 1.0);
     let per_trial = trials * variants * (columns(groups) * 8.0 + 24.0);

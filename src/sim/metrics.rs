@@ -94,6 +94,11 @@ pub struct TrialObserver<'a> {
     acc: [f64; 4],
     group_acc: Vec<f64>,
     count: usize,
+    /// Work space, so that a step allocates nothing: the error, its whitened form and the
+    /// matrix the NEES Cholesky factor is computed in.
+    err: Vector,
+    white: Vector,
+    chol_buf: Option<crate::linalg::Matrix>,
 }
 
 impl Sums {
@@ -135,6 +140,9 @@ impl Sums {
             acc: [0.0; 4],
             group_acc: vec![0.0; groups.len()],
             count: 0,
+            err: Vector::zeros(0),
+            white: Vector::zeros(0),
+            chol_buf: None,
         }
     }
 
@@ -170,8 +178,16 @@ impl TrialObserver<'_> {
     ) -> Result<(), crate::linalg::LinalgError> {
         let layout = self.sums.layout();
         let w = layout.width();
+        // err = mean - truth, in the buffer.
+        if self.err.len() != est.mean.len() {
+            self.err = Vector::zeros(est.mean.len());
+            self.white = Vector::zeros(est.mean.len());
+        }
+        self.err.copy_from(&est.mean);
+        self.err -= truth;
+        let nees_direct = nees_buffered(&self.err, &est.cov, &mut self.white, &mut self.chol_buf);
+        let err = &self.err;
         let row = &mut self.sums.per_step[(k - 1) * w..k * w];
-        let err = &est.mean - truth;
         let total: f64 = err.iter().map(|e| e * e).sum();
         let steady = k >= self.steady_from;
         for (g, (_, idx)) in self.groups.iter().enumerate() {
@@ -184,13 +200,13 @@ impl TrialObserver<'_> {
         // A particle cloud can collapse onto one particle: its covariance is then singular.
         // NEES is computed with a tiny relative jitter (so the claim of certainty shows as a
         // huge NEES) and the step is counted as degenerate; NaN/inf remain errors.
-        let (nees, degenerate) = match mahalanobis_sq(&err, &est.cov) {
+        let (nees, degenerate) = match nees_direct {
             Ok(v) => (v, false),
             Err(crate::linalg::LinalgError::NotPositiveDefinite) => {
                 let n = est.cov.nrows();
                 let scale = (est.cov.trace().abs() / n as f64).max(1e-12);
                 let jittered = &est.cov + crate::linalg::Matrix::identity(n, n) * (1e-9 * scale);
-                (mahalanobis_sq(&err, &jittered)?, true)
+                (mahalanobis_sq(err, &jittered)?, true)
             }
             Err(e) => return Err(e),
         };
@@ -227,6 +243,41 @@ impl TrialObserver<'_> {
         row.extend(self.group_acc.iter().map(|v| v / c));
         self.sums.per_trial.push(row);
     }
+}
+
+/// [`mahalanobis_sq`] with the factorization done in `buf` and the solve in `white`: the same
+/// checks (square, finite), the same Cholesky factorization of a copy of `p` and the same
+/// triangular solve, hence the same number, without allocating.
+fn nees_buffered(
+    e: &Vector,
+    p: &crate::linalg::Matrix,
+    white: &mut Vector,
+    buf: &mut Option<crate::linalg::Matrix>,
+) -> Result<f64, crate::linalg::LinalgError> {
+    use crate::linalg::LinalgError;
+    if p.nrows() != p.ncols() {
+        return Err(LinalgError::NotSquare {
+            rows: p.nrows(),
+            cols: p.ncols(),
+        });
+    }
+    if p.iter().any(|v| !v.is_finite()) {
+        return Err(LinalgError::NonFinite);
+    }
+    let mut m = match buf.take() {
+        Some(m) if m.shape() == p.shape() => m,
+        _ => crate::linalg::Matrix::zeros(p.nrows(), p.ncols()),
+    };
+    m.copy_from(p);
+    let chol = nalgebra::Cholesky::new(m).ok_or(LinalgError::NotPositiveDefinite)?;
+    white.copy_from(e);
+    // Only the lower triangle is read: the dirty factor solves as `chol.l()` does.
+    let solved = chol.l_dirty().solve_lower_triangular_mut(white);
+    *buf = Some(chol.unpack_dirty());
+    if !solved {
+        return Err(LinalgError::NotPositiveDefinite);
+    }
+    Ok(white.norm_squared())
 }
 
 #[cfg(test)]

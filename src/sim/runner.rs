@@ -17,6 +17,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// and hence every bit of the result, is the same for 1 or many threads.
 const BLOCK: usize = 4;
 
+/// Blocks in flight at once, per worker thread. Only memory and load balance depend on it,
+/// never the result: blocks are merged in block order whatever the window.
+const WINDOW_PER_THREAD: usize = 8;
+
 /// Stream 0 of a trial draws truth and measurements; stream 1 + v is variant v's coins.
 pub fn trial_rng(seed: u64, trial: u64, stream: u64) -> Xoshiro256PlusPlus {
     Xoshiro256PlusPlus::seed_from_u64(trial_seed(seed, trial, stream))
@@ -65,30 +69,134 @@ pub struct TrialData {
 
 /// Draws x_0 from the prior, then x_k and every z_k^i, all from one stream.
 pub fn draw_trial(exp: &Experiment, trial: usize) -> TrialData {
-    let sys = &exp.system;
-    let mut rng = trial_rng(exp.seed, trial as u64, 0);
-    let x0 = &exp.initial_truth;
-    let x0_sqrt = crate::model::transition::psd_sqrt(&x0.cov).expect("validated initial truth");
-    let n0 = Vector::from_fn(sys.state_dim(), |_, _| {
-        rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, &mut rng)
-    });
-    let mut x = &x0.mean + x0_sqrt * n0;
-    let mut truth = Vec::with_capacity(exp.steps);
-    let mut measurements = Vec::with_capacity(exp.steps);
-    for _ in 0..exp.steps {
-        x = sys.transition.sample_next(&x, &mut rng);
-        measurements.push(sys.sensors.iter().map(|s| s.sample(&x, &mut rng)).collect());
-        truth.push(x.clone());
+    let mut drawer = Drawer::new(exp);
+    drawer.draw(exp, trial);
+    drawer.data
+}
+
+/// Draws trials into buffers reused from trial to trial: the same numbers as drawing each
+/// vector afresh (`F x + Q^{1/2} w`, `H x + R^{1/2} v`, the same gemv products and the same
+/// order of normal draws), without allocating per step.
+struct Drawer {
+    data: TrialData,
+    /// Square root of the initial-truth covariance, once per run instead of once per trial.
+    x0_sqrt: crate::linalg::Matrix,
+    x: Vector,
+    normals: Vector,
+    a: Vector,
+    b: Vector,
+    /// Per sensor: its noise draw v and R^{1/2} v.
+    v: Vec<Vector>,
+    rv: Vec<Vector>,
+}
+
+impl Drawer {
+    fn new(exp: &Experiment) -> Self {
+        let sys = &exp.system;
+        let n = sys.state_dim();
+        let x0_sqrt = crate::model::transition::psd_sqrt(&exp.initial_truth.cov)
+            .expect("validated initial truth");
+        let zeros = |d: usize| Vector::zeros(d);
+        Self {
+            data: TrialData {
+                truth: (0..exp.steps).map(|_| zeros(n)).collect(),
+                measurements: (0..exp.steps)
+                    .map(|_| sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect())
+                    .collect(),
+            },
+            x0_sqrt,
+            x: zeros(n),
+            normals: zeros(n),
+            a: zeros(n),
+            b: zeros(n),
+            v: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
+            rv: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
+        }
     }
-    TrialData {
-        truth,
-        measurements,
+
+    fn draw(&mut self, exp: &Experiment, trial: usize) {
+        let sys = &exp.system;
+        let mut rng = trial_rng(exp.seed, trial as u64, 0);
+        let normal = |rng: &mut Xoshiro256PlusPlus| -> f64 {
+            rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
+        };
+        // x_0 = mean + S n_0.
+        self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
+        crate::filter::fixed::gemv(&mut self.a, &self.x0_sqrt, &self.normals);
+        self.x.copy_from(&exp.initial_truth.mean);
+        self.x += &self.a;
+        let t = &sys.transition;
+        for k in 0..exp.steps {
+            // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
+            self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
+            crate::filter::fixed::gemv(&mut self.a, t.f(), &self.x);
+            crate::filter::fixed::gemv(&mut self.b, t.q_sqrt(), &self.normals);
+            self.a += &self.b;
+            std::mem::swap(&mut self.x, &mut self.a);
+            for (i, (s, z)) in sys
+                .sensors
+                .iter()
+                .zip(self.data.measurements[k].iter_mut())
+                .enumerate()
+            {
+                match s.as_linear() {
+                    // z = H x + R^{1/2} v (MeasurementModel::sample).
+                    Some(lin) => {
+                        let (v, rv) = (&mut self.v[i], &mut self.rv[i]);
+                        v.iter_mut().for_each(|e| *e = normal(&mut rng));
+                        crate::filter::fixed::gemv(z, lin.h(), &self.x);
+                        crate::filter::fixed::gemv(rv, s.noise_sqrt(), v);
+                        *z += &*rv;
+                    }
+                    None => *z = s.sample(&self.x, &mut rng),
+                }
+            }
+            self.data.truth[k].copy_from(&self.x);
+        }
+    }
+}
+
+/// A [`Drawer`] borrowed from a pool and returned to it when dropped.
+struct PooledDrawer<'a> {
+    drawer: Option<Drawer>,
+    pool: &'a std::sync::Mutex<Vec<Drawer>>,
+}
+
+impl<'a> PooledDrawer<'a> {
+    fn take(pool: &'a std::sync::Mutex<Vec<Drawer>>, exp: &Experiment) -> Self {
+        let drawer = pool
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .pop()
+            .unwrap_or_else(|| Drawer::new(exp));
+        Self {
+            drawer: Some(drawer),
+            pool,
+        }
+    }
+
+    fn get(&mut self) -> &mut Drawer {
+        self.drawer.as_mut().expect("present until dropped")
+    }
+}
+
+impl Drop for PooledDrawer<'_> {
+    fn drop(&mut self) {
+        if let Some(d) = self.drawer.take() {
+            self.pool.lock().unwrap_or_else(|e| e.into_inner()).push(d);
+        }
     }
 }
 
 /// Runs one trial of every variant, adding into `sums` (one per variant).
-fn run_trial(exp: &Experiment, trial: usize, sums: &mut [Sums]) -> Result<(), RunError> {
-    let data = draw_trial(exp, trial);
+fn run_trial(
+    exp: &Experiment,
+    trial: usize,
+    sums: &mut [Sums],
+    drawer: &mut Drawer,
+) -> Result<(), RunError> {
+    drawer.draw(exp, trial);
+    let data = &drawer.data;
     let n_sensors = exp.system.n_sensors();
     let mut inbox = Vec::with_capacity(n_sensors);
     let mut transmissions = Vec::with_capacity(n_sensors);
@@ -174,24 +282,40 @@ pub fn run(
             .map(|_| Sums::new(exp.groups.len(), exp.steps, exp.system.state_dim()))
             .collect()
     };
-    let blocks: Result<Vec<Vec<Sums>>, RunError> = pool.install(|| {
-        (0..n_blocks)
-            .into_par_iter()
-            .map(|b| {
-                let mut sums = empty();
-                for trial in b * BLOCK..((b + 1) * BLOCK).min(exp.trials) {
-                    run_trial(exp, trial, &mut sums)?;
-                    progress(done.fetch_add(1, Ordering::Relaxed) + 1);
-                }
-                Ok(sums)
-            })
-            .collect()
-    });
+    // Blocks run in parallel a window at a time and are merged into the total in block order
+    // as each window finishes: memory stays flat in the number of trials (at most `window`
+    // blocks' sums are alive), and the summation order is the one of a sequential run.
+    let window = WINDOW_PER_THREAD * pool.current_num_threads().max(1);
+    let drawers = std::sync::Mutex::new(Vec::new());
     let mut total = empty();
-    for block in blocks? {
-        for (t, b) in total.iter_mut().zip(&block) {
-            t.merge(b);
+    let mut start = 0;
+    while start < n_blocks {
+        let end = (start + window).min(n_blocks);
+        let blocks: Result<Vec<Vec<Sums>>, RunError> = pool.install(|| {
+            (start..end)
+                .into_par_iter()
+                // One drawer (trial buffers) per worker task, not per block, recycled
+                // from window to window.
+                .map_init(
+                    || PooledDrawer::take(&drawers, exp),
+                    |drawer, b| {
+                        let drawer = drawer.get();
+                        let mut sums = empty();
+                        for trial in b * BLOCK..((b + 1) * BLOCK).min(exp.trials) {
+                            run_trial(exp, trial, &mut sums, drawer)?;
+                            progress(done.fetch_add(1, Ordering::Relaxed) + 1);
+                        }
+                        Ok(sums)
+                    },
+                )
+                .collect()
+        });
+        for block in blocks? {
+            for (t, b) in total.iter_mut().zip(&block) {
+                t.merge(b);
+            }
         }
+        start = end;
     }
     Ok(total)
 }

@@ -1,12 +1,17 @@
 //! Fusion center of the globalized distributed KF (seed 004).
-use super::plan::GlobalizedPlan;
-use super::sensor::debiased_extrapolation;
+use super::plan::{GlobalizedPlan, PredictedDelta};
+use super::sensor::debiased_extrapolation_into;
 use crate::filter::Gaussian;
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::model::MeasurementModel;
 use crate::scheme::{FusionCenter, SchemeError};
+use nalgebra::{Cholesky, Dyn};
+use std::collections::{HashMap, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
+use std::sync::RwLock;
 
 /// Which fusion rule the center applies to silent sensors.
 #[derive(Debug, Clone, PartialEq)]
@@ -21,7 +26,90 @@ pub enum Fusion {
     Bounded { b: Matrix },
 }
 
+/// The fused covariance of one step and its Cholesky factor. It depends only on the plan step,
+/// the set of silent sensors and (Algorithm 2) how many of them are extrapolated inexactly —
+/// never on measurements — so it is computed once per such key and shared by all trials.
+#[derive(Debug)]
+pub struct FusedCovariance {
+    /// Cholesky factor of the fused information matrix (10).
+    pub chol: Cholesky<f64, Dyn>,
+    /// The fused covariance, inflated for Algorithm 2.
+    pub cov: Matrix,
+}
+
+/// Key of a [`FusedCovariance`]: plan step, bit set of silent sensors, inexact count.
+type CovKey = (usize, u64, usize);
+
+/// Memo of [`FusedCovariance`]s of one fusion rule, shared by the centers of all trials.
+///
+/// A key is admitted on its second sighting: most silence patterns of a long sweep occur
+/// once, and keeping them would cost memory (hundreds of MB for `dormann-fig1`) for no reuse.
+/// Both sets are capped; beyond the caps the covariance is simply recomputed. Which entries
+/// are kept never changes a number, only how often one is recomputed.
+#[derive(Debug, Default)]
+pub struct CovarianceMemo {
+    entries: RwLock<Memo>,
+}
+
+#[derive(Debug, Default)]
+struct Memo {
+    kept: HashMap<CovKey, Arc<FusedCovariance>, KeyHash>,
+    seen: HashSet<CovKey, KeyHash>,
+}
+
+/// A multiplicative hash of the three words of a [`CovKey`] (the keys are not adversarial;
+/// SipHash would cost more than the lookup it guards).
+#[derive(Debug, Default, Clone, Copy)]
+struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+type KeyHash = BuildHasherDefault<KeyHasher>;
+
+/// Bytes all [`CovarianceMemo`]s of the process may keep together (kept entries are ~700
+/// bytes for a 6-D state), and keys seen once one memo may remember.
+const MEMO_BUDGET: usize = 32 << 20;
+const MEMO_SEEN: usize = 1 << 13;
+static MEMO_BYTES: AtomicUsize = AtomicUsize::new(0);
+
+/// Approximate heap bytes of one kept entry of an n-D state: two n x n matrices and overhead.
+fn memo_entry_bytes(n: usize) -> usize {
+    2 * 8 * n * n + 160
+}
+
+impl Drop for Memo {
+    fn drop(&mut self) {
+        let n = self.kept.values().next().map_or(0, |c| c.cov.nrows());
+        MEMO_BYTES.fetch_sub(self.kept.len() * memo_entry_bytes(n), Ordering::Relaxed);
+    }
+}
+
+impl CovarianceMemo {
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
 /// The fusion center.
+///
+/// A step allocates nothing: the covariance comes from the shared [`CovarianceMemo`] (computed
+/// there by the very operations the direct form performs), the information vector and the
+/// held estimates live in buffers, and the predicted debiasing matrices are the plan's.
 #[derive(Debug, Clone)]
 pub struct DkfCenter {
     plan: Arc<GlobalizedPlan>,
@@ -30,10 +118,20 @@ pub struct DkfCenter {
     est: Gaussian,
     /// Per sensor: last received globalized estimate, predicted since (x̄^{pp,i}).
     held: Vec<Vector>,
-    /// Per sensor: its debiasing matrix, predicted since (Δ^{pp,i}); Algorithm 2 only.
-    held_delta: Vec<Matrix>,
+    /// Per sensor: its debiasing matrix, predicted since (Δ^{pp,i}), a link of the plan's
+    /// shared chain; Algorithm 2 only (`None` when A is singular).
+    held_delta: Vec<Option<Arc<PredictedDelta>>>,
     /// Per sensor: consecutive silent steps including the current one.
     silent_steps: Vec<usize>,
+    memo: Arc<CovarianceMemo>,
+    /// Per sensor: the first sensor whose information matrix H^T R^{-1} H is bitwise the
+    /// same (identical sensors remove identical information, see [`canonical_silence`]).
+    class: Vec<usize>,
+    /// Work space.
+    info_vec: Vector,
+    tmp: Vector,
+    tmp2: Vector,
+    contribution: Vector,
 }
 
 impl DkfCenter {
@@ -44,10 +142,37 @@ impl DkfCenter {
         prior: Gaussian,
         fusion: Fusion,
     ) -> Self {
+        Self::with_memo(
+            plan,
+            sensors,
+            prior,
+            fusion,
+            Arc::new(CovarianceMemo::new()),
+        )
+    }
+
+    /// Like [`DkfCenter::new`], sharing the covariance memo `memo` with other centers of the
+    /// same plan and fusion rule (the trials of one scheme variant).
+    pub fn with_memo(
+        plan: Arc<GlobalizedPlan>,
+        sensors: Vec<Arc<dyn MeasurementModel>>,
+        prior: Gaussian,
+        fusion: Fusion,
+        memo: Arc<CovarianceMemo>,
+    ) -> Self {
         let n = prior.dim();
         let held = vec![prior.mean.clone(); sensors.len()];
-        let held_delta = vec![Matrix::identity(n, n); sensors.len()];
+        let held_delta = (0..sensors.len()).map(|i| plan.delta_head(i, 0)).collect();
         let silent_steps = vec![0; sensors.len()];
+        let info = |s: &Arc<dyn MeasurementModel>| s.as_linear().map(|l| l.information().clone());
+        let class = (0..sensors.len())
+            .map(|i| {
+                let mine = info(&sensors[i]);
+                (0..i)
+                    .find(|&j| mine.is_some() && info(&sensors[j]).is_some_and(|o| Some(o) == mine))
+                    .unwrap_or(i)
+            })
+            .collect();
         Self {
             plan,
             sensors,
@@ -56,7 +181,84 @@ impl DkfCenter {
             held,
             held_delta,
             silent_steps,
+            memo,
+            class,
+            info_vec: Vector::zeros(n),
+            tmp: Vector::zeros(n),
+            tmp2: Vector::zeros(n),
+            contribution: Vector::zeros(n),
         }
+    }
+
+    /// The fused covariance of plan step `p` with the silent sensors `silent` (bit i = sensor
+    /// i) of which `inexact` are extrapolated: memoized when there are at most 64 sensors.
+    fn fused_covariance(
+        &self,
+        p: usize,
+        silent: u64,
+        inexact: usize,
+    ) -> Result<Arc<FusedCovariance>, SchemeError> {
+        let memoized = self.sensors.len() <= 64;
+        let key = (p, silent, inexact);
+        if memoized {
+            let entries = self.memo.entries.read().unwrap_or_else(|e| e.into_inner());
+            if let Some(c) = entries.kept.get(&key) {
+                return Ok(c.clone());
+            }
+        }
+        let c = Arc::new(self.compute_fused_covariance(p, |i| silent >> i & 1 == 1, inexact)?);
+        if memoized {
+            let mut memo = self.memo.entries.write().unwrap_or_else(|e| e.into_inner());
+            if memo.seen.remove(&key) {
+                let bytes = memo_entry_bytes(c.cov.nrows());
+                let budget = MEMO_BYTES.fetch_add(bytes, Ordering::Relaxed);
+                if budget + bytes <= MEMO_BUDGET {
+                    memo.kept.insert(key, c.clone());
+                } else {
+                    MEMO_BYTES.fetch_sub(bytes, Ordering::Relaxed);
+                }
+            } else if memo.seen.len() < MEMO_SEEN {
+                memo.seen.insert(key);
+            }
+        }
+        Ok(c)
+    }
+
+    /// (10): start from N (C̄^e)^{-1}, remove the information of each silent sensor (in sensor
+    /// order), invert; Algorithm 2 adds (N - m - l)^2 C (C̄^p)^{-1} B (C̄^p)^{-1} C^T. The same
+    /// operations in the same order as the direct per-step form.
+    fn compute_fused_covariance(
+        &self,
+        p: usize,
+        is_silent: impl Fn(usize) -> bool,
+        inexact: usize,
+    ) -> Result<FusedCovariance, SchemeError> {
+        let m = self.plan.at(p)?;
+        let nf = self.sensors.len() as f64;
+        let mut info = &m.cbar_e_inv * nf;
+        for (i, s) in self.sensors.iter().enumerate() {
+            if is_silent(i) {
+                let lin = s.as_linear().ok_or_else(|| {
+                    SchemeError::Unsupported("distributed KF needs linear sensors".into())
+                })?;
+                info -= lin.information();
+            }
+        }
+        symmetrize(&mut info);
+        let chol = cholesky(&info).map_err(|source| SchemeError::Matrix {
+            what: "fused information matrix (10)",
+            source,
+        })?;
+        let mut cov = chol.inverse();
+        if let Fusion::Bounded { b } = &self.fusion {
+            if inexact > 0 {
+                let g = &cov * &m.cbar_p_inv;
+                let factor = (inexact * inexact) as f64;
+                cov += (&g * b * g.transpose()) * factor;
+            }
+        }
+        symmetrize(&mut cov);
+        Ok(FusedCovariance { chol, cov })
     }
 }
 
@@ -69,23 +271,26 @@ impl FusionCenter for DkfCenter {
                 self.sensors.len()
             )));
         }
+        let p = self.plan.index(k)?;
         let m = self.plan.at(k)?;
         let a = self.plan.a();
         let bounded = matches!(self.fusion, Fusion::Bounded { .. });
-        let nf = self.sensors.len() as f64;
         let n = self.est.dim();
-        // (10): start from N (C̄^e)^{-1}, remove the information of each silent sensor.
-        let mut info = &m.cbar_e_inv * nf;
-        let mut info_vec = Vector::zeros(n);
+        // (11): the information vector; (10)'s matrix only depends on who was silent.
+        self.info_vec.fill(0.0);
+        let mut silent = 0u64;
         // Silent sensors whose extrapolation is not exact (N - m - l of Section IV).
         let mut inexact = 0usize;
         for (i, msg) in inbox.iter().enumerate() {
-            self.held[i] = a * &self.held[i];
+            super::sensor::predict_in_place(a, &mut self.held[i], &mut self.tmp);
             if bounded {
-                let a_inv = self.plan.a_inv().ok_or_else(|| {
-                    SchemeError::Unsupported("Algorithm 2 needs an invertible system matrix".into())
-                })?;
-                self.held_delta[i] = a * &self.held_delta[i] * a_inv;
+                if self.plan.a_inv().is_none() {
+                    return Err(SchemeError::Unsupported(
+                        "Algorithm 2 needs an invertible system matrix".into(),
+                    ));
+                }
+                let next = self.held_delta[i].as_ref().map(|d| d.next(&self.plan));
+                self.held_delta[i] = next;
             }
             match msg {
                 Received::Estimate(x) => {
@@ -96,22 +301,27 @@ impl FusionCenter for DkfCenter {
                         });
                     }
                     // (11), first sum.
-                    info_vec += &m.cbar_e_inv * x;
+                    crate::filter::fixed::gemv(&mut self.tmp, &m.cbar_e_inv, x);
+                    self.info_vec += &self.tmp;
                     self.held[i].copy_from(x);
                     if bounded {
-                        self.held_delta[i].copy_from(&m.delta_e[i]);
+                        self.held_delta[i] = self.plan.delta_head(i, p);
                     }
                     self.silent_steps[i] = 0;
                 }
                 Received::Silent | Received::NotScheduled => {
                     self.silent_steps[i] += 1;
-                    let lin = self.sensors[i].as_linear().ok_or_else(|| {
-                        SchemeError::Unsupported("distributed KF needs linear sensors".into())
-                    })?;
-                    info -= lin.information();
+                    if self.sensors[i].as_linear().is_none() {
+                        return Err(SchemeError::Unsupported(
+                            "distributed KF needs linear sensors".into(),
+                        ));
+                    }
+                    if i < 64 {
+                        silent |= 1 << i;
+                    }
                     let contribution = if self.silent_steps[i] == 1 {
                         // Sent at k-1: x̄^{pp} = x̄^p, exact (11), second sum.
-                        self.held[i].clone()
+                        &self.held[i]
                     } else {
                         match &self.fusion {
                             Fusion::OmittedEstimates => {
@@ -126,15 +336,20 @@ impl FusionCenter for DkfCenter {
                             }
                             Fusion::Bounded { .. } => {
                                 inexact += 1;
-                                debiased_extrapolation(
+                                let pd = self.held_delta[i].as_ref().expect("checked invertible");
+                                debiased_extrapolation_into(
                                     &m.delta_p[i],
-                                    &self.held_delta[i],
+                                    &pd.lu,
                                     &self.held[i],
-                                )?
+                                    &mut self.tmp2,
+                                    &mut self.contribution,
+                                )?;
+                                &self.contribution
                             }
                         }
                     };
-                    info_vec += &m.cbar_p_inv * contribution;
+                    crate::filter::fixed::gemv(&mut self.tmp, &m.cbar_p_inv, contribution);
+                    self.info_vec += &self.tmp;
                 }
                 Received::Measurement(_) | Received::Frame(_) => {
                     return Err(SchemeError::Protocol {
@@ -144,26 +359,44 @@ impl FusionCenter for DkfCenter {
                 }
             }
         }
-        symmetrize(&mut info);
-        let chol = cholesky(&info).map_err(|source| SchemeError::Matrix {
-            what: "fused information matrix (10)",
-            source,
-        })?;
-        let mean = chol.solve(&info_vec);
-        let mut cov = chol.inverse();
-        if let Fusion::Bounded { b } = &self.fusion {
-            if inexact > 0 {
-                let g = &cov * &m.cbar_p_inv;
-                let factor = (inexact * inexact) as f64;
-                cov += (&g * b * g.transpose()) * factor;
-            }
-        }
-        symmetrize(&mut cov);
-        self.est = Gaussian { mean, cov };
+        let fused = if self.sensors.len() <= 64 {
+            let silent = canonical_silence(&self.class, silent);
+            self.fused_covariance(p, silent, inexact)?
+        } else {
+            // Too many sensors for the bit set: the direct form, one silence set at a time.
+            Arc::new(self.compute_fused_covariance(
+                p,
+                |i| matches!(inbox[i], Received::Silent | Received::NotScheduled),
+                inexact,
+            )?)
+        };
+        self.est.mean.copy_from(&self.info_vec);
+        fused.chol.solve_mut(&mut self.est.mean);
+        self.est.cov.copy_from(&fused.cov);
         Ok(())
     }
 
     fn estimate(&self) -> &Gaussian {
         &self.est
     }
+}
+
+/// The silence set that removes the same sequence of information matrices as `silent` (bit i
+/// = sensor i silent): each silent sensor, in order, is replaced by the first sensor of its
+/// class after the previous choice. (10) subtracts H_i^T R_i^{-1} H_i in sensor order, so two
+/// sets with the same sequence of (bitwise equal) matrices give the same covariance bit for
+/// bit; seed 004's Fig. 1 has its sensors in identical pairs, and the memo keys halve.
+fn canonical_silence(class: &[usize], silent: u64) -> u64 {
+    let mut out = 0u64;
+    let mut next = 0usize;
+    for (i, &c) in class.iter().enumerate() {
+        if silent >> i & 1 == 1 {
+            let j = (next..=i)
+                .find(|&j| class[j] == c)
+                .expect("sensor i itself is of class c");
+            out |= 1 << j;
+            next = j + 1;
+        }
+    }
+    out
 }

@@ -11,7 +11,7 @@ pub mod params;
 pub mod plan;
 pub mod sensor;
 
-pub use center::{DkfCenter, Fusion};
+pub use center::{CovarianceMemo, DkfCenter, Fusion};
 pub use plan::GlobalizedPlan;
 pub use sensor::{DkfSensor, Trigger};
 
@@ -27,6 +27,8 @@ pub struct DistributedKfScheme {
     plan: Arc<GlobalizedPlan>,
     trigger: Trigger,
     fusion: Fusion,
+    /// Fused covariances by (step, silent set, inexact count), shared by the trials' centers.
+    memo: Arc<CovarianceMemo>,
 }
 
 impl DistributedKfScheme {
@@ -38,7 +40,7 @@ impl DistributedKfScheme {
         trigger: Trigger,
         bound: Option<Matrix>,
     ) -> Result<Self, SchemeError> {
-        let plan = Arc::new(GlobalizedPlan::new(&system, horizon)?);
+        let plan = GlobalizedPlan::shared(&system, horizon)?;
         let fusion = match (&trigger, bound) {
             (Trigger::Bounded { .. }, Some(b)) => {
                 if plan.a_inv().is_none() {
@@ -61,6 +63,7 @@ impl DistributedKfScheme {
             plan,
             trigger,
             fusion,
+            memo: Arc::new(CovarianceMemo::new()),
         })
     }
 
@@ -148,11 +151,12 @@ impl Scheme for DistributedKfScheme {
                 )) as Box<dyn SensorNode>
             })
             .collect();
-        let center = Box::new(DkfCenter::new(
+        let center = Box::new(DkfCenter::with_memo(
             self.plan.clone(),
             self.system.sensors.clone(),
             self.system.prior.clone(),
             self.fusion.clone(),
+            self.memo.clone(),
         ));
         Ok(SchemeInstance { sensors, center })
     }
@@ -169,5 +173,7 @@ fn check_alpha(alpha: f64) -> Result<f64, SchemeError> {
     }
 }
 
+#[cfg(test)]
+mod reference;
 #[cfg(test)]
 mod tests;

@@ -5,6 +5,8 @@
 //! fusion center compute them identically; we compute them once and share them.
 use crate::linalg::{relative_difference, spd_inverse, symmetrize, Matrix};
 use crate::scheme::{SchemeError, System};
+use nalgebra::{Dyn, LU};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 
 /// Matrices of one time step k.
 #[derive(Debug, Clone)]
@@ -44,6 +46,69 @@ pub struct GlobalizedPlan {
     a: Matrix,
     a_inv: Option<Matrix>,
     n_sensors: usize,
+    /// Predicted debiasing matrices, filled on demand (see [`GlobalizedPlan::delta_head`]).
+    deltas: Arc<DeltaMemo>,
+}
+
+/// Δ^{pp,i} = A^j Δ^{e,i}_s A^{-j}: sensor i's debiasing matrix sent at step s, predicted j
+/// times (Section IV), with its LU factors for the debiased extrapolation. It depends on
+/// (i, s, j) only, never on measurements, so it is computed once and shared by the sensor, its
+/// replica in the fusion center, every trial and every variant that shares the plan. It is
+/// computed by exactly the products the per-trial recursion `Δ <- A Δ A^{-1}` performs, so the
+/// numbers are the same bit for bit. The predictions of one Δ^{e,i}_s form a chain: a holder
+/// steps to [`PredictedDelta::next`] each step (a lock-free read once computed).
+#[derive(Debug)]
+pub struct PredictedDelta {
+    /// Δ^{pp,i}.
+    pub delta: Matrix,
+    /// Its LU factorization (as `Δ.clone().lu()`).
+    pub lu: LU<f64, Dyn, Dyn>,
+    next: OnceLock<Arc<PredictedDelta>>,
+}
+
+impl PredictedDelta {
+    fn new(delta: Matrix) -> Self {
+        let lu = delta.clone().lu();
+        Self {
+            delta,
+            lu,
+            next: OnceLock::new(),
+        }
+    }
+
+    /// A Δ A^{-1}: the matrix one step later, computed on first use. `plan` must be the plan
+    /// this matrix came from (its A is invertible, or there would be no chain).
+    pub fn next(&self, plan: &GlobalizedPlan) -> Arc<PredictedDelta> {
+        self.next
+            .get_or_init(|| {
+                let a_inv = plan
+                    .a_inv
+                    .as_ref()
+                    .expect("a chain exists only for invertible A");
+                Arc::new(Self::new(&plan.a * &self.delta * a_inv))
+            })
+            .clone()
+    }
+}
+
+impl Drop for PredictedDelta {
+    /// Unlinks the chain iteratively: a long silence makes a long chain, and the default
+    /// recursive drop could exhaust the stack.
+    fn drop(&mut self) {
+        let mut next = self.next.take();
+        while let Some(n) = next {
+            next = match Arc::try_unwrap(n) {
+                Ok(mut node) => node.next.take(),
+                Err(_) => None,
+            };
+        }
+    }
+}
+
+/// The head of each chain: sensor i's Δ^{e,i} of plan step p at index i * steps + p.
+#[derive(Debug, Default)]
+struct DeltaMemo {
+    heads: Vec<OnceLock<Arc<PredictedDelta>>>,
 }
 
 impl GlobalizedPlan {
@@ -152,13 +217,68 @@ impl GlobalizedPlan {
                 break;
             }
         }
+        let heads = if a_inv.is_some() {
+            (0..sensors.len() * steps.len())
+                .map(|_| OnceLock::new())
+                .collect()
+        } else {
+            Vec::new()
+        };
         Ok(Self {
             steps,
             converged,
             a,
             a_inv,
             n_sensors: sensors.len(),
+            deltas: Arc::new(DeltaMemo { heads }),
         })
+    }
+
+    /// The plan of `system` for `horizon` steps, shared with every other caller that asked for
+    /// the same system (same `Arc`) and horizon while that plan is alive. A sweep builds many
+    /// variants of one system; the plan (and its memo of predicted debiasing matrices) depends
+    /// on the system only, so one copy serves them all instead of one per variant.
+    pub fn shared(system: &Arc<System>, horizon: usize) -> Result<Arc<Self>, SchemeError> {
+        type Entry = (Weak<System>, usize, Weak<GlobalizedPlan>);
+        static CACHE: Mutex<Vec<Entry>> = Mutex::new(Vec::new());
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        cache.retain(|(s, _, p)| s.strong_count() > 0 && p.strong_count() > 0);
+        for (s, h, p) in cache.iter() {
+            if *h == horizon && s.upgrade().is_some_and(|s| Arc::ptr_eq(&s, system)) {
+                if let Some(p) = p.upgrade() {
+                    return Ok(p);
+                }
+            }
+        }
+        let plan = Arc::new(Self::new(system, horizon)?);
+        cache.push((Arc::downgrade(system), horizon, Arc::downgrade(&plan)));
+        Ok(plan)
+    }
+
+    /// Index into the precomputed steps of step k: k itself, or the converged last step.
+    pub fn index(&self, k: usize) -> Result<usize, SchemeError> {
+        if k < self.steps.len() {
+            Ok(k)
+        } else if self.converged {
+            Ok(self.steps.len() - 1)
+        } else {
+            Err(SchemeError::HorizonExceeded {
+                k,
+                horizon: self.steps.len() - 1,
+            })
+        }
+    }
+
+    /// Sensor i's debiasing matrix Δ^{e,i} of plan step `p` (an [`GlobalizedPlan::index`]),
+    /// the head of its chain of predictions ([`PredictedDelta::next`]). `None` when A is
+    /// singular (no debiasing).
+    pub fn delta_head(&self, i: usize, p: usize) -> Option<Arc<PredictedDelta>> {
+        self.a_inv.as_ref()?;
+        let head = &self.deltas.heads[i * self.steps.len() + p];
+        Some(
+            head.get_or_init(|| Arc::new(PredictedDelta::new(self.steps[p].delta_e[i].clone())))
+                .clone(),
+        )
     }
 
     /// Matrices of step k (k = 0 is the initialization).
