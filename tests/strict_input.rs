@@ -291,7 +291,7 @@ fn requests_too_large_for_the_machine_are_refused_before_the_run() {
     );
     assert_eq!(code, Some(2), "{stderr}");
     assert!(
-        stderr.contains("memory") && stderr.contains("--allow-large"),
+        (stderr.contains("memory") || stderr.contains("hours")) && stderr.contains("--allow-large"),
         "{stderr}"
     );
     // Small in memory, but days of particle filtering.
