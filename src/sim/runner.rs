@@ -142,6 +142,7 @@ fn run_trial(exp: &Experiment, trial: usize, sums: &mut [Sums]) -> Result<(), Ru
                     k,
                     source,
                 })?;
+            obs.record_ess(k, inst.center.ess());
         }
         obs.finish();
     }
