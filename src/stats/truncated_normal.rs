@@ -126,7 +126,7 @@ fn upper_tail_cf(x: f64) -> (f64, f64) {
 /// next to the mean, e.g. a state of 1e18) is treated as its edge: mean `a`, variance 0, mass
 /// 0. NaN gives NaN moments, which the filter's covariance checks then refuse.
 pub fn truncated_standard(a: f64, b: f64) -> TruncatedMoments {
-    if !(a < b) {
+    if a.partial_cmp(&b) != Some(std::cmp::Ordering::Less) {
         return TruncatedMoments {
             log_mass: f64::NEG_INFINITY,
             mean: if a.is_nan() || b.is_nan() {
