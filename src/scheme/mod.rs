@@ -149,6 +149,12 @@ pub trait FusionCenter: Send {
     fn feedback(&self) -> Option<Feedback> {
         None
     }
+    /// Effective sample size `1 / sum w_i^2` of the particle weights after the last step's
+    /// update and before any resampling (so a cloud that collapses onto a few particles shows
+    /// even if it is resampled at once). `None` for centers that are not particle filters.
+    fn ess(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// Fresh per-trial state of a scheme.

@@ -24,7 +24,11 @@ impl Layout {
     /// (a robust consistency check: 0.99 of the steps for a consistent filter, whatever a
     /// few collapsed particle clouds do to the mean NEES).
     pub const NEES_COVERED: usize = 8;
-    const FIXED: usize = 9;
+    /// Effective sample size of the particle weights (particle-filter centers only).
+    pub const ESS: usize = 9;
+    /// Steps whose NEES was below the 95% quantile of chi-square with n degrees of freedom.
+    pub const NEES_COVERED_95: usize = 10;
+    const FIXED: usize = 11;
 
     /// Entries per step.
     pub fn width(&self) -> usize {
@@ -59,8 +63,96 @@ impl TrialStat {
         if n < 2 {
             return (mean, f64::NAN);
         }
-        let var = ((self.sum_sq - nf * mean * mean) / (nf - 1.0)).max(0.0);
-        (mean, (var / nf).sqrt())
+        let var = (self.sum_sq - nf * mean * mean) / (nf - 1.0);
+        // An overflowed sum of squares gives no standard error: NaN (reported as not finite),
+        // never a reassuring 0 beside a mean of 1e300.
+        if !var.is_finite() || !mean.is_finite() {
+            return (mean, f64::NAN);
+        }
+        (mean, (var.max(0.0) / nf).sqrt())
+    }
+}
+
+/// The divergence rule: a trial has diverged when its NEES exceeds the chi-square(n) 99.9%
+/// quantile for this many consecutive steps, or when any step's squared error or NEES is not
+/// finite. A consistent filter does so with probability about 1e-30 per window of steps.
+pub const DIVERGENCE_RUN: usize = 10;
+/// Upper tail probability of the divergence threshold (the 99.9% quantile).
+pub const DIVERGENCE_TAIL: f64 = 1e-3;
+
+/// A fixed log-spaced histogram of steady-state NEES / n: exact counts that merge by addition,
+/// from which the median is read by interpolating inside the bin that holds it (50 bins per
+/// decade from 1e-4 to 1e12; a few tenths of a percent for a smooth distribution).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NeesHistogram {
+    /// Bin 0: below 1e-4; bin BINS + 1: at or above 1e12, or not finite.
+    pub counts: Vec<u64>,
+}
+
+impl NeesHistogram {
+    const LO: f64 = -4.0;
+    const PER_DECADE: f64 = 50.0;
+    const BINS: usize = 800;
+
+    fn new() -> Self {
+        Self {
+            counts: vec![0; Self::BINS + 2],
+        }
+    }
+
+    fn add(&mut self, v: f64) {
+        let b = if !v.is_finite() {
+            Self::BINS + 1
+        } else if v <= 0.0 {
+            0
+        } else {
+            let t = (v.log10() - Self::LO) * Self::PER_DECADE;
+            if t < 0.0 {
+                0
+            } else if t >= Self::BINS as f64 {
+                Self::BINS + 1
+            } else {
+                1 + t as usize
+            }
+        };
+        self.counts[b] += 1;
+    }
+
+    fn merge(&mut self, o: &NeesHistogram) {
+        for (a, b) in self.counts.iter_mut().zip(&o.counts) {
+            *a += b;
+        }
+    }
+
+    /// Number of values added.
+    pub fn total(&self) -> u64 {
+        self.counts.iter().sum()
+    }
+
+    /// The median, interpolated log-linearly inside the bin that holds it; `None` when empty,
+    /// the bin edge when it lies in the underflow or overflow bin (infinite for overflow).
+    pub fn median(&self) -> Option<f64> {
+        let total = self.total();
+        if total == 0 {
+            return None;
+        }
+        let half = total as f64 / 2.0;
+        let mut acc = 0.0;
+        for (b, &c) in self.counts.iter().enumerate() {
+            let next = acc + c as f64;
+            if next >= half && c > 0 {
+                if b == 0 {
+                    return Some(10f64.powf(Self::LO));
+                }
+                if b == Self::BINS + 1 {
+                    return Some(f64::INFINITY);
+                }
+                let frac = (half - acc) / c as f64;
+                return Some(10f64.powf(Self::LO + (b as f64 - 1.0 + frac) / Self::PER_DECADE));
+            }
+            acc = next;
+        }
+        None
     }
 }
 
@@ -82,6 +174,17 @@ pub struct Sums {
     /// Per trial, in trial order: steady-state mean squared error, total then per group.
     /// Kept so that two schemes can be compared by paired differences on the same trials.
     pub per_trial: Vec<Vec<f64>>,
+    /// Per trial, in trial order: steady-state mean NEES (to see whether a few trials dominate
+    /// the mean).
+    pub per_trial_nees: Vec<f64>,
+    /// Trials that diverged (see [`DIVERGENCE_RUN`]).
+    pub diverged: usize,
+    /// Smallest ESS across trials per step (infinite where no particle filter reported one).
+    pub ess_min: Vec<f64>,
+    /// Whether the fusion center reported an ESS.
+    pub has_ess: bool,
+    /// Steady-state NEES / n of every (trial, step).
+    pub nees_hist: NeesHistogram,
 }
 
 /// Observer of one trial of one variant: accumulates into a [`Sums`] as the trial runs.
@@ -91,6 +194,13 @@ pub struct TrialObserver<'a> {
     steady_from: usize,
     /// chi^2_n 99% quantile.
     nees_bound: f64,
+    /// chi^2_n 95% quantile.
+    nees_bound_95: f64,
+    /// chi^2_n 99.9% quantile (divergence).
+    divergence_bound: f64,
+    /// Current run of consecutive steps above `divergence_bound`.
+    run: usize,
+    diverged: bool,
     acc: [f64; 4],
     group_acc: Vec<f64>,
     count: usize,
@@ -115,6 +225,11 @@ impl Sums {
             steady_nees: TrialStat::default(),
             steady_messages: TrialStat::default(),
             per_trial: Vec::new(),
+            per_trial_nees: Vec::new(),
+            diverged: 0,
+            ess_min: vec![f64::INFINITY; steps],
+            has_ess: false,
+            nees_hist: NeesHistogram::new(),
         }
     }
 
@@ -132,11 +247,20 @@ impl Sums {
     ) -> TrialObserver<'a> {
         let nees_bound = crate::stats::chi2::upper_quantile(self.state_dim as f64, 0.01)
             .unwrap_or(f64::INFINITY);
+        let quantile = |tail: f64| {
+            crate::stats::chi2::upper_quantile(self.state_dim as f64, tail).unwrap_or(f64::INFINITY)
+        };
+        let nees_bound_95 = quantile(0.05);
+        let divergence_bound = quantile(DIVERGENCE_TAIL);
         TrialObserver {
             sums: self,
             groups,
             steady_from,
             nees_bound,
+            nees_bound_95,
+            divergence_bound,
+            run: 0,
+            diverged: false,
             acc: [0.0; 4],
             group_acc: vec![0.0; groups.len()],
             count: 0,
@@ -157,6 +281,13 @@ impl Sums {
         self.steady_nees.merge(&o.steady_nees);
         self.steady_messages.merge(&o.steady_messages);
         self.per_trial.extend(o.per_trial.iter().cloned());
+        self.per_trial_nees.extend_from_slice(&o.per_trial_nees);
+        self.diverged += o.diverged;
+        for (a, b) in self.ess_min.iter_mut().zip(&o.ess_min) {
+            *a = a.min(*b);
+        }
+        self.has_ess |= o.has_ess;
+        self.nees_hist.merge(&o.nees_hist);
     }
 
     /// Sum of entry `field` at step index `s` (0-based).
@@ -220,7 +351,23 @@ impl TrialObserver<'_> {
         row[Layout::DOWNLINK_BITS] += traffic.downlink_bits as f64;
         row[Layout::DEGENERATE] += f64::from(u8::from(degenerate));
         row[Layout::NEES_COVERED] += f64::from(u8::from(nees <= self.nees_bound));
+        row[Layout::NEES_COVERED_95] += f64::from(u8::from(nees <= self.nees_bound_95));
+        // Divergence: a run of NEES beyond the 99.9% quantile, or anything not finite.
+        if !(total.is_finite() && nees.is_finite()) {
+            self.diverged = true;
+        }
+        if nees > self.divergence_bound || nees.is_nan() {
+            self.run += 1;
+            if self.run >= DIVERGENCE_RUN {
+                self.diverged = true;
+            }
+        } else {
+            self.run = 0;
+        }
         if steady {
+            self.sums
+                .nees_hist
+                .add(nees / self.sums.state_dim.max(1) as f64);
             self.acc[0] += total;
             self.acc[1] += trace;
             self.acc[2] += nees;
@@ -230,6 +377,19 @@ impl TrialObserver<'_> {
         Ok(())
     }
 
+    /// Records the fusion center's effective sample size after step `k` (1-based), if it has
+    /// one (particle filters; see [`crate::scheme::FusionCenter::ess`]).
+    pub fn record_ess(&mut self, k: usize, ess: Option<f64>) {
+        let Some(ess) = ess else {
+            return;
+        };
+        let w = self.sums.layout().width();
+        self.sums.per_step[(k - 1) * w + Layout::ESS] += ess;
+        let m = &mut self.sums.ess_min[k - 1];
+        *m = m.min(ess);
+        self.sums.has_ess = true;
+    }
+
     /// Closes the trial.
     pub fn finish(self) {
         let c = self.count.max(1) as f64;
@@ -237,6 +397,8 @@ impl TrialObserver<'_> {
         self.sums.steady_mse.add(self.acc[0] / c);
         self.sums.steady_trace.add(self.acc[1] / c);
         self.sums.steady_nees.add(self.acc[2] / c);
+        self.sums.per_trial_nees.push(self.acc[2] / c);
+        self.sums.diverged += usize::from(self.diverged);
         self.sums.steady_messages.add(self.acc[3] / c);
         let mut row = Vec::with_capacity(1 + self.group_acc.len());
         row.push(self.acc[0] / c);

@@ -128,6 +128,14 @@ pub(crate) fn check(
         if !p.value.is_finite() {
             return Err(ctx.err(at("value"), "expected a finite number"));
         }
+        if let Some(t) = p.tolerance {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(ctx.err(at("tolerance"), format!("expected a number > 0, got {t}")));
+            }
+        }
+    }
+    if paper.trials == Some(0) {
+        return Err(ctx.err("paper.trials".to_string(), "expected at least 1 trial"));
     }
     for (i, c) in paper.claims.iter().enumerate() {
         let at = |f: &str| format!("paper.claims[{i}].{f}");
@@ -187,8 +195,21 @@ pub(crate) fn check(
                 } else {
                     s.one_of(&at("metric"), metric, &["mse", "mse:<group>"])?;
                 }
-                if let ClaimSpec::Close { within, .. } = c {
+                if let ClaimSpec::Close {
+                    within,
+                    tolerance_source,
+                    ..
+                } = c
+                {
                     finite_nonneg(ctx, &at("within"), *within)?;
+                    if !(tolerance_source == "ours" || tolerance_source.starts_with("paper: ")) {
+                        return Err(ctx.err(
+                            at("tolerance_source"),
+                            format!(
+                                "{tolerance_source:?}: expected \"ours\" or \"paper: '<quote>'\""
+                            ),
+                        ));
+                    }
                 }
             }
             ClaimSpec::CloserToTarget {

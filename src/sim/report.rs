@@ -6,13 +6,99 @@ use super::scenario::ClaimSpec;
 use serde::Serialize;
 use std::fmt::Write as _;
 
+/// Standard errors beyond which a difference decides a verdict: a claim holds (or fails) when
+/// the Monte Carlo z of its deciding quantity is beyond +-`Z_DECIDE`, and is "not resolved at
+/// this trial count" in between.
+pub const Z_DECIDE: f64 = 2.0;
+/// Standard errors that the trial count suggested for an unresolved claim aims at:
+/// trials x (`Z_TARGET` / |z|)^2 would put the same difference `Z_TARGET` standard errors out.
+pub const Z_TARGET: f64 = 2.5;
+
+/// A claim's verdict.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Verdict {
+    Holds,
+    Fails,
+    /// Within the Monte Carlo noise at this trial count.
+    NotResolved,
+}
+
+impl Verdict {
+    /// `z` of the deciding quantity, signed so that negative supports the claim.
+    fn of_z(z: f64) -> Self {
+        if z < -Z_DECIDE {
+            Verdict::Holds
+        } else if z > Z_DECIDE {
+            Verdict::Fails
+        } else {
+            Verdict::NotResolved
+        }
+    }
+    fn label(self) -> &'static str {
+        match self {
+            Verdict::Holds => "holds",
+            Verdict::Fails => "FAILS",
+            Verdict::NotResolved => "not resolved",
+        }
+    }
+    /// Combines per-point verdicts: any failure fails, else any unresolved point leaves the
+    /// claim unresolved.
+    fn and(self, o: Verdict) -> Verdict {
+        match (self, o) {
+            (Verdict::Fails, _) | (_, Verdict::Fails) => Verdict::Fails,
+            (Verdict::NotResolved, _) | (_, Verdict::NotResolved) => Verdict::NotResolved,
+            _ => Verdict::Holds,
+        }
+    }
+}
+
+/// Trials at which a difference `z` standard errors out (at `trials`) would be `Z_TARGET` out.
+pub fn trials_to_resolve(trials: usize, z: f64) -> Option<usize> {
+    if !z.is_finite() || z == 0.0 {
+        return None;
+    }
+    let t = trials as f64 * (Z_TARGET / z.abs()).powi(2);
+    Some(t.ceil().max(trials as f64 + 1.0) as usize)
+}
+
 /// A claim and whether it holds in our run.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct ClaimResult {
     pub text: String,
+    /// `verdict == holds`.
     pub holds: bool,
+    pub verdict: Verdict,
+    /// For an unresolved claim: trials that would resolve it (from the standard error), if the
+    /// difference is not exactly zero.
+    pub trials_to_resolve: Option<usize>,
+    /// Where the claim's tolerance comes from (`close` claims): the paper's words or ours.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tolerance_source: Option<String>,
     /// The numbers behind the verdict.
     pub evidence: String,
+}
+
+impl ClaimResult {
+    fn new(
+        text: &str,
+        verdict: Verdict,
+        trials_to_resolve: Option<usize>,
+        evidence: String,
+    ) -> Self {
+        Self {
+            text: text.to_string(),
+            holds: verdict == Verdict::Holds,
+            verdict,
+            trials_to_resolve: if verdict == Verdict::NotResolved {
+                trials_to_resolve
+            } else {
+                None
+            },
+            tolerance_source: None,
+            evidence,
+        }
+    }
 }
 
 /// A published number and ours.
@@ -25,6 +111,12 @@ pub struct Comparison {
     pub paper: f64,
     pub ours: Option<f64>,
     pub ours_se: Option<f64>,
+    /// `agrees` when |ours - paper| <= 2 standard errors (or, without a standard error,
+    /// within `tolerance` relative), else `differs`; `missing` when we have no number.
+    pub verdict: String,
+    /// (ours - paper) / standard error, where there is one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub z: Option<f64>,
 }
 
 fn curve_index(exp: &Experiment, label: &str) -> Option<usize> {
@@ -82,53 +174,81 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                 let pa = curve_points(exp, summary, ia);
                 let pb = curve_points(exp, summary, ib);
                 let mut evidence = Vec::new();
-                let mut holds = true;
+                let mut verdict = Verdict::Holds;
+                let mut need: Option<usize> = None;
                 let mut compared = 0;
                 for p in pa
                     .iter()
                     .filter(|p| p.rate >= rate_range[0] && p.rate <= rate_range[1])
                 {
-                    if let Some(vb) = interpolate(&pb, p.rate, metric) {
-                        let va = metric_of(p, metric);
-                        compared += 1;
-                        holds &= va < vb;
+                    let Some((d, se)) = below_difference(summary, p, &pb, metric) else {
+                        continue;
+                    };
+                    let va = metric_of(p, metric);
+                    if d == 0.0 && se == 0.0 {
                         evidence.push(format!(
-                            "rate {:.3}: {:.4} vs {:.4} ({})",
-                            p.rate,
-                            va,
-                            vb,
-                            if va < vb { "ok" } else { "FAILS" }
+                            "rate {:.3}: {va:.4} vs {va:.4} (identical on every trial: the same scheme, not counted)",
+                            p.rate
                         ));
+                        continue;
                     }
+                    compared += 1;
+                    let z = d / se;
+                    let v = Verdict::of_z(z);
+                    verdict = verdict.and(v);
+                    if v == Verdict::NotResolved {
+                        need = need.max(trials_to_resolve(summary.trials, z));
+                    }
+                    evidence.push(format!(
+                        "rate {:.3}: {va:.4} vs {:.4}, z = {z:.1} ({})",
+                        p.rate,
+                        va - d,
+                        v.label()
+                    ));
                 }
                 if compared == 0 {
-                    holds = false;
+                    verdict = Verdict::Fails;
                     evidence.push(format!(
-                        "no rate of {a:?} in [{}, {}] is covered by {b:?}",
+                        "no distinct rate of {a:?} in [{}, {}] is covered by {b:?}",
                         rate_range[0], rate_range[1]
                     ));
                 }
-                ClaimResult {
-                    text: text.clone(),
-                    holds,
-                    evidence: format!("{metric} of {a} vs {b}: {}", evidence.join("; ")),
-                }
+                ClaimResult::new(
+                    text,
+                    verdict,
+                    need,
+                    format!(
+                        "{metric} of {a} vs {b} (criterion: difference below 0 by more than {Z_DECIDE} standard errors at every rate): {}",
+                        evidence.join("; ")
+                    ),
+                )
             }
             ClaimSpec::ReachesRateBelow { text, scheme, rate } => {
                 let Some(i) = curve_index(exp, scheme) else {
                     return missing(text, scheme);
                 };
-                let min = summary
+                let lowest = summary
                     .schemes
                     .iter()
                     .filter(|s| s.curve == i)
-                    .map(|s| s.steady_state.rate)
-                    .fold(f64::INFINITY, f64::min);
-                ClaimResult {
-                    text: text.clone(),
-                    holds: min < *rate,
-                    evidence: format!("lowest steady-state rate of {scheme}: {min:.3} (bound {rate})"),
-                }
+                    .min_by(|x, y| x.steady_state.rate.total_cmp(&y.steady_state.rate));
+                let Some(low) = lowest else {
+                    return missing(text, scheme);
+                };
+                let (min, se) = (low.steady_state.rate, low.steady_state.rate_se);
+                let z = if se > 0.0 {
+                    (min - rate) / se
+                } else if min < *rate {
+                    f64::NEG_INFINITY
+                } else {
+                    f64::INFINITY
+                };
+                ClaimResult::new(
+                    text,
+                    Verdict::of_z(z),
+                    trials_to_resolve(summary.trials, z),
+                    format!("lowest steady-state rate of {scheme}: {min:.3} ± {se:.3} (bound {rate}; z = {z:.1}, criterion: below by more than {Z_DECIDE} standard errors)"),
+                )
             }
             ClaimSpec::Better {
                 text,
@@ -138,10 +258,18 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                 b_params,
                 metric,
             } => pairwise(summary, text, (a, a_params), (b, b_params), metric, |d, se, _, _| {
+                if d == 0.0 && se == 0.0 {
+                    return (
+                        Verdict::Fails,
+                        None,
+                        "identical on every trial: neither beats the other".to_string(),
+                    );
+                }
                 let z = d / se;
                 (
-                    d < 0.0 && z < -2.0,
-                    format!("z = {z:.1} (criterion: difference < 0 by more than 2 standard errors)"),
+                    Verdict::of_z(z),
+                    trials_to_resolve(summary.trials, z),
+                    format!("z = {z:.1} (criterion: difference < 0 by more than {Z_DECIDE} standard errors)"),
                 )
             }),
             ClaimSpec::Close {
@@ -152,13 +280,33 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                 b_params,
                 metric,
                 within,
-            } => pairwise(summary, text, (a, a_params), (b, b_params), metric, |_, _, ma, mb| {
-                let rel = (ma - mb).abs() / mb;
-                (
-                    rel <= *within,
-                    format!("relative difference {:.1}% (criterion: <= {:.1}%)", 100.0 * rel, 100.0 * within),
-                )
-            }),
+                tolerance_source,
+            } => {
+                let mut r = pairwise(summary, text, (a, a_params), (b, b_params), metric, |d, se, _, mb| {
+                    let rel = d.abs() / mb;
+                    let rel_se = se / mb;
+                    // Negative z supports the claim: |rel| is below the tolerance.
+                    let z = if rel_se > 0.0 {
+                        (rel - within) / rel_se
+                    } else if rel <= *within {
+                        f64::NEG_INFINITY
+                    } else {
+                        f64::INFINITY
+                    };
+                    (
+                        Verdict::of_z(z),
+                        trials_to_resolve(summary.trials, z),
+                        format!(
+                            "relative difference {:.1}% ± {:.1}% (criterion: <= {:.1}% ({tolerance_source}) by more than {Z_DECIDE} standard errors; z = {z:.1})",
+                            100.0 * rel,
+                            100.0 * rel_se,
+                            100.0 * within
+                        ),
+                    )
+                });
+                r.tolerance_source = Some(tolerance_source.clone());
+                r
+            }
             ClaimSpec::CloserToTarget { text, a, b, param, metric } => {
                 let value = |s: &super::results::SchemeSummary| -> Option<f64> {
                     match metric.as_str() {
@@ -167,8 +315,17 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                         _ => None,
                     }
                 };
-                let mut holds = true;
+                let mut verdict = Verdict::Holds;
+                let mut need: Option<usize> = None;
                 let mut evidence = Vec::new();
+                // Standard error of the metric (both are rates of transmissions).
+                let se_of = |s: &super::results::SchemeSummary| -> f64 {
+                    if metric == "rate" {
+                        s.steady_state.rate_se
+                    } else {
+                        s.steady_state.rate_se * summary.sensors as f64
+                    }
+                };
                 for sa in summary.schemes.iter().filter(|s| &s.name == a) {
                     let Some(super::scenario::ParamValue::Number(target)) = sa.params.get(param) else {
                         continue;
@@ -181,22 +338,39 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                     let (Some(va), Some(vb)) = (value(sa), value(sb)) else {
                         return missing(text, metric);
                     };
-                    let ok = (va - target).abs() < (vb - target).abs();
-                    holds &= ok;
+                    // Unpaired (the steady-state rates are summaries): a conservative SE.
+                    let d = (va - target).abs() - (vb - target).abs();
+                    let se = se_of(sa).hypot(se_of(sb));
+                    let z = if se > 0.0 {
+                        d / se
+                    } else if d < 0.0 {
+                        f64::NEG_INFINITY
+                    } else {
+                        f64::INFINITY
+                    };
+                    let v = Verdict::of_z(z);
+                    verdict = verdict.and(v);
+                    if v == Verdict::NotResolved {
+                        need = need.max(trials_to_resolve(summary.trials, z));
+                    }
                     evidence.push(format!(
-                        "{param} = {target}: {a} {va:.4}, {b} {vb:.4} ({})",
-                        if ok { "ok" } else { "FAILS" }
+                        "{param} = {target}: {a} {va:.4}, {b} {vb:.4}, z = {z:.1} ({})",
+                        v.label()
                     ));
                 }
                 if evidence.is_empty() {
-                    holds = false;
+                    verdict = Verdict::Fails;
                     evidence.push(format!("no common values of {param}"));
                 }
-                ClaimResult {
-                    text: text.clone(),
-                    holds,
-                    evidence: format!("{metric}: {}", evidence.join("; ")),
-                }
+                ClaimResult::new(
+                    text,
+                    verdict,
+                    need,
+                    format!(
+                        "{metric} (criterion: |{a} - target| below |{b} - target| by more than {Z_DECIDE} standard errors): {}",
+                        evidence.join("; ")
+                    ),
+                )
             }
             ClaimSpec::Consistent { text, schemes } => {
                 let mut holds = true;
@@ -227,13 +401,14 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                     }
                 }
                 let (ratio, at) = worst.unwrap_or((f64::NAN, String::new()));
-                ClaimResult {
-                    text: text.clone(),
-                    holds,
-                    evidence: format!(
+                ClaimResult::new(
+                    text,
+                    if holds { Verdict::Holds } else { Verdict::Fails },
+                    None,
+                    format!(
                         "{count} variants; largest MSE/trace = {ratio:.3} at {at} (criterion: MSE <= trace + 3 se)"
                     ),
-                }
+                )
             }
         })
         .collect()
@@ -295,40 +470,82 @@ fn pairwise(
     (a, ap): (&str, &super::scenario::Params),
     (b, bp): (&str, &super::scenario::Params),
     metric: &str,
-    verdict: impl Fn(f64, f64, f64, f64) -> (bool, String),
+    verdict: impl Fn(f64, f64, f64, f64) -> (Verdict, Option<usize>, String),
 ) -> ClaimResult {
     let found = variant(summary, a, ap)
         .and_then(|va| variant(summary, b, bp).map(|vb| (va, vb)))
         .and_then(|(va, vb)| metric_column(summary, metric).map(|c| (va, vb, c)));
     match found {
-        Err(e) => ClaimResult {
-            text: text.to_string(),
-            holds: false,
-            evidence: e,
-        },
+        Err(e) => ClaimResult::new(text, Verdict::Fails, None, e),
         Ok((va, vb, col)) => {
             let (d, se, ma, mb) = paired(&va.per_trial, &vb.per_trial, col);
-            let (holds, why) = verdict(d, se, ma, mb);
-            ClaimResult {
-                text: text.to_string(),
-                holds,
-                evidence: format!(
+            let (v, need, why) = verdict(d, se, ma, mb);
+            ClaimResult::new(
+                text,
+                v,
+                need,
+                format!(
                     "{metric}: {a} {ma:.4} (RMS {:.4}) vs {b} {mb:.4} (RMS {:.4}); paired difference {d:.4} ± {se:.4} over {} trials; {why}",
                     ma.sqrt(),
                     mb.sqrt(),
                     va.per_trial.len()
                 ),
-            }
+            )
         }
     }
 }
 
 fn missing(text: &str, name: &str) -> ClaimResult {
-    ClaimResult {
-        text: text.to_string(),
-        holds: false,
-        evidence: format!("no scheme labelled {name:?} in this scenario"),
+    ClaimResult::new(
+        text,
+        Verdict::Fails,
+        None,
+        format!("no scheme labelled {name:?} in this scenario"),
+    )
+}
+
+/// Paired difference (a - b) and its standard error at point `p` of curve a, with curve b
+/// interpolated linearly in the rate trial by trial (MSE), or unpaired from the two standard
+/// errors (trace). `None` outside b's span.
+fn below_difference(
+    summary: &Summary,
+    p: &CurvePoint,
+    pb: &[CurvePoint],
+    metric: &str,
+) -> Option<(f64, f64)> {
+    let vb = interpolate(pb, p.rate, metric)?;
+    let d = metric_of(p, metric) - vb;
+    // The two points of b around p.rate and the weight of the second.
+    let (q0, q1, t) = pb
+        .windows(2)
+        .find(|w| p.rate >= w[0].rate - 1e-9 && p.rate <= w[1].rate + 1e-9)
+        .map(|w| {
+            let span = w[1].rate - w[0].rate;
+            let t = if span.abs() < 1e-12 {
+                0.0
+            } else {
+                ((p.rate - w[0].rate) / span).clamp(0.0, 1.0)
+            };
+            (w[0], w[1], t)
+        })
+        .unwrap_or((pb[0], pb[0], 0.0));
+    if metric != "mse" {
+        let se_b = ((1.0 - t) * q0.mse_se).hypot(t * q1.mse_se);
+        return Some((d, p.mse_se.hypot(se_b)));
     }
+    let a = &summary.schemes[p.variant].per_trial;
+    let b0 = &summary.schemes[q0.variant].per_trial;
+    let b1 = &summary.schemes[q1.variant].per_trial;
+    let n = a.len().min(b0.len()).min(b1.len());
+    if n < 2 {
+        return Some((d, f64::NAN));
+    }
+    let diffs: Vec<f64> = (0..n)
+        .map(|i| a[i][0] - ((1.0 - t) * b0[i][0] + t * b1[i][0]))
+        .collect();
+    let mean = diffs.iter().sum::<f64>() / n as f64;
+    let var = diffs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n as f64 - 1.0);
+    Some((d, (var / n as f64).sqrt()))
 }
 
 /// Our value of each published number.
@@ -346,6 +563,7 @@ pub fn compare_published(exp: &Experiment, summary: &Summary) -> Vec<Comparison>
                         .iter()
                         .all(|(k, v)| s.params.get(k).is_some_and(|x| x.matches(v)))
             });
+            let tolerance = p.tolerance.unwrap_or(0.05);
             let (ours, se) = match found {
                 None => (None, None),
                 Some(s) => {
@@ -365,6 +583,37 @@ pub fn compare_published(exp: &Experiment, summary: &Summary) -> Vec<Comparison>
                     }
                 }
             };
+            let z = match (ours, se) {
+                (Some(v), Some(se)) if se > 0.0 => Some((v - p.value) / se),
+                _ => None,
+            };
+            let verdict = match (ours, z) {
+                (None, _) => "missing".to_string(),
+                (Some(_), Some(z)) if z.abs() <= Z_DECIDE => {
+                    format!("agrees (within {Z_DECIDE} standard errors)")
+                }
+                (Some(_), Some(z)) => format!("differs ({:.1} standard errors off)", z.abs()),
+                (Some(v), None) => {
+                    let rel = (v - p.value).abs() / p.value.abs();
+                    let src = if p.tolerance.is_some() {
+                        "stated"
+                    } else {
+                        "ours"
+                    };
+                    if rel <= tolerance {
+                        format!(
+                            "agrees (within {:.0}% relative, {src}; no standard error)",
+                            100.0 * tolerance
+                        )
+                    } else {
+                        format!(
+                            "differs ({:.1}% relative, tolerance {:.0}% {src}; no standard error)",
+                            100.0 * rel,
+                            100.0 * tolerance
+                        )
+                    }
+                }
+            };
             Comparison {
                 scheme: p.scheme.clone(),
                 params: params_text(&p.params),
@@ -373,6 +622,8 @@ pub fn compare_published(exp: &Experiment, summary: &Summary) -> Vec<Comparison>
                 paper: p.value,
                 ours,
                 ours_se: se,
+                verdict,
+                z,
             }
         })
         .collect()
@@ -386,8 +637,8 @@ fn comparison_text(c: &Comparison) -> String {
         _ => "not found".to_string(),
     };
     format!(
-        "{} [{}] {} ({}): paper {:.4}, ours {ours}",
-        c.scheme, c.params, c.metric, c.source, c.paper
+        "{} [{}] {} ({}): paper {:.4}, ours {ours}: {}",
+        c.scheme, c.params, c.metric, c.source, c.paper, c.verdict
     )
 }
 
@@ -413,7 +664,7 @@ pub fn render_markdown(
             let _ = writeln!(
                 out,
                 "- **{}** {}  \n  {}",
-                if c.holds { "holds" } else { "FAILS" },
+                verdict_text(c),
                 c.text,
                 c.evidence
             );
@@ -430,6 +681,14 @@ pub fn render(exp: &Experiment, comparisons: &[Comparison], claims: &[ClaimResul
         let _ = writeln!(out, "Reproducing: {}", p.citation);
         for n in &p.notes {
             let _ = writeln!(out, "  note: {n}");
+        }
+        if let Some(t) = p.trials.filter(|&t| exp.trials < t) {
+            let _ = writeln!(
+                out,
+                "  warning: {} trials, fewer than the paper's {t}: our standard errors are about {:.1}x theirs, and some verdicts may not be resolved (run with --trials {t})",
+                exp.trials,
+                (t as f64 / exp.trials as f64).sqrt()
+            );
         }
     }
     if comparisons.is_empty() {
@@ -448,10 +707,130 @@ pub fn render(exp: &Experiment, comparisons: &[Comparison], claims: &[ClaimResul
         let _ = writeln!(
             out,
             "  [{}] {}\n        {}",
-            if c.holds { "holds" } else { "FAILS" },
+            verdict_text(c),
             c.text,
             c.evidence
         );
     }
     out
+}
+
+/// "holds", "FAILS" or "not resolved at this trial count (about N trials would resolve it)".
+fn verdict_text(c: &ClaimResult) -> String {
+    match (c.verdict, c.trials_to_resolve) {
+        (Verdict::NotResolved, Some(n)) => {
+            format!("not resolved at this trial count; about {n} trials would resolve it")
+        }
+        (Verdict::NotResolved, None) => "not resolved at this trial count".to_string(),
+        (v, _) => v.label().to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::{build, results, runner};
+
+    /// A summary with two schemes "A" and "B" whose per-trial MSEs are given.
+    fn two(a: Vec<f64>, b: Vec<f64>) -> Summary {
+        let opts = build::LoadOptions {
+            trials: Some(2),
+            ..Default::default()
+        };
+        let text = crate::sim::builtin::get("default").unwrap();
+        let exp = build::load_with(text, "default", &opts).unwrap();
+        let sums = runner::run(&exp, runner::RunOptions::default(), &|_| {}).unwrap();
+        let mut s = results::summarize(&exp, &sums);
+        s.trials = a.len();
+        let mut sa = s.schemes[0].clone();
+        let mut sb = s.schemes[0].clone();
+        sa.name = "A".into();
+        sb.name = "B".into();
+        sa.per_trial = a.into_iter().map(|v| vec![v]).collect();
+        sb.per_trial = b.into_iter().map(|v| vec![v]).collect();
+        s.schemes = vec![sa, sb];
+        s
+    }
+
+    fn better(s: &Summary) -> ClaimResult {
+        let none = crate::sim::scenario::Params::default();
+        pairwise(
+            s,
+            "A beats B",
+            ("A", &none),
+            ("B", &none),
+            "mse",
+            |d, se, _, _| {
+                if d == 0.0 && se == 0.0 {
+                    return (Verdict::Fails, None, "identical".into());
+                }
+                let z = d / se;
+                (
+                    Verdict::of_z(z),
+                    trials_to_resolve(s.trials, z),
+                    String::new(),
+                )
+            },
+        )
+    }
+
+    /// Per-trial values with mean 0 and standard error exactly `se` over 100 trials
+    /// (alternating +-sqrt(var)).
+    fn noise(se: f64) -> Vec<f64> {
+        let n = 100.0_f64;
+        // sample sd s with s / sqrt(n) = se; alternating +-c has sd c sqrt(n / (n - 1)).
+        let c = se * n.sqrt() * ((n - 1.0) / n).sqrt();
+        (0..100).map(|i| if i % 2 == 0 { c } else { -c }).collect()
+    }
+
+    #[test]
+    fn identical_schemes_never_beat_each_other() {
+        let a: Vec<f64> = (0..100).map(|i| 1.0 + 0.01 * f64::from(i % 7)).collect();
+        let s = two(a.clone(), a);
+        let r = better(&s);
+        assert!(!r.holds);
+        assert_ne!(r.verdict, Verdict::Holds);
+        // ...and in the other direction either.
+        let none = crate::sim::scenario::Params::default();
+        let r2 = pairwise(
+            &s,
+            "B beats A",
+            ("B", &none),
+            ("A", &none),
+            "mse",
+            |d, se, _, _| (Verdict::of_z(d / se), None, String::new()),
+        );
+        assert_ne!(r2.verdict, Verdict::Holds);
+    }
+
+    #[test]
+    fn ten_standard_errors_hold_and_one_is_not_resolved() {
+        let base: Vec<f64> = vec![2.0; 100];
+        for (k, expected) in [
+            (10.0, Verdict::Holds),
+            (1.0, Verdict::NotResolved),
+            (-10.0, Verdict::Fails),
+        ] {
+            let a: Vec<f64> = noise(0.01).iter().map(|e| 2.0 - k * 0.01 + e).collect();
+            let r = better(&two(a, base.clone()));
+            assert_eq!(r.verdict, expected, "{k} SE: {}", r.evidence);
+            assert_eq!(r.holds, expected == Verdict::Holds);
+            if expected == Verdict::NotResolved {
+                // 1 SE at 100 trials: (2.5 / 1)^2 x 100 = 625 trials.
+                assert_eq!(r.trials_to_resolve, Some(625));
+                assert!(verdict_text(&r).contains("625 trials"));
+            } else {
+                assert_eq!(r.trials_to_resolve, None);
+            }
+        }
+    }
+
+    #[test]
+    fn trials_to_resolve_follows_the_square_law() {
+        assert_eq!(trials_to_resolve(100, 1.25), Some(400));
+        assert_eq!(trials_to_resolve(100, 0.0), None);
+        assert_eq!(Verdict::of_z(-2.01), Verdict::Holds);
+        assert_eq!(Verdict::of_z(1.99), Verdict::NotResolved);
+        assert_eq!(Verdict::of_z(f64::NEG_INFINITY), Verdict::Holds);
+    }
 }

@@ -58,11 +58,60 @@ pub struct SchemeSummary {
     /// for a consistent filter. Robust where the mean NEES is ruined by a few collapsed
     /// particle clouds.
     pub nees_coverage_99: f64,
+    /// Fraction of (trial, step) pairs whose NEES was below the chi-square 95% quantile: 0.95
+    /// for a consistent filter.
+    pub nees_coverage_95: f64,
+    /// Fraction of trials that diverged: NEES above the chi-square(n) 99.9% quantile for 10
+    /// consecutive steps, or a squared error or NEES that is not finite
+    /// ([`super::metrics::DIVERGENCE_RUN`]).
+    pub diverged_fraction: f64,
+    /// Effective sample size of particle-filter fusion centers (absent for other schemes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ess: Option<EssSummary>,
+    /// Statistics of the NEES that a few collapsed trials cannot ruin.
+    pub consistency: Consistency,
     pub steady_state: SteadyState,
     /// Per trial: steady-state MSE, total then per group (for paired comparisons; not
     /// written to summary.json).
     #[serde(skip)]
     pub per_trial: Vec<Vec<f64>>,
+}
+
+/// Effective sample size `1 / sum w^2` of a particle filter's weights after each update, before
+/// resampling.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct EssSummary {
+    /// Time average of `mean_per_step`.
+    pub mean: f64,
+    /// Smallest ESS of any trial at any step.
+    pub min: f64,
+    /// Mean across trials per step.
+    pub mean_per_step: Vec<f64>,
+    /// Minimum across trials per step.
+    pub min_per_step: Vec<f64>,
+}
+
+/// Robust consistency statistics (steady state), beside the mean ANEES.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Consistency {
+    /// Median over steady-state (trial, step) pairs of NEES / n (interpolated in a histogram
+    /// with 50 bins per decade).
+    pub median_nees: f64,
+    /// What a consistent filter gives: the chi-square(n) median / n.
+    pub median_nees_expected: f64,
+    /// The 95% interval of a per-step ANEES (mean NEES over this run's trials / n) of a
+    /// consistent filter: chi-square(trials x n) 2.5% and 97.5% quantiles / (trials x n).
+    pub anees_interval_95: [f64; 2],
+    /// Fraction of steady-state steps whose ANEES lies inside `anees_interval_95` (about 0.95
+    /// for a consistent filter).
+    pub anees_steps_in_interval: f64,
+    /// Share of the summed steady-state NEES carried by the largest 1% of trials (at least
+    /// one trial).
+    pub top_trials_share: f64,
+    /// Whether the mean ANEES is dominated by a few trials: the largest 1% of trials carry
+    /// more than half of it (judged from 10 trials on). Read the median and the coverage
+    /// instead.
+    pub mean_dominated: bool,
 }
 
 /// The whole run.
@@ -113,6 +162,23 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
             let (trace_ss, trace_se) = s.steady_trace.mean_se(exp.trials);
             let (nees_ss, _) = s.steady_nees.mean_se(exp.trials);
             let (msg_ss, msg_se) = s.steady_messages.mean_se(exp.trials);
+            let covered_95: f64 = col(Layout::NEES_COVERED_95).iter().sum();
+            let ess = s.has_ess.then(|| {
+                let mean_per_step = col(Layout::ESS);
+                EssSummary {
+                    mean: mean_per_step.iter().sum::<f64>() / steps as f64,
+                    min: s.ess_min.iter().copied().fold(f64::INFINITY, f64::min),
+                    mean_per_step,
+                    min_per_step: s.ess_min.clone(),
+                }
+            });
+            let consistency = consistency(
+                exp.system.state_dim(),
+                exp.trials,
+                exp.steady_from,
+                s,
+                &anees_per_step,
+            );
             SchemeSummary {
                 name: exp.curves[v.curve].label.clone(),
                 kind: v.kind.to_string(),
@@ -131,6 +197,10 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
                 downlink_bits_per_step: downlink_bits / steps as f64,
                 degenerate_covariance_fraction: degenerate / steps as f64,
                 nees_coverage_99: covered / steps as f64,
+                nees_coverage_95: covered_95 / steps as f64,
+                diverged_fraction: s.diverged as f64 / trials,
+                ess,
+                consistency,
                 per_trial: s.per_trial.clone(),
                 steady_state: SteadyState {
                     from_step: exp.steady_from,
@@ -157,6 +227,46 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
         groups: exp.groups.iter().cloned().collect(),
         group_order: exp.groups.iter().map(|(g, _)| g.clone()).collect(),
         schemes,
+    }
+}
+
+/// Robust consistency statistics of one variant.
+pub fn consistency(
+    state_dim: usize,
+    trials: usize,
+    steady_from: usize,
+    s: &Sums,
+    anees_per_step: &[f64],
+) -> Consistency {
+    let n = state_dim as f64;
+    let q = |dof: f64, tail: f64| crate::stats::chi2::upper_quantile(dof, tail).unwrap_or(f64::NAN);
+    let nn = trials as f64 * n;
+    let interval = [q(nn, 0.975) / nn, q(nn, 0.025) / nn];
+    let steady: Vec<f64> = anees_per_step
+        .iter()
+        .skip(steady_from.saturating_sub(1))
+        .copied()
+        .collect();
+    let inside = steady
+        .iter()
+        .filter(|&&a| a >= interval[0] && a <= interval[1])
+        .count();
+    let mut per_trial = s.per_trial_nees.clone();
+    per_trial.sort_by(|a, b| b.total_cmp(a));
+    let top = per_trial.len().div_ceil(100).max(1);
+    let total: f64 = per_trial.iter().sum();
+    let share = if total > 0.0 {
+        per_trial.iter().take(top).sum::<f64>() / total
+    } else {
+        0.0
+    };
+    Consistency {
+        median_nees: s.nees_hist.median().unwrap_or(f64::NAN),
+        median_nees_expected: q(n, 0.5) / n,
+        anees_interval_95: interval,
+        anees_steps_in_interval: inside as f64 / steady.len().max(1) as f64,
+        top_trials_share: share,
+        mean_dominated: per_trial.len() >= 10 && share > 0.5,
     }
 }
 
@@ -194,9 +304,28 @@ pub fn per_step_csv(summary: &Summary) -> String {
     out
 }
 
-/// The results table printed on the terminal.
+/// A number for the table: fixed decimals, scientific beyond 1e6, "overflow" if not finite.
+fn num(v: f64, decimals: usize) -> String {
+    if !v.is_finite() {
+        "overflow".to_string()
+    } else if v.abs() >= 1e6 {
+        format!("{v:.1e}")
+    } else {
+        format!("{v:.decimals$}")
+    }
+}
+
+/// The results table printed on the terminal, followed by a warning line per scheme whose
+/// health needs attention (see [`warnings`]). Columns for divergence, degenerate covariances
+/// and the particle ESS appear only when some scheme has a non-zero value / a particle filter.
 pub fn table(summary: &Summary) -> String {
     let groups: Vec<&String> = summary.group_order.iter().collect();
+    let any_diverged = summary.schemes.iter().any(|s| s.diverged_fraction > 0.0);
+    let any_degenerate = summary
+        .schemes
+        .iter()
+        .any(|s| s.degenerate_covariance_fraction > 0.0);
+    let any_ess = summary.schemes.iter().any(|s| s.ess.is_some());
     let mut header = vec!["scheme".to_string(), "params".to_string()];
     header.extend(groups.iter().map(|g| format!("RMSE {g}")));
     header.extend(
@@ -205,7 +334,24 @@ pub fn table(summary: &Summary) -> String {
             "±se",
             "trace(ss)",
             "ANEES",
+            "NEES med",
+            "NEES<95%",
             "NEES<99%",
+        ]
+        .iter()
+        .map(|s| s.to_string()),
+    );
+    if any_diverged {
+        header.push("diverged".to_string());
+    }
+    if any_degenerate {
+        header.push("degenerate".to_string());
+    }
+    if any_ess {
+        header.push("ESS mean/min".to_string());
+    }
+    header.extend(
+        [
             "rate",
             "tx/step",
             "bits/step",
@@ -218,16 +364,34 @@ pub fn table(summary: &Summary) -> String {
     let mut rows = vec![header];
     for s in &summary.schemes {
         let mut r = vec![s.name.clone(), params_text(&s.params)];
-        r.extend(groups.iter().map(|g| format!("{:.4}", s.mean_rmse[*g])));
-        r.push(format!("{:.4}", s.steady_state.mse));
-        r.push(format!("{:.4}", s.steady_state.mse_se));
-        r.push(format!("{:.4}", s.steady_state.trace));
-        r.push(if s.anees.abs() < 1e6 {
-            format!("{:.3}", s.anees)
-        } else {
-            format!("{:.1e}", s.anees)
-        });
+        r.extend(groups.iter().map(|g| num(s.mean_rmse[*g], 4)));
+        r.push(num(s.steady_state.mse, 4));
+        r.push(num(s.steady_state.mse_se, 4));
+        r.push(num(s.steady_state.trace, 4));
+        r.push(format!(
+            "{}{}",
+            num(s.anees, 3),
+            if s.consistency.mean_dominated {
+                "*"
+            } else {
+                ""
+            }
+        ));
+        r.push(num(s.consistency.median_nees, 3));
+        r.push(format!("{:.3}", s.nees_coverage_95));
         r.push(format!("{:.3}", s.nees_coverage_99));
+        if any_diverged {
+            r.push(format!("{:.3}", s.diverged_fraction));
+        }
+        if any_degenerate {
+            r.push(format!("{:.3}", s.degenerate_covariance_fraction));
+        }
+        if any_ess {
+            r.push(match &s.ess {
+                Some(e) => format!("{:.1}/{:.1}", e.mean, e.min),
+                None => "-".to_string(),
+            });
+        }
         r.push(format!("{:.3}", s.rate));
         r.push(format!("{:.2}", s.transmissions_per_step));
         r.push(format!("{:.0}", s.bits_per_step));
@@ -256,6 +420,73 @@ pub fn table(summary: &Summary) -> String {
         if i == 0 {
             out.push_str(&"-".repeat(widths.iter().sum::<usize>() + 2 * (widths.len() - 1)));
             out.push('\n');
+        }
+    }
+    if let Some(s) = summary.schemes.first() {
+        let c = &s.consistency;
+        let _ = writeln!(
+            out,
+            "NEES med: median NEES / n (consistent: {:.3}); NEES<95%/<99%: share of steps below the chi-square quantile (consistent: 0.95/0.99); a consistent filter's per-step ANEES lies in [{:.3}, {:.3}] at {} trials.",
+            c.median_nees_expected, c.anees_interval_95[0], c.anees_interval_95[1], summary.trials
+        );
+    }
+    let w = warnings(summary);
+    if !w.is_empty() {
+        out.push('\n');
+        for line in w {
+            let _ = writeln!(out, "warning: {line}");
+        }
+    }
+    out
+}
+
+/// One line per scheme whose health needs attention: diverged trials, degenerate covariances,
+/// a mean ANEES dominated by a few trials, an overflow. Each names the scheme and what to
+/// change.
+pub fn warnings(summary: &Summary) -> Vec<String> {
+    let mut out = Vec::new();
+    for s in &summary.schemes {
+        let who = if s.params.is_empty() {
+            s.name.clone()
+        } else {
+            format!("{} ({})", s.name, params_text(&s.params))
+        };
+        let ess = s.ess.as_ref().map(|e| {
+            format!(
+                " (ESS mean {:.1}, min {:.1}): use more particles, or resample on an ESS rule (ess_threshold)",
+                e.mean, e.min
+            )
+        });
+        if s.diverged_fraction > 0.0 {
+            out.push(format!(
+                "{who}: {:.1}% of trials diverged (NEES above the chi-square 99.9% quantile for {} consecutive steps, or not finite){}",
+                100.0 * s.diverged_fraction,
+                super::metrics::DIVERGENCE_RUN,
+                ess.clone().unwrap_or_else(|| ": check its noise parameters and thresholds; its error bars claim more certainty than it has".to_string())
+            ));
+        }
+        if s.degenerate_covariance_fraction > 0.0 {
+            out.push(format!(
+                "{who}: fused covariance singular at {:.2}% of (trial, step) pairs (a collapsed particle cloud){}",
+                100.0 * s.degenerate_covariance_fraction,
+                ess.clone().unwrap_or_default()
+            ));
+        }
+        if s.consistency.mean_dominated {
+            out.push(format!(
+                "{who}: mean ANEES {} is dominated by a few trials (the largest 1% carry {:.0}% of it); read the median NEES ({}) and the coverage instead",
+                num(s.anees, 3),
+                100.0 * s.consistency.top_trials_share,
+                num(s.consistency.median_nees, 3)
+            ));
+        }
+        if !(s.steady_state.mse.is_finite()
+            && s.steady_state.mse_se.is_finite()
+            && s.anees.is_finite())
+        {
+            out.push(format!(
+                "{who}: overflow (MSE, its standard error or ANEES is not finite): rescale the scenario's units"
+            ));
         }
     }
     out
@@ -352,5 +583,85 @@ fn find_nulls(v: &serde_json::Value, path: &str, out: &mut Vec<String>) {
             }
         }
         _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::Gaussian;
+    use crate::linalg::{Matrix, Vector};
+    use crate::network::Traffic;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// A consistent 2-D filter over 1000 trials (error ~ N(0, I), covariance I), except that one
+    /// trial in a thousand claims a covariance 1e-12 I at every step (NEES ~ 1e12).
+    fn synthetic(collapsed: bool) -> (Sums, Vec<f64>) {
+        let (trials, steps, n) = (1000, 50, 2);
+        let mut sums = Sums::new(1, steps, n);
+        let groups = vec![("all".to_string(), vec![0, 1])];
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(7);
+        let truth = Vector::zeros(n);
+        for t in 0..trials {
+            let mut obs = sums.trial(&groups, 11);
+            let scale = if collapsed && t == 500 { 1e-12 } else { 1.0 };
+            for k in 1..=steps {
+                let mean = Vector::from_fn(n, |_, _| StandardNormal.sample(&mut rng));
+                let est = Gaussian::new(mean, Matrix::identity(n, n) * scale);
+                obs.record(k, &truth, &est, Traffic::default()).unwrap();
+            }
+            obs.finish();
+        }
+        let anees: Vec<f64> = (0..steps)
+            .map(|k| sums.at(k, Layout::NEES) / trials as f64 / n as f64)
+            .collect();
+        (sums, anees)
+    }
+
+    #[test]
+    fn one_collapsed_trial_in_a_thousand_is_flagged_while_median_and_coverage_stay_sane() {
+        let (good, good_anees) = synthetic(false);
+        let (bad, bad_anees) = synthetic(true);
+        let cg = consistency(2, 1000, 11, &good, &good_anees);
+        let cb = consistency(2, 1000, 11, &bad, &bad_anees);
+        assert!(!cg.mean_dominated, "{cg:?}");
+        assert!(cb.mean_dominated, "{cb:?}");
+        assert!(cb.top_trials_share > 0.99);
+        // The mean is ruined...
+        let mean_bad = bad_anees.iter().sum::<f64>() / bad_anees.len() as f64;
+        assert!(mean_bad > 1e8, "{mean_bad}");
+        // ...the median and the coverage are not: chi2_2 median / 2 = ln 2.
+        let expected = std::f64::consts::LN_2;
+        assert!((cg.median_nees_expected - expected).abs() < 1e-9);
+        for c in [&cg, &cb] {
+            assert!((c.median_nees / expected - 1.0).abs() < 0.02, "{c:?}");
+        }
+        let cov = |s: &Sums| {
+            (0..50)
+                .map(|k| s.at(k, Layout::NEES_COVERED_95))
+                .sum::<f64>()
+                / 50e3
+        };
+        assert!((cov(&good) - 0.95).abs() < 0.005, "{}", cov(&good));
+        assert!((cov(&bad) - cov(&good)).abs() < 0.002);
+        // The collapsed trial is the one that diverged.
+        assert_eq!(good.diverged, 0);
+        assert_eq!(bad.diverged, 1);
+        // A consistent filter's per-step ANEES lies in the chi-square interval most of the time.
+        assert!(cg.anees_steps_in_interval > 0.8, "{cg:?}");
+        assert_eq!(cb.anees_steps_in_interval, 0.0);
+    }
+
+    #[test]
+    fn an_overflowed_sum_of_squares_gives_no_standard_error() {
+        let mut t = crate::sim::metrics::TrialStat::default();
+        for v in [1e300, 2e300, 3e300] {
+            t.sum += v;
+            t.sum_sq += v * v;
+        }
+        let (mean, se) = t.mean_se(3);
+        assert!((mean / 2e300 - 1.0).abs() < 1e-12);
+        assert!(se.is_nan());
     }
 }

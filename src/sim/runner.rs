@@ -250,6 +250,7 @@ fn run_trial(
                     k,
                     source,
                 })?;
+            obs.record_ess(k, inst.center.ess());
         }
         obs.finish();
     }

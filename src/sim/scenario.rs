@@ -291,6 +291,9 @@ pub struct PaperSpec {
     /// Choices the paper leaves open and how we made them.
     #[serde(default)]
     pub notes: Vec<String>,
+    /// Monte Carlo trials the paper ran; `hushfuse reproduce` warns when run with fewer.
+    #[serde(default)]
+    pub trials: Option<usize>,
     /// Numbers printed in the paper.
     #[serde(default)]
     pub published: Vec<PublishedValue>,
@@ -313,6 +316,11 @@ pub struct PublishedValue {
     pub value: f64,
     /// Where in the paper, e.g. "Table I".
     pub source: String,
+    /// Relative tolerance of the verdict for a metric we have no standard error for
+    /// (`rmse:<group>`); default 0.05 (ours). Metrics with a standard error agree when within
+    /// 2 standard errors.
+    #[serde(default)]
+    pub tolerance: Option<f64>,
 }
 
 /// A claim of the paper, checked on our numbers.
@@ -371,5 +379,12 @@ pub enum ClaimSpec {
         b_params: Params,
         metric: String,
         within: f64,
+        /// Where `within` comes from: `"paper: '<quote>'"` or `"ours"` (the default).
+        #[serde(default = "ours")]
+        tolerance_source: String,
     },
+}
+
+fn ours() -> String {
+    "ours".to_string()
 }

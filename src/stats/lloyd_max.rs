@@ -31,7 +31,7 @@
 //! thresholds at the quantiles of `N(0, 3)`, Panter & Dite 1951), polished by a few Lloyd
 //! sweeps; Newton steps are damped so the residual decreases monotonically.
 
-use statrs::function::erf::{erf_inv, erfc};
+use statrs::function::erf::erf_inv;
 use std::f64::consts::SQRT_2;
 
 /// `1 / sqrt(2π)`.
@@ -102,9 +102,17 @@ fn x_pdf(x: f64) -> f64 {
     }
 }
 
-/// Upper tail `Q(x) = 1 - Φ(x)` via `erfc`, relative accuracy kept far into the tail.
+/// Upper tail `Q(x) = 1 - Φ(x)` on the crate's accurate tail function
+/// ([`crate::stats::normal::q`], a few 1e-15 relative; statrs' `erfc` has about 1e-10, which
+/// limited the midpoint condition and `rho` to that).
 fn upper_tail(x: f64) -> f64 {
-    0.5 * erfc(x / SQRT_2)
+    if x == f64::INFINITY {
+        0.0
+    } else if x == f64::NEG_INFINITY {
+        1.0
+    } else {
+        crate::stats::normal::q(x)
+    }
 }
 
 /// `Pr{a < ψ ≤ b}` for `a ≤ b`; differences of upper tails on the side away from the
@@ -491,7 +499,7 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_xoshiro::Xoshiro256PlusPlus;
-    use statrs::function::erf::erf;
+    use statrs::function::erf::{erf, erfc};
 
     /// Independent evaluation of the truncated-normal mean: erf for the probability (erfc
     /// on the far side of the mode to keep relative accuracy) and the direct pdf
@@ -512,6 +520,79 @@ mod tests {
             0.5 * (erf(b / SQRT_2) - erf(a / SQRT_2))
         };
         (phi(a) - phi(b)) / p
+    }
+
+    /// Reference values computed once with mpmath at 40 digits (findroot on the midpoint
+    /// condition with centroid levels, symmetric positive thresholds; rho from eq. (16)),
+    /// independently of this file: (L, positive thresholds, rho). Kept at full printed
+    /// precision as data (rho of L = 2 is 2 / pi).
+    #[allow(clippy::excessive_precision, clippy::approx_constant)]
+    const MPMATH: &[(usize, &[f64], f64)] = &[
+        (2, &[], 0.636_619_772_367_581_343_075_535),
+        (
+            3,
+            &[0.612_003_180_962_480_760_568_090],
+            0.809_825_960_752_098_521_317_809,
+        ),
+        (
+            4,
+            &[0.981_598_821_567_793_705_900_327],
+            0.882_518_152_170_670_712_875_813,
+        ),
+        (
+            5,
+            &[
+                0.382_283_785_584_909_633_280_812,
+                1.244_357_489_165_485_128_513_04,
+            ],
+            0.920_058_872_911_722_561_231_678,
+        ),
+        (
+            8,
+            &[
+                0.500_549_730_075_049_471_506_591,
+                1.049_957_279_855_438_574_996_85,
+                1.747_927_491_520_993_580_260_45,
+            ],
+            0.965_452_239_211_496_269_723_403,
+        ),
+    ];
+
+    #[test]
+    fn thresholds_and_rho_match_high_precision_references() {
+        for &(l, pos, rho) in MPMATH {
+            let q = LloydMax::design(l).unwrap();
+            let mut got: Vec<f64> = q.thresholds.iter().copied().filter(|&t| t > 0.0).collect();
+            got.sort_by(f64::total_cmp);
+            assert_eq!(got.len(), pos.len(), "L={l}");
+            for (g, r) in got.iter().zip(pos) {
+                assert!((g - r).abs() < 1e-14, "L={l}: threshold {g} vs {r}");
+            }
+            assert!(
+                (q.rho() - rho).abs() < 1e-14,
+                "L={l}: rho {} vs {rho}",
+                q.rho()
+            );
+        }
+    }
+
+    #[test]
+    fn optimality_conditions_hold_to_1e_14_up_to_65_levels() {
+        for l in 2..=65 {
+            let q = LloydMax::design(l).unwrap();
+            for i in 0..q.thresholds.len() {
+                let mid = 0.5 * (q.levels[i] + q.levels[i + 1]);
+                assert!((q.thresholds[i] - mid).abs() < 1e-14, "L={l} i={i}");
+            }
+            for i in 0..l {
+                let m = q.moments(i).mean;
+                assert!(
+                    (q.levels[i] - m).abs() < 1e-14 * m.abs().max(1.0),
+                    "L={l} i={i}"
+                );
+            }
+            assert!((q.rho() - (1.0 - q.mse())).abs() < 1e-14, "L={l}");
+        }
     }
 
     #[test]

@@ -53,6 +53,8 @@ pub struct CensoredPfCenter {
     cloud: ParticleCloud,
     rng: Xoshiro256PlusPlus,
     est: Gaussian,
+    /// ESS after the last update, before resampling.
+    last_ess: f64,
     /// x_{k|k-1} and P_{k|k-1} fed back before step k.
     prediction: Gaussian,
     /// Replica of each sensor's local covariance P^i_{k-1|k-1} (Remark 1 (I), Remark 3 (I)).
@@ -111,6 +113,7 @@ impl CensoredPfCenter {
             est: system.prior.clone(),
             prediction,
             transition,
+            last_ess: options.particles as f64,
             cloud,
             rng,
             protocol,
@@ -429,6 +432,7 @@ impl FusionCenter for CensoredPfCenter {
         }
         self.silent = silent;
         self.cloud.normalize().map_err(pf_err)?;
+        self.last_ess = self.cloud.ess().map_err(pf_err)?;
         self.cloud.estimate_into(&mut self.est).map_err(pf_err)?;
         self.cloud
             .resample_if(
@@ -482,6 +486,9 @@ impl FusionCenter for CensoredPfCenter {
 
     fn estimate(&self) -> &Gaussian {
         &self.est
+    }
+    fn ess(&self) -> Option<f64> {
+        Some(self.last_ess)
     }
 
     fn feedback(&self) -> Option<Feedback> {

@@ -93,6 +93,8 @@ pub struct ExactCensoredCenter {
     cloud: ParticleCloud,
     rng: Xoshiro256PlusPlus,
     est: Gaussian,
+    /// ESS after the last update, before resampling.
+    last_ess: f64,
     /// Each sensor's local covariance P^i_{k-1|k-1} (deterministic for linear sensors).
     local_cov: Vec<Matrix>,
     /// Scratch: h x and h x_hat^i (rows component-major), the (drawn or received) z.
@@ -171,6 +173,7 @@ impl ExactCensoredCenter {
             transition,
             options,
             eta,
+            last_ess: cloud.len() as f64,
             cloud,
             rng,
             system,
@@ -425,6 +428,7 @@ impl FusionCenter for ExactCensoredCenter {
             self.update_copies(i, &gain);
         }
         self.cloud.normalize().map_err(pf_err)?;
+        self.last_ess = self.cloud.ess().map_err(pf_err)?;
         // The fused estimate: weighted mean and covariance of the state part only.
         let w = self.cloud.weights().map_err(pf_err)?.to_vec();
         let mut mean = Vector::zeros(d);
@@ -464,6 +468,9 @@ impl FusionCenter for ExactCensoredCenter {
 
     fn estimate(&self) -> &Gaussian {
         &self.est
+    }
+    fn ess(&self) -> Option<f64> {
+        Some(self.last_ess)
     }
 }
 

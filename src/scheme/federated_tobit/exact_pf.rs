@@ -330,6 +330,8 @@ pub struct TobitPfCenter {
     mu: Vec<f64>,
     last_log_evidence: f64,
     last_censored: usize,
+    /// ESS after the last update, before resampling.
+    last_ess: f64,
 }
 
 impl TobitPfCenter {
@@ -357,6 +359,7 @@ impl TobitPfCenter {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
         let cloud = ParticleCloud::from_gaussian(options.particles, &system.prior, &mut rng)
             .map_err(pf_err)?;
+        let particles = options.particles as f64;
         Ok(Self {
             est: system.prior.clone(),
             mu: vec![0.0; options.particles],
@@ -368,6 +371,7 @@ impl TobitPfCenter {
             system,
             last_log_evidence: 0.0,
             last_censored: 0,
+            last_ess: particles,
         })
     }
 
@@ -442,6 +446,7 @@ impl FusionCenter for TobitPfCenter {
             add_log_likelihood(reading, ch.sd, ch.tau_l, ch.tau_r, &self.mu, lw);
         }
         let log_evidence = self.cloud.normalize().map_err(pf_err)?;
+        self.last_ess = self.cloud.ess().map_err(pf_err)?;
         self.last_log_evidence = if any { log_evidence } else { 0.0 };
         self.cloud.estimate_into(&mut self.est).map_err(pf_err)?;
         self.cloud
@@ -456,6 +461,9 @@ impl FusionCenter for TobitPfCenter {
 
     fn estimate(&self) -> &Gaussian {
         &self.est
+    }
+    fn ess(&self) -> Option<f64> {
+        Some(self.last_ess)
     }
 }
 
