@@ -29,6 +29,11 @@ const GOLDEN: &[(&str, usize, u64, usize)] = &[
     ("zheng-nofb-n4", 8, 0x328997a2e93dd3f5, 42993),
     ("geng-oscillator", 8, 0x8372d0499cc4ae14, 394220),
     ("geng-tracking", 8, 0xe11d54e34653bc3f, 112508),
+    ("arena-1d", 4, 0x7061d80bde7a5014, 262809),
+    ("arena-nca", 4, 0x713d143c62d15845, 240744),
+    ("arena-rss", 4, 0xf60e83ef1a72f429, 39040),
+    ("arena-wsn", 4, 0xf0a12315937cc84c, 114139),
+    ("arena-tobit", 4, 0x7ee4d06ae840ba3d, 315770),
 ];
 
 /// FNV-1a, 64 bits: a stable hash written out (std's hasher may change between releases).
