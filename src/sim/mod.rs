@@ -1,7 +1,9 @@
 //! Scenario files, the Monte Carlo runner, metrics, outputs (CSV/JSON/SVG) and the paper
 //! reports. The simulator owns the only time loop.
+pub mod arena;
 pub mod build;
 pub mod builtin;
+pub mod calibrate;
 pub mod limits;
 pub mod metrics;
 pub mod paper_check;
