@@ -1,6 +1,6 @@
 //! `hushfuse` command line: run scenarios, list the built-in ones, reproduce paper figures.
 use clap::{Parser, Subcommand};
-use hushfuse::sim::{arena, build, builtin, calibrate, plot, report, results, runner, tables};
+use hushfuse::sim::{arena, build, builtin, calibrate, html, plot, report, results, runner, tables};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use std::io::IsTerminal;
@@ -67,6 +67,15 @@ enum Command {
         #[command(flatten)]
         args: RunArgs,
     },
+    /// Write report.html for the results in OUT_DIR (of `hushfuse run`): figures, tables, one
+    /// trial in detail, the scenario as run. Reruns trial 0 and the per-step errors.
+    Report {
+        /// The output folder of a run (holds summary.json and scenario_as_run.toml).
+        out_dir: PathBuf,
+        /// Worker threads (unused by the report itself; kept for symmetry).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+    },
     /// List the built-in scenarios.
     List,
     /// List every scheme kind with its parameters and defaults.
@@ -118,6 +127,7 @@ fn main() -> ExitCode {
             });
             Ok(())
         }
+        Some(Command::Report { out_dir, .. }) => report_dir(&out_dir),
         Some(Command::List) => {
             let text: String = builtin::BUILTIN
                 .iter()
@@ -207,6 +217,7 @@ fn table_report(text: &str, source: &str, args: &RunArgs) -> Result<(), Failure>
 
 fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     let (text, source) = scenario_text(scenario)?;
+    let text_in = text.clone();
     let kind = build::file_kind(&text, &source).map_err(|e| Failure::Input(e.to_string()))?;
     if kind == build::FileKind::TableReport {
         return table_report(&text, &source, args);
@@ -302,6 +313,22 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         files.push("reproduction.md".to_string());
     }
     files.extend(plot::write_all(&exp, &summary, &dir).map_err(Failure::Run)?);
+    let as_run = as_run_text(&text_in, args);
+    write("scenario_as_run.toml", &as_run)?;
+    files.push("scenario_as_run.toml".to_string());
+    if args.report {
+        let page = html::render(&html::Input {
+            exp: &exp,
+            summary: &summary,
+            scenario_text: &as_run,
+            alone: false,
+            arena: None,
+            se_trials: exp.trials.min(200),
+        })
+        .map_err(Failure::Run)?;
+        write("report.html", &page)?;
+        files.push("report.html".to_string());
+    }
     text.push_str(&format!(
         "\nwrote {}: {}\n",
         dir.display(),
@@ -440,6 +467,21 @@ fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, Path
         files.push(format!("{sub}/"));
     }
     files.extend(arena::write_plots(&out, &group, &first.scenario, &dir).map_err(Failure::Run)?);
+    if args.report {
+        let exp = build::load_with(&out.texts[0], &source, &opts.load)
+            .map_err(|e| Failure::Run(e.to_string()))?;
+        let page = html::render(&html::Input {
+            exp: &exp,
+            summary: &out.summaries[0],
+            scenario_text: &out.texts[0],
+            alone: true,
+            arena: Some(&out),
+            se_trials: exp.trials.min(200),
+        })
+        .map_err(Failure::Run)?;
+        write("report.html", &page)?;
+        files.push("report.html".into());
+    }
     msg.push_str(&format!("\nwrote {}: {}\n", dir.display(), files.join(", ")));
     print_out(&msg);
     Ok((out, dir))
@@ -469,5 +511,61 @@ fn quick_arena() -> Result<(), Failure> {
         start.elapsed().as_secs_f64()
     ));
     print_out(&msg);
+    Ok(())
+}
+
+/// The scenario text as run: the file with `--trials` and `--seed` written in (comments kept
+/// when nothing was overridden).
+fn as_run_text(text: &str, args: &RunArgs) -> String {
+    if args.trials.is_none() && args.seed.is_none() {
+        return text.to_string();
+    }
+    let Ok(mut t) = toml::from_str::<toml::Table>(text) else {
+        return text.to_string();
+    };
+    if let Some(n) = args.trials {
+        t.insert("trials".into(), toml::Value::Integer(n as i64));
+    }
+    if let Some(s) = args.seed {
+        t.insert("seed".into(), toml::Value::Integer(s as i64));
+    }
+    toml::to_string(&t).unwrap_or_else(|_| text.to_string())
+}
+
+/// `hushfuse report <out-dir>`: report.html from a run's summary.json and scenario_as_run.toml.
+fn report_dir(dir: &Path) -> Result<(), Failure> {
+    let read = |name: &str| {
+        std::fs::read_to_string(dir.join(name)).map_err(|e| {
+            Failure::Input(format!(
+                "{}: cannot read: {e} (run `hushfuse run <scenario> --out {}` first; calibrated arenas: `run --budgets ... --report`)",
+                dir.join(name).display(),
+                dir.display()
+            ))
+        })
+    };
+    let text = read("scenario_as_run.toml")?;
+    let summary: results::Summary = serde_json::from_str(&read("summary.json")?)
+        .map_err(|e| Failure::Input(format!("{}: {e}", dir.join("summary.json").display())))?;
+    let source = dir.join("scenario_as_run.toml").display().to_string();
+    let exp = build::load(&text, &source).map_err(|e| Failure::Input(e.to_string()))?;
+    if exp.variants.len() != summary.schemes.len() || exp.trials != summary.trials {
+        return Err(Failure::Input(format!(
+            "{}: summary.json and scenario_as_run.toml do not belong together",
+            dir.display()
+        )));
+    }
+    let page = html::render(&html::Input {
+        exp: &exp,
+        summary: &summary,
+        scenario_text: &text,
+        alone: false,
+        arena: None,
+        se_trials: exp.trials.min(200),
+    })
+    .map_err(Failure::Run)?;
+    let path = dir.join("report.html");
+    std::fs::write(&path, page)
+        .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+    print_out(&format!("wrote {}\n", path.display()));
     Ok(())
 }
