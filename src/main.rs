@@ -1,6 +1,8 @@
 //! `hushfuse` command line: run scenarios, list the built-in ones, reproduce paper figures.
 use clap::{Parser, Subcommand};
-use hushfuse::sim::{arena, build, builtin, calibrate, html, plot, report, results, runner, tables};
+use hushfuse::sim::{
+    arena, build, builtin, calibrate, html, plot, report, results, runner, tables,
+};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use std::io::IsTerminal;
@@ -431,7 +433,8 @@ fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, Path
             std::fs::create_dir_all(parent)
                 .map_err(|e| Failure::Run(format!("cannot create {}: {e}", parent.display())))?;
         }
-        std::fs::write(&p, text).map_err(|e| Failure::Run(format!("cannot write {}: {e}", p.display())))
+        std::fs::write(&p, text)
+            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", p.display())))
     };
     let json = serde_json::json!({
         "scenario": first.scenario,
@@ -455,7 +458,10 @@ fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, Path
         &serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?,
     )?;
     write("best_per_budget.md", &arena::best_markdown(&out, &group))?;
-    let mut files = vec!["calibration.json".to_string(), "best_per_budget.md".to_string()];
+    let mut files = vec![
+        "calibration.json".to_string(),
+        "best_per_budget.md".to_string(),
+    ];
     for (b, s) in out.summaries.iter().enumerate() {
         let sub = format!("budget-{}", calibrate::short(budgets[b]));
         write(&format!("{sub}/scenario.toml"), &out.texts[b])?;
@@ -482,7 +488,11 @@ fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, Path
         write("report.html", &page)?;
         files.push("report.html".into());
     }
-    msg.push_str(&format!("\nwrote {}: {}\n", dir.display(), files.join(", ")));
+    msg.push_str(&format!(
+        "\nwrote {}: {}\n",
+        dir.display(),
+        files.join(", ")
+    ));
     print_out(&msg);
     Ok((out, dir))
 }

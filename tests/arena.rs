@@ -33,7 +33,13 @@ fn calibration_reaches_every_budget_of_arena_1d() {
         for c in row {
             let tunable = reachable.contains(&c.kind.as_str());
             if tunable {
-                assert_eq!(c.status, Status::Calibrated, "{} at {}", c.label, budgets[b]);
+                assert_eq!(
+                    c.status,
+                    Status::Calibrated,
+                    "{} at {}",
+                    c.label,
+                    budgets[b]
+                );
                 assert!(
                     (c.achieved - budgets[b]).abs() <= out.tolerance * budgets[b],
                     "{}: achieved {} for target {}",

@@ -65,7 +65,12 @@ pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
                 format!("{:.4}", c.result.mean_rmse[group]),
                 format!("{:.1}", c.achieved),
             ]),
-            None => r.extend(["(none within budget)".into(), "".into(), "".into(), "".into()]),
+            None => r.extend([
+                "(none within budget)".into(),
+                "".into(),
+                "".into(),
+                "".into(),
+            ]),
         }
         match ok.get(1) {
             Some(c) => r.extend([c.label.clone(), format!("{:.4}", c.result.mean_rmse[group])]),
@@ -96,7 +101,11 @@ pub fn best_markdown(out: &Outcome, group: &str) -> String {
 
 /// The lines of an accuracy-against-bits figure: per scheme its points over the budgets
 /// (markers; a scheme without a knob is one marker), and the Pareto front (dashed black).
-pub fn bits_lines(out: &Outcome, metric: &dyn Fn(&super::calibrate::Calibrated) -> f64) -> Vec<Line> {
+pub fn bits_lines(
+    out: &Outcome,
+    metric: &dyn Fn(&super::calibrate::Calibrated) -> f64,
+    front: bool,
+) -> Vec<Line> {
     let n = out.rows.first().map_or(0, Vec::len);
     let mut lines = Vec::new();
     let mut all = Vec::new();
@@ -124,6 +133,9 @@ pub fn bits_lines(out: &Outcome, metric: &dyn Fn(&super::calibrate::Calibrated) 
             markers: true,
         });
     }
+    if !front {
+        return lines;
+    }
     let front: Vec<(f64, f64)> = pareto_front(&all).into_iter().map(|i| all[i]).collect();
     lines.push(Line {
         name: "Pareto front".into(),
@@ -136,7 +148,12 @@ pub fn bits_lines(out: &Outcome, metric: &dyn Fn(&super::calibrate::Calibrated) 
 }
 
 /// Writes `rmse_<group>_vs_bits.svg` (first group) and `anees_vs_bits.svg`; returns the files.
-pub fn write_plots(out: &Outcome, group: &str, scenario: &str, dir: &Path) -> Result<Vec<String>, String> {
+pub fn write_plots(
+    out: &Outcome,
+    group: &str,
+    scenario: &str,
+    dir: &Path,
+) -> Result<Vec<String>, String> {
     let x = format!("{} bits per step (achieved)", out.axis.name());
     let mut files = Vec::new();
     let f = format!("rmse_{group}_vs_bits.svg");
@@ -146,7 +163,11 @@ pub fn write_plots(out: &Outcome, group: &str, scenario: &str, dir: &Path) -> Re
         &format!("{scenario}: mean RMSE of {group} against bits"),
         &x,
         &format!("mean RMSE {group}"),
-        &bits_lines(out, &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN)),
+        &bits_lines(
+            out,
+            &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN),
+            true,
+        ),
     )?;
     files.push(f);
     let f = "anees_vs_bits.svg".to_string();
@@ -155,7 +176,7 @@ pub fn write_plots(out: &Outcome, group: &str, scenario: &str, dir: &Path) -> Re
         &format!("{scenario}: ANEES against bits (1 = consistent)"),
         &x,
         "ANEES",
-        &bits_lines(out, &|c| c.result.anees),
+        &bits_lines(out, &|c| c.result.anees, false),
     )?;
     files.push(f);
     Ok(files)
@@ -192,15 +213,15 @@ mod tests {
     #[test]
     fn pareto_front_of_a_hand_made_set() {
         let pts = [
-            (10.0, 5.0), // 0: front
-            (20.0, 3.0), // 1: front
-            (15.0, 6.0), // 2: dominated by 0
-            (30.0, 3.0), // 3: dominated by 1 (same error, more bits)
-            (5.0, 9.0),  // 4: front (fewest bits)
-            (40.0, 1.0), // 5: front
-            (20.0, 4.0), // 6: dominated by 1 (same bits, more error)
+            (10.0, 5.0),     // 0: front
+            (20.0, 3.0),     // 1: front
+            (15.0, 6.0),     // 2: dominated by 0
+            (30.0, 3.0),     // 3: dominated by 1 (same error, more bits)
+            (5.0, 9.0),      // 4: front (fewest bits)
+            (40.0, 1.0),     // 5: front
+            (20.0, 4.0),     // 6: dominated by 1 (same bits, more error)
             (f64::NAN, 0.1), // 7: never
-            (10.0, 5.0), // 8: duplicate of 0: only one of them
+            (10.0, 5.0),     // 8: duplicate of 0: only one of them
         ];
         let f = pareto_front(&pts);
         assert_eq!(f.len(), 4, "{f:?}");
@@ -212,9 +233,9 @@ mod tests {
             if !p.0.is_finite() {
                 continue;
             }
-            let dominated = pts.iter().any(|q| {
-                q.0.is_finite() && q.0 <= p.0 && q.1 <= p.1 && (q.0 < p.0 || q.1 < p.1)
-            });
+            let dominated = pts
+                .iter()
+                .any(|q| q.0.is_finite() && q.0 <= p.0 && q.1 <= p.1 && (q.0 < p.0 || q.1 < p.1));
             if f.contains(&i) {
                 assert!(!dominated, "{i} on the front but dominated");
             } else if i != 0 && i != 8 {

@@ -89,20 +89,23 @@ pub fn knob_range(kind: &str, n_sensors: usize) -> Option<KnobRange> {
         "dkf-alg1-random" => r(0.5, Some(1.0), false),
         "censored-pf" => r(1e-3 * n_sensors as f64, Some(n_sensors as f64), false),
         "quantized-innovation" => r(1.0, Some(8.0), true),
-        "dkf-alg1-event" | "dkf-alg2-event" | "innovation-trigger-kf"
-        | "stochastic-trigger-open" | "stochastic-trigger-closed" | "send-on-delta"
-        | "ci-fusion" | "naive-fusion" => r(0.0, None, false),
+        "dkf-alg1-event"
+        | "dkf-alg2-event"
+        | "innovation-trigger-kf"
+        | "stochastic-trigger-open"
+        | "stochastic-trigger-closed"
+        | "send-on-delta"
+        | "ci-fusion"
+        | "naive-fusion" => r(0.0, None, false),
         other => {
             let e = registry::find(other)?;
             let knob = e.knob?;
             let doc = e.params.iter().find(|p| p.name == knob)?;
-            doc.values
-                .starts_with("number >= 0")
-                .then_some(KnobRange {
-                    lo: 0.0,
-                    hi: None,
-                    integer: false,
-                })
+            doc.values.starts_with("number >= 0").then_some(KnobRange {
+                lo: 0.0,
+                hi: None,
+                integer: false,
+            })
         }
     }
 }
@@ -249,7 +252,10 @@ fn entries(base: &toml::Table) -> Result<Vec<toml::Table>, String> {
         .ok_or("the scenario has no [[schemes]]")?;
     list.iter()
         .map(|v| {
-            let mut t = v.as_table().ok_or("a [[schemes]] entry is not a table")?.clone();
+            let mut t = v
+                .as_table()
+                .ok_or("a [[schemes]] entry is not a table")?
+                .clone();
             if let Some(sweep) = t.remove("sweep") {
                 // A swept entry is calibrated from the first value of each swept parameter.
                 if let Some(s) = sweep.as_table() {
@@ -303,7 +309,9 @@ pub fn calibrate(
         let kind = full.curves[ci].kind.clone();
         let label = full.curves[ci].label.clone();
         let reg = registry::find(&kind).ok_or("unknown kind")?;
-        let range = reg.knob.and_then(|k| knob_range(&kind, n_sensors).map(|r| (k, r)));
+        let range = reg
+            .knob
+            .and_then(|k| knob_range(&kind, n_sensors).map(|r| (k, r)));
         let mut rows = Vec::new();
         let Some((knob, range)) = range else {
             let s = ev.run(entry, None)?;
@@ -378,7 +386,8 @@ pub fn calibrate(
                 return Err(format!("{label}: `{knob}` = {lo} does not build"));
             };
             let mut hi = range.hi.unwrap_or(1.0);
-            let mut f_hi = eval(&mut ev, hi).ok_or(format!("{label}: `{knob}` = {hi} does not build"))?;
+            let mut f_hi =
+                eval(&mut ev, hi).ok_or(format!("{label}: `{knob}` = {hi} does not build"))?;
             if range.hi.is_none() {
                 let mut n = 0;
                 while axis.of(&f_hi) > min_target && n < 12 {
@@ -437,7 +446,10 @@ pub fn calibrate(
         }
         for ((x, mut s, st), &b) in chosen.into_iter().zip(budgets) {
             if pilot.is_some_and(|p| p < trials) {
-                s = ev.run(&with_knob(entry, knob, x, range.integer), None)?.schemes[0].clone();
+                s = ev
+                    .run(&with_knob(entry, knob, x, range.integer), None)?
+                    .schemes[0]
+                    .clone();
             }
             rows.push(Calibrated {
                 label: label.clone(),

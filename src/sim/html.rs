@@ -69,7 +69,7 @@ fn pe(e: impl std::fmt::Display) -> String {
 
 /// The variants shown in the detailed figures: the all-data bound (if any) and the best by
 /// mean RMSE of the first group, at most `max` in all.
-fn selected(summary: &Summary, max: usize) -> Vec<usize> {
+fn selected(summary: &Summary, max: usize, allowed: &dyn Fn(usize) -> bool) -> Vec<usize> {
     let g = &summary.group_order[0];
     let mut idx: Vec<usize> = (0..summary.schemes.len()).collect();
     idx.sort_by(|&a, &b| {
@@ -86,7 +86,7 @@ fn selected(summary: &Summary, max: usize) -> Vec<usize> {
         if out.len() >= max {
             break;
         }
-        if !out.contains(&i) && summary.schemes[i].mean_rmse[g].is_finite() {
+        if !out.contains(&i) && allowed(i) && summary.schemes[i].mean_rmse[g].is_finite() {
             out.push(i);
         }
     }
@@ -94,13 +94,20 @@ fn selected(summary: &Summary, max: usize) -> Vec<usize> {
 }
 
 /// A figure with a legend to its right, drawn by `body` into the chart.
-fn legend(area: &DrawingArea<SVGBackend, plotters::coord::Shift>, names: &[(String, RGBColor)]) -> Result<(), String> {
+fn legend(
+    area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    names: &[(String, RGBColor)],
+) -> Result<(), String> {
     for (i, (n, c)) in names.iter().enumerate() {
         let y = 40 + 18 * i as i32;
         area.draw(&PathElement::new(vec![(8, y), (40, y)], c.stroke_width(2)))
             .map_err(pe)?;
-        area.draw(&Text::new(n.clone(), (48, y - 7), ("sans-serif", 13).into_font().color(&BLACK)))
-            .map_err(pe)?;
+        area.draw(&Text::new(
+            n.clone(),
+            (48, y - 7),
+            ("sans-serif", 13).into_font().color(&BLACK),
+        ))
+        .map_err(pe)?;
     }
     Ok(())
 }
@@ -117,13 +124,22 @@ fn rmse_bands(input: &Input, sel: &[usize]) -> Result<String, String> {
         let (a, b) = root.split_horizontally(780);
         let ymax = sel
             .iter()
-            .flat_map(|&v| curves[v].0.iter().zip(&curves[v].1).map(|(r, s)| r + 2.0 * s))
+            .flat_map(|&v| {
+                curves[v]
+                    .0
+                    .iter()
+                    .zip(&curves[v].1)
+                    .map(|(r, s)| r + 2.0 * s)
+            })
             .filter(|y| y.is_finite())
             .fold(0.0, f64::max)
             .max(1e-12);
         let mut chart = ChartBuilder::on(&a)
             .caption(
-                format!("RMSE of {gname} per step, ±2 standard errors ({} trials)", input.se_trials),
+                format!(
+                    "RMSE of {gname} per step, ±2 standard errors ({} trials)",
+                    input.se_trials
+                ),
                 ("sans-serif", 17),
             )
             .margin(12)
@@ -144,7 +160,11 @@ fn rmse_bands(input: &Input, sel: &[usize]) -> Result<String, String> {
             let mut poly: Vec<(f64, f64)> = (0..exp.steps)
                 .map(|k| ((k + 1) as f64, r[k] + 2.0 * se[k]))
                 .collect();
-            poly.extend((0..exp.steps).rev().map(|k| ((k + 1) as f64, (r[k] - 2.0 * se[k]).max(0.0))));
+            poly.extend(
+                (0..exp.steps)
+                    .rev()
+                    .map(|k| ((k + 1) as f64, (r[k] - 2.0 * se[k]).max(0.0))),
+            );
             chart
                 .draw_series(std::iter::once(Polygon::new(poly, c.mix(0.18).filled())))
                 .map_err(pe)?;
@@ -173,7 +193,10 @@ fn ellipse(c: (f64, f64), p: [[f64; 2]; 2]) -> Vec<(f64, f64)> {
         .map(|i| {
             let t = i as f64 / 40.0 * std::f64::consts::TAU;
             let (u, v) = (2.0 * l1.sqrt() * t.cos(), 2.0 * l2.sqrt() * t.sin());
-            (c.0 + u * th.cos() - v * th.sin(), c.1 + u * th.sin() + v * th.cos())
+            (
+                c.0 + u * th.cos() - v * th.sin(),
+                c.1 + u * th.sin() + v * th.cos(),
+            )
         })
         .collect()
 }
@@ -182,9 +205,19 @@ fn ellipse(c: (f64, f64), p: [[f64; 2]; 2]) -> Vec<(f64, f64)> {
 /// and the sensor positions.
 fn trajectory(input: &Input, tr: &trace::Trace, sel: &[usize]) -> Result<String, String> {
     let exp = input.exp;
-    let (gname, idx) = &exp.groups[0];
+    // A two-index group (a position) when there is one, else the first group.
+    let (gname, idx) = exp
+        .groups
+        .iter()
+        .find(|(_, i)| i.len() == 2)
+        .unwrap_or(&exp.groups[0]);
     let mut buf = String::new();
-    let positions: Vec<[f64; 2]> = exp.system.sensors.iter().filter_map(|s| s.position()).collect();
+    let positions: Vec<[f64; 2]> = exp
+        .system
+        .sensors
+        .iter()
+        .filter_map(|s| s.position())
+        .collect();
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 620)).into_drawing_area();
         root.fill(&WHITE).map_err(pe)?;
@@ -195,47 +228,98 @@ fn trajectory(input: &Input, tr: &trace::Trace, sel: &[usize]) -> Result<String,
             let (ix, iy) = (idx[0], idx[1]);
             let mut pts: Vec<(f64, f64)> = tr.truth.iter().map(|x| (x[ix], x[iy])).collect();
             for &v in sel {
-                pts.extend(tr.variants[v].estimates.iter().map(|e| (e.mean[ix], e.mean[iy])));
+                pts.extend(
+                    tr.variants[v]
+                        .estimates
+                        .iter()
+                        .map(|e| (e.mean[ix], e.mean[iy])),
+                );
             }
-            let finite: Vec<(f64, f64)> = pts.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()).collect();
+            let finite: Vec<(f64, f64)> = pts
+                .iter()
+                .copied()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .collect();
             let (mut x0, mut x1, mut y0, mut y1) = finite.iter().fold(
-                (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY),
+                (
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                ),
                 |(a, b, c, d), p| (a.min(p.0), b.max(p.0), c.min(p.1), d.max(p.1)),
             );
-            for p in &positions {
-                x0 = x0.min(p[0]);
-                x1 = x1.max(p[0]);
-                y0 = y0.min(p[1]);
-                y1 = y1.max(p[1]);
-            }
-            let (px, py) = (0.05 * (x1 - x0).max(1e-9), 0.05 * (y1 - y0).max(1e-9));
+            // Zoom on the track (with a margin of a quarter of its extent); sensors inside
+            // the frame are drawn, the others are counted in the legend.
+            let (mx, my) = (0.25 * (x1 - x0).max(1e-9), 0.25 * (y1 - y0).max(1e-9));
+            let m = mx.max(my);
+            (x0, x1, y0, y1) = (x0 - m, x1 + m, y0 - m, y1 + m);
+            let shown: Vec<[f64; 2]> = positions
+                .iter()
+                .copied()
+                .filter(|p| p[0] >= x0 && p[0] <= x1 && p[1] >= y0 && p[1] <= y1)
+                .collect();
+            let hidden = positions.len() - shown.len();
+            let positions = shown;
+            let (px, py) = (0.0, 0.0);
             let mut chart = ChartBuilder::on(&a)
-                .caption(format!("trial 0: {gname}, estimates with 2σ ellipses every {every} steps"), ("sans-serif", 17))
+                .caption(
+                    format!("trial 0: {gname}, estimates with 2σ ellipses every {every} steps"),
+                    ("sans-serif", 17),
+                )
                 .margin(12)
                 .x_label_area_size(40)
                 .y_label_area_size(60)
                 .build_cartesian_2d(x0 - px..x1 + px, y0 - py..y1 + py)
                 .map_err(pe)?;
-            chart.configure_mesh().x_desc(format!("state {ix}")).y_desc(format!("state {iy}")).draw().map_err(pe)?;
-            if !positions.is_empty() {
+            chart
+                .configure_mesh()
+                .x_desc(format!("state {ix}"))
+                .y_desc(format!("state {iy}"))
+                .draw()
+                .map_err(pe)?;
+            if !positions.is_empty() || hidden > 0 {
                 chart
-                    .draw_series(positions.iter().map(|p| TriangleMarker::new((p[0], p[1]), 6, BLACK.mix(0.6).filled())))
+                    .draw_series(
+                        positions
+                            .iter()
+                            .map(|p| TriangleMarker::new((p[0], p[1]), 6, BLACK.mix(0.6).filled())),
+                    )
                     .map_err(pe)?;
-                names.push(("sensor positions (▲)".into(), RGBColor(110, 110, 110)));
+                names.push((
+                    if hidden > 0 {
+                        format!("sensor positions (▲; {hidden} outside the frame)")
+                    } else {
+                        "sensor positions (▲)".into()
+                    },
+                    RGBColor(110, 110, 110),
+                ));
             }
             chart
-                .draw_series(LineSeries::new(tr.truth.iter().map(|x| (x[ix], x[iy])), BLACK.stroke_width(3)))
+                .draw_series(LineSeries::new(
+                    tr.truth.iter().map(|x| (x[ix], x[iy])),
+                    BLACK.stroke_width(3),
+                ))
                 .map_err(pe)?;
             for (j, &v) in sel.iter().enumerate() {
                 let c = PALETTE[j % PALETTE.len()];
                 let est = &tr.variants[v].estimates;
                 chart
-                    .draw_series(LineSeries::new(est.iter().map(|e| (e.mean[ix], e.mean[iy])), c.stroke_width(2)))
+                    .draw_series(LineSeries::new(
+                        est.iter().map(|e| (e.mean[ix], e.mean[iy])),
+                        c.stroke_width(2),
+                    ))
                     .map_err(pe)?;
                 for e in est.iter().skip(every - 1).step_by(every) {
-                    let p = [[e.cov[(ix, ix)], e.cov[(ix, iy)]], [e.cov[(iy, ix)], e.cov[(iy, iy)]]];
+                    let p = [
+                        [e.cov[(ix, ix)], e.cov[(ix, iy)]],
+                        [e.cov[(iy, ix)], e.cov[(iy, iy)]],
+                    ];
                     chart
-                        .draw_series(std::iter::once(PathElement::new(ellipse((e.mean[ix], e.mean[iy]), p), c.stroke_width(1))))
+                        .draw_series(std::iter::once(PathElement::new(
+                            ellipse((e.mean[ix], e.mean[iy]), p),
+                            c.stroke_width(1),
+                        )))
                         .map_err(pe)?;
                 }
                 names.push((input.summary.schemes[v].name.clone(), c));
@@ -243,41 +327,81 @@ fn trajectory(input: &Input, tr: &trace::Trace, sel: &[usize]) -> Result<String,
         } else {
             let i = idx[0];
             let t = exp.steps as f64;
-            let mut ys: Vec<f64> = tr.truth.iter().map(|x| x[i]).collect();
+            // Estimates minus the truth, so that small errors stay visible on a long track.
+            let truth: Vec<f64> = tr.truth.iter().map(|x| x[i]).collect();
+            let mut ys: Vec<f64> = vec![0.0];
             for &v in sel {
-                ys.extend(tr.variants[v].estimates.iter().flat_map(|e| {
-                    let s = 2.0 * e.cov[(i, i)].max(0.0).sqrt();
-                    [e.mean[i] - s, e.mean[i] + s]
-                }));
+                ys.extend(
+                    tr.variants[v]
+                        .estimates
+                        .iter()
+                        .zip(&truth)
+                        .flat_map(|(e, x)| {
+                            let s = 2.0 * e.cov[(i, i)].max(0.0).sqrt();
+                            [e.mean[i] - x - s, e.mean[i] - x + s]
+                        }),
+                );
             }
             let ys: Vec<f64> = ys.into_iter().filter(|y| y.is_finite()).collect();
-            let (y0, y1) = ys.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| (a.min(*y), b.max(*y)));
+            let (y0, y1) = ys
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
+                    (a.min(*y), b.max(*y))
+                });
             let pad = 0.05 * (y1 - y0).max(1e-9);
             let mut chart = ChartBuilder::on(&a)
-                .caption(format!("trial 0: state {i} ({gname}) against time, estimates ±2σ"), ("sans-serif", 17))
+                .caption(
+                    format!("trial 0: estimate − truth of state {i} ({gname}), ±2σ (truth = 0)"),
+                    ("sans-serif", 17),
+                )
                 .margin(12)
                 .x_label_area_size(40)
                 .y_label_area_size(60)
                 .build_cartesian_2d(1.0..t, y0 - pad..y1 + pad)
                 .map_err(pe)?;
-            chart.configure_mesh().x_desc("step k").y_desc(format!("state {i}")).draw().map_err(pe)?;
+            chart
+                .configure_mesh()
+                .x_desc("step k")
+                .y_desc(format!("error of state {i}"))
+                .draw()
+                .map_err(pe)?;
             for (j, &v) in sel.iter().enumerate() {
                 let c = PALETTE[j % PALETTE.len()];
                 let est = &tr.variants[v].estimates;
                 let mut poly: Vec<(f64, f64)> = est
                     .iter()
                     .enumerate()
-                    .map(|(k, e)| ((k + 1) as f64, e.mean[i] + 2.0 * e.cov[(i, i)].max(0.0).sqrt()))
+                    .map(|(k, e)| {
+                        (
+                            (k + 1) as f64,
+                            e.mean[i] - truth[k] + 2.0 * e.cov[(i, i)].max(0.0).sqrt(),
+                        )
+                    })
                     .collect();
-                poly.extend(est.iter().enumerate().rev().map(|(k, e)| ((k + 1) as f64, e.mean[i] - 2.0 * e.cov[(i, i)].max(0.0).sqrt())));
-                chart.draw_series(std::iter::once(Polygon::new(poly, c.mix(0.12).filled()))).map_err(pe)?;
+                poly.extend(est.iter().enumerate().rev().map(|(k, e)| {
+                    (
+                        (k + 1) as f64,
+                        e.mean[i] - truth[k] - 2.0 * e.cov[(i, i)].max(0.0).sqrt(),
+                    )
+                }));
                 chart
-                    .draw_series(LineSeries::new(est.iter().enumerate().map(|(k, e)| ((k + 1) as f64, e.mean[i])), c.stroke_width(2)))
+                    .draw_series(std::iter::once(Polygon::new(poly, c.mix(0.12).filled())))
+                    .map_err(pe)?;
+                chart
+                    .draw_series(LineSeries::new(
+                        est.iter()
+                            .enumerate()
+                            .map(|(k, e)| ((k + 1) as f64, e.mean[i] - truth[k])),
+                        c.stroke_width(2),
+                    ))
                     .map_err(pe)?;
                 names.push((input.summary.schemes[v].name.clone(), c));
             }
             chart
-                .draw_series(LineSeries::new(tr.truth.iter().enumerate().map(|(k, x)| ((k + 1) as f64, x[i])), BLACK.stroke_width(3)))
+                .draw_series(LineSeries::new(
+                    (1..=exp.steps).map(|k| (k as f64, 0.0)),
+                    BLACK.stroke_width(3),
+                ))
                 .map_err(pe)?;
         }
         legend(&b, &names)?;
@@ -372,7 +496,12 @@ pub fn render(input: &Input) -> Result<String, String> {
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>hushfuse report: {}</title><style>{STYLE}</style></head><body>\n",
         esc(&s.scenario)
     );
-    let _ = writeln!(h, "<h1>{}</h1>\n<p>{}</p>", esc(&s.scenario), esc(&s.description));
+    let _ = writeln!(
+        h,
+        "<h1>{}</h1>\n<p>{}</p>",
+        esc(&s.scenario),
+        esc(&s.description)
+    );
     let _ = writeln!(
         h,
         "<table class=\"meta\"><tr><td>hushfuse</td><td>{}</td></tr><tr><td>source</td><td>{}</td></tr><tr><td>seed</td><td>{} (trial t draws truth and measurements from stream (seed, t, 0); scheme v its coins from (seed, t, 1 + v){})</td></tr><tr><td>trials x steps</td><td>{} x {}</td></tr><tr><td>sensors, state dimension</td><td>{}, {}</td></tr></table>",
@@ -394,14 +523,34 @@ pub fn render(input: &Input) -> Result<String, String> {
             &format!("mean RMSE of {group} against bits"),
             &x,
             &format!("mean RMSE {group}"),
-            &arena::bits_lines(out, &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN)),
+            &arena::bits_lines(
+                out,
+                &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN),
+                true,
+            ),
         )?;
         let _ = writeln!(h, "<h2>Accuracy against bits</h2>\n<figure>{svg}</figure>");
-        let svg = plot::lines_svg("ANEES against bits (1 = consistent)", &x, "ANEES", &arena::bits_lines(out, &|c| c.result.anees))?;
+        let svg = plot::lines_svg(
+            "ANEES against bits (1 = consistent)",
+            &x,
+            "ANEES",
+            &arena::bits_lines(out, &|c| c.result.anees, false),
+        )?;
         let _ = writeln!(h, "<figure>{svg}</figure>");
         let _ = writeln!(h, "<h2>Calibration</h2>");
         for (b, row) in out.rows.iter().enumerate() {
-            let mut rows = vec![vec!["scheme".to_string(), "knob".into(), "target".into(), "achieved".into(), "status".into(), format!("mean RMSE {group}"), "ANEES".into(), "payload bits".into(), "frame bits".into(), "downlink bits".into()]];
+            let mut rows = vec![vec![
+                "scheme".to_string(),
+                "knob".into(),
+                "target".into(),
+                "achieved".into(),
+                "status".into(),
+                format!("mean RMSE {group}"),
+                "ANEES".into(),
+                "payload bits".into(),
+                "frame bits".into(),
+                "downlink bits".into(),
+            ]];
             for c in row {
                 rows.push(vec![
                     c.label.clone(),
@@ -426,14 +575,36 @@ pub fn render(input: &Input) -> Result<String, String> {
     let _ = writeln!(
         h,
         "<h2>Results{}</h2>",
-        if input.arena.is_some() { format!(" at the first budget ({} bits per step)", short(input.arena.map_or(0.0, |o| o.budgets[0]))) } else { String::new() }
+        if input.arena.is_some() {
+            format!(
+                " at the first budget ({} bits per step)",
+                short(input.arena.map_or(0.0, |o| o.budgets[0]))
+            )
+        } else {
+            String::new()
+        }
     );
     let mut rows = vec![vec!["scheme".to_string(), "params".into()]];
     rows[0].extend(s.group_order.iter().map(|g| format!("mean RMSE {g}")));
-    rows[0].extend(["MSE(ss)", "±se", "ANEES", "rate", "payload bits/step", "frame bits/step", "downlink bits/step"].map(String::from));
+    rows[0].extend(
+        [
+            "MSE(ss)",
+            "±se",
+            "ANEES",
+            "rate",
+            "payload bits/step",
+            "frame bits/step",
+            "downlink bits/step",
+        ]
+        .map(String::from),
+    );
     for r in &s.schemes {
         let mut row = vec![r.name.clone(), params_text(&r.params)];
-        row.extend(s.group_order.iter().map(|g| format!("{:.4}", r.mean_rmse[g])));
+        row.extend(
+            s.group_order
+                .iter()
+                .map(|g| format!("{:.4}", r.mean_rmse[g])),
+        );
         row.extend([
             format!("{:.4}", r.steady_state.mse),
             format!("{:.4}", r.steady_state.mse_se),
@@ -446,13 +617,32 @@ pub fn render(input: &Input) -> Result<String, String> {
         rows.push(row);
     }
     h.push_str(&html_table(&rows));
-    let sel = selected(s, 6);
-    let _ = writeln!(h, "<h2>Per-step error</h2>\n<p>The all-data bound and the best schemes by mean RMSE of {}; bands: ±2 standard errors of the RMSE (delta method on the per-trial squared errors).</p>", esc(group));
+    let within = |i: usize| {
+        input.arena.is_none_or(|o| {
+            let c = &o.rows[0][i];
+            c.status == super::calibrate::Status::Calibrated
+                || c.achieved <= c.target * (1.0 + o.tolerance)
+        })
+    };
+    let sel = selected(s, 6, &within);
+    let _ = writeln!(h, "<h2>Per-step error</h2>\n<p>The all-data bound and the best schemes by mean RMSE of {}{}; bands: ±2 standard errors of the RMSE (delta method on the per-trial squared errors).</p>", esc(group), if input.arena.is_some() { " among those within the first budget" } else { "" });
     let _ = writeln!(h, "<figure>{}</figure>", rmse_bands(input, &sel)?);
     let tr = trace::trace(exp, 0, input.alone)?;
-    let _ = writeln!(h, "<h2>One trial</h2>\n<figure>{}</figure>", trajectory(input, &tr, &sel)?);
-    let _ = writeln!(h, "<h3>Who sent when (trial 0)</h3>\n<figure>{}</figure>", timeline(input, &tr, &sel));
-    let _ = writeln!(h, "<h2>The scenario as run</h2>\n<pre>{}</pre>", esc(input.scenario_text));
+    let _ = writeln!(
+        h,
+        "<h2>One trial</h2>\n<figure>{}</figure>",
+        trajectory(input, &tr, &sel)?
+    );
+    let _ = writeln!(
+        h,
+        "<h3>Who sent when (trial 0)</h3>\n<figure>{}</figure>",
+        timeline(input, &tr, &sel)
+    );
+    let _ = writeln!(
+        h,
+        "<h2>The scenario as run</h2>\n<pre>{}</pre>",
+        esc(input.scenario_text)
+    );
     h.push_str("</body></html>\n");
     Ok(h)
 }
@@ -462,7 +652,10 @@ pub fn render(input: &Input) -> Result<String, String> {
 pub fn external_references(html: &str) -> Vec<String> {
     let lower = html.to_ascii_lowercase();
     let mut bad = Vec::new();
-    for pat in ["src=", "href=", "@import", "url(", "<link", "<script", "<iframe", "<img", "<object", "<embed"] {
+    for pat in [
+        "src=", "href=", "@import", "url(", "<link", "<script", "<iframe", "<img", "<object",
+        "<embed",
+    ] {
         let mut from = 0;
         while let Some(i) = lower[from..].find(pat) {
             let at = from + i;

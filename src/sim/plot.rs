@@ -59,7 +59,12 @@ pub fn lines(
 }
 
 /// [`lines`] into a string (for inline SVG in `report.html`).
-pub fn lines_svg(title: &str, x_label: &str, y_label: &str, data: &[Line]) -> Result<String, String> {
+pub fn lines_svg(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    data: &[Line],
+) -> Result<String, String> {
     let all: Vec<(f64, f64)> = data
         .iter()
         .flat_map(|l| l.points.iter().copied())
@@ -95,6 +100,7 @@ pub fn lines_svg(title: &str, x_label: &str, y_label: &str, data: &[Line]) -> Re
                 let mut chart = $chart;
                 chart
                     .configure_mesh()
+                    .light_line_style(RGBColor(242, 242, 242))
                     .x_desc(x_label)
                     .y_desc(y_label)
                     .draw()
@@ -109,7 +115,12 @@ pub fn lines_svg(title: &str, x_label: &str, y_label: &str, data: &[Line]) -> Re
                         .collect();
                     if l.dashed {
                         chart
-                            .draw_series(DashedLineSeries::new(pts.clone(), 6, 4, c.stroke_width(2)))
+                            .draw_series(DashedLineSeries::new(
+                                pts.clone(),
+                                6,
+                                4,
+                                c.stroke_width(2),
+                            ))
                             .map_err(plot_err)?;
                     } else if pts.len() > 1 {
                         chart
@@ -128,7 +139,9 @@ pub fn lines_svg(title: &str, x_label: &str, y_label: &str, data: &[Line]) -> Re
                                 )
                                 .map_err(plot_err)?,
                             _ => chart
-                                .draw_series(pts.iter().map(|&p| Cross::new(p, 4, c.stroke_width(2))))
+                                .draw_series(
+                                    pts.iter().map(|&p| Cross::new(p, 4, c.stroke_width(2))),
+                                )
                                 .map_err(plot_err)?,
                         };
                     }
@@ -165,7 +178,10 @@ pub fn lines_svg(title: &str, x_label: &str, y_label: &str, data: &[Line]) -> Re
                 for seg in 0..3 {
                     let s0 = xa + seg * 12;
                     legend_area
-                        .draw(&PathElement::new(vec![(s0, y), (s0 + 7, y)], c.stroke_width(2)))
+                        .draw(&PathElement::new(
+                            vec![(s0, y), (s0 + 7, y)],
+                            c.stroke_width(2),
+                        ))
                         .map_err(plot_err)?;
                 }
             } else if l.points.len() > 1 {

@@ -57,7 +57,8 @@ fn run_variant(
     let n = exp.system.n_sensors();
     let stream = 1 + if alone { 0 } else { v as u64 };
     let mut rng = trial_rng(exp.seed, trial as u64, stream);
-    let center_seed = splitmix64(trial_seed(exp.seed, trial as u64, stream) ^ 0xC3A5_C85C_97CB_3127);
+    let center_seed =
+        splitmix64(trial_seed(exp.seed, trial as u64, stream) ^ 0xC3A5_C85C_97CB_3127);
     let variant = &exp.variants[v];
     let mut inst = variant
         .scheme
@@ -140,10 +141,7 @@ pub fn rmse_with_se(
         for v in 0..exp.variants.len() {
             let (a, b) = (&mut s1[v], &mut s2[v]);
             run_variant(exp, &data, v, trial, alone, &mut |k, x, est, _| {
-                let e: f64 = indices
-                    .iter()
-                    .map(|&i| (x[i] - est.mean[i]).powi(2))
-                    .sum();
+                let e: f64 = indices.iter().map(|&i| (x[i] - est.mean[i]).powi(2)).sum();
                 a[k - 1] += e;
                 b[k - 1] += e * e;
             })?;
