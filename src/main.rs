@@ -410,10 +410,10 @@ fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, Path
         out.evaluations,
         elapsed
     );
-    for b in 0..budgets.len() {
+    for (b, budget) in budgets.iter().enumerate() {
         msg.push_str(&format!(
             "\nbudget {} {} bits/step (tolerance {}%):\n",
-            calibrate::short(budgets[b]),
+            calibrate::short(*budget),
             axis.name(),
             calibrate::short(100.0 * out.tolerance)
         ));

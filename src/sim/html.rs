@@ -410,6 +410,7 @@ fn trajectory(input: &Input, tr: &trace::Trace, sel: &[usize]) -> Result<String,
     Ok(buf)
 }
 
+#[allow(clippy::needless_range_loop)] // i indexes sensors across the per-step rows
 /// Per selected scheme, a row per sensor and a cell per step: sent, silent, not scheduled.
 fn timeline(input: &Input, tr: &trace::Trace, sel: &[usize]) -> String {
     let steps = input.exp.steps;

@@ -45,6 +45,12 @@ fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
     splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream)
 }
 
+/// Called after every step with (k, truth, fused estimate, what each sensor did).
+type StepFn<'a> = &'a mut dyn FnMut(usize, &Vector, &Gaussian, &[Link]);
+
+/// Per variant: per-step RMSE and its standard error.
+pub type RmseSe = Vec<(Vec<f64>, Vec<f64>)>;
+
 /// Runs variant `v` over `trial`, calling `f(k, truth, estimate, links)` after every step.
 fn run_variant(
     exp: &Experiment,
@@ -52,7 +58,7 @@ fn run_variant(
     v: usize,
     trial: usize,
     alone: bool,
-    f: &mut dyn FnMut(usize, &Vector, &Gaussian, &[Link]),
+    f: StepFn,
 ) -> Result<(), String> {
     let n = exp.system.n_sensors();
     let stream = 1 + if alone { 0 } else { v as u64 };
@@ -132,7 +138,7 @@ pub fn rmse_with_se(
     indices: &[usize],
     trials: usize,
     alone: bool,
-) -> Result<Vec<(Vec<f64>, Vec<f64>)>, String> {
+) -> Result<RmseSe, String> {
     let t = exp.steps;
     let mut s1 = vec![vec![0.0; t]; exp.variants.len()];
     let mut s2 = vec![vec![0.0; t]; exp.variants.len()];
