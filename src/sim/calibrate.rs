@@ -22,7 +22,8 @@
 //! [0.5, 1]; `l` of `censored-pf` in [0.001 N, N] (N sensors); `bits` of
 //! `quantized-innovation` the integers 1..=8 (values that do not build, e.g. zhang above 3, end
 //! the range); every threshold (`alpha`, `delta`, `tau`) in [0, hi], hi found by quadrupling
-//! from 1 until the rate is below the smallest target (at most 4^12). A kind whose knob is not
+//! from 1 until the rate is below the smallest target (at most 4^12), or until it stops falling
+//! (a floor: hi is then the first value on it). A kind whose knob is not
 //! in the table but documents `number >= 0` is treated as a threshold.
 use super::build::{self, LoadOptions};
 use super::results::{self, SchemeSummary, Summary};
@@ -390,11 +391,16 @@ pub fn calibrate(
                 eval(&mut ev, hi).ok_or(format!("{label}: `{knob}` = {hi} does not build"))?;
             if range.hi.is_none() {
                 let mut n = 0;
+                // Quadruple until below the smallest target; stop where the rate no longer
+                // falls (a scheme with a floor, e.g. Algorithm 1's send-after-silence), keeping
+                // the first value of the floor.
                 while axis.of(&f_hi) > min_target && n < 12 {
-                    hi *= 4.0;
-                    match eval(&mut ev, hi) {
-                        Some(s) => f_hi = s,
-                        None => break,
+                    match eval(&mut ev, hi * 4.0) {
+                        Some(s) if axis.of(&s) < axis.of(&f_hi) => {
+                            hi *= 4.0;
+                            f_hi = s;
+                        }
+                        _ => break,
                     }
                     n += 1;
                 }
