@@ -1,6 +1,8 @@
 //! `hushfuse` command line: run scenarios, list the built-in ones, reproduce paper figures.
 use clap::{Parser, Subcommand};
-use hushfuse::sim::{build, builtin, plot, report, results, runner, tables};
+use hushfuse::sim::{
+    arena, build, builtin, calibrate, html, plot, report, results, runner, tables,
+};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use std::io::IsTerminal;
@@ -13,7 +15,7 @@ use std::time::Instant;
 #[command(
     name = "hushfuse",
     version,
-    about = "Multi-sensor state estimation when sensors must save bandwidth.\nWith no command, runs the built-in default scenario."
+    about = "Multi-sensor state estimation when sensors must save bandwidth.\nWith no command, runs a quick arena: every scheme at a few bit budgets (seconds)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -37,6 +39,25 @@ struct RunArgs {
     /// Run even if the estimated memory or run time is above the limits (16 GiB, 24 hours).
     #[arg(long)]
     allow_large: bool,
+    /// Tune every scheme's bandwidth knob so that all spend BITS bits per step (pilot runs on
+    /// common random numbers), then compare them.
+    #[arg(long, value_name = "BITS", conflicts_with = "budgets")]
+    budget: Option<f64>,
+    /// Several budgets, comma-separated: accuracy against bits, the Pareto front and the best
+    /// scheme per budget.
+    #[arg(long, value_name = "B1,B2,...")]
+    budgets: Option<String>,
+    /// What the budget counts: uplink payload bits, whole 802.15.4 frames, or frames plus the
+    /// downlink feedback.
+    #[arg(long, default_value = "payload", value_name = "payload|frame|total")]
+    budget_axis: String,
+    /// Trials of the calibration's pilot runs (default: the scenario's; fewer is faster, and the
+    /// calibrated knobs are then rerun at the full count).
+    #[arg(long)]
+    pilot_trials: Option<usize>,
+    /// Also write report.html (self-contained: figures, tables, the scenario as run).
+    #[arg(long)]
+    report: bool,
 }
 
 #[derive(Subcommand)]
@@ -47,6 +68,15 @@ enum Command {
         scenario: String,
         #[command(flatten)]
         args: RunArgs,
+    },
+    /// Write report.html for the results in OUT_DIR (of `hushfuse run`): figures, tables, one
+    /// trial in detail, the scenario as run. Reruns trial 0 and the per-step errors.
+    Report {
+        /// The output folder of a run (holds summary.json and scenario_as_run.toml).
+        out_dir: PathBuf,
+        /// Worker threads (unused by the report itself; kept for symmetry).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
     },
     /// List the built-in scenarios.
     List,
@@ -74,8 +104,14 @@ enum Failure {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        None => run("default", &RunArgs::default(), false),
-        Some(Command::Run { scenario, args }) => run(&scenario, &args, false),
+        None => quick_arena(),
+        Some(Command::Run { scenario, args }) => {
+            if args.budget.is_some() || args.budgets.is_some() {
+                arena_run(&scenario, &args).map(|_| ())
+            } else {
+                run(&scenario, &args, false)
+            }
+        }
         Some(Command::Reproduce { id, args }) => {
             if builtin::get(&id).is_none() && !Path::new(&id).exists() {
                 Err(Failure::Input(format!(
@@ -93,6 +129,7 @@ fn main() -> ExitCode {
             });
             Ok(())
         }
+        Some(Command::Report { out_dir, .. }) => report_dir(&out_dir),
         Some(Command::List) => {
             let text: String = builtin::BUILTIN
                 .iter()
@@ -182,6 +219,7 @@ fn table_report(text: &str, source: &str, args: &RunArgs) -> Result<(), Failure>
 
 fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     let (text, source) = scenario_text(scenario)?;
+    let text_in = text.clone();
     let kind = build::file_kind(&text, &source).map_err(|e| Failure::Input(e.to_string()))?;
     if kind == build::FileKind::TableReport {
         return table_report(&text, &source, args);
@@ -277,6 +315,22 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         files.push("reproduction.md".to_string());
     }
     files.extend(plot::write_all(&exp, &summary, &dir).map_err(Failure::Run)?);
+    let as_run = as_run_text(&text_in, args);
+    write("scenario_as_run.toml", &as_run)?;
+    files.push("scenario_as_run.toml".to_string());
+    if args.report {
+        let page = html::render(&html::Input {
+            exp: &exp,
+            summary: &summary,
+            scenario_text: &as_run,
+            alone: false,
+            arena: None,
+            se_trials: exp.trials.min(200),
+        })
+        .map_err(Failure::Run)?;
+        write("report.html", &page)?;
+        files.push("report.html".to_string());
+    }
     text.push_str(&format!(
         "\nwrote {}: {}\n",
         dir.display(),
@@ -290,5 +344,238 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
             bad.join("\n  ")
         )));
     }
+    Ok(())
+}
+
+/// Budgets from `--budget` or `--budgets`.
+fn budgets_of(args: &RunArgs) -> Result<Vec<f64>, Failure> {
+    if let Some(b) = args.budget {
+        return Ok(vec![b]);
+    }
+    let text = args.budgets.as_deref().unwrap_or_default();
+    text.split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|b| b.is_finite() && *b > 0.0)
+                .ok_or_else(|| {
+                    Failure::Input(format!(
+                        "--budgets: expected positive numbers separated by commas, got {t:?}"
+                    ))
+                })
+        })
+        .collect()
+}
+
+/// `run --budget` / `--budgets`: calibrate every scheme to each budget, print and write the
+/// comparison. Returns the outcome and the output folder.
+fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, PathBuf), Failure> {
+    let (text, source) = scenario_text(scenario)?;
+    let budgets = budgets_of(args)?;
+    let axis = calibrate::Axis::parse(&args.budget_axis).map_err(Failure::Input)?;
+    let opts = calibrate::Options {
+        axis,
+        pilot_trials: args.pilot_trials,
+        threads: args.threads,
+        load: build::LoadOptions {
+            trials: args.trials,
+            seed: args.seed,
+            threads: args.threads,
+            limits: args.allow_large.then(hushfuse::sim::limits::Limits::none),
+        },
+        ..Default::default()
+    };
+    let start = Instant::now();
+    let out = calibrate::calibrate(&text, &source, &budgets, &opts).map_err(|e| {
+        if e.contains("field `") || e.starts_with(&source) {
+            Failure::Input(e)
+        } else {
+            Failure::Run(e)
+        }
+    })?;
+    let elapsed = start.elapsed().as_secs_f64();
+    let first = &out.summaries[0];
+    let group = first.group_order[0].clone();
+    let mut msg = format!(
+        "{} — {} trials x {} steps, seed {}, {} sensors: {} schemes calibrated to {} budget(s) on the {} axis ({} pilot runs, {:.1} s)\n",
+        first.scenario,
+        first.trials,
+        first.steps,
+        first.seed,
+        first.sensors,
+        out.rows[0].len(),
+        budgets.len(),
+        axis.name(),
+        out.evaluations,
+        elapsed
+    );
+    for (b, budget) in budgets.iter().enumerate() {
+        msg.push_str(&format!(
+            "\nbudget {} {} bits/step (tolerance {}%):\n",
+            calibrate::short(*budget),
+            axis.name(),
+            calibrate::short(100.0 * out.tolerance)
+        ));
+        msg.push_str(&calibrate::table(&out, b, &group));
+    }
+    msg.push_str("\nbest scheme per budget (lowest mean RMSE among schemes within the budget):\n");
+    msg.push_str(&arena::best_table(&out, &group));
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(&first.scenario));
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
+    let write = |name: &str, text: &str| {
+        let p = dir.join(name);
+        if let Some(parent) = p.parent() {
+            std::fs::create_dir_all(parent)
+                .map_err(|e| Failure::Run(format!("cannot create {}: {e}", parent.display())))?;
+        }
+        std::fs::write(&p, text)
+            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", p.display())))
+    };
+    let json = serde_json::json!({
+        "scenario": first.scenario,
+        "axis": axis.name(),
+        "tolerance": out.tolerance,
+        "pilot_runs": out.evaluations,
+        "seconds": elapsed,
+        "budgets": budgets,
+        "rows": out.rows.iter().map(|row| row.iter().map(|c| serde_json::json!({
+            "scheme": c.label, "kind": c.kind, "knob": c.knob, "value": c.value,
+            "target": c.target, "achieved": c.achieved, "status": c.status,
+            "bits_per_step": c.result.bits_per_step,
+            "frame_bits_per_step": c.result.frame_bits_per_step,
+            "downlink_bits_per_step": c.result.downlink_bits_per_step,
+            "mean_rmse": c.result.mean_rmse, "anees": c.result.anees,
+            "steady_state": c.result.steady_state,
+        })).collect::<Vec<_>>()).collect::<Vec<_>>(),
+    });
+    write(
+        "calibration.json",
+        &serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?,
+    )?;
+    write("best_per_budget.md", &arena::best_markdown(&out, &group))?;
+    let mut files = vec![
+        "calibration.json".to_string(),
+        "best_per_budget.md".to_string(),
+    ];
+    for (b, s) in out.summaries.iter().enumerate() {
+        let sub = format!("budget-{}", calibrate::short(budgets[b]));
+        write(&format!("{sub}/scenario.toml"), &out.texts[b])?;
+        write(
+            &format!("{sub}/summary.json"),
+            &serde_json::to_string_pretty(s).map_err(|e| Failure::Run(e.to_string()))?,
+        )?;
+        write(&format!("{sub}/per_step.csv"), &results::per_step_csv(s))?;
+        files.push(format!("{sub}/"));
+    }
+    files.extend(arena::write_plots(&out, &group, &first.scenario, &dir).map_err(Failure::Run)?);
+    if args.report {
+        let exp = build::load_with(&out.texts[0], &source, &opts.load)
+            .map_err(|e| Failure::Run(e.to_string()))?;
+        let page = html::render(&html::Input {
+            exp: &exp,
+            summary: &out.summaries[0],
+            scenario_text: &out.texts[0],
+            alone: true,
+            arena: Some(&out),
+            se_trials: exp.trials.min(200),
+        })
+        .map_err(Failure::Run)?;
+        write("report.html", &page)?;
+        files.push("report.html".into());
+    }
+    msg.push_str(&format!(
+        "\nwrote {}: {}\n",
+        dir.display(),
+        files.join(", ")
+    ));
+    print_out(&msg);
+    Ok((out, dir))
+}
+
+/// `hushfuse` without arguments: the quick arena, and which scheme wins at which budget.
+fn quick_arena() -> Result<(), Failure> {
+    let (name, trials, budgets) = arena::QUICK;
+    let text = builtin::get(name).expect("built-in quick arena");
+    let opts = calibrate::Options {
+        load: build::LoadOptions {
+            trials: Some(trials),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let start = Instant::now();
+    let out = calibrate::calibrate(text, &format!("built-in:{name}"), budgets, &opts)
+        .map_err(Failure::Run)?;
+    let group = out.summaries[0].group_order[0].clone();
+    let mut msg = arena::quick_description(trials, budgets);
+    msg.push('\n');
+    msg.push_str(&arena::best_table(&out, &group));
+    msg.push_str(&format!(
+        "\n({} pilot runs, {:.1} s. `hushfuse list` shows the built-in scenarios, `hushfuse run default` the seed 004 comparison, `hushfuse --help` the commands.)\n",
+        out.evaluations,
+        start.elapsed().as_secs_f64()
+    ));
+    print_out(&msg);
+    Ok(())
+}
+
+/// The scenario text as run: the file with `--trials` and `--seed` written in (comments kept
+/// when nothing was overridden).
+fn as_run_text(text: &str, args: &RunArgs) -> String {
+    if args.trials.is_none() && args.seed.is_none() {
+        return text.to_string();
+    }
+    let Ok(mut t) = toml::from_str::<toml::Table>(text) else {
+        return text.to_string();
+    };
+    if let Some(n) = args.trials {
+        t.insert("trials".into(), toml::Value::Integer(n as i64));
+    }
+    if let Some(s) = args.seed {
+        t.insert("seed".into(), toml::Value::Integer(s as i64));
+    }
+    toml::to_string(&t).unwrap_or_else(|_| text.to_string())
+}
+
+/// `hushfuse report <out-dir>`: report.html from a run's summary.json and scenario_as_run.toml.
+fn report_dir(dir: &Path) -> Result<(), Failure> {
+    let read = |name: &str| {
+        std::fs::read_to_string(dir.join(name)).map_err(|e| {
+            Failure::Input(format!(
+                "{}: cannot read: {e} (run `hushfuse run <scenario> --out {}` first; calibrated arenas: `run --budgets ... --report`)",
+                dir.join(name).display(),
+                dir.display()
+            ))
+        })
+    };
+    let text = read("scenario_as_run.toml")?;
+    let summary: results::Summary = serde_json::from_str(&read("summary.json")?)
+        .map_err(|e| Failure::Input(format!("{}: {e}", dir.join("summary.json").display())))?;
+    let source = dir.join("scenario_as_run.toml").display().to_string();
+    let exp = build::load(&text, &source).map_err(|e| Failure::Input(e.to_string()))?;
+    if exp.variants.len() != summary.schemes.len() || exp.trials != summary.trials {
+        return Err(Failure::Input(format!(
+            "{}: summary.json and scenario_as_run.toml do not belong together",
+            dir.display()
+        )));
+    }
+    let page = html::render(&html::Input {
+        exp: &exp,
+        summary: &summary,
+        scenario_text: &text,
+        alone: false,
+        arena: None,
+        se_trials: exp.trials.min(200),
+    })
+    .map_err(Failure::Run)?;
+    let path = dir.join("report.html");
+    std::fs::write(&path, page)
+        .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+    print_out(&format!("wrote {}\n", path.display()));
     Ok(())
 }

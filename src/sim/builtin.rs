@@ -92,6 +92,31 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         "Seed 002 Section IV-B / Figs. 10-11: target tracking with acceleration bias, FTKF-DB vs FTKF",
         include_str!("../../scenarios/geng-tracking.toml"),
     ),
+    (
+        "arena-1d",
+        "Arena: 1-D constant velocity, 4 scalar linear sensors, every scheme of the registry (--budget, --budgets)",
+        include_str!("../../scenarios/arena-1d.toml"),
+    ),
+    (
+        "arena-nca",
+        "Arena: seed 004's six 2-D linear sensors, every scheme that applies",
+        include_str!("../../scenarios/arena-nca.toml"),
+    ),
+    (
+        "arena-rss",
+        "Arena: seed 000's nine RSS sensors, every scheme that applies",
+        include_str!("../../scenarios/arena-rss.toml"),
+    ),
+    (
+        "arena-wsn",
+        "Arena: seed 003's 50 range sensors (quantized innovation activates 3), every scheme that applies",
+        include_str!("../../scenarios/arena-wsn.toml"),
+    ),
+    (
+        "arena-tobit",
+        "Arena: seed 002's oscillator with bias, two scalar sensors, every scheme that applies",
+        include_str!("../../scenarios/arena-tobit.toml"),
+    ),
 ];
 
 /// The TOML text of a built-in scenario.

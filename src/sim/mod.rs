@@ -1,7 +1,10 @@
 //! Scenario files, the Monte Carlo runner, metrics, outputs (CSV/JSON/SVG) and the paper
 //! reports. The simulator owns the only time loop.
+pub mod arena;
 pub mod build;
 pub mod builtin;
+pub mod calibrate;
+pub mod html;
 pub mod limits;
 pub mod metrics;
 pub mod paper_check;
@@ -14,3 +17,4 @@ pub mod schemes;
 pub mod sweep;
 pub mod system;
 pub mod tables;
+pub mod trace;

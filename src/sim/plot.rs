@@ -34,9 +34,19 @@ pub struct Line {
     pub points: Vec<(f64, f64)>,
     pub dashed: bool,
     pub color: usize,
+    /// Draw a marker at every point (a line of one point is always drawn as a marker).
+    pub markers: bool,
+}
+
+/// Marker shape of a color index: circles for the first palette round, then triangles, then
+/// squares, so that more than 12 series stay distinguishable.
+fn shape(i: usize) -> usize {
+    (i / COLORS.len()) % 3
 }
 
 /// Draws lines into an SVG file with a log-scale y axis when the data span more than a decade.
+/// The legend sits to the right of the plot (it never hides data); dashed lines are dashed in
+/// the legend too, and markers appear there as well.
 pub fn lines(
     path: &Path,
     title: &str,
@@ -44,6 +54,17 @@ pub fn lines(
     y_label: &str,
     data: &[Line],
 ) -> Result<(), String> {
+    let svg = lines_svg(title, x_label, y_label, data)?;
+    std::fs::write(path, svg).map_err(|e| format!("plot: cannot write {}: {e}", path.display()))
+}
+
+/// [`lines`] into a string (for inline SVG in `report.html`).
+pub fn lines_svg(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    data: &[Line],
+) -> Result<String, String> {
     let all: Vec<(f64, f64)> = data
         .iter()
         .flat_map(|l| l.points.iter().copied())
@@ -61,79 +82,133 @@ pub fn lines(
         x0 -= 0.5;
         x1 += 0.5;
     }
+    let pad = 0.03 * (x1 - x0);
+    let (x0, x1) = (x0 - pad, x1 + pad);
     let positive: Vec<f64> = all.iter().map(|p| p.1).filter(|y| *y > 0.0).collect();
     let y0 = positive.iter().copied().fold(f64::INFINITY, f64::min);
     let y1 = positive.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let log = y0.is_finite() && y1 / y0 > 10.0;
-    let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
-    root.fill(&WHITE).map_err(plot_err)?;
-    macro_rules! draw {
-        ($chart:expr) => {{
-            let mut chart = $chart;
-            chart
-                .configure_mesh()
-                .x_desc(x_label)
-                .y_desc(y_label)
-                .draw()
-                .map_err(plot_err)?;
-            for l in data {
-                let c = color(l.color);
-                let pts: Vec<(f64, f64)> = l
-                    .points
-                    .iter()
-                    .copied()
-                    .filter(|(_, y)| !log || *y > 0.0)
-                    .collect();
-                if l.dashed {
-                    chart
-                        .draw_series(DashedLineSeries::new(pts, 6, 4, c.stroke_width(2)))
-                        .map_err(plot_err)?
-                        .label(l.name.clone())
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1))
-                        });
-                } else {
-                    chart
-                        .draw_series(LineSeries::new(pts, c.stroke_width(2)))
-                        .map_err(plot_err)?
-                        .label(l.name.clone())
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3))
-                        });
+    let legend_w = 330u32;
+    let height = 560u32.max(60 + 18 * data.len() as u32);
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (780 + legend_w, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_err)?;
+        let (plot_area, legend_area) = root.split_horizontally(780);
+        macro_rules! draw {
+            ($chart:expr) => {{
+                let mut chart = $chart;
+                chart
+                    .configure_mesh()
+                    .light_line_style(RGBColor(242, 242, 242))
+                    .x_desc(x_label)
+                    .y_desc(y_label)
+                    .draw()
+                    .map_err(plot_err)?;
+                for l in data {
+                    let c = color(l.color);
+                    let pts: Vec<(f64, f64)> = l
+                        .points
+                        .iter()
+                        .copied()
+                        .filter(|(x, y)| x.is_finite() && y.is_finite() && (!log || *y > 0.0))
+                        .collect();
+                    if l.dashed {
+                        chart
+                            .draw_series(DashedLineSeries::new(
+                                pts.clone(),
+                                6,
+                                4,
+                                c.stroke_width(2),
+                            ))
+                            .map_err(plot_err)?;
+                    } else if pts.len() > 1 {
+                        chart
+                            .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))
+                            .map_err(plot_err)?;
+                    }
+                    if l.markers || pts.len() == 1 {
+                        let sh = shape(l.color);
+                        match sh {
+                            0 => chart
+                                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, c.filled())))
+                                .map_err(plot_err)?,
+                            1 => chart
+                                .draw_series(
+                                    pts.iter().map(|&p| TriangleMarker::new(p, 5, c.filled())),
+                                )
+                                .map_err(plot_err)?,
+                            _ => chart
+                                .draw_series(
+                                    pts.iter().map(|&p| Cross::new(p, 4, c.stroke_width(2))),
+                                )
+                                .map_err(plot_err)?,
+                        };
+                    }
                 }
+            }};
+        }
+        let mut builder = ChartBuilder::on(&plot_area);
+        builder
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70);
+        if log {
+            draw!(builder
+                .build_cartesian_2d(x0..x1, (y0 * 0.8..y1 * 1.25).log_scale())
+                .map_err(plot_err)?);
+        } else {
+            let ymax = all.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+            let ymin = all
+                .iter()
+                .map(|p| p.1)
+                .fold(f64::INFINITY, f64::min)
+                .min(0.0);
+            draw!(builder
+                .build_cartesian_2d(x0..x1, ymin..(ymax * 1.1).max(ymin + 1e-12))
+                .map_err(plot_err)?);
+        }
+        // The legend: a sample of each line (dashed when dashed, with its marker), then its name.
+        for (i, l) in data.iter().enumerate() {
+            let c = color(l.color);
+            let y = 40 + 18 * i as i32;
+            let (xa, xb) = (8, 40);
+            if l.dashed {
+                for seg in 0..3 {
+                    let s0 = xa + seg * 12;
+                    legend_area
+                        .draw(&PathElement::new(
+                            vec![(s0, y), (s0 + 7, y)],
+                            c.stroke_width(2),
+                        ))
+                        .map_err(plot_err)?;
+                }
+            } else if l.points.len() > 1 {
+                legend_area
+                    .draw(&PathElement::new(vec![(xa, y), (xb, y)], c.stroke_width(2)))
+                    .map_err(plot_err)?;
             }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()
+            if l.markers || l.points.len() == 1 {
+                let p = (24, y);
+                match shape(l.color) {
+                    0 => legend_area.draw(&Circle::new(p, 4, c.filled())),
+                    1 => legend_area.draw(&TriangleMarker::new(p, 5, c.filled())),
+                    _ => legend_area.draw(&Cross::new(p, 4, c.stroke_width(2))),
+                }
                 .map_err(plot_err)?;
-        }};
+            }
+            legend_area
+                .draw(&Text::new(
+                    l.name.clone(),
+                    (48, y - 7),
+                    ("sans-serif", 13).into_font().color(&BLACK),
+                ))
+                .map_err(plot_err)?;
+        }
+        root.present().map_err(plot_err)?;
     }
-    let mut builder = ChartBuilder::on(&root);
-    builder
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(45)
-        .y_label_area_size(70);
-    if log {
-        draw!(builder
-            .build_cartesian_2d(x0..x1, (y0 * 0.8..y1 * 1.25).log_scale())
-            .map_err(plot_err)?);
-    } else {
-        let ymax = all.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
-        let ymin = all
-            .iter()
-            .map(|p| p.1)
-            .fold(f64::INFINITY, f64::min)
-            .min(0.0);
-        draw!(builder
-            .build_cartesian_2d(x0..x1, ymin..(ymax * 1.1).max(ymin + 1e-12))
-            .map_err(plot_err)?);
-    }
-    root.present().map_err(plot_err)?;
-    Ok(())
+    Ok(buf)
 }
 
 /// Writes the figures of a run into `dir`; returns the files written.
@@ -152,12 +227,14 @@ pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<
                 points: pts.iter().map(|p| (p.rate, p.mse)).collect(),
                 dashed: false,
                 color: ci,
+                markers: true,
             });
             data.push(Line {
                 name: format!("{} trace", curve.label),
                 points: pts.iter().map(|p| (p.rate, p.trace)).collect(),
                 dashed: true,
                 color: ci,
+                markers: true,
             });
         }
         let f = "mse_trace_vs_rate.svg".to_string();
@@ -217,6 +294,7 @@ fn per_step(
                 .collect(),
             dashed: false,
             color: if few { i } else { s.curve },
+            markers: false,
         })
         .collect();
     if !single.is_empty() {
@@ -250,6 +328,7 @@ fn per_step(
                     .collect(),
                 dashed: false,
                 color: j,
+                markers: false,
             })
             .collect();
         if data.len() > 12 {

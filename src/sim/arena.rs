@@ -1,0 +1,246 @@
+//! The arena (issue 11 items 4 and 7): every scheme of a scenario at several bit budgets,
+//! accuracy against bits per step, the Pareto front and the best scheme per budget.
+use super::calibrate::{render, short, Outcome, Status};
+use super::plot::{self, Line};
+use std::path::Path;
+
+/// Indices of the non-dominated points (lower bits and lower error are better), sorted by
+/// bits. A point is dominated when another has bits <= and error <= with one of them strictly
+/// smaller. Non-finite points are never on the front.
+pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..points.len())
+        .filter(|&i| points[i].0.is_finite() && points[i].1.is_finite())
+        .collect();
+    idx.sort_by(|&a, &b| {
+        points[a]
+            .0
+            .total_cmp(&points[b].0)
+            .then(points[a].1.total_cmp(&points[b].1))
+    });
+    let mut front: Vec<usize> = Vec::new();
+    let mut best = f64::INFINITY;
+    for i in idx {
+        if points[i].1 < best {
+            best = points[i].1;
+            front.push(i);
+        }
+    }
+    front
+}
+
+/// Whether a result counts at its budget: calibrated, or spending no more than the budget
+/// (within the tolerance).
+fn within(c: &super::calibrate::Calibrated, tol: f64) -> bool {
+    c.status == Status::Calibrated || c.achieved <= c.target * (1.0 + tol)
+}
+
+/// Per budget: the scheme with the lowest mean RMSE of `group` among those within budget,
+/// as (budget, label, knob text, RMSE, achieved bits, runner-up label and RMSE).
+pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
+    let mut rows = vec![vec![
+        format!("budget ({} bits/step)", out.axis.name()),
+        "best scheme".to_string(),
+        "knob".to_string(),
+        format!("RMSE {group}"),
+        "bits/step".to_string(),
+        "runner-up".to_string(),
+        format!("RMSE {group}"),
+    ]];
+    for (b, row) in out.rows.iter().enumerate() {
+        let mut ok: Vec<&super::calibrate::Calibrated> = row
+            .iter()
+            .filter(|c| within(c, out.tolerance))
+            .filter(|c| c.result.mean_rmse.get(group).is_some_and(|r| r.is_finite()))
+            .collect();
+        ok.sort_by(|a, c| a.result.mean_rmse[group].total_cmp(&c.result.mean_rmse[group]));
+        let knob = |c: &super::calibrate::Calibrated| match (&c.knob, c.value) {
+            (Some(k), Some(v)) => format!("{k} = {}", short(v)),
+            _ => "—".into(),
+        };
+        let mut r = vec![format!("{}", short(out.budgets[b]))];
+        match ok.first() {
+            Some(c) => r.extend([
+                c.label.clone(),
+                knob(c),
+                format!("{:.4}", c.result.mean_rmse[group]),
+                format!("{:.1}", c.achieved),
+            ]),
+            None => r.extend([
+                "(none within budget)".into(),
+                "".into(),
+                "".into(),
+                "".into(),
+            ]),
+        }
+        match ok.get(1) {
+            Some(c) => r.extend([c.label.clone(), format!("{:.4}", c.result.mean_rmse[group])]),
+            None => r.extend(["—".into(), "".into()]),
+        }
+        rows.push(r);
+    }
+    rows
+}
+
+/// The best-per-budget table as text.
+pub fn best_table(out: &Outcome, group: &str) -> String {
+    render(&best_per_budget(out, group))
+}
+
+/// The best-per-budget table as Markdown.
+pub fn best_markdown(out: &Outcome, group: &str) -> String {
+    let rows = best_per_budget(out, group);
+    let mut s = String::new();
+    for (i, r) in rows.iter().enumerate() {
+        s.push_str(&format!("| {} |\n", r.join(" | ")));
+        if i == 0 {
+            s.push_str(&format!("|{}\n", "---|".repeat(r.len())));
+        }
+    }
+    s
+}
+
+/// The lines of an accuracy-against-bits figure: per scheme its points over the budgets
+/// (markers; a scheme without a knob is one marker), and the Pareto front (dashed black).
+pub fn bits_lines(
+    out: &Outcome,
+    metric: &dyn Fn(&super::calibrate::Calibrated) -> f64,
+    front: bool,
+) -> Vec<Line> {
+    let n = out.rows.first().map_or(0, Vec::len);
+    let mut lines = Vec::new();
+    let mut all = Vec::new();
+    for s in 0..n {
+        let mut pts: Vec<(f64, f64)> = out
+            .rows
+            .iter()
+            .map(|row| (row[s].achieved, metric(&row[s])))
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        pts.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9 && (a.1 - b.1).abs() < 1e-12);
+        all.extend(pts.iter().copied());
+        let first = &out.rows[0][s];
+        let tag = match first.status {
+            Status::NoKnob => " (no knob)",
+            Status::NotTunable => " (as written)",
+            _ => "",
+        };
+        lines.push(Line {
+            name: format!("{}{tag}", first.label),
+            points: pts,
+            dashed: false,
+            color: if s >= 10 { s + 1 } else { s },
+            markers: true,
+        });
+    }
+    if !front {
+        return lines;
+    }
+    let front: Vec<(f64, f64)> = pareto_front(&all).into_iter().map(|i| all[i]).collect();
+    lines.push(Line {
+        name: "Pareto front".into(),
+        points: front,
+        dashed: true,
+        color: 10,
+        markers: false,
+    });
+    lines
+}
+
+/// Writes `rmse_<group>_vs_bits.svg` (first group) and `anees_vs_bits.svg`; returns the files.
+pub fn write_plots(
+    out: &Outcome,
+    group: &str,
+    scenario: &str,
+    dir: &Path,
+) -> Result<Vec<String>, String> {
+    let x = format!("{} bits per step (achieved)", out.axis.name());
+    let mut files = Vec::new();
+    let f = format!("rmse_{group}_vs_bits.svg");
+    let g = group.to_string();
+    plot::lines(
+        &dir.join(&f),
+        &format!("{scenario}: mean RMSE of {group} against bits"),
+        &x,
+        &format!("mean RMSE {group}"),
+        &bits_lines(
+            out,
+            &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN),
+            true,
+        ),
+    )?;
+    files.push(f);
+    let f = "anees_vs_bits.svg".to_string();
+    plot::lines(
+        &dir.join(&f),
+        &format!("{scenario}: ANEES against bits (1 = consistent)"),
+        &x,
+        "ANEES",
+        &bits_lines(out, &|c| c.result.anees, false),
+    )?;
+    files.push(f);
+    Ok(files)
+}
+
+/// The quick arena of `hushfuse` without arguments: scenario, trials and budgets.
+pub const QUICK: (&str, usize, &[f64]) = ("arena-1d", 40, &[12.0, 24.0, 48.0, 96.0]);
+
+/// The paragraph above the quick arena's table.
+pub fn quick_description(trials: usize, budgets: &[f64]) -> String {
+    format!(
+        "The quick arena (built-in `arena-1d`, {trials} trials x 100 steps): a target moving on a \
+line at nearly constant velocity, watched by three position sensors (noise variances 1, 2 and 4) \
+and one velocity sensor, each sending 32-bit readings over a link that charges every bit. Every \
+scheme of the library runs on the same truths and measurements; each scheme's one bandwidth knob \
+(a send probability, a threshold, the number of quantizer bits, the average number of senders) \
+is tuned so that it spends the same uplink payload bits per step, here {} bits per step (sending \
+everything costs 128). Schemes without a knob (the all-data KF bound, the round-robin seed 002 \
+schemes) spend what they spend and count only at budgets they fit. The table names, per budget, \
+the scheme with the lowest mean position RMSE. `hushfuse run arena-1d --budgets 12,24,48,96 \
+--report` gives the full comparison with figures.\n",
+        budgets
+            .iter()
+            .map(|b| short(*b))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_front_of_a_hand_made_set() {
+        let pts = [
+            (10.0, 5.0),     // 0: front
+            (20.0, 3.0),     // 1: front
+            (15.0, 6.0),     // 2: dominated by 0
+            (30.0, 3.0),     // 3: dominated by 1 (same error, more bits)
+            (5.0, 9.0),      // 4: front (fewest bits)
+            (40.0, 1.0),     // 5: front
+            (20.0, 4.0),     // 6: dominated by 1 (same bits, more error)
+            (f64::NAN, 0.1), // 7: never
+            (10.0, 5.0),     // 8: duplicate of 0: only one of them
+        ];
+        let f = pareto_front(&pts);
+        assert_eq!(f.len(), 4, "{f:?}");
+        assert_eq!(f[0], 4);
+        assert!(f[1] == 0 || f[1] == 8);
+        assert_eq!(&f[2..], &[1, 5]);
+        // No point of the front is dominated by any point, and every other point is.
+        for (i, p) in pts.iter().enumerate() {
+            if !p.0.is_finite() {
+                continue;
+            }
+            let dominated = pts
+                .iter()
+                .any(|q| q.0.is_finite() && q.0 <= p.0 && q.1 <= p.1 && (q.0 < p.0 || q.1 < p.1));
+            if f.contains(&i) {
+                assert!(!dominated, "{i} on the front but dominated");
+            } else if i != 0 && i != 8 {
+                assert!(dominated, "{i} off the front but not dominated");
+            }
+        }
+    }
+}

@@ -1,0 +1,581 @@
+//! Rate calibration (issue 11 item 3): tune every scheme's bandwidth knob so that all schemes of
+//! a scenario spend the same bits per step, then compare their accuracy at that budget.
+//!
+//! **Method.** Each `[[schemes]]` entry is run *alone* (so its coins always come from the same
+//! stream, variant 0) on pilot runs of the scenario: same seed, same trials, hence the same
+//! truths and measurements for every knob value (common random numbers). With common random
+//! numbers the map knob -> bits per step is monotone (a threshold's rate falls as it grows; a
+//! send probability's or `l`'s rises): the direction is read off the two ends of the range, and
+//! the knob is bisected until the pilot's bits per step are within `tolerance` (relative, 2% by
+//! default) of the target, or 40 halvings. Integer knobs (quantizer bits) are evaluated at every
+//! integer of their range and the nearest is taken. A target outside what the range can reach
+//! takes the nearer end and is marked. Schemes without a knob run as they are and are marked.
+//!
+//! By default the pilot runs use the scenario's own trials, so the point reported *is* the
+//! pilot point: the achieved budget equals the pilot's, and the results are those of the scheme
+//! alone with the calibrated knob (every scheme on the same truths). With fewer pilot trials
+//! (`pilot_trials`) the calibrated knob is rerun at the full trial count and the achieved budget
+//! is measured there (it then differs from the target by Monte Carlo error).
+//!
+//! **Knob ranges** ([`knob_range`]): a small table per kind, from the parameters' documented
+//! values: `rate` of `centralized-kf-random` in [0.001, 1]; `rate` of `dkf-alg1-random` in
+//! [0.5, 1]; `l` of `censored-pf` in [0.001 N, N] (N sensors); `bits` of
+//! `quantized-innovation` the integers 1..=8 (values that do not build, e.g. zhang above 3, end
+//! the range); every threshold (`alpha`, `delta`, `tau`) in [0, hi], hi found by quadrupling
+//! from 1 until the rate is below the smallest target (at most 4^12), or until it stops falling
+//! (a floor: hi is then the first value on it). A kind whose knob is not
+//! in the table but documents `number >= 0` is treated as a threshold.
+use super::build::{self, LoadOptions};
+use super::results::{self, SchemeSummary, Summary};
+use super::runner;
+use crate::scheme::registry;
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// Which bits count against the budget.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    /// Uplink payload bits per step (the measurement or estimate bits).
+    #[default]
+    Payload,
+    /// Whole 802.15.4 uplink frames per step (header, payload, footer).
+    Frame,
+    /// Frames plus the fusion center's downlink feedback bits.
+    Total,
+}
+
+impl Axis {
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "payload" => Ok(Axis::Payload),
+            "frame" => Ok(Axis::Frame),
+            "total" => Ok(Axis::Total),
+            _ => Err(format!(
+                "--budget-axis: expected payload, frame or total, got {s:?}"
+            )),
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Axis::Payload => "payload",
+            Axis::Frame => "frame",
+            Axis::Total => "total",
+        }
+    }
+    /// The bits per step of a result on this axis.
+    pub fn of(self, s: &SchemeSummary) -> f64 {
+        match self {
+            Axis::Payload => s.bits_per_step,
+            Axis::Frame => s.frame_bits_per_step,
+            Axis::Total => s.frame_bits_per_step + s.downlink_bits_per_step,
+        }
+    }
+}
+
+/// Where a knob may range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KnobRange {
+    pub lo: f64,
+    /// `None`: a threshold without an upper end (found by quadrupling).
+    pub hi: Option<f64>,
+    pub integer: bool,
+}
+
+/// The range of `kind`'s knob on a system of `n_sensors` sensors (module docs).
+pub fn knob_range(kind: &str, n_sensors: usize) -> Option<KnobRange> {
+    let r = |lo, hi, integer| Some(KnobRange { lo, hi, integer });
+    match kind {
+        "centralized-kf-random" => r(1e-3, Some(1.0), false),
+        "dkf-alg1-random" => r(0.5, Some(1.0), false),
+        "censored-pf" => r(1e-3 * n_sensors as f64, Some(n_sensors as f64), false),
+        "quantized-innovation" => r(1.0, Some(8.0), true),
+        "dkf-alg1-event"
+        | "dkf-alg2-event"
+        | "innovation-trigger-kf"
+        | "stochastic-trigger-open"
+        | "stochastic-trigger-closed"
+        | "send-on-delta"
+        | "ci-fusion"
+        | "naive-fusion" => r(0.0, None, false),
+        other => {
+            let e = registry::find(other)?;
+            let knob = e.knob?;
+            let doc = e.params.iter().find(|p| p.name == knob)?;
+            doc.values.starts_with("number >= 0").then_some(KnobRange {
+                lo: 0.0,
+                hi: None,
+                integer: false,
+            })
+        }
+    }
+}
+
+/// How a scheme met its budget.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Status {
+    /// Within tolerance of the target.
+    Calibrated,
+    /// An integer knob: the nearest integer.
+    NearestInteger,
+    /// The target is outside the knob's reach: the nearer end of the range.
+    OutOfRange,
+    /// The scheme has no knob: run as it is.
+    NoKnob,
+    /// The knob could not be set (e.g. the entry uses another parameter instead): run as written.
+    NotTunable,
+}
+
+impl Status {
+    pub fn text(self) -> &'static str {
+        match self {
+            Status::Calibrated => "calibrated",
+            Status::NearestInteger => "nearest integer",
+            Status::OutOfRange => "out of range",
+            Status::NoKnob => "no knob",
+            Status::NotTunable => "not tunable",
+        }
+    }
+}
+
+/// One scheme at one budget.
+#[derive(Debug, Clone, Serialize)]
+pub struct Calibrated {
+    pub label: String,
+    pub kind: String,
+    pub knob: Option<String>,
+    pub value: Option<f64>,
+    pub target: f64,
+    pub achieved: f64,
+    pub status: Status,
+    /// Knob evaluations (pilot runs) spent on this scheme, shared over all budgets.
+    #[serde(skip)]
+    pub result: SchemeSummary,
+}
+
+/// Calibration settings.
+#[derive(Debug, Clone, Copy)]
+pub struct Options {
+    pub axis: Axis,
+    /// Relative tolerance on the bits per step (default 0.02).
+    pub tolerance: f64,
+    /// Trials of the pilot runs (`None`: the scenario's).
+    pub pilot_trials: Option<usize>,
+    pub threads: usize,
+    pub load: LoadOptions,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            axis: Axis::Payload,
+            tolerance: 0.02,
+            pilot_trials: None,
+            threads: 0,
+            load: LoadOptions::default(),
+        }
+    }
+}
+
+/// The result at every budget.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub budgets: Vec<f64>,
+    /// `rows[b][s]`: budget b, scheme entry s.
+    pub rows: Vec<Vec<Calibrated>>,
+    /// One summary per budget: every scheme at its calibrated knob (the scenario's header).
+    pub summaries: Vec<Summary>,
+    /// The scenario text with the knobs of each budget (what was run).
+    pub texts: Vec<String>,
+    /// Pilot runs made.
+    pub evaluations: usize,
+    pub axis: Axis,
+    pub tolerance: f64,
+}
+
+struct Evaluator<'a> {
+    base: toml::Table,
+    file: &'a str,
+    opts: &'a Options,
+    evaluations: usize,
+}
+
+impl Evaluator<'_> {
+    /// The scenario with only `entry`, at `trials`.
+    fn text(&self, entries: &[toml::Table], trials: Option<usize>) -> String {
+        let mut t = self.base.clone();
+        t.insert(
+            "schemes".into(),
+            toml::Value::Array(entries.iter().cloned().map(toml::Value::Table).collect()),
+        );
+        if let Some(n) = trials {
+            t.insert("trials".into(), toml::Value::Integer(n as i64));
+        }
+        toml::to_string(&t).expect("a TOML table serializes")
+    }
+
+    /// Runs `entry` alone; `Err` when it does not build (a knob value out of its range).
+    fn run(&mut self, entry: &toml::Table, trials: Option<usize>) -> Result<Summary, String> {
+        self.evaluations += 1;
+        let text = self.text(std::slice::from_ref(entry), trials);
+        let exp = build::load_with(&text, self.file, &self.opts.load).map_err(|e| e.to_string())?;
+        let sums = runner::run(
+            &exp,
+            runner::RunOptions {
+                threads: self.opts.threads,
+            },
+            &|_| {},
+        )
+        .map_err(|e| e.to_string())?;
+        Ok(results::summarize(&exp, &sums))
+    }
+}
+
+fn with_knob(entry: &toml::Table, knob: &str, value: f64, integer: bool) -> toml::Table {
+    let mut t = entry.clone();
+    t.insert(
+        knob.into(),
+        if integer {
+            toml::Value::Integer(value.round() as i64)
+        } else {
+            toml::Value::Float(value)
+        },
+    );
+    t
+}
+
+/// The scheme entries of a scenario table, without `sweep` and `frontier` (one point each).
+fn entries(base: &toml::Table) -> Result<Vec<toml::Table>, String> {
+    let list = base
+        .get("schemes")
+        .and_then(|v| v.as_array())
+        .ok_or("the scenario has no [[schemes]]")?;
+    list.iter()
+        .map(|v| {
+            let mut t = v
+                .as_table()
+                .ok_or("a [[schemes]] entry is not a table")?
+                .clone();
+            if let Some(sweep) = t.remove("sweep") {
+                // A swept entry is calibrated from the first value of each swept parameter.
+                if let Some(s) = sweep.as_table() {
+                    for (k, vals) in s {
+                        if let Some(first) = vals.as_array().and_then(|a| a.first()) {
+                            t.insert(k.clone(), first.clone());
+                        }
+                    }
+                }
+            }
+            t.remove("frontier");
+            Ok(t)
+        })
+        .collect()
+}
+
+/// Calibrates every scheme of the scenario `text` at every budget.
+pub fn calibrate(
+    text: &str,
+    file: &str,
+    budgets: &[f64],
+    opts: &Options,
+) -> Result<Outcome, String> {
+    if budgets.is_empty() || budgets.iter().any(|b| !(b.is_finite() && *b > 0.0)) {
+        return Err("budgets must be positive numbers of bits per step".into());
+    }
+    let mut base: toml::Table = toml::from_str(text).map_err(|e| format!("{file}: {e}"))?;
+    if let Some(t) = opts.load.trials {
+        base.insert("trials".into(), toml::Value::Integer(t as i64));
+    }
+    if let Some(s) = opts.load.seed {
+        base.insert("seed".into(), toml::Value::Integer(s as i64));
+    }
+    // Validate the whole scenario first (errors name the original file and field).
+    let full = build::load_with(&toml::to_string(&base).expect("table"), file, &opts.load)
+        .map_err(|e| e.to_string())?;
+    let n_sensors = full.system.n_sensors();
+    let trials = full.trials;
+    let pilot = opts.pilot_trials.map(|p| p.clamp(1, trials));
+    let list = entries(&base)?;
+    let mut ev = Evaluator {
+        base,
+        file,
+        opts,
+        evaluations: 0,
+    };
+    let axis = opts.axis;
+    let tol = opts.tolerance.max(1e-6);
+    let mut per_scheme: Vec<Vec<Calibrated>> = Vec::new();
+    for (ci, entry) in list.iter().enumerate() {
+        let kind = full.curves[ci].kind.clone();
+        let label = full.curves[ci].label.clone();
+        let reg = registry::find(&kind).ok_or("unknown kind")?;
+        let range = reg
+            .knob
+            .and_then(|k| knob_range(&kind, n_sensors).map(|r| (k, r)));
+        let mut rows = Vec::new();
+        let Some((knob, range)) = range else {
+            let s = ev.run(entry, None)?;
+            let r = s.schemes[0].clone();
+            for &b in budgets {
+                rows.push(Calibrated {
+                    label: label.clone(),
+                    kind: kind.clone(),
+                    knob: reg.knob.map(str::to_string),
+                    value: None,
+                    target: b,
+                    achieved: axis.of(&r),
+                    status: if reg.knob.is_some() {
+                        Status::NotTunable
+                    } else {
+                        Status::NoKnob
+                    },
+                    result: r.clone(),
+                });
+            }
+            per_scheme.push(rows);
+            continue;
+        };
+        // Pilot evaluations, cached by knob value.
+        let mut cache: BTreeMap<u64, Option<SchemeSummary>> = BTreeMap::new();
+        let mut eval = |ev: &mut Evaluator, x: f64| -> Option<SchemeSummary> {
+            let x = if range.integer { x.round() } else { x };
+            cache
+                .entry(x.to_bits())
+                .or_insert_with(|| {
+                    ev.run(&with_knob(entry, knob, x, range.integer), pilot)
+                        .ok()
+                        .map(|s| s.schemes[0].clone())
+                })
+                .clone()
+        };
+        let min_target = budgets.iter().copied().fold(f64::INFINITY, f64::min);
+        let mut chosen: Vec<(f64, SchemeSummary, Status)> = Vec::new();
+        if range.integer {
+            let mut points = Vec::new();
+            let mut x = range.lo;
+            while x <= range.hi.unwrap_or(range.lo) + 0.5 {
+                match eval(&mut ev, x) {
+                    Some(s) => points.push((x, s)),
+                    None if points.is_empty() => {}
+                    None => break,
+                }
+                x += 1.0;
+            }
+            if points.is_empty() {
+                return Err(format!("{label}: no value of `{knob}` builds"));
+            }
+            for &b in budgets {
+                let (x, s) = points
+                    .iter()
+                    .min_by(|p, q| {
+                        (axis.of(&p.1) - b)
+                            .abs()
+                            .total_cmp(&(axis.of(&q.1) - b).abs())
+                    })
+                    .expect("non-empty");
+                let st = if (axis.of(s) - b).abs() <= tol * b {
+                    Status::Calibrated
+                } else {
+                    Status::NearestInteger
+                };
+                chosen.push((*x, s.clone(), st));
+            }
+        } else {
+            let lo = range.lo;
+            let Some(f_lo) = eval(&mut ev, lo) else {
+                return Err(format!("{label}: `{knob}` = {lo} does not build"));
+            };
+            let mut hi = range.hi.unwrap_or(1.0);
+            let mut f_hi =
+                eval(&mut ev, hi).ok_or(format!("{label}: `{knob}` = {hi} does not build"))?;
+            if range.hi.is_none() {
+                let mut n = 0;
+                // Quadruple until below the smallest target; stop where the rate no longer
+                // falls (a scheme with a floor, e.g. Algorithm 1's send-after-silence), keeping
+                // the first value of the floor.
+                while axis.of(&f_hi) > min_target && n < 12 {
+                    match eval(&mut ev, hi * 4.0) {
+                        Some(s) if axis.of(&s) < axis.of(&f_hi) => {
+                            hi *= 4.0;
+                            f_hi = s;
+                        }
+                        _ => break,
+                    }
+                    n += 1;
+                }
+            }
+            let increasing = axis.of(&f_hi) >= axis.of(&f_lo);
+            for &b in budgets {
+                let (a_lo, a_hi) = (axis.of(&f_lo), axis.of(&f_hi));
+                let (min, max) = (a_lo.min(a_hi), a_lo.max(a_hi));
+                if b <= min * (1.0 - tol) || b >= max * (1.0 + tol) {
+                    let at_lo = (b < min) == (a_lo <= a_hi);
+                    let (x, s) = if at_lo { (lo, &f_lo) } else { (hi, &f_hi) };
+                    let st = if (axis.of(s) - b).abs() <= tol * b {
+                        Status::Calibrated
+                    } else {
+                        Status::OutOfRange
+                    };
+                    chosen.push((x, s.clone(), st));
+                    continue;
+                }
+                let (mut a, mut c) = (lo, hi);
+                let mut best = if (a_lo - b).abs() < (a_hi - b).abs() {
+                    (lo, f_lo.clone())
+                } else {
+                    (hi, f_hi.clone())
+                };
+                for _ in 0..40 {
+                    if (axis.of(&best.1) - b).abs() <= tol * b {
+                        break;
+                    }
+                    let mid = 0.5 * (a + c);
+                    let Some(s) = eval(&mut ev, mid) else { break };
+                    let f = axis.of(&s);
+                    if (f - b).abs() < (axis.of(&best.1) - b).abs() {
+                        best = (mid, s.clone());
+                    }
+                    if (f < b) == increasing {
+                        a = mid;
+                    } else {
+                        c = mid;
+                    }
+                }
+                let st = if (axis.of(&best.1) - b).abs() <= tol * b {
+                    Status::Calibrated
+                } else {
+                    Status::OutOfRange
+                };
+                chosen.push((best.0, best.1, st));
+            }
+        }
+        for ((x, mut s, st), &b) in chosen.into_iter().zip(budgets) {
+            if pilot.is_some_and(|p| p < trials) {
+                s = ev
+                    .run(&with_knob(entry, knob, x, range.integer), None)?
+                    .schemes[0]
+                    .clone();
+            }
+            rows.push(Calibrated {
+                label: label.clone(),
+                kind: kind.clone(),
+                knob: Some(knob.to_string()),
+                value: Some(if range.integer { x.round() } else { x }),
+                target: b,
+                achieved: axis.of(&s),
+                status: st,
+                result: s,
+            });
+        }
+        per_scheme.push(rows);
+    }
+    // Per budget: the summary of every scheme at its knob, and the scenario as run.
+    let mut rows = Vec::new();
+    let mut summaries = Vec::new();
+    let mut texts = Vec::new();
+    let header = results::summarize(&full, &[]);
+    for b in 0..budgets.len() {
+        let row: Vec<Calibrated> = per_scheme.iter().map(|r| r[b].clone()).collect();
+        let tables: Vec<toml::Table> = list
+            .iter()
+            .zip(&row)
+            .map(|(e, c)| match (&c.knob, c.value) {
+                (Some(k), Some(v)) => with_knob(
+                    e,
+                    k,
+                    v,
+                    knob_range(&c.kind, n_sensors).is_some_and(|r| r.integer),
+                ),
+                _ => e.clone(),
+            })
+            .collect();
+        let mut summary = header.clone();
+        summary.schemes = row
+            .iter()
+            .enumerate()
+            .map(|(ci, c)| {
+                let mut s = c.result.clone();
+                s.curve = ci;
+                s
+            })
+            .collect();
+        texts.push(ev.text(&tables, None));
+        summaries.push(summary);
+        rows.push(row);
+    }
+    Ok(Outcome {
+        budgets: budgets.to_vec(),
+        rows,
+        summaries,
+        texts,
+        evaluations: ev.evaluations,
+        axis,
+        tolerance: tol,
+    })
+}
+
+/// The calibration table of one budget: target and achieved beside each scheme.
+pub fn table(outcome: &Outcome, b: usize, group: &str) -> String {
+    let mut rows = vec![vec![
+        "scheme".to_string(),
+        "knob".to_string(),
+        format!("target {}", outcome.axis.name()),
+        "achieved".to_string(),
+        "status".to_string(),
+        format!("RMSE {group}"),
+        "ANEES".to_string(),
+    ]];
+    for c in &outcome.rows[b] {
+        rows.push(vec![
+            c.label.clone(),
+            match (&c.knob, c.value) {
+                (Some(k), Some(v)) => format!("{k} = {}", short(v)),
+                _ => "—".to_string(),
+            },
+            format!("{:.1}", c.target),
+            format!("{:.1}", c.achieved),
+            c.status.text().to_string(),
+            c.result
+                .mean_rmse
+                .get(group)
+                .map_or("—".into(), |r| format!("{r:.4}")),
+            format!("{:.3}", c.result.anees),
+        ]);
+    }
+    render(&rows)
+}
+
+/// A number with at most 4 significant decimals.
+pub fn short(v: f64) -> String {
+    let s = format!("{v:.4}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// Left-aligned first column, right-aligned others, a rule under the header.
+pub fn render(rows: &[Vec<String>]) -> String {
+    let widths: Vec<usize> = (0..rows[0].len())
+        .map(|c| rows.iter().map(|r| r[c].chars().count()).max().unwrap_or(0))
+        .collect();
+    let mut out = String::new();
+    for (i, r) in rows.iter().enumerate() {
+        let line: Vec<String> = r
+            .iter()
+            .enumerate()
+            .map(|(c, cell)| {
+                if c == 0 {
+                    format!("{cell:<w$}", w = widths[c])
+                } else {
+                    format!("{cell:>w$}", w = widths[c])
+                }
+            })
+            .collect();
+        out.push_str(line.join("  ").trim_end());
+        out.push('\n');
+        if i == 0 {
+            out.push_str(&"-".repeat(widths.iter().sum::<usize>() + 2 * (widths.len() - 1)));
+            out.push('\n');
+        }
+    }
+    out
+}

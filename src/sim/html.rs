@@ -1,0 +1,673 @@
+//! `report.html` (issue 11 item 5): one self-contained file — inline SVG figures, the tables,
+//! the scenario as run, the version and seeds; no scripts, fonts, styles or images from
+//! anywhere else, so it reads offline and can be mailed as it is.
+use super::arena;
+use super::build::Experiment;
+use super::calibrate::{short, Outcome};
+use super::plot;
+use super::results::{params_text, Summary};
+use super::trace::{self, Link};
+use plotters::prelude::*;
+use std::fmt::Write as _;
+
+/// What a report shows.
+pub struct Input<'a> {
+    /// The experiment as run (for a calibrated arena: the scenario at the first budget).
+    pub exp: &'a Experiment,
+    pub summary: &'a Summary,
+    /// The scenario text as run.
+    pub scenario_text: &'a str,
+    /// Every scheme ran alone (calibrated arenas): coins of stream 1 for each.
+    pub alone: bool,
+    pub arena: Option<&'a Outcome>,
+    /// Trials used for the per-step standard errors (at most the run's).
+    pub se_trials: usize,
+}
+
+/// Escapes text for HTML.
+pub fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn html_table(rows: &[Vec<String>]) -> String {
+    let mut s = String::from("<table>\n<tr>");
+    for h in &rows[0] {
+        let _ = write!(s, "<th>{}</th>", esc(h));
+    }
+    s.push_str("</tr>\n");
+    for r in &rows[1..] {
+        s.push_str("<tr>");
+        for (i, c) in r.iter().enumerate() {
+            let class = if i == 0 { "" } else { " class=\"n\"" };
+            let _ = write!(s, "<td{class}>{}</td>", esc(c));
+        }
+        s.push_str("</tr>\n");
+    }
+    s.push_str("</table>\n");
+    s
+}
+
+const PALETTE: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
+    RGBColor(188, 189, 34),
+    RGBColor(127, 127, 127),
+];
+
+fn pe(e: impl std::fmt::Display) -> String {
+    format!("plot: {e}")
+}
+
+/// The variants shown in the detailed figures: the all-data bound (if any) and the best by
+/// mean RMSE of the first group, at most `max` in all.
+fn selected(summary: &Summary, max: usize, allowed: &dyn Fn(usize) -> bool) -> Vec<usize> {
+    let g = &summary.group_order[0];
+    let mut idx: Vec<usize> = (0..summary.schemes.len()).collect();
+    idx.sort_by(|&a, &b| {
+        let r = |i: usize| summary.schemes[i].mean_rmse[g];
+        r(a).total_cmp(&r(b))
+    });
+    let mut out: Vec<usize> = summary
+        .schemes
+        .iter()
+        .position(|s| s.kind == "centralized-kf")
+        .into_iter()
+        .collect();
+    for i in idx {
+        if out.len() >= max {
+            break;
+        }
+        if !out.contains(&i) && allowed(i) && summary.schemes[i].mean_rmse[g].is_finite() {
+            out.push(i);
+        }
+    }
+    out
+}
+
+/// A figure with a legend to its right, drawn by `body` into the chart.
+fn legend(
+    area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    names: &[(String, RGBColor)],
+) -> Result<(), String> {
+    for (i, (n, c)) in names.iter().enumerate() {
+        let y = 40 + 18 * i as i32;
+        area.draw(&PathElement::new(vec![(8, y), (40, y)], c.stroke_width(2)))
+            .map_err(pe)?;
+        area.draw(&Text::new(
+            n.clone(),
+            (48, y - 7),
+            ("sans-serif", 13).into_font().color(&BLACK),
+        ))
+        .map_err(pe)?;
+    }
+    Ok(())
+}
+
+/// Per-step RMSE with +-2 standard-error bands.
+fn rmse_bands(input: &Input, sel: &[usize]) -> Result<String, String> {
+    let exp = input.exp;
+    let (gname, idx) = &exp.groups[0];
+    let curves = trace::rmse_with_se(exp, idx, input.se_trials, input.alone)?;
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 520)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let (a, b) = root.split_horizontally(780);
+        let ymax = sel
+            .iter()
+            .flat_map(|&v| {
+                curves[v]
+                    .0
+                    .iter()
+                    .zip(&curves[v].1)
+                    .map(|(r, s)| r + 2.0 * s)
+            })
+            .filter(|y| y.is_finite())
+            .fold(0.0, f64::max)
+            .max(1e-12);
+        let mut chart = ChartBuilder::on(&a)
+            .caption(
+                format!(
+                    "RMSE of {gname} per step, ±2 standard errors ({} trials)",
+                    input.se_trials
+                ),
+                ("sans-serif", 17),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(1.0..exp.steps as f64, 0.0..ymax * 1.05)
+            .map_err(pe)?;
+        chart
+            .configure_mesh()
+            .x_desc("step k")
+            .y_desc(format!("RMSE {gname}"))
+            .draw()
+            .map_err(pe)?;
+        let mut names = Vec::new();
+        for (j, &v) in sel.iter().enumerate() {
+            let c = PALETTE[j % PALETTE.len()];
+            let (r, se) = &curves[v];
+            let mut poly: Vec<(f64, f64)> = (0..exp.steps)
+                .map(|k| ((k + 1) as f64, r[k] + 2.0 * se[k]))
+                .collect();
+            poly.extend(
+                (0..exp.steps)
+                    .rev()
+                    .map(|k| ((k + 1) as f64, (r[k] - 2.0 * se[k]).max(0.0))),
+            );
+            chart
+                .draw_series(std::iter::once(Polygon::new(poly, c.mix(0.18).filled())))
+                .map_err(pe)?;
+            chart
+                .draw_series(LineSeries::new(
+                    (0..exp.steps).map(|k| ((k + 1) as f64, r[k])),
+                    c.stroke_width(2),
+                ))
+                .map_err(pe)?;
+            names.push((input.summary.schemes[v].name.clone(), c));
+        }
+        legend(&b, &names)?;
+        root.present().map_err(pe)?;
+    }
+    Ok(buf)
+}
+
+/// 2-sigma ellipse of a 2x2 covariance around a centre, as a closed polyline.
+fn ellipse(c: (f64, f64), p: [[f64; 2]; 2]) -> Vec<(f64, f64)> {
+    let (a, b, d) = (p[0][0], p[0][1], p[1][1]);
+    let tr = 0.5 * (a + d);
+    let disc = (0.25 * (a - d).powi(2) + b * b).sqrt();
+    let (l1, l2) = ((tr + disc).max(0.0), (tr - disc).max(0.0));
+    let th = 0.5 * (2.0 * b).atan2(a - d);
+    (0..=40)
+        .map(|i| {
+            let t = i as f64 / 40.0 * std::f64::consts::TAU;
+            let (u, v) = (2.0 * l1.sqrt() * t.cos(), 2.0 * l2.sqrt() * t.sin());
+            (
+                c.0 + u * th.cos() - v * th.sin(),
+                c.1 + u * th.sin() + v * th.cos(),
+            )
+        })
+        .collect()
+}
+
+/// Trial 0: truth, estimates with 2-sigma ellipses (2-D position groups) or bands (1-D),
+/// and the sensor positions.
+fn trajectory(input: &Input, tr: &trace::Trace, sel: &[usize]) -> Result<String, String> {
+    let exp = input.exp;
+    // A two-index group (a position) when there is one, else the first group.
+    let (gname, idx) = exp
+        .groups
+        .iter()
+        .find(|(_, i)| i.len() == 2)
+        .unwrap_or(&exp.groups[0]);
+    let mut buf = String::new();
+    let positions: Vec<[f64; 2]> = exp
+        .system
+        .sensors
+        .iter()
+        .filter_map(|s| s.position())
+        .collect();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 620)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let (a, b) = root.split_horizontally(780);
+        let mut names = vec![("truth".to_string(), BLACK)];
+        let every = (exp.steps / 10).max(1);
+        if idx.len() == 2 {
+            let (ix, iy) = (idx[0], idx[1]);
+            let mut pts: Vec<(f64, f64)> = tr.truth.iter().map(|x| (x[ix], x[iy])).collect();
+            for &v in sel {
+                pts.extend(
+                    tr.variants[v]
+                        .estimates
+                        .iter()
+                        .map(|e| (e.mean[ix], e.mean[iy])),
+                );
+            }
+            let finite: Vec<(f64, f64)> = pts
+                .iter()
+                .copied()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .collect();
+            let (mut x0, mut x1, mut y0, mut y1) = finite.iter().fold(
+                (
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                ),
+                |(a, b, c, d), p| (a.min(p.0), b.max(p.0), c.min(p.1), d.max(p.1)),
+            );
+            // Zoom on the track (with a margin of a quarter of its extent); sensors inside
+            // the frame are drawn, the others are counted in the legend.
+            let (mx, my) = (0.25 * (x1 - x0).max(1e-9), 0.25 * (y1 - y0).max(1e-9));
+            let m = mx.max(my);
+            (x0, x1, y0, y1) = (x0 - m, x1 + m, y0 - m, y1 + m);
+            let shown: Vec<[f64; 2]> = positions
+                .iter()
+                .copied()
+                .filter(|p| p[0] >= x0 && p[0] <= x1 && p[1] >= y0 && p[1] <= y1)
+                .collect();
+            let hidden = positions.len() - shown.len();
+            let positions = shown;
+            let (px, py) = (0.0, 0.0);
+            let mut chart = ChartBuilder::on(&a)
+                .caption(
+                    format!("trial 0: {gname}, estimates with 2σ ellipses every {every} steps"),
+                    ("sans-serif", 17),
+                )
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(60)
+                .build_cartesian_2d(x0 - px..x1 + px, y0 - py..y1 + py)
+                .map_err(pe)?;
+            chart
+                .configure_mesh()
+                .x_desc(format!("state {ix}"))
+                .y_desc(format!("state {iy}"))
+                .draw()
+                .map_err(pe)?;
+            if !positions.is_empty() || hidden > 0 {
+                chart
+                    .draw_series(
+                        positions
+                            .iter()
+                            .map(|p| TriangleMarker::new((p[0], p[1]), 6, BLACK.mix(0.6).filled())),
+                    )
+                    .map_err(pe)?;
+                names.push((
+                    if hidden > 0 {
+                        format!("sensor positions (▲; {hidden} outside the frame)")
+                    } else {
+                        "sensor positions (▲)".into()
+                    },
+                    RGBColor(110, 110, 110),
+                ));
+            }
+            chart
+                .draw_series(LineSeries::new(
+                    tr.truth.iter().map(|x| (x[ix], x[iy])),
+                    BLACK.stroke_width(3),
+                ))
+                .map_err(pe)?;
+            for (j, &v) in sel.iter().enumerate() {
+                let c = PALETTE[j % PALETTE.len()];
+                let est = &tr.variants[v].estimates;
+                chart
+                    .draw_series(LineSeries::new(
+                        est.iter().map(|e| (e.mean[ix], e.mean[iy])),
+                        c.stroke_width(2),
+                    ))
+                    .map_err(pe)?;
+                for e in est.iter().skip(every - 1).step_by(every) {
+                    let p = [
+                        [e.cov[(ix, ix)], e.cov[(ix, iy)]],
+                        [e.cov[(iy, ix)], e.cov[(iy, iy)]],
+                    ];
+                    chart
+                        .draw_series(std::iter::once(PathElement::new(
+                            ellipse((e.mean[ix], e.mean[iy]), p),
+                            c.stroke_width(1),
+                        )))
+                        .map_err(pe)?;
+                }
+                names.push((input.summary.schemes[v].name.clone(), c));
+            }
+        } else {
+            let i = idx[0];
+            let t = exp.steps as f64;
+            // Estimates minus the truth, so that small errors stay visible on a long track.
+            let truth: Vec<f64> = tr.truth.iter().map(|x| x[i]).collect();
+            let mut ys: Vec<f64> = vec![0.0];
+            for &v in sel {
+                ys.extend(
+                    tr.variants[v]
+                        .estimates
+                        .iter()
+                        .zip(&truth)
+                        .flat_map(|(e, x)| {
+                            let s = 2.0 * e.cov[(i, i)].max(0.0).sqrt();
+                            [e.mean[i] - x - s, e.mean[i] - x + s]
+                        }),
+                );
+            }
+            let ys: Vec<f64> = ys.into_iter().filter(|y| y.is_finite()).collect();
+            let (y0, y1) = ys
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
+                    (a.min(*y), b.max(*y))
+                });
+            let pad = 0.05 * (y1 - y0).max(1e-9);
+            let mut chart = ChartBuilder::on(&a)
+                .caption(
+                    format!("trial 0: estimate − truth of state {i} ({gname}), ±2σ (truth = 0)"),
+                    ("sans-serif", 17),
+                )
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(60)
+                .build_cartesian_2d(1.0..t, y0 - pad..y1 + pad)
+                .map_err(pe)?;
+            chart
+                .configure_mesh()
+                .x_desc("step k")
+                .y_desc(format!("error of state {i}"))
+                .draw()
+                .map_err(pe)?;
+            for (j, &v) in sel.iter().enumerate() {
+                let c = PALETTE[j % PALETTE.len()];
+                let est = &tr.variants[v].estimates;
+                let mut poly: Vec<(f64, f64)> = est
+                    .iter()
+                    .enumerate()
+                    .map(|(k, e)| {
+                        (
+                            (k + 1) as f64,
+                            e.mean[i] - truth[k] + 2.0 * e.cov[(i, i)].max(0.0).sqrt(),
+                        )
+                    })
+                    .collect();
+                poly.extend(est.iter().enumerate().rev().map(|(k, e)| {
+                    (
+                        (k + 1) as f64,
+                        e.mean[i] - truth[k] - 2.0 * e.cov[(i, i)].max(0.0).sqrt(),
+                    )
+                }));
+                chart
+                    .draw_series(std::iter::once(Polygon::new(poly, c.mix(0.12).filled())))
+                    .map_err(pe)?;
+                chart
+                    .draw_series(LineSeries::new(
+                        est.iter()
+                            .enumerate()
+                            .map(|(k, e)| ((k + 1) as f64, e.mean[i] - truth[k])),
+                        c.stroke_width(2),
+                    ))
+                    .map_err(pe)?;
+                names.push((input.summary.schemes[v].name.clone(), c));
+            }
+            chart
+                .draw_series(LineSeries::new(
+                    (1..=exp.steps).map(|k| (k as f64, 0.0)),
+                    BLACK.stroke_width(3),
+                ))
+                .map_err(pe)?;
+        }
+        legend(&b, &names)?;
+        root.present().map_err(pe)?;
+    }
+    Ok(buf)
+}
+
+#[allow(clippy::needless_range_loop)] // i indexes sensors across the per-step rows
+/// Per selected scheme, a row per sensor and a cell per step: sent, silent, not scheduled.
+fn timeline(input: &Input, tr: &trace::Trace, sel: &[usize]) -> String {
+    let steps = input.exp.steps;
+    let n = input.exp.system.n_sensors();
+    let cw = (900.0 / steps as f64).clamp(0.5, 8.0);
+    let rh = (160.0 / n as f64).clamp(2.0, 12.0);
+    let left = 230.0;
+    let block = 22.0 + rh * n as f64 + 10.0;
+    let width = left + cw * steps as f64 + 20.0;
+    let height = 40.0 + block * sel.len() as f64;
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{height:.0}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
+    );
+    let _ = writeln!(
+        s,
+        "<rect x=\"{left}\" y=\"8\" width=\"12\" height=\"12\" fill=\"#1f77b4\"/><text x=\"{}\" y=\"18\">sent</text><rect x=\"{}\" y=\"8\" width=\"12\" height=\"12\" fill=\"#d9d9d9\"/><text x=\"{}\" y=\"18\">silent</text><rect x=\"{}\" y=\"8\" width=\"12\" height=\"12\" fill=\"#ffffff\" stroke=\"#999\"/><text x=\"{}\" y=\"18\">not scheduled</text><text x=\"{}\" y=\"18\">steps 1..{steps}, one row per sensor</text>",
+        left + 16.0, left + 60.0, left + 76.0, left + 130.0, left + 146.0, left + 260.0
+    );
+    for (j, &v) in sel.iter().enumerate() {
+        let y0 = 36.0 + block * j as f64;
+        let _ = writeln!(
+            s,
+            "<text x=\"4\" y=\"{:.1}\" font-weight=\"bold\">{}</text>",
+            y0 + 12.0,
+            esc(&input.summary.schemes[v].name)
+        );
+        let links = &tr.variants[v].links;
+        for i in 0..n {
+            let y = y0 + 20.0 + rh * i as f64;
+            if n <= 12 {
+                let _ = writeln!(s, "<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"10\" text-anchor=\"end\">sensor {}</text>", left - 4.0, y + rh - 1.0, i + 1);
+            }
+            let _ = writeln!(
+                s,
+                "<rect x=\"{left}\" y=\"{y:.1}\" width=\"{:.1}\" height=\"{rh:.1}\" fill=\"#ffffff\" stroke=\"#bbb\" stroke-width=\"0.3\"/>",
+                cw * steps as f64
+            );
+            // Runs of equal status as one rectangle each.
+            let mut k = 0;
+            while k < steps {
+                let st = links[k][i];
+                let mut e = k + 1;
+                while e < steps && links[e][i] == st {
+                    e += 1;
+                }
+                let fill = match st {
+                    Link::Sent => Some("#1f77b4"),
+                    Link::Silent => Some("#d9d9d9"),
+                    Link::NotScheduled => None,
+                };
+                if let Some(f) = fill {
+                    let _ = writeln!(
+                        s,
+                        "<rect x=\"{:.2}\" y=\"{y:.1}\" width=\"{:.2}\" height=\"{:.1}\" fill=\"{f}\"/>",
+                        left + cw * k as f64,
+                        cw * (e - k) as f64,
+                        (rh - 0.5).max(1.0)
+                    );
+                }
+                k = e;
+            }
+        }
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+const STYLE: &str = "body{font-family:sans-serif;max-width:1150px;margin:1em auto;padding:0 1em;color:#222}\
+table{border-collapse:collapse;margin:0.5em 0 1.5em;font-size:13px}\
+th,td{border:1px solid #ccc;padding:3px 7px}th{background:#f0f0f0;text-align:left}\
+td.n{text-align:right;font-variant-numeric:tabular-nums}\
+pre{background:#f7f7f7;border:1px solid #ddd;padding:0.7em;overflow:auto;font-size:12px}\
+h2{border-bottom:1px solid #ddd;padding-bottom:0.2em;margin-top:1.6em}.meta td{border:none;padding:1px 12px 1px 0}\
+figure{margin:0.5em 0}svg{max-width:100%;height:auto}";
+
+/// The report as one HTML string.
+pub fn render(input: &Input) -> Result<String, String> {
+    let s = input.summary;
+    let exp = input.exp;
+    let group = &s.group_order[0];
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>hushfuse report: {}</title><style>{STYLE}</style></head><body>\n",
+        esc(&s.scenario)
+    );
+    let _ = writeln!(
+        h,
+        "<h1>{}</h1>\n<p>{}</p>",
+        esc(&s.scenario),
+        esc(&s.description)
+    );
+    let _ = writeln!(
+        h,
+        "<table class=\"meta\"><tr><td>hushfuse</td><td>{}</td></tr><tr><td>source</td><td>{}</td></tr><tr><td>seed</td><td>{} (trial t draws truth and measurements from stream (seed, t, 0); scheme v its coins from (seed, t, 1 + v){})</td></tr><tr><td>trials x steps</td><td>{} x {}</td></tr><tr><td>sensors, state dimension</td><td>{}, {}</td></tr></table>",
+        env!("CARGO_PKG_VERSION"),
+        esc(&s.source),
+        s.seed,
+        if input.alone { "; here every scheme ran alone, v = 0" } else { "" },
+        s.trials,
+        s.steps,
+        s.sensors,
+        s.state_dim
+    );
+    if let Some(out) = input.arena {
+        let _ = writeln!(h, "<h2>Best scheme per budget</h2>\n<p>Every scheme's bandwidth knob tuned so that it spends the budget in {} bits per step (pilot runs on common random numbers, tolerance {}%); schemes without a knob count at budgets they fit.</p>", out.axis.name(), short(100.0 * out.tolerance));
+        h.push_str(&html_table(&arena::best_per_budget(out, group)));
+        let x = format!("{} bits per step (achieved)", out.axis.name());
+        let g = group.clone();
+        let svg = plot::lines_svg(
+            &format!("mean RMSE of {group} against bits"),
+            &x,
+            &format!("mean RMSE {group}"),
+            &arena::bits_lines(
+                out,
+                &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN),
+                true,
+            ),
+        )?;
+        let _ = writeln!(h, "<h2>Accuracy against bits</h2>\n<figure>{svg}</figure>");
+        let svg = plot::lines_svg(
+            "ANEES against bits (1 = consistent)",
+            &x,
+            "ANEES",
+            &arena::bits_lines(out, &|c| c.result.anees, false),
+        )?;
+        let _ = writeln!(h, "<figure>{svg}</figure>");
+        let _ = writeln!(h, "<h2>Calibration</h2>");
+        for (b, row) in out.rows.iter().enumerate() {
+            let mut rows = vec![vec![
+                "scheme".to_string(),
+                "knob".into(),
+                "target".into(),
+                "achieved".into(),
+                "status".into(),
+                format!("mean RMSE {group}"),
+                "ANEES".into(),
+                "payload bits".into(),
+                "frame bits".into(),
+                "downlink bits".into(),
+            ]];
+            for c in row {
+                rows.push(vec![
+                    c.label.clone(),
+                    match (&c.knob, c.value) {
+                        (Some(k), Some(v)) => format!("{k} = {}", short(v)),
+                        _ => "—".into(),
+                    },
+                    format!("{:.1}", c.target),
+                    format!("{:.1}", c.achieved),
+                    c.status.text().into(),
+                    format!("{:.4}", c.result.mean_rmse[group]),
+                    format!("{:.3}", c.result.anees),
+                    format!("{:.1}", c.result.bits_per_step),
+                    format!("{:.1}", c.result.frame_bits_per_step),
+                    format!("{:.1}", c.result.downlink_bits_per_step),
+                ]);
+            }
+            let _ = writeln!(h, "<h3>budget {} bits per step</h3>", short(out.budgets[b]));
+            h.push_str(&html_table(&rows));
+        }
+    }
+    let _ = writeln!(
+        h,
+        "<h2>Results{}</h2>",
+        if input.arena.is_some() {
+            format!(
+                " at the first budget ({} bits per step)",
+                short(input.arena.map_or(0.0, |o| o.budgets[0]))
+            )
+        } else {
+            String::new()
+        }
+    );
+    let mut rows = vec![vec!["scheme".to_string(), "params".into()]];
+    rows[0].extend(s.group_order.iter().map(|g| format!("mean RMSE {g}")));
+    rows[0].extend(
+        [
+            "MSE(ss)",
+            "±se",
+            "ANEES",
+            "rate",
+            "payload bits/step",
+            "frame bits/step",
+            "downlink bits/step",
+        ]
+        .map(String::from),
+    );
+    for r in &s.schemes {
+        let mut row = vec![r.name.clone(), params_text(&r.params)];
+        row.extend(
+            s.group_order
+                .iter()
+                .map(|g| format!("{:.4}", r.mean_rmse[g])),
+        );
+        row.extend([
+            format!("{:.4}", r.steady_state.mse),
+            format!("{:.4}", r.steady_state.mse_se),
+            format!("{:.3}", r.anees),
+            format!("{:.3}", r.rate),
+            format!("{:.1}", r.bits_per_step),
+            format!("{:.1}", r.frame_bits_per_step),
+            format!("{:.1}", r.downlink_bits_per_step),
+        ]);
+        rows.push(row);
+    }
+    h.push_str(&html_table(&rows));
+    let within = |i: usize| {
+        input.arena.is_none_or(|o| {
+            let c = &o.rows[0][i];
+            c.status == super::calibrate::Status::Calibrated
+                || c.achieved <= c.target * (1.0 + o.tolerance)
+        })
+    };
+    let sel = selected(s, 6, &within);
+    let _ = writeln!(h, "<h2>Per-step error</h2>\n<p>The all-data bound and the best schemes by mean RMSE of {}{}; bands: ±2 standard errors of the RMSE (delta method on the per-trial squared errors).</p>", esc(group), if input.arena.is_some() { " among those within the first budget" } else { "" });
+    let _ = writeln!(h, "<figure>{}</figure>", rmse_bands(input, &sel)?);
+    let tr = trace::trace(exp, 0, input.alone)?;
+    let _ = writeln!(
+        h,
+        "<h2>One trial</h2>\n<figure>{}</figure>",
+        trajectory(input, &tr, &sel)?
+    );
+    let _ = writeln!(
+        h,
+        "<h3>Who sent when (trial 0)</h3>\n<figure>{}</figure>",
+        timeline(input, &tr, &sel)
+    );
+    let _ = writeln!(
+        h,
+        "<h2>The scenario as run</h2>\n<pre>{}</pre>",
+        esc(input.scenario_text)
+    );
+    h.push_str("</body></html>\n");
+    Ok(h)
+}
+
+/// Whether an HTML text refers to anything outside itself: `src=` or `href=` attributes (any
+/// value but an in-page `#anchor`), `@import`, `url(` other than `url(#...)`, or `<link`.
+pub fn external_references(html: &str) -> Vec<String> {
+    let lower = html.to_ascii_lowercase();
+    let mut bad = Vec::new();
+    for pat in [
+        "src=", "href=", "@import", "url(", "<link", "<script", "<iframe", "<img", "<object",
+        "<embed",
+    ] {
+        let mut from = 0;
+        while let Some(i) = lower[from..].find(pat) {
+            let at = from + i;
+            let rest = &lower[at + pat.len()..];
+            let rest = rest.trim_start_matches(['"', '\'', ' ']);
+            let in_page = (pat.ends_with('=') || pat == "url(") && rest.starts_with('#');
+            if !in_page {
+                bad.push(html[at..(at + 60).min(html.len())].to_string());
+            }
+            from = at + pat.len();
+        }
+    }
+    bad
+}
