@@ -26,6 +26,13 @@ pub fn trial_rng(seed: u64, trial: u64, stream: u64) -> Xoshiro256PlusPlus {
     Xoshiro256PlusPlus::seed_from_u64(trial_seed(seed, trial, stream))
 }
 
+/// The seed of the fusion center's own generator (particle filters) for the variant whose coin
+/// stream is `stream`: independent of the coins, and the same wherever a trial is replayed
+/// (`trace`, calibration).
+pub fn center_seed(seed: u64, trial: u64, stream: u64) -> u64 {
+    splitmix64(trial_seed(seed, trial, stream) ^ 0xC3A5_C85C_97CB_3127)
+}
+
 fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
     splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream)
 }
@@ -211,8 +218,7 @@ fn run_trial(
         };
         let mut rng = trial_rng(exp.seed, trial as u64, 1 + v as u64);
         // The fusion center's own stream (particle filters) is independent of the sensors'.
-        let center_seed =
-            splitmix64(trial_seed(exp.seed, trial as u64, 1 + v as u64) ^ 0xC3A5_C85C_97CB_3127);
+        let center_seed = center_seed(exp.seed, trial as u64, 1 + v as u64);
         let mut inst = variant
             .scheme
             .build_with_seed(center_seed)

@@ -33,18 +33,6 @@ pub struct Trace {
     pub variants: Vec<VariantTrace>,
 }
 
-// The runner's seed derivation (private there), repeated so that a trace is the runner's trial.
-fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
-fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
-    splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream)
-}
-
 /// Called after every step with (k, truth, fused estimate, what each sensor did).
 type StepFn<'a> = &'a mut dyn FnMut(usize, &Vector, &Gaussian, &[Link]);
 
@@ -63,8 +51,7 @@ fn run_variant(
     let n = exp.system.n_sensors();
     let stream = 1 + if alone { 0 } else { v as u64 };
     let mut rng = trial_rng(exp.seed, trial as u64, stream);
-    let center_seed =
-        splitmix64(trial_seed(exp.seed, trial as u64, stream) ^ 0xC3A5_C85C_97CB_3127);
+    let center_seed = super::runner::center_seed(exp.seed, trial as u64, stream);
     let variant = &exp.variants[v];
     let mut inst = variant
         .scheme
