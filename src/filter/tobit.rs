@@ -76,13 +76,50 @@ impl Thresholds {
     /// The detection device of eq. (6): `tau_l` if `ybar <= tau_l`, `tau_r` if `ybar >= tau_r`,
     /// else `ybar`.
     pub fn censor(&self, ybar: f64) -> f64 {
-        if ybar <= self.lo {
-            self.lo
-        } else if ybar >= self.hi {
-            self.hi
-        } else {
-            ybar
+        censor(ybar, self.lo, self.hi).value(self.lo, self.hi)
+    }
+}
+
+/// Where a reading fell against the censoring region `(tau_l, tau_r)` (seed 002, eq. (6)).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Censored {
+    /// `z <= tau_l`: the estimator sees `y = tau_l` (alpha = 1 in eq. (7)).
+    Left,
+    /// `z >= tau_r`: the estimator sees `y = tau_r` (beta = 1 in eq. (7)).
+    Right,
+    /// `tau_l < z < tau_r`: the estimator sees `y = z`.
+    Inside(f64),
+}
+
+impl Censored {
+    /// The censored observation `y` of eq. (6): `tau_l`, `tau_r` or `z`.
+    pub fn value(self, tau_l: f64, tau_r: f64) -> f64 {
+        match self {
+            Censored::Left => tau_l,
+            Censored::Right => tau_r,
+            Censored::Inside(z) => z,
         }
+    }
+
+    /// Whether the reading was censored (left or right).
+    pub fn is_censored(self) -> bool {
+        !matches!(self, Censored::Inside(_))
+    }
+}
+
+/// Seed 002, eq. (6): the two-sided (dead-zone-like) censoring of a reading `z` with
+/// `tau_l < tau_r`. The boundaries belong to the censored sides, as printed (`z <= tau_l` is
+/// left-censored, `z >= tau_r` right-censored). Infinite thresholds never censor a finite `z`.
+/// A NaN `z` compares false with everything and comes back as `Inside(NaN)`: callers reject
+/// non-finite readings first (the fusion center does).
+#[inline]
+pub fn censor(z: f64, tau_l: f64, tau_r: f64) -> Censored {
+    if z <= tau_l {
+        Censored::Left
+    } else if z >= tau_r {
+        Censored::Right
+    } else {
+        Censored::Inside(z)
     }
 }
 
