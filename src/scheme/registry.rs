@@ -66,6 +66,22 @@ pub struct ParamDoc {
     pub meaning: &'static str,
 }
 
+/// `resampling` of every particle-filter scheme.
+pub const RESAMPLING: ParamDoc = ParamDoc {
+    name: "resampling",
+    values: "systematic|stratified|residual|multinomial",
+    default: "systematic",
+    meaning: "resampling scheme",
+};
+
+/// `ess_threshold` of every particle-filter scheme.
+pub const ESS_THRESHOLD: ParamDoc = ParamDoc {
+    name: "ess_threshold",
+    values: "number in [0, 1]",
+    default: "none",
+    meaning: "resample only when ESS < threshold x particles (default: every step)",
+};
+
 /// A scheme's parameters as read from a file: they validate themselves and build the scheme.
 pub trait SchemeParams: DeserializeOwned {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError>;

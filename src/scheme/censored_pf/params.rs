@@ -183,18 +183,8 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
             default: "1000",
             meaning: "particles of the fusion center",
         },
-        ParamDoc {
-            name: "resampling",
-            values: "systematic|stratified|residual|multinomial",
-            default: "systematic",
-            meaning: "resampling scheme",
-        },
-        ParamDoc {
-            name: "ess_threshold",
-            values: "number in [0, 1]",
-            default: "none",
-            meaning: "resample only when ESS < threshold x particles (default: every step)",
-        },
+        registry::RESAMPLING,
+        registry::ESS_THRESHOLD,
         ParamDoc {
             name: "band",
             values: "exact|monte-carlo",
