@@ -98,9 +98,17 @@ pub fn lines_svg(
         macro_rules! draw {
             ($chart:expr) => {{
                 let mut chart = $chart;
+                // On a log axis plotters draws a light line at every tenth of a decade, which
+                // renders as a grey band at the top of each decade: only the bold lines stay.
+                let light = if log {
+                    RGBColor(255, 255, 255)
+                } else {
+                    RGBColor(242, 242, 242)
+                };
                 chart
                     .configure_mesh()
-                    .light_line_style(RGBColor(242, 242, 242))
+                    .light_line_style(light)
+                    .y_labels(12)
                     .x_desc(x_label)
                     .y_desc(y_label)
                     .draw()
