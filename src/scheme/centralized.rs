@@ -388,30 +388,7 @@ mod tests {
     use crate::linalg::{matrix_from_rows, relative_difference, Matrix};
     use crate::model::{presets, LinearSensor, MeasurementModel};
 
-    /// A linear sensor that hides its linearity, so filters take the EKF path (Jacobian at
-    /// the prediction, sequential updates).
-    #[derive(Debug)]
-    struct Opaque(LinearSensor);
-    impl MeasurementModel for Opaque {
-        fn state_dim(&self) -> usize {
-            self.0.state_dim()
-        }
-        fn meas_dim(&self) -> usize {
-            self.0.meas_dim()
-        }
-        fn predict(&self, x: &Vector) -> Vector {
-            self.0.predict(x)
-        }
-        fn jacobian(&self, x: &Vector) -> Matrix {
-            self.0.jacobian(x)
-        }
-        fn noise_cov(&self) -> &Matrix {
-            self.0.noise_cov()
-        }
-        fn noise_sqrt(&self) -> &Matrix {
-            self.0.noise_sqrt()
-        }
-    }
+    use crate::model::Opaque;
 
     /// The EKF on a linear model equals the KF (information-form fusion).
     #[test]

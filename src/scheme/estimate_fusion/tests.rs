@@ -221,29 +221,8 @@ fn replica_covariance_and_send_rate() {
     assert!(rates.windows(2).all(|w| w[1] < w[0]), "{rates:?}");
 }
 
-/// A linear sensor that hides its linearity: its covariance must travel.
-#[derive(Debug)]
-struct Opaque(LinearSensor);
-impl MeasurementModel for Opaque {
-    fn state_dim(&self) -> usize {
-        self.0.state_dim()
-    }
-    fn meas_dim(&self) -> usize {
-        self.0.meas_dim()
-    }
-    fn predict(&self, x: &Vector) -> Vector {
-        self.0.predict(x)
-    }
-    fn jacobian(&self, x: &Vector) -> Matrix {
-        self.0.jacobian(x)
-    }
-    fn noise_cov(&self) -> &Matrix {
-        self.0.noise_cov()
-    }
-    fn noise_sqrt(&self) -> &Matrix {
-        self.0.noise_sqrt()
-    }
-}
+// A linear sensor that hides its linearity: its covariance must travel.
+use crate::model::Opaque;
 
 #[test]
 fn nonlinear_sensors_send_their_covariance() {
