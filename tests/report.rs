@@ -10,6 +10,17 @@ fn hushfuse(args: &[&str]) -> std::process::Output {
         .expect("binary runs")
 }
 
+/// Runs hushfuse and requires success, showing its stderr otherwise.
+fn run_ok(args: &[&str]) {
+    let out = hushfuse(args);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// Independent of `external_references`: attribute values of src/href and CSS imports.
 fn naive_check(html: &str) {
     let l = html.to_ascii_lowercase();
@@ -61,7 +72,7 @@ fn the_checker_finds_external_references() {
 fn report_html_is_self_contained() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let out = hushfuse(&[
+    run_ok(&[
         "run",
         "arena-rss",
         "--trials",
@@ -70,14 +81,8 @@ fn report_html_is_self_contained() {
         "--out",
         run.to_str().unwrap(),
     ]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let arena = dir.path().join("arena");
-    let out = hushfuse(&[
+    run_ok(&[
         "run",
         "arena-tobit",
         "--trials",
@@ -88,22 +93,10 @@ fn report_html_is_self_contained() {
         "--out",
         arena.to_str().unwrap(),
     ]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     // `hushfuse report <out-dir>` rewrites the first one from its files.
     let first = std::fs::read_to_string(run.join("report.html")).unwrap();
     std::fs::remove_file(run.join("report.html")).unwrap();
-    let out = hushfuse(&["report", run.to_str().unwrap()]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_ok(&["report", run.to_str().unwrap()]);
     let again = std::fs::read_to_string(run.join("report.html")).unwrap();
     assert_eq!(first, again, "report <out-dir> differs from run --report");
     for page in [run.join("report.html"), arena.join("report.html")] {
@@ -147,7 +140,7 @@ fn headless_chromium_renders_the_report() {
     };
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let out = hushfuse(&[
+    run_ok(&[
         "run",
         "arena-1d",
         "--trials",
@@ -156,12 +149,6 @@ fn headless_chromium_renders_the_report() {
         "--out",
         run.to_str().unwrap(),
     ]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let png = dir.path().join("r.png");
     let profile = dir.path().join("profile");
     let status = Command::new(browser)
