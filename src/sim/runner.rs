@@ -195,7 +195,7 @@ impl Drop for PooledDrawer<'_> {
     }
 }
 
-/// Runs one trial of every variant, adding into `sums` (one per variant).
+/// Runs one trial of every variant on freshly drawn data, adding into `sums` (one per variant).
 fn run_trial(
     exp: &Experiment,
     trial: usize,
@@ -203,63 +203,106 @@ fn run_trial(
     drawer: &mut Drawer,
 ) -> Result<(), RunError> {
     drawer.draw(exp, trial);
-    let data = &drawer.data;
+    run_trial_on(exp, trial, &drawer.data, sums)
+}
+
+/// Runs one trial of every variant on the given truth and measurements (drawn by
+/// [`draw_trial`], or recorded), adding into `sums` (one per variant). Variant v's coins come
+/// from stream 1 + v of `trial`, as in [`run`].
+pub fn run_trial_on(
+    exp: &Experiment,
+    trial: usize,
+    data: &TrialData,
+    sums: &mut [Sums],
+) -> Result<(), RunError> {
+    let mut scratch = Scratch::new(exp.system.n_sensors());
+    for (v, s) in sums.iter_mut().enumerate().take(exp.variants.len()) {
+        run_variant(exp, trial, v, data, s, &mut scratch)?;
+    }
+    Ok(())
+}
+
+/// Per-step buffers of [`run_variant`], reused across variants.
+struct Scratch {
+    inbox: Vec<crate::link::Received>,
+    transmissions: Vec<crate::link::Transmission>,
+}
+
+impl Scratch {
+    fn new(n_sensors: usize) -> Self {
+        Self {
+            inbox: Vec::with_capacity(n_sensors),
+            transmissions: Vec::with_capacity(n_sensors),
+        }
+    }
+}
+
+/// Runs variant `v` over one trial's data, adding into its `sums`.
+fn run_variant(
+    exp: &Experiment,
+    trial: usize,
+    v: usize,
+    data: &TrialData,
+    sums: &mut Sums,
+    scratch: &mut Scratch,
+) -> Result<(), RunError> {
     let n_sensors = exp.system.n_sensors();
-    let mut inbox = Vec::with_capacity(n_sensors);
-    let mut transmissions = Vec::with_capacity(n_sensors);
-    for (v, variant) in exp.variants.iter().enumerate() {
-        let label = &exp.curves[variant.curve].label;
-        let scheme_err = |k: usize, source: SchemeError| RunError::Scheme {
-            label: label.clone(),
-            variant: v,
-            trial,
-            k,
-            source,
-        };
-        let mut rng = trial_rng(exp.seed, trial as u64, 1 + v as u64);
-        // The fusion center's own stream (particle filters) is independent of the sensors'.
-        let center_seed = center_seed(exp.seed, trial as u64, 1 + v as u64);
-        let mut inst = variant
-            .scheme
-            .build_with_seed(center_seed)
-            .map_err(|e| scheme_err(0, e))?;
-        let schedule = variant.scheme.schedule();
-        let mut obs = sums[v].trial(&exp.groups, exp.steady_from);
-        // What the fusion center tells the sensors before the first measurement.
-        let mut feedback = inst.center.feedback();
-        for k in 1..=exp.steps {
-            transmissions.clear();
-            for (i, node) in inst.sensors.iter_mut().enumerate() {
-                let t = if schedule.allows(k, i, n_sensors) {
-                    node.step(k, &data.measurements[k - 1][i], feedback.as_ref(), &mut rng)
-                        .map_err(|e| scheme_err(k, e))?
-                } else {
-                    crate::link::Transmission::Silent
-                };
-                transmissions.push(t);
-            }
-            let mut traffic = network::deliver(transmissions.drain(..), &mut inbox);
-            traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
-            if schedule != network::Schedule::All {
-                for (i, r) in inbox.iter_mut().enumerate() {
-                    if !schedule.allows(k, i, n_sensors) {
-                        *r = crate::link::Received::NotScheduled;
-                    }
+    let Scratch {
+        inbox,
+        transmissions,
+    } = scratch;
+    let variant = &exp.variants[v];
+    let label = &exp.curves[variant.curve].label;
+    let scheme_err = |k: usize, source: SchemeError| RunError::Scheme {
+        label: label.clone(),
+        variant: v,
+        trial,
+        k,
+        source,
+    };
+    let mut rng = trial_rng(exp.seed, trial as u64, 1 + v as u64);
+    // The fusion center's own stream (particle filters) is independent of the sensors'.
+    let center_seed = center_seed(exp.seed, trial as u64, 1 + v as u64);
+    let mut inst = variant
+        .scheme
+        .build_with_seed(center_seed)
+        .map_err(|e| scheme_err(0, e))?;
+    let schedule = variant.scheme.schedule();
+    let mut obs = sums.trial(&exp.groups, exp.steady_from);
+    // What the fusion center tells the sensors before the first measurement.
+    let mut feedback = inst.center.feedback();
+    for k in 1..=exp.steps {
+        transmissions.clear();
+        for (i, node) in inst.sensors.iter_mut().enumerate() {
+            let t = if schedule.allows(k, i, n_sensors) {
+                node.step(k, &data.measurements[k - 1][i], feedback.as_ref(), &mut rng)
+                    .map_err(|e| scheme_err(k, e))?
+            } else {
+                crate::link::Transmission::Silent
+            };
+            transmissions.push(t);
+        }
+        let mut traffic = network::deliver(transmissions.drain(..), inbox);
+        traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
+        if schedule != network::Schedule::All {
+            for (i, r) in inbox.iter_mut().enumerate() {
+                if !schedule.allows(k, i, n_sensors) {
+                    *r = crate::link::Received::NotScheduled;
                 }
             }
-            inst.center.step(k, &inbox).map_err(|e| scheme_err(k, e))?;
-            feedback = inst.center.feedback();
-            obs.record(k, &data.truth[k - 1], inst.center.estimate(), traffic)
-                .map_err(|source| RunError::Covariance {
-                    label: label.clone(),
-                    trial,
-                    k,
-                    source,
-                })?;
-            obs.record_ess(k, inst.center.ess());
         }
-        obs.finish();
+        inst.center.step(k, inbox).map_err(|e| scheme_err(k, e))?;
+        feedback = inst.center.feedback();
+        obs.record(k, &data.truth[k - 1], inst.center.estimate(), traffic)
+            .map_err(|source| RunError::Covariance {
+                label: label.clone(),
+                trial,
+                k,
+                source,
+            })?;
+        obs.record_ess(k, inst.center.ess());
     }
+    obs.finish();
     Ok(())
 }
 
