@@ -103,6 +103,51 @@ fn valid_scenario_runs_and_writes_outputs() {
     // All-send: both sensors every step, one 32-bit component each.
     assert_eq!(s["rate"].as_f64().unwrap(), 1.0);
     assert_eq!(s["bits_per_step"].as_f64().unwrap(), 64.0);
+    // Every mean has its standard error; an all-send scheme's traffic has no spread.
+    assert_eq!(s["bits_per_step_se"].as_f64().unwrap(), 0.0);
+    assert_eq!(
+        s["traffic_per_step"]["payload_bits"][3].as_f64(),
+        Some(64.0)
+    );
+    assert_eq!(
+        s["traffic_per_step"]["payload_bits_se"][3].as_f64(),
+        Some(0.0)
+    );
+    assert!(s["rmse_se"]["position"][5].as_f64().unwrap() > 0.0);
+    assert!(s["anees_se"].as_f64().unwrap() > 0.0);
+
+    // per_step.csv is tidy: parameters in their own columns, a standard error after each mean.
+    let csv = std::fs::read_to_string(dir.path().join("o/per_step.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("per_step.csv lacks {name}: {header:?}"))
+    };
+    for name in [
+        "scheme",
+        "kind",
+        "step",
+        "rmse_position",
+        "rmse_position_se",
+        "payload_bits",
+    ] {
+        col(name);
+    }
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert!(rows.iter().all(|r| r.len() == header.len()));
+    let sweep = header
+        .iter()
+        .find(|h| h.starts_with("param_"))
+        .expect("a swept parameter column");
+    let p = col(sweep);
+    // The all-send KF has no such parameter; some swept variant has a number there.
+    assert!(rows.iter().any(|r| r[p].is_empty()));
+    assert!(rows.iter().any(|r| r[p].parse::<f64>().is_ok()));
+    assert_eq!(rows[3][col("payload_bits")], "64");
+    assert_eq!(rows[3][col("payload_bits_se")], "0");
 }
 
 /// Each bad file must exit with code 2 and name the offending field.

@@ -165,6 +165,11 @@ pub struct Sums {
     pub steps: usize,
     /// steps x width, row-major.
     pub per_step: Vec<f64>,
+    /// Sums of squares of the same per-(trial, step) values, for per-step standard errors.
+    pub per_step_sq: Vec<f64>,
+    /// Per field of the layout: the per-trial average over all steps, whose spread across
+    /// trials gives the standard error of every time-averaged mean in `summary.json`.
+    pub whole_run: Vec<TrialStat>,
     pub trials: usize,
     /// Steady-state per-trial averages: total squared error, trace, NEES, messages per step.
     pub steady_mse: TrialStat,
@@ -203,6 +208,8 @@ pub struct TrialObserver<'a> {
     diverged: bool,
     acc: [f64; 4],
     group_acc: Vec<f64>,
+    /// This trial's per-field sums over all steps (for [`Sums::whole_run`]).
+    run_acc: Vec<f64>,
     count: usize,
     /// Work space, so that a step allocates nothing: the error, its whitened form and the
     /// matrix the NEES Cholesky factor is computed in.
@@ -219,6 +226,8 @@ impl Sums {
             state_dim,
             steps,
             per_step: vec![0.0; steps * layout.width()],
+            per_step_sq: vec![0.0; steps * layout.width()],
+            whole_run: vec![TrialStat::default(); layout.width()],
             trials: 0,
             steady_mse: TrialStat::default(),
             steady_trace: TrialStat::default(),
@@ -252,6 +261,7 @@ impl Sums {
         };
         let nees_bound_95 = quantile(0.05);
         let divergence_bound = quantile(DIVERGENCE_TAIL);
+        let width = self.layout().width();
         TrialObserver {
             sums: self,
             groups,
@@ -263,6 +273,7 @@ impl Sums {
             diverged: false,
             acc: [0.0; 4],
             group_acc: vec![0.0; groups.len()],
+            run_acc: vec![0.0; width],
             count: 0,
             err: Vector::zeros(0),
             white: Vector::zeros(0),
@@ -274,6 +285,12 @@ impl Sums {
     pub fn merge(&mut self, o: &Sums) {
         for (a, b) in self.per_step.iter_mut().zip(&o.per_step) {
             *a += b;
+        }
+        for (a, b) in self.per_step_sq.iter_mut().zip(&o.per_step_sq) {
+            *a += b;
+        }
+        for (a, b) in self.whole_run.iter_mut().zip(&o.whole_run) {
+            a.merge(b);
         }
         self.trials += o.trials;
         self.steady_mse.merge(&o.steady_mse);
@@ -293,6 +310,16 @@ impl Sums {
     /// Sum of entry `field` at step index `s` (0-based).
     pub fn at(&self, s: usize, field: usize) -> f64 {
         self.per_step[s * self.layout().width() + field]
+    }
+
+    /// Mean over trials and its standard error of entry `field` at step index `s` (0-based).
+    pub fn mean_se_at(&self, s: usize, field: usize) -> (f64, f64) {
+        let i = s * self.layout().width() + field;
+        TrialStat {
+            sum: self.per_step[i],
+            sum_sq: self.per_step_sq[i],
+        }
+        .mean_se(self.trials)
     }
 }
 
@@ -319,11 +346,20 @@ impl TrialObserver<'_> {
         let nees_direct = nees_buffered(&self.err, &est.cov, &mut self.white, &mut self.chol_buf);
         let err = &self.err;
         let row = &mut self.sums.per_step[(k - 1) * w..k * w];
+        let row_sq = &mut self.sums.per_step_sq[(k - 1) * w..k * w];
+        let run_acc = &mut self.run_acc;
+        // Every per-(trial, step) value goes into the sum, the sum of squares and this
+        // trial's whole-run sum.
+        let mut add = |f: usize, v: f64| {
+            row[f] += v;
+            row_sq[f] += v * v;
+            run_acc[f] += v;
+        };
         let total: f64 = err.iter().map(|e| e * e).sum();
         let steady = k >= self.steady_from;
         for (g, (_, idx)) in self.groups.iter().enumerate() {
             let se = idx.iter().map(|&j| err[j] * err[j]).sum::<f64>();
-            row[layout.group(g)] += se;
+            add(layout.group(g), se);
             if steady {
                 self.group_acc[g] += se;
             }
@@ -342,16 +378,22 @@ impl TrialObserver<'_> {
             Err(e) => return Err(e),
         };
         let trace = est.cov.trace();
-        row[Layout::TOTAL_SE] += total;
-        row[Layout::NEES] += nees;
-        row[Layout::TRACE] += trace;
-        row[Layout::MESSAGES] += traffic.messages as f64;
-        row[Layout::BITS] += traffic.bits as f64;
-        row[Layout::FRAME_BITS] += traffic.frame_bits as f64;
-        row[Layout::DOWNLINK_BITS] += traffic.downlink_bits as f64;
-        row[Layout::DEGENERATE] += f64::from(u8::from(degenerate));
-        row[Layout::NEES_COVERED] += f64::from(u8::from(nees <= self.nees_bound));
-        row[Layout::NEES_COVERED_95] += f64::from(u8::from(nees <= self.nees_bound_95));
+        add(Layout::TOTAL_SE, total);
+        add(Layout::NEES, nees);
+        add(Layout::TRACE, trace);
+        add(Layout::MESSAGES, traffic.messages as f64);
+        add(Layout::BITS, traffic.bits as f64);
+        add(Layout::FRAME_BITS, traffic.frame_bits as f64);
+        add(Layout::DOWNLINK_BITS, traffic.downlink_bits as f64);
+        add(Layout::DEGENERATE, f64::from(u8::from(degenerate)));
+        add(
+            Layout::NEES_COVERED,
+            f64::from(u8::from(nees <= self.nees_bound)),
+        );
+        add(
+            Layout::NEES_COVERED_95,
+            f64::from(u8::from(nees <= self.nees_bound_95)),
+        );
         // Divergence: a run of NEES beyond the 99.9% quantile, or anything not finite.
         if !(total.is_finite() && nees.is_finite()) {
             self.diverged = true;
@@ -385,6 +427,8 @@ impl TrialObserver<'_> {
         };
         let w = self.sums.layout().width();
         self.sums.per_step[(k - 1) * w + Layout::ESS] += ess;
+        self.sums.per_step_sq[(k - 1) * w + Layout::ESS] += ess * ess;
+        self.run_acc[Layout::ESS] += ess;
         let m = &mut self.sums.ess_min[k - 1];
         *m = m.min(ess);
         self.sums.has_ess = true;
@@ -404,6 +448,10 @@ impl TrialObserver<'_> {
         row.push(self.acc[0] / c);
         row.extend(self.group_acc.iter().map(|v| v / c));
         self.sums.per_trial.push(row);
+        let steps = self.sums.steps.max(1) as f64;
+        for (stat, v) in self.sums.whole_run.iter_mut().zip(&self.run_acc) {
+            stat.add(v / steps);
+        }
     }
 }
 
@@ -483,5 +531,48 @@ mod tests {
         assert_eq!(m.at(1, Layout::TOTAL_SE), 10.0);
         let (mean, se) = m.steady_mse.mean_se(2);
         assert_eq!((mean, se), (5.0, 0.0));
+    }
+
+    #[test]
+    fn second_moments_and_whole_run_averages_give_hand_computed_standard_errors() {
+        // One 1-D state, 3 trials x 2 steps; the estimate is off by e(t, k), covariance 1.
+        let groups = vec![("x".to_string(), vec![0])];
+        let errors = [[1.0, 2.0], [2.0, 0.0], [3.0, 1.0]];
+        let mut s = Sums::new(1, 2, 1);
+        let truth = Vector::from_vec(vec![0.0]);
+        for (t, e) in errors.iter().enumerate() {
+            let mut obs = s.trial(&groups, 1);
+            for (k, &e) in e.iter().enumerate() {
+                let est = Gaussian::new(Vector::from_vec(vec![e]), Matrix::identity(1, 1));
+                let traffic = Traffic {
+                    messages: t as _,
+                    bits: 8 * k as u64,
+                    ..Traffic::default()
+                };
+                obs.record(k + 1, &truth, &est, traffic).unwrap();
+            }
+            obs.finish();
+        }
+        // Step 1 squared errors 1, 4, 9: mean 14/3, sample variance (98 - 196/3) / 2 = 49/3,
+        // se sqrt(49/9) = 7/3.
+        let (m, se) = s.mean_se_at(0, Layout::TOTAL_SE);
+        assert!((m - 14.0 / 3.0).abs() < 1e-12);
+        assert!((se - 7.0 / 3.0).abs() < 1e-12, "{se}");
+        // Per-trial time averages of the squared error: 2.5, 2, 5 -> mean 19/6; sample
+        // variance (35.25 - 361/12) / 2 = 31/12, se sqrt(31/36).
+        let (m, se) = s.whole_run[Layout::TOTAL_SE].mean_se(3);
+        assert!((m - 19.0 / 6.0).abs() < 1e-12);
+        assert!((se - (31.0f64 / 36.0).sqrt()).abs() < 1e-12, "{se}");
+        // Messages: trial t sends t per step; whole-run averages 0, 1, 2 -> se 1 / sqrt(3).
+        let (m, se) = s.whole_run[Layout::MESSAGES].mean_se(3);
+        assert_eq!(m, 1.0);
+        assert!((se - 1.0 / 3f64.sqrt()).abs() < 1e-12);
+        // Bits are 0 at step 1 and 8 at step 2 in every trial: no spread at either step.
+        assert_eq!(s.mean_se_at(1, Layout::BITS), (8.0, 0.0));
+        // Merging two halves gives the same second moments as one pass.
+        let mut m2 = Sums::new(1, 2, 1);
+        m2.merge(&s);
+        assert_eq!(m2.per_step_sq, s.per_step_sq);
+        assert_eq!(m2.whole_run, s.whole_run);
     }
 }

@@ -18,8 +18,26 @@ pub struct SteadyState {
     pub trace_se: f64,
     /// Mean NEES divided by the state dimension (1 for a consistent filter).
     pub anees: f64,
+    pub anees_se: f64,
     pub rate: f64,
     pub rate_se: f64,
+}
+
+/// Per-step traffic: mean over trials and its standard error at each step.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct TrafficPerStep {
+    /// Transmissions / sensors.
+    pub rate: Vec<f64>,
+    pub rate_se: Vec<f64>,
+    /// Uplink payload bits (all sensors).
+    pub payload_bits: Vec<f64>,
+    pub payload_bits_se: Vec<f64>,
+    /// Bits of the 802.15.4 MAC frames sent.
+    pub frame_bits: Vec<f64>,
+    pub frame_bits_se: Vec<f64>,
+    /// Feedback bits from the fusion center.
+    pub downlink_bits: Vec<f64>,
+    pub downlink_bits_se: Vec<f64>,
 }
 
 /// Results of one scheme variant.
@@ -31,40 +49,64 @@ pub struct SchemeSummary {
     pub params: Params,
     /// RMSE per state group per step.
     pub rmse: BTreeMap<String, Vec<f64>>,
+    /// Standard error of `rmse` (delta method: se(MSE) / (2 RMSE)).
+    pub rmse_se: BTreeMap<String, Vec<f64>>,
     /// Time average of the per-step RMSE, per group.
     pub mean_rmse: BTreeMap<String, f64>,
+    /// An upper bound on the standard error of `mean_rmse`: the time average of `rmse_se`,
+    /// exact when the errors of all steps are fully correlated across trials and larger
+    /// otherwise (the exact delta-method value needs every pair of steps' covariance).
+    pub mean_rmse_se_upper: BTreeMap<String, f64>,
     /// Mean total squared error per step.
     pub mse: Vec<f64>,
+    pub mse_se: Vec<f64>,
     /// Mean trace of the fused covariance per step.
     pub trace: Vec<f64>,
+    pub trace_se: Vec<f64>,
     /// Mean NEES / state dimension per step.
     pub anees_per_step: Vec<f64>,
+    pub anees_per_step_se: Vec<f64>,
     /// Time average of `anees_per_step`.
     pub anees: f64,
+    /// Standard error of `anees`, from the per-trial time averages (as for every `*_se` of a
+    /// time-averaged mean below).
+    pub anees_se: f64,
     /// Transmissions / (sensors x steps).
     pub rate: f64,
+    pub rate_se: f64,
     /// Mean number of sensors transmitting per step.
     pub transmissions_per_step: f64,
+    pub transmissions_per_step_se: f64,
     /// Mean payload bits sent per step (all sensors).
     pub bits_per_step: f64,
+    pub bits_per_step_se: f64,
     /// Mean bits of the 802.15.4 MAC frames sent per step (header, payload, footer).
     pub frame_bits_per_step: f64,
+    pub frame_bits_per_step_se: f64,
     /// Mean feedback bits from the fusion center to the sensors per step.
     pub downlink_bits_per_step: f64,
+    pub downlink_bits_per_step_se: f64,
+    /// Per step: rate and bits with their standard errors.
+    pub traffic_per_step: TrafficPerStep,
     /// Fraction of (trial, step) pairs whose fused covariance was singular (collapsed
     /// particle clouds); their NEES used a 1e-9 relative jitter.
     pub degenerate_covariance_fraction: f64,
+    pub degenerate_covariance_fraction_se: f64,
     /// Fraction of (trial, step) pairs whose NEES was below the chi-square 99% quantile: 0.99
     /// for a consistent filter. Robust where the mean NEES is ruined by a few collapsed
     /// particle clouds.
     pub nees_coverage_99: f64,
+    pub nees_coverage_99_se: f64,
     /// Fraction of (trial, step) pairs whose NEES was below the chi-square 95% quantile: 0.95
     /// for a consistent filter.
     pub nees_coverage_95: f64,
+    pub nees_coverage_95_se: f64,
     /// Fraction of trials that diverged: NEES above the chi-square(n) 99.9% quantile for 10
     /// consecutive steps, or a squared error or NEES that is not finite
     /// ([`super::metrics::DIVERGENCE_RUN`]).
     pub diverged_fraction: f64,
+    /// Binomial standard error sqrt(p (1 - p) / trials).
+    pub diverged_fraction_se: f64,
     /// Effective sample size of particle-filter fusion centers (absent for other schemes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ess: Option<EssSummary>,
@@ -83,6 +125,7 @@ pub struct SchemeSummary {
 pub struct EssSummary {
     /// Time average of `mean_per_step`.
     pub mean: f64,
+    pub mean_se: f64,
     /// Smallest ESS of any trial at any step.
     pub min: f64,
     /// Mean across trials per step.
@@ -144,13 +187,39 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
         .map(|(v, s)| {
             let layout = s.layout();
             let col = |f: usize| -> Vec<f64> { (0..steps).map(|k| s.at(k, f) / trials).collect() };
+            let col_se =
+                |f: usize| -> Vec<f64> { (0..steps).map(|k| s.mean_se_at(k, f).1).collect() };
+            // Standard error of a time-averaged mean of field f, scaled like the mean.
+            let run_se = |f: usize, scale: f64| s.whole_run[f].mean_se(exp.trials).1 * scale;
             let mut rmse = BTreeMap::new();
+            let mut rmse_se = BTreeMap::new();
             let mut mean_rmse = BTreeMap::new();
+            let mut mean_rmse_se_upper = BTreeMap::new();
             for (g, (name, _)) in exp.groups.iter().enumerate() {
                 let r: Vec<f64> = col(layout.group(g)).into_iter().map(f64::sqrt).collect();
+                let r_se: Vec<f64> = col_se(layout.group(g))
+                    .into_iter()
+                    .zip(&r)
+                    .map(|(se, r)| rmse_se_of(se, *r))
+                    .collect();
                 mean_rmse.insert(name.clone(), r.iter().sum::<f64>() / steps as f64);
+                mean_rmse_se_upper.insert(name.clone(), r_se.iter().sum::<f64>() / steps as f64);
                 rmse.insert(name.clone(), r);
+                rmse_se.insert(name.clone(), r_se);
             }
+            let per_sensor =
+                |v: Vec<f64>| -> Vec<f64> { v.into_iter().map(|x| x / n_sensors).collect() };
+            let traffic_per_step = TrafficPerStep {
+                rate: per_sensor(col(Layout::MESSAGES)),
+                rate_se: per_sensor(col_se(Layout::MESSAGES)),
+                payload_bits: col(Layout::BITS),
+                payload_bits_se: col_se(Layout::BITS),
+                frame_bits: col(Layout::FRAME_BITS),
+                frame_bits_se: col_se(Layout::FRAME_BITS),
+                downlink_bits: col(Layout::DOWNLINK_BITS),
+                downlink_bits_se: col_se(Layout::DOWNLINK_BITS),
+            };
+            let p_div = s.diverged as f64 / trials;
             let anees_per_step: Vec<f64> = col(Layout::NEES).into_iter().map(|x| x / n).collect();
             let messages: f64 = col(Layout::MESSAGES).iter().sum();
             let bits: f64 = col(Layout::BITS).iter().sum();
@@ -160,13 +229,14 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
             let covered: f64 = col(Layout::NEES_COVERED).iter().sum();
             let (mse_ss, mse_se) = s.steady_mse.mean_se(exp.trials);
             let (trace_ss, trace_se) = s.steady_trace.mean_se(exp.trials);
-            let (nees_ss, _) = s.steady_nees.mean_se(exp.trials);
+            let (nees_ss, nees_se) = s.steady_nees.mean_se(exp.trials);
             let (msg_ss, msg_se) = s.steady_messages.mean_se(exp.trials);
             let covered_95: f64 = col(Layout::NEES_COVERED_95).iter().sum();
             let ess = s.has_ess.then(|| {
                 let mean_per_step = col(Layout::ESS);
                 EssSummary {
                     mean: mean_per_step.iter().sum::<f64>() / steps as f64,
+                    mean_se: run_se(Layout::ESS, 1.0),
                     min: s.ess_min.iter().copied().fold(f64::INFINITY, f64::min),
                     mean_per_step,
                     min_per_step: s.ess_min.clone(),
@@ -185,20 +255,40 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
                 curve: v.curve,
                 params: v.params.clone(),
                 rmse,
+                rmse_se,
                 mean_rmse,
+                mean_rmse_se_upper,
                 mse: col(Layout::TOTAL_SE),
+                mse_se: col_se(Layout::TOTAL_SE),
                 trace: col(Layout::TRACE),
+                trace_se: col_se(Layout::TRACE),
                 anees: anees_per_step.iter().sum::<f64>() / steps as f64,
+                anees_se: run_se(Layout::NEES, 1.0 / n),
                 anees_per_step,
+                anees_per_step_se: col_se(Layout::NEES).into_iter().map(|x| x / n).collect(),
                 rate: messages / (steps as f64 * n_sensors),
+                rate_se: run_se(Layout::MESSAGES, 1.0 / n_sensors),
                 transmissions_per_step: messages / steps as f64,
+                transmissions_per_step_se: run_se(Layout::MESSAGES, 1.0),
                 bits_per_step: bits / steps as f64,
+                bits_per_step_se: run_se(Layout::BITS, 1.0),
                 frame_bits_per_step: frame_bits / steps as f64,
+                frame_bits_per_step_se: run_se(Layout::FRAME_BITS, 1.0),
                 downlink_bits_per_step: downlink_bits / steps as f64,
+                downlink_bits_per_step_se: run_se(Layout::DOWNLINK_BITS, 1.0),
+                traffic_per_step,
                 degenerate_covariance_fraction: degenerate / steps as f64,
+                degenerate_covariance_fraction_se: run_se(Layout::DEGENERATE, 1.0),
                 nees_coverage_99: covered / steps as f64,
+                nees_coverage_99_se: run_se(Layout::NEES_COVERED, 1.0),
                 nees_coverage_95: covered_95 / steps as f64,
-                diverged_fraction: s.diverged as f64 / trials,
+                nees_coverage_95_se: run_se(Layout::NEES_COVERED_95, 1.0),
+                diverged_fraction: p_div,
+                diverged_fraction_se: if exp.trials > 0 {
+                    (p_div * (1.0 - p_div) / trials).sqrt()
+                } else {
+                    f64::NAN
+                },
                 ess,
                 consistency,
                 per_trial: s.per_trial.clone(),
@@ -209,6 +299,7 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
                     trace: trace_ss,
                     trace_se,
                     anees: nees_ss / n,
+                    anees_se: nees_se / n,
                     rate: msg_ss / n_sensors,
                     rate_se: msg_se / n_sensors,
                 },
@@ -227,6 +318,16 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
         groups: exp.groups.iter().cloned().collect(),
         group_order: exp.groups.iter().map(|(g, _)| g.clone()).collect(),
         schemes,
+    }
+}
+
+/// Standard error of an RMSE from that of its MSE by the delta method: d sqrt(m) = dm / (2
+/// sqrt(m)). A zero RMSE with a zero spread has a zero standard error.
+fn rmse_se_of(mse_se: f64, rmse: f64) -> f64 {
+    if mse_se == 0.0 {
+        0.0
+    } else {
+        mse_se / (2.0 * rmse)
     }
 }
 
@@ -278,30 +379,70 @@ pub fn params_text(p: &Params) -> String {
         .join(", ")
 }
 
-/// `per_step.csv`: one row per scheme variant and step.
+/// `per_step.csv`: one row per scheme variant and step, in tidy form. Each scheme parameter
+/// has its own column `param_<name>` (the union over all variants, empty where a scheme has
+/// no such parameter); every mean over trials is followed by its standard error (`*_se`).
 pub fn per_step_csv(summary: &Summary) -> String {
     let groups: Vec<&String> = summary.group_order.iter().collect();
-    let mut out = String::from("scheme,params,step");
-    for g in &groups {
-        let _ = write!(out, ",rmse_{g}");
-    }
-    out.push_str(",mse,trace,anees\n");
+    let mut params: Vec<&String> = Vec::new();
     for s in &summary.schemes {
-        for k in 0..summary.steps {
-            let _ = write!(
-                out,
-                "\"{}\",\"{}\",{}",
-                s.name,
-                params_text(&s.params),
-                k + 1
-            );
-            for g in &groups {
-                let _ = write!(out, ",{}", s.rmse[*g][k]);
+        for k in s.params.keys() {
+            if !params.contains(&k) {
+                params.push(k);
             }
-            let _ = writeln!(out, ",{},{},{}", s.mse[k], s.trace[k], s.anees_per_step[k]);
+        }
+    }
+    let mut out = String::from("scheme,kind");
+    for p in &params {
+        // Prefixed: a parameter may share a name with a metric column (`rate`, `bits`).
+        let _ = write!(out, ",{}", csv_field(&format!("param_{p}")));
+    }
+    out.push_str(",step");
+    for g in &groups {
+        let _ = write!(out, ",rmse_{g},rmse_{g}_se");
+    }
+    out.push_str(",mse,mse_se,trace,trace_se,anees,anees_se,rate,rate_se,payload_bits,payload_bits_se,frame_bits,frame_bits_se,downlink_bits,downlink_bits_se\n");
+    for s in &summary.schemes {
+        let mut lead = format!("{},{}", csv_field(&s.name), csv_field(&s.kind));
+        for p in &params {
+            // Numbers in full (shortest round-trip form), not the table's six decimals.
+            let v = match s.params.get(*p) {
+                Some(super::scenario::ParamValue::Number(x)) => format!("{x}"),
+                Some(v) => v.to_string(),
+                None => String::new(),
+            };
+            let _ = write!(lead, ",{}", csv_field(&v));
+        }
+        let t = &s.traffic_per_step;
+        for k in 0..summary.steps {
+            let _ = write!(out, "{lead},{}", k + 1);
+            for g in &groups {
+                let _ = write!(out, ",{},{}", s.rmse[*g][k], s.rmse_se[*g][k]);
+            }
+            for (v, se) in [
+                (s.mse[k], s.mse_se[k]),
+                (s.trace[k], s.trace_se[k]),
+                (s.anees_per_step[k], s.anees_per_step_se[k]),
+                (t.rate[k], t.rate_se[k]),
+                (t.payload_bits[k], t.payload_bits_se[k]),
+                (t.frame_bits[k], t.frame_bits_se[k]),
+                (t.downlink_bits[k], t.downlink_bits_se[k]),
+            ] {
+                let _ = write!(out, ",{v},{se}");
+            }
+            out.push('\n');
         }
     }
     out
+}
+
+/// A CSV field, quoted (with doubled quotes) when it holds a comma, a quote or a line break.
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
 }
 
 /// A number for the table: fixed decimals, scientific beyond 1e6, "overflow" if not finite.
