@@ -403,3 +403,23 @@ fn bad_censoring_parameters_exit_2() {
     assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("position_indices"), "{stderr}");
 }
+
+/// One trial has no standard errors (NaN, written as null): that is no overflow, and the run
+/// succeeds.
+#[test]
+fn a_single_trial_run_succeeds_without_standard_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scenario.toml");
+    std::fs::write(&path, VALID).unwrap();
+    let out = hushfuse(
+        &["run", path.to_str().unwrap(), "--trials", "1", "--out", "o"],
+        dir.path(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(!stderr.contains("not finite"), "{stderr}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("o/summary.json")).unwrap())
+            .unwrap();
+    assert!(json["schemes"][0]["anees_se"].is_null());
+}
