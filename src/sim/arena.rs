@@ -81,9 +81,24 @@ pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
     rows
 }
 
-/// The best-per-budget table as text.
+/// The best-per-budget table as text, with the bound below it where there is one.
 pub fn best_table(out: &Outcome, group: &str) -> String {
-    render(&best_per_budget(out, group))
+    let mut s = render(&best_per_budget(out, group));
+    if let Some(line) = bound_line(out, group) {
+        s.push_str(&line);
+        s.push('\n');
+    }
+    s
+}
+
+/// The posterior Cramér–Rao bound on the mean RMSE of `group` (every sensor at every step,
+/// any estimator): no scheme can be below it, whatever its budget.
+fn bound_line(out: &Outcome, group: &str) -> Option<String> {
+    let b = out.summaries.first()?.pcrb.as_ref()?;
+    let r = b.mean_rmse.get(group)?;
+    Some(format!(
+        "bound: posterior Cramér–Rao bound on the mean RMSE of {group} with every sensor at every step, for any estimator: {r:.4}"
+    ))
 }
 
 /// The best-per-budget table as Markdown.
@@ -95,6 +110,9 @@ pub fn best_markdown(out: &Outcome, group: &str) -> String {
         if i == 0 {
             s.push_str(&format!("|{}\n", "---|".repeat(r.len())));
         }
+    }
+    if let Some(line) = bound_line(out, group) {
+        s.push_str(&format!("\n{line}\n"));
     }
     s
 }
@@ -147,6 +165,24 @@ pub fn bits_lines(
     lines
 }
 
+/// Adds the bound as a dashed grey horizontal line across the points' range of bits.
+fn with_bound(mut lines: Vec<Line>, bound: Option<f64>) -> Vec<Line> {
+    let xs = lines.iter().flat_map(|l| l.points.iter().map(|p| p.0));
+    let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+        (a.min(x), b.max(x))
+    });
+    if let Some(b) = bound.filter(|b| b.is_finite() && lo.is_finite()) {
+        lines.push(Line {
+            name: "PCRB (all data, any estimator)".into(),
+            points: vec![(lo, b), (hi, b)],
+            dashed: true,
+            color: 9,
+            markers: false,
+        });
+    }
+    lines
+}
+
 /// Writes `rmse_<group>_vs_bits.svg` (first group) and `anees_vs_bits.svg`; returns the files.
 pub fn write_plots(
     out: &Outcome,
@@ -163,10 +199,16 @@ pub fn write_plots(
         &format!("{scenario}: mean RMSE of {group} against bits"),
         &x,
         &format!("mean RMSE {group}"),
-        &bits_lines(
-            out,
-            &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN),
-            true,
+        &with_bound(
+            bits_lines(
+                out,
+                &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN),
+                true,
+            ),
+            out.summaries
+                .first()
+                .and_then(|s| s.pcrb.as_ref())
+                .and_then(|b| b.mean_rmse.get(&g).copied()),
         ),
     )?;
     files.push(f);

@@ -474,7 +474,8 @@ pub fn calibrate(
     let mut rows = Vec::new();
     let mut summaries = Vec::new();
     let mut texts = Vec::new();
-    let header = results::summarize(&full, &[]);
+    let mut header = results::summarize(&full, &[]);
+    header.pcrb = super::pcrb::compute(&full).ok();
     for b in 0..budgets.len() {
         let row: Vec<Calibrated> = per_scheme.iter().map(|r| r[b].clone()).collect();
         let tables: Vec<toml::Table> = list

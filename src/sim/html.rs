@@ -176,6 +176,19 @@ fn rmse_bands(input: &Input, sel: &[usize]) -> Result<String, String> {
                 .map_err(pe)?;
             names.push((input.summary.schemes[v].name.clone(), c));
         }
+        // The posterior Cramér–Rao bound: no estimator with every sensor's data is below it.
+        if let Some(r) = input.summary.pcrb.as_ref().and_then(|b| b.rmse.get(gname)) {
+            let grey = RGBColor(110, 110, 110);
+            chart
+                .draw_series(DashedLineSeries::new(
+                    (0..exp.steps).map(|k| ((k + 1) as f64, r[k])),
+                    6,
+                    4,
+                    grey.stroke_width(2),
+                ))
+                .map_err(pe)?;
+            names.push(("PCRB (all data, any estimator; dashed)".into(), grey));
+        }
         legend(&b, &names)?;
         root.present().map_err(pe)?;
     }
@@ -615,6 +628,20 @@ pub fn render(input: &Input) -> Result<String, String> {
             format!("{:.1}", r.frame_bits_per_step),
             format!("{:.1}", r.downlink_bits_per_step),
         ]);
+        rows.push(row);
+    }
+    if let Some(b) = &s.pcrb {
+        let mut row = vec![
+            "Posterior Cramér–Rao bound (all data, any estimator)".to_string(),
+            String::new(),
+        ];
+        row.extend(s.group_order.iter().map(|g| {
+            b.mean_rmse
+                .get(g)
+                .map_or(String::new(), |r| format!("{r:.4}"))
+        }));
+        row.push(format!("{:.4}", b.steady_mse));
+        row.resize(rows[0].len(), String::new());
         rows.push(row);
     }
     h.push_str(&html_table(&rows));

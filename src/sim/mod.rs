@@ -8,6 +8,7 @@ pub mod html;
 pub mod limits;
 pub mod metrics;
 pub mod paper_check;
+pub mod pcrb;
 pub mod plot;
 pub mod report;
 pub mod results;

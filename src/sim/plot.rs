@@ -24,6 +24,52 @@ fn color(i: usize) -> RGBColor {
     COLORS[i % COLORS.len()]
 }
 
+/// Tick values of a log axis over [lo, hi]: 1, 2 and 5 times every power of ten in range (also
+/// 3 and 4, 6 to 9 when the range spans little more than a decade), so that every decade is labelled,
+/// those above 10 and below 1 included (plotters' own log key points skip them).
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let decades = (hi / lo).log10();
+    let mantissas: &[f64] = if decades < 1.2 {
+        &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]
+    } else {
+        &[1.0, 2.0, 5.0]
+    };
+    let mut ticks = Vec::new();
+    for e in lo.log10().floor() as i32..=hi.log10().ceil() as i32 {
+        for m in mantissas {
+            // Divided for negative powers: 6 / 10 is 0.6, 6 * 0.1 is not.
+            let v = if e < 0 {
+                m / 10f64.powi(-e)
+            } else {
+                m * 10f64.powi(e)
+            };
+            if v >= lo && v <= hi {
+                ticks.push(v);
+            }
+        }
+    }
+    ticks
+}
+
+/// A tick label: up to four significant digits without trailing zeros ("0.5", "20", "0.025"),
+/// powers of ten beyond 1e5 or below 1e-3 ("1e6").
+fn tick_label(v: f64) -> String {
+    if v == 0.0 {
+        return "0".into();
+    }
+    let a = v.abs();
+    if !(1e-3..1e5).contains(&a) {
+        return format!("{v:.0e}");
+    }
+    let decimals = (3 - a.log10().floor() as i32).max(0) as usize;
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
 fn plot_err(e: impl std::fmt::Display) -> String {
     format!("plot: {e}")
 }
@@ -109,6 +155,7 @@ pub fn lines_svg(
                     .configure_mesh()
                     .light_line_style(light)
                     .y_labels(12)
+                    .y_label_formatter(&|v| tick_label(*v))
                     .x_desc(x_label)
                     .y_desc(y_label)
                     .draw()
@@ -163,8 +210,12 @@ pub fn lines_svg(
             .x_label_area_size(45)
             .y_label_area_size(70);
         if log {
+            let (lo, hi) = (y0 * 0.8, y1 * 1.25);
             draw!(builder
-                .build_cartesian_2d(x0..x1, (y0 * 0.8..y1 * 1.25).log_scale())
+                .build_cartesian_2d(
+                    x0..x1,
+                    (lo..hi).log_scale().with_key_points(log_ticks(lo, hi))
+                )
                 .map_err(plot_err)?);
         } else {
             let ymax = all.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
@@ -366,4 +417,32 @@ pub fn slug(s: &str) -> String {
         }
     }
     out.trim_matches('-').to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_ticks_label_every_decade_above_ten_and_below_one() {
+        let t = log_ticks(0.4, 15.0);
+        assert_eq!(t, vec![0.5, 1.0, 2.0, 5.0, 10.0]);
+        let t = log_ticks(0.4, 3.0);
+        assert_eq!(t, vec![0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 2.0, 3.0]);
+        let t = log_ticks(3.0, 2500.0);
+        assert_eq!(
+            t,
+            vec![5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0]
+        );
+    }
+
+    #[test]
+    fn tick_labels_are_short() {
+        assert_eq!(tick_label(0.5), "0.5");
+        assert_eq!(tick_label(20.0), "20");
+        assert_eq!(tick_label(0.025), "0.025");
+        assert_eq!(tick_label(0.30000000000000004), "0.3");
+        assert_eq!(tick_label(1e6), "1e6");
+        assert_eq!(tick_label(0.0), "0");
+    }
 }

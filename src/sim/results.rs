@@ -172,6 +172,10 @@ pub struct Summary {
     /// Group names in file order.
     pub group_order: Vec<String>,
     pub schemes: Vec<SchemeSummary>,
+    /// The posterior Cramér–Rao bound of the model with every sensor at every step, where it
+    /// is defined (see [`super::pcrb`]); absent where it was not computed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pcrb: Option<super::pcrb::Pcrb>,
 }
 
 /// Turns sums into per-scheme results.
@@ -318,6 +322,7 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
         groups: exp.groups.iter().cloned().collect(),
         group_order: exp.groups.iter().map(|(g, _)| g.clone()).collect(),
         schemes,
+        pcrb: None,
     }
 }
 
@@ -548,6 +553,9 @@ pub fn table(summary: &Summary) -> String {
             "NEES med: median NEES / n (consistent: {:.3}); NEES<95%/<99%: share of steps below the chi-square quantile (consistent: 0.95/0.99); a consistent filter's per-step ANEES lies in [{:.3}, {:.3}] at {} trials.",
             c.median_nees_expected, c.anees_interval_95[0], c.anees_interval_95[1], summary.trials
         );
+    }
+    if let Some(b) = &summary.pcrb {
+        let _ = writeln!(out, "{}.", super::pcrb::line(b, &summary.group_order));
     }
     let w = warnings(summary);
     if !w.is_empty() {
