@@ -9,6 +9,7 @@ pub mod limits;
 pub mod metrics;
 pub mod paper_check;
 pub mod plot;
+pub mod replay;
 pub mod report;
 pub mod results;
 pub mod runner;
