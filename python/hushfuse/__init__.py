@@ -146,6 +146,29 @@ def _fmt(v: float) -> str:
     return repr(float(v))
 
 
+def _cell(v: Any) -> str:
+    """One DataFrame cell as CSV text: floats so that they read back to the same bits (pandas'
+    own to_csv drops the 17th digit), NaN as an empty field, anything else as written."""
+    if isinstance(v, (float, np.floating)):
+        return "" if math.isnan(v) else _fmt(v)
+    if isinstance(v, (bool, np.bool_)):
+        return str(v)
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    return "" if v is None else str(v)
+
+
+def _frame_csv(frame: Any) -> str:
+    import csv
+
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\n")
+    w.writerow([str(c) for c in frame.columns])
+    for row in frame.itertuples(index=False, name=None):
+        w.writerow([_cell(v) for v in row])
+    return out.getvalue()
+
+
 def _measurement_arrays(measurements: Any) -> List[np.ndarray]:
     """A 3-D array (T, N, m) or a sequence of N 2-D arrays (T, m_i) -> list of 2-D arrays."""
     if isinstance(measurements, np.ndarray):
@@ -212,7 +235,7 @@ def _measurements_csv(arrays: Sequence[np.ndarray]) -> str:
 
 def _truth_csv(truth: Any) -> str:
     if _is_frame(truth):
-        return truth.to_csv(index=False)
+        return _frame_csv(truth)
     t = np.asarray(truth, dtype=float)
     if t.ndim == 1:
         t = t[:, None]
@@ -230,7 +253,10 @@ def measurements_frame(measurements: Any) -> "Any":
     command line read: columns ``step``, ``sensor``, ``z0``, ``z1``, ...; all-NaN rows left out."""
     import pandas as pd
 
-    return pd.read_csv(io.StringIO(_measurements_csv(_measurement_arrays(measurements))))
+    return pd.read_csv(
+        io.StringIO(_measurements_csv(_measurement_arrays(measurements))),
+        float_precision="round_trip",
+    )
 
 
 def replay(
@@ -271,7 +297,7 @@ def replay(
     """
     scenario = _check_scenario(scenario)
     if _is_frame(measurements):
-        meas_csv, meas_name = measurements.to_csv(index=False), "measurements (DataFrame)"
+        meas_csv, meas_name = _frame_csv(measurements), "measurements (DataFrame)"
     else:
         meas_csv, meas_name = _measurements_csv(_measurement_arrays(measurements)), "measurements"
     truth_csv = None

@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# The Python package's tests, from a fresh machine: a fresh virtual environment under
+# target/py/, the pinned tools (python/requirements-test.txt), clippy of the Python crate (it is
+# not a default workspace member), the wheel built by maturin and installed, then pytest.
+# Prints how long each part took. Part of README's test command (after `cargo test --release`).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$PWD
+py=${PYTHON:-python3}
+venv=target/py/venv
+wheels=target/py/wheels
+now() { date +%s.%N; }
+took() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
+
+command -v "$py" >/dev/null || { echo "test-python: $py not found (set PYTHON=...)" >&2; exit 1; }
+t0=$(now)
+rm -rf "$venv" "$wheels"
+mkdir -p target/py
+"$py" -m venv "$venv"
+"$venv/bin/pip" install -q --disable-pip-version-check -r python/requirements-test.txt
+t_venv=$(took "$t0")
+
+t1=$(now)
+cargo clippy -p hushfuse-python --release -- -D warnings
+t_clippy=$(took "$t1")
+
+t2=$(now)
+(cd python && "$root/$venv/bin/maturin" build --release --quiet -i "$root/$venv/bin/python" --out "$root/$wheels")
+"$venv/bin/pip" install -q --disable-pip-version-check --no-deps "$wheels"/hushfuse-*.whl
+t_wheel=$(took "$t2")
+
+# The command line, for the tests that compare Python with it (built already by `cargo test`).
+cargo build --release --quiet --bin hushfuse
+export HUSHFUSE_BIN="$root/target/release/hushfuse"
+export OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1
+
+t3=$(now)
+# From target/py, so that the installed package is imported, not python/hushfuse.
+set +e
+(cd target/py && "$root/$venv/bin/pytest" -q -p no:cacheprovider "$root/python/tests")
+rc=$?
+set -e
+t_pytest=$(took "$t3")
+echo "test-python: venv + pinned tools ${t_venv} s, clippy (python crate) ${t_clippy} s, wheel build + install ${t_wheel} s, pytest ${t_pytest} s"
+if [ "$rc" -eq 5 ]; then
+    echo "test-python: pytest collected no tests: failing" >&2
+    exit 1
+fi
+exit "$rc"
