@@ -253,10 +253,10 @@ def measurements_frame(measurements: Any) -> "Any":
     command line read: columns ``step``, ``sensor``, ``z0``, ``z1``, ...; all-NaN rows left out."""
     import pandas as pd
 
-    return pd.read_csv(
-        io.StringIO(_measurements_csv(_measurement_arrays(measurements))),
-        float_precision="round_trip",
-    )
+    text = io.StringIO(_measurements_csv(_measurement_arrays(measurements)))
+    if int(pd.__version__.split(".")[0]) >= 3:
+        return pd.read_csv(text)  # round-trip precision is the default from pandas 3 on
+    return pd.read_csv(text, float_precision="round_trip")
 
 
 def replay(
