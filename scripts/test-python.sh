@@ -12,6 +12,13 @@ wheels=target/py/wheels
 now() { date +%s.%N; }
 took() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
 
+# A fresh machine without Python (or without its venv module) gets Debian's.
+if ! { command -v "$py" >/dev/null && "$py" -c "import venv, ensurepip" 2>/dev/null; }; then
+    if command -v apt-get >/dev/null 2>&1; then
+        (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3 python3-venv python3-dev >/dev/null) || true
+        py=python3
+    fi
+fi
 command -v "$py" >/dev/null || { echo "test-python: $py not found (set PYTHON=...)" >&2; exit 1; }
 t0=$(now)
 rm -rf "$venv" "$wheels"
