@@ -128,10 +128,12 @@ pub fn get(name: &str) -> Option<&'static str> {
 }
 
 /// A scenario's text and source name from a path, a built-in name, or (when `allow_text`)
-/// TOML text itself (anything with a newline or `=`), with the command line's messages.
+/// TOML text itself (anything with a newline or `=` that is not a path of an existing file),
+/// with the command line's messages.
 pub fn resolve(scenario: &str, allow_text: bool) -> Result<(String, String), String> {
     let path = std::path::Path::new(scenario);
-    if allow_text && (scenario.contains('\n') || scenario.contains('=')) {
+    let text_like = allow_text && (scenario.contains('\n') || scenario.contains('='));
+    if text_like && !path.exists() {
         Ok((scenario.to_string(), "<scenario text>".to_string()))
     } else if path.exists() || scenario.ends_with(".toml") {
         let text =

@@ -403,8 +403,7 @@ impl Recorded {
     }
 
     /// From per-step readings (`None`: no reading) and truth, checked against the experiment
-    /// (sensor count and dimensions, state dimension, number of steps). `what` names the data
-    /// in messages.
+    /// (sensor count and dimensions, state dimension, number of steps, finite values).
     pub fn from_parts(
         exp: &Experiment,
         readings: Vec<Vec<Option<Vector>>>,
