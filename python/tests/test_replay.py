@@ -95,3 +95,19 @@ def test_example_replay_python_equals_cli(tmp_path):
         assert (rows[[f"sensor_{i}" for i in range(4)]].to_numpy() == s["links"]).all()
     # The example's deleted rows are missing readings.
     assert not r["available"][9, 3] and not r["available"][19, 1] and r["available"].sum() == 154
+
+
+def test_three_d_array_and_list_agree():
+    """Sensors of equal dimension: a (T, N, m) array is the same data as the list of (T, m)."""
+    data = hushfuse.simulate(CENSORED_PF)
+    cube = np.stack(data["measurements"], axis=1)
+    assert cube.shape == (15, 2, 1)
+    cube[3, 1, :] = np.nan  # sensor 1 has no reading at step 4
+    a = hushfuse.replay(CENSORED_PF, cube, data["truth"])
+    lst = [cube[:, i, :] for i in range(2)]
+    b = hushfuse.replay(CENSORED_PF, lst, data["truth"])
+    assert plain(a["summary"]) == plain(b["summary"])
+    assert a["available"].sum() == 29 and not a["available"][3, 1]
+    assert all(s["links"][3, 1] == "missing" for s in a["schemes"])
+    assert [v["kind"] for v in hushfuse.variants(CENSORED_PF)] == ["censored-pf", "centralized-kf"]
+    assert "default" in [name for name, _ in hushfuse.builtins()]
