@@ -729,7 +729,7 @@ fn replay(a: &ReplayArgs) -> Result<(), Failure> {
     if let Some(sums) = &r.replayed.sums {
         let summary = results::summarize(&r.exp, sums);
         msg.push('\n');
-        msg.push_str(&replay::table(&summary));
+        msg.push_str(&results::table(&summary));
         let json =
             serde_json::to_string_pretty(&summary).map_err(|e| Failure::Run(e.to_string()))?;
         write("summary.json", &json)?;

@@ -832,21 +832,3 @@ pub fn non_finite(summary: &super::results::Summary) -> Vec<String> {
     }
     super::results::non_finite(&check)
 }
-
-/// The results table of a replay: [`super::results::table`] without the overflow warnings
-/// that only the missing standard errors of a single trial raise.
-pub fn table(summary: &super::results::Summary) -> String {
-    let bad = non_finite(summary);
-    super::results::table(summary)
-        .lines()
-        .filter(|l| {
-            !l.contains("overflow (MSE, its standard error or ANEES is not finite)")
-                || bad.iter().any(|b| {
-                    l.strip_prefix("warning: ")
-                        .and_then(|w| w.split(": overflow").next())
-                        .is_some_and(|who| b.starts_with(who))
-                })
-        })
-        .map(|l| format!("{l}\n"))
-        .collect()
-}
