@@ -1,7 +1,7 @@
 //! `hushfuse` command line: run scenarios, list the built-in ones, reproduce paper figures.
 use clap::{Parser, Subcommand};
 use hushfuse::sim::{
-    arena, build, builtin, calibrate, html, plot, report, results, runner, tables,
+    arena, build, builtin, calibrate, html, plot, replay, report, results, runner, tables,
 };
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
@@ -58,6 +58,10 @@ struct RunArgs {
     /// Also write report.html (self-contained: figures, tables, the scenario as run).
     #[arg(long)]
     report: bool,
+    /// Also write trial K's simulated measurements and truth as CSV into DIR (the layout
+    /// `hushfuse replay` reads).
+    #[arg(long, hide = true, num_args = 2, value_names = ["K", "DIR"])]
+    write_trial: Option<Vec<String>>,
 }
 
 #[derive(Subcommand)]
@@ -77,6 +81,31 @@ enum Command {
         /// Worker threads (unused by the report itself; kept for symmetry).
         #[arg(long, default_value_t = 0)]
         threads: usize,
+    },
+    /// Run every scheme of a scenario on recorded measurements (CSV) instead of simulated
+    /// ones: write estimates.csv, and with --truth summary.json and per_step.csv (one trial).
+    Replay {
+        /// Path of a TOML scenario, or the name of a built-in one.
+        scenario: String,
+        /// Recorded measurements: `step,sensor,z0,...`, one row per reading (a missing row:
+        /// no reading at that step).
+        #[arg(long, value_name = "FILE.csv")]
+        measurements: PathBuf,
+        /// Recorded truth: `step,x0,...`, one row per step from 1.
+        #[arg(long, value_name = "FILE.csv")]
+        truth: Option<PathBuf>,
+        /// Output folder (default: hushfuse-out/<scenario>-replay/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Override the scenario's seed (the schemes' coins).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Use the coins of this trial (to replay data written from trial K of a run).
+        #[arg(long, default_value_t = 0)]
+        trial: usize,
+        /// Run even if the estimated memory or run time is above the limits.
+        #[arg(long)]
+        allow_large: bool,
     },
     /// List the built-in scenarios.
     List,
@@ -130,6 +159,23 @@ fn main() -> ExitCode {
             Ok(())
         }
         Some(Command::Report { out_dir, .. }) => report_dir(&out_dir),
+        Some(Command::Replay {
+            scenario,
+            measurements,
+            truth,
+            out,
+            seed,
+            trial,
+            allow_large,
+        }) => replay(&ReplayArgs {
+            scenario: &scenario,
+            measurements: &measurements,
+            truth: truth.as_deref(),
+            out: out.as_deref(),
+            seed,
+            trial,
+            allow_large,
+        }),
         Some(Command::List) => {
             let text: String = builtin::BUILTIN
                 .iter()
@@ -176,18 +222,7 @@ struct PaperOutput<'a> {
 
 /// Text and source name of a scenario given as a path or a built-in name.
 fn scenario_text(scenario: &str) -> Result<(String, String), Failure> {
-    let path = Path::new(scenario);
-    if path.exists() || scenario.ends_with(".toml") {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| Failure::Input(format!("{scenario}: cannot read: {e}")))?;
-        Ok((text, scenario.to_string()))
-    } else if let Some(t) = builtin::get(scenario) {
-        Ok((t.to_string(), format!("built-in:{scenario}")))
-    } else {
-        Err(Failure::Input(format!(
-            "{scenario:?} is neither a file nor a built-in scenario (`hushfuse list`)"
-        )))
-    }
+    builtin::resolve(scenario, false).map_err(Failure::Input)
 }
 
 /// A computed table reproduction (no Monte Carlo): ours beside the paper's printed values.
@@ -332,13 +367,21 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         write("report.html", &page)?;
         files.push("report.html".to_string());
     }
+    if let Some(wt) = &args.write_trial {
+        files.extend(write_trial(&exp, wt)?);
+    }
     text.push_str(&format!(
         "\nwrote {}: {}\n",
         dir.display(),
         files.join(", ")
     ));
     print_out(&text);
-    let bad = results::non_finite(&summary);
+    // One trial has no standard errors (NaN): not a failure of the run.
+    let bad = if exp.trials == 1 {
+        replay::non_finite(&summary)
+    } else {
+        results::non_finite(&summary)
+    };
     if !bad.is_empty() {
         return Err(Failure::Run(format!(
             "the run produced numbers that are not finite (written as null in summary.json), so its results cannot be trusted:\n  {}\nrescale the scenario's units or check its noise levels",
@@ -578,5 +621,136 @@ fn report_dir(dir: &Path) -> Result<(), Failure> {
     std::fs::write(&path, page)
         .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
     print_out(&format!("wrote {}\n", path.display()));
+    Ok(())
+}
+
+/// `run --write-trial K DIR`: trial K's simulated measurements and truth as CSV.
+fn write_trial(exp: &build::Experiment, args: &[String]) -> Result<Vec<String>, Failure> {
+    let [k, dir] = args else {
+        return Err(Failure::Input("--write-trial: expected K DIR".into()));
+    };
+    let k: usize = k.parse().map_err(|_| {
+        Failure::Input(format!("--write-trial: expected a trial number, got {k:?}"))
+    })?;
+    let dir = PathBuf::from(dir);
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
+    let data = runner::draw_trial(exp, k);
+    let mut files = Vec::new();
+    for (name, text) in [
+        ("measurements.csv", replay::measurements_csv(exp, &data)),
+        ("truth.csv", replay::truth_csv(&data)),
+    ] {
+        let p = dir.join(name);
+        std::fs::write(&p, text)
+            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", p.display())))?;
+        files.push(p.display().to_string());
+    }
+    Ok(files)
+}
+
+struct ReplayArgs<'a> {
+    scenario: &'a str,
+    measurements: &'a Path,
+    truth: Option<&'a Path>,
+    out: Option<&'a Path>,
+    seed: Option<u64>,
+    trial: usize,
+    allow_large: bool,
+}
+
+/// `hushfuse replay`: every scheme of the scenario on recorded measurements.
+fn replay(a: &ReplayArgs) -> Result<(), Failure> {
+    let (text, source) = scenario_text(a.scenario)?;
+    let read = |p: &Path| {
+        std::fs::read_to_string(p)
+            .map_err(|e| Failure::Input(format!("{}: cannot read: {e}", p.display())))
+    };
+    let meas_name = a.measurements.display().to_string();
+    let meas = read(a.measurements)?;
+    let truth_name = a.truth.map(|p| p.display().to_string());
+    let truth = a.truth.map(read).transpose()?;
+    let opts = replay::ReplayOptions {
+        seed: a.seed,
+        trial: a.trial,
+        load: build::LoadOptions {
+            limits: a.allow_large.then(hushfuse::sim::limits::Limits::none),
+            ..Default::default()
+        },
+    };
+    let start = Instant::now();
+    let r = replay::replay_csv(
+        &text,
+        &source,
+        (&meas, &meas_name),
+        truth.as_deref().zip(truth_name.as_deref()),
+        &opts,
+    )
+    .map_err(|e| match e {
+        replay::ReplayError::Input(m) => Failure::Input(m),
+        replay::ReplayError::Run(m) => Failure::Run(m),
+    })?;
+    let elapsed = start.elapsed().as_secs_f64();
+    let dir = a
+        .out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(format!("{}-replay", r.exp.name)));
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
+    let write = |name: &str, text: &str| {
+        std::fs::write(dir.join(name), text)
+            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", dir.join(name).display())))
+    };
+    let readings: usize = r
+        .recorded
+        .available
+        .iter()
+        .map(|a| a.iter().filter(|&&b| b).count())
+        .sum();
+    let mut msg = format!(
+        "{} — replay of {} ({} steps, {} readings of {} sensors), seed {}, {} scheme variants ({:.1} s)\n",
+        r.exp.name,
+        meas_name,
+        r.exp.steps,
+        readings,
+        r.exp.system.n_sensors(),
+        r.exp.seed,
+        r.exp.variants.len(),
+        elapsed
+    );
+    write(
+        "estimates.csv",
+        &replay::estimates_csv(&r.exp, &r.recorded, &r.replayed),
+    )?;
+    for n in &r.notes {
+        msg.push_str(&format!("note: {n}\n"));
+    }
+    let mut files = vec!["estimates.csv".to_string()];
+    let mut bad = Vec::new();
+    if let Some(sums) = &r.replayed.sums {
+        let summary = results::summarize(&r.exp, sums);
+        msg.push('\n');
+        msg.push_str(&results::table(&summary));
+        let json =
+            serde_json::to_string_pretty(&summary).map_err(|e| Failure::Run(e.to_string()))?;
+        write("summary.json", &json)?;
+        write("per_step.csv", &results::per_step_csv(&summary))?;
+        files.extend(["summary.json".to_string(), "per_step.csv".to_string()]);
+        bad = replay::non_finite(&summary);
+    } else {
+        msg.push_str("(no --truth: estimates only, no error metrics)\n");
+    }
+    msg.push_str(&format!(
+        "\nwrote {}: {}\n",
+        dir.display(),
+        files.join(", ")
+    ));
+    print_out(&msg);
+    if !bad.is_empty() {
+        return Err(Failure::Run(format!(
+            "the replay produced numbers that are not finite (written as null in summary.json):\n  {}",
+            bad.join("\n  ")
+        )));
+    }
     Ok(())
 }

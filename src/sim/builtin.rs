@@ -126,3 +126,24 @@ pub fn get(name: &str) -> Option<&'static str> {
         .find(|(n, _, _)| *n == name)
         .map(|(_, _, t)| *t)
 }
+
+/// A scenario's text and source name from a path, a built-in name, or (when `allow_text`)
+/// TOML text itself (anything with a newline or `=` that is not a path of an existing file),
+/// with the command line's messages.
+pub fn resolve(scenario: &str, allow_text: bool) -> Result<(String, String), String> {
+    let path = std::path::Path::new(scenario);
+    let text_like = allow_text && (scenario.contains('\n') || scenario.contains('='));
+    if text_like && !path.exists() {
+        Ok((scenario.to_string(), "<scenario text>".to_string()))
+    } else if path.exists() || scenario.ends_with(".toml") {
+        let text =
+            std::fs::read_to_string(path).map_err(|e| format!("{scenario}: cannot read: {e}"))?;
+        Ok((text, scenario.to_string()))
+    } else if let Some(t) = get(scenario) {
+        Ok((t.to_string(), format!("built-in:{scenario}")))
+    } else {
+        Err(format!(
+            "{scenario:?} is neither a file nor a built-in scenario (`hushfuse list`)"
+        ))
+    }
+}

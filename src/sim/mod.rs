@@ -10,6 +10,7 @@ pub mod metrics;
 pub mod paper_check;
 pub mod pcrb;
 pub mod plot;
+pub mod replay;
 pub mod report;
 pub mod results;
 pub mod runner;

@@ -512,7 +512,12 @@ pub fn table(summary: &Summary) -> String {
         let mut r = vec![s.name.clone(), params_text(&s.params)];
         r.extend(groups.iter().map(|g| num(s.mean_rmse[*g], 4)));
         r.push(num(s.steady_state.mse, 4));
-        r.push(num(s.steady_state.mse_se, 4));
+        // One trial has no standard error (NaN): a dash, not "overflow".
+        r.push(if summary.trials == 1 && s.steady_state.mse_se.is_nan() {
+            "-".to_string()
+        } else {
+            num(s.steady_state.mse_se, 4)
+        });
         r.push(num(s.steady_state.trace, 4));
         r.push(format!(
             "{}{}",
@@ -607,10 +612,9 @@ pub fn warnings(summary: &Summary) -> Vec<String> {
                 num(s.consistency.median_nees, 3)
             ));
         }
-        if !(s.steady_state.mse.is_finite()
-            && s.steady_state.mse_se.is_finite()
-            && s.anees.is_finite())
-        {
+        let se_ok = s.steady_state.mse_se.is_finite()
+            || (summary.trials == 1 && s.steady_state.mse_se.is_nan());
+        if !(s.steady_state.mse.is_finite() && se_ok && s.anees.is_finite()) {
             out.push(format!(
                 "{who}: overflow (MSE, its standard error or ANEES is not finite): rescale the scenario's units"
             ));

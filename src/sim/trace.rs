@@ -1,13 +1,15 @@
-//! One trial in detail, and per-step errors with their standard errors, for `report.html`.
+//! One trial in detail, and per-step errors with their standard errors, for `report.html`; and
+//! the loop that replays recorded measurements ([`super::replay`]).
 //! The same loop as [`super::runner`] (the same truths, measurements and coins: a variant's
 //! coins come from stream 1 + its index, or stream 1 for every variant when each scheme ran
 //! alone, as calibrated arenas do); [`super::runner::run`] itself is untouched.
 use super::build::Experiment;
+use super::metrics::Sums;
 use super::runner::{draw_trial, trial_rng};
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
 use crate::link::{Received, Transmission};
-use crate::network;
+use crate::network::{self, Traffic};
 
 /// What one sensor did at one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -39,6 +41,145 @@ type StepFn<'a> = &'a mut dyn FnMut(usize, &Vector, &Gaussian, &[Link]);
 /// Per variant: per-step RMSE and its standard error.
 pub type RmseSe = Vec<(Vec<f64>, Vec<f64>)>;
 
+/// Everything one step of one variant produced.
+#[derive(Debug)]
+pub struct StepOutput<'a> {
+    /// Step (1-based).
+    pub k: usize,
+    /// Fused estimate after the step.
+    pub estimate: &'a Gaussian,
+    /// What each sensor did.
+    pub links: &'a [Link],
+    /// Payload bits each sensor sent (0 when it did not send).
+    pub bits: &'a [u64],
+    /// The step's traffic, counted as the runner counts it (uplink by the network, downlink
+    /// from the feedback the sensors were given before the step).
+    pub traffic: Traffic,
+    /// The fusion center's effective sample size (particle filters).
+    pub ess: Option<f64>,
+}
+
+/// Where a variant's coins come from and which readings exist.
+#[derive(Debug, Clone, Copy)]
+pub struct LoopOptions<'a> {
+    /// Trial index of the coin streams (stream 1 + v of this trial, as in the runner).
+    pub trial: usize,
+    /// Every variant on stream 1 (schemes run alone, as calibrated arenas do).
+    pub alone: bool,
+    /// `available[k - 1][i]`: whether sensor i has a reading at step k. A sensor without one
+    /// is not asked (its node does not step) and reaches the fusion center as
+    /// [`Received::NotScheduled`]. `None`: every reading exists.
+    pub available: Option<&'a [Vec<bool>]>,
+}
+
+/// Runs variant `v` over `measurements` (`measurements[k - 1][i]`, read only where
+/// available), calling `f` after every step; a scheme error or an error of `f` stops the loop.
+/// With every reading available this is the runner's loop step for step: the same coins, the
+/// same inbox, the same traffic.
+pub fn run_variant_with(
+    exp: &Experiment,
+    measurements: &[Vec<Vector>],
+    v: usize,
+    opts: LoopOptions,
+    f: &mut dyn FnMut(&StepOutput) -> Result<(), String>,
+) -> Result<(), String> {
+    let n = exp.system.n_sensors();
+    let stream = 1 + if opts.alone { 0 } else { v as u64 };
+    let trial = opts.trial as u64;
+    let mut rng = trial_rng(exp.seed, trial, stream);
+    let center_seed = super::runner::center_seed(exp.seed, trial, stream);
+    let variant = &exp.variants[v];
+    let label = &exp.curves[variant.curve].label;
+    let err = |k: usize, e: &dyn std::fmt::Display| format!("scheme {label}, step {k}: {e}");
+    let mut inst = variant
+        .scheme
+        .build_with_seed(center_seed)
+        .map_err(|e| err(0, &e))?;
+    let schedule = variant.scheme.schedule();
+    let mut feedback = inst.center.feedback();
+    let mut inbox = Vec::with_capacity(n);
+    let mut tx = Vec::with_capacity(n);
+    let mut links = Vec::with_capacity(n);
+    let mut bits = Vec::with_capacity(n);
+    for k in 1..=exp.steps {
+        tx.clear();
+        links.clear();
+        bits.clear();
+        let has = |i: usize| opts.available.is_none_or(|a| a[k - 1][i]);
+        for (i, node) in inst.sensors.iter_mut().enumerate() {
+            let t = if schedule.allows(k, i, n) && has(i) {
+                let t = node
+                    .step(k, &measurements[k - 1][i], feedback.as_ref(), &mut rng)
+                    .map_err(|e| err(k, &e))?;
+                match &t {
+                    Transmission::Send(m) => {
+                        links.push(Link::Sent);
+                        bits.push(m.bits());
+                    }
+                    Transmission::Silent => {
+                        links.push(Link::Silent);
+                        bits.push(0);
+                    }
+                }
+                t
+            } else {
+                links.push(Link::NotScheduled);
+                bits.push(0);
+                Transmission::Silent
+            };
+            tx.push(t);
+        }
+        let mut traffic = network::deliver(tx.drain(..), &mut inbox);
+        traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n));
+        if schedule != network::Schedule::All || opts.available.is_some() {
+            for (i, r) in inbox.iter_mut().enumerate() {
+                if !schedule.allows(k, i, n) || !has(i) {
+                    *r = Received::NotScheduled;
+                }
+            }
+        }
+        inst.center.step(k, &inbox).map_err(|e| err(k, &e))?;
+        feedback = inst.center.feedback();
+        f(&StepOutput {
+            k,
+            estimate: inst.center.estimate(),
+            links: &links,
+            bits: &bits,
+            traffic,
+            ess: inst.center.ess(),
+        })?;
+    }
+    Ok(())
+}
+
+/// Runs variant `v` over `measurements` and adds the trial into `sums` exactly as the runner
+/// does (the same observer calls in the same order), calling `f` after every step too.
+pub fn run_variant_into(
+    exp: &Experiment,
+    measurements: &[Vec<Vector>],
+    truth: &[Vector],
+    v: usize,
+    opts: LoopOptions,
+    sums: &mut Sums,
+    f: &mut dyn FnMut(&StepOutput) -> Result<(), String>,
+) -> Result<(), String> {
+    let label = exp.curves[exp.variants[v].curve].label.clone();
+    let mut obs = sums.trial(&exp.groups, exp.steady_from);
+    run_variant_with(exp, measurements, v, opts, &mut |s| {
+        obs.record(s.k, &truth[s.k - 1], s.estimate, s.traffic)
+            .map_err(|e| {
+                format!(
+                    "scheme {label}, step {}: fused covariance is not positive definite ({e})",
+                    s.k
+                )
+            })?;
+        obs.record_ess(s.k, s.ess);
+        f(s)
+    })?;
+    obs.finish();
+    Ok(())
+}
+
 /// Runs variant `v` over `trial`, calling `f(k, truth, estimate, links)` after every step.
 fn run_variant(
     exp: &Experiment,
@@ -48,53 +189,15 @@ fn run_variant(
     alone: bool,
     f: StepFn,
 ) -> Result<(), String> {
-    let n = exp.system.n_sensors();
-    let stream = 1 + if alone { 0 } else { v as u64 };
-    let mut rng = trial_rng(exp.seed, trial as u64, stream);
-    let center_seed = super::runner::center_seed(exp.seed, trial as u64, stream);
-    let variant = &exp.variants[v];
-    let mut inst = variant
-        .scheme
-        .build_with_seed(center_seed)
-        .map_err(|e| e.to_string())?;
-    let schedule = variant.scheme.schedule();
-    let mut feedback = inst.center.feedback();
-    let mut inbox = Vec::with_capacity(n);
-    let mut tx = Vec::with_capacity(n);
-    let mut links = Vec::with_capacity(n);
-    for k in 1..=exp.steps {
-        tx.clear();
-        links.clear();
-        for (i, node) in inst.sensors.iter_mut().enumerate() {
-            let t = if schedule.allows(k, i, n) {
-                let t = node
-                    .step(k, &data.measurements[k - 1][i], feedback.as_ref(), &mut rng)
-                    .map_err(|e| e.to_string())?;
-                links.push(if matches!(t, Transmission::Send(_)) {
-                    Link::Sent
-                } else {
-                    Link::Silent
-                });
-                t
-            } else {
-                links.push(Link::NotScheduled);
-                Transmission::Silent
-            };
-            tx.push(t);
-        }
-        network::deliver(tx.drain(..), &mut inbox);
-        if schedule != network::Schedule::All {
-            for (i, r) in inbox.iter_mut().enumerate() {
-                if !schedule.allows(k, i, n) {
-                    *r = Received::NotScheduled;
-                }
-            }
-        }
-        inst.center.step(k, &inbox).map_err(|e| e.to_string())?;
-        feedback = inst.center.feedback();
-        f(k, &data.truth[k - 1], inst.center.estimate(), &links);
-    }
-    Ok(())
+    let opts = LoopOptions {
+        trial,
+        alone,
+        available: None,
+    };
+    run_variant_with(exp, &data.measurements, v, opts, &mut |s| {
+        f(s.k, &data.truth[s.k - 1], s.estimate, s.links);
+        Ok(())
+    })
 }
 
 /// Trial `trial` of every variant: estimates and who sent.

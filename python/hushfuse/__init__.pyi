@@ -1,0 +1,41 @@
+"""Type stubs of the ``hushfuse`` package (docstrings in ``__init__.py``)."""
+from os import PathLike
+from typing import Any, Dict, List, Optional, Sequence, Union
+
+import numpy as np
+import numpy.typing as npt
+
+from ._hushfuse import (
+    DataError as DataError,
+    Feedback as Feedback,
+    FusionCenter as FusionCenter,
+    InputError as InputError,
+    RunError as RunError,
+    Scheme as Scheme,
+    ScenarioError as ScenarioError,
+    SensorNode as SensorNode,
+    Transmission as Transmission,
+    builtins as builtins,
+)
+
+__version__: str
+
+ScenarioLike = Union[str, "PathLike[str]"]
+Measurements = Union[Any, npt.NDArray[np.float64], Sequence[npt.NDArray[np.float64]]]
+
+def run(
+    scenario: ScenarioLike,
+    trials: Optional[int] = None,
+    seed: Optional[int] = None,
+    threads: int = 0,
+) -> Dict[str, Any]: ...
+def simulate(scenario: ScenarioLike, trial: int = 0, seed: Optional[int] = None) -> Dict[str, Any]: ...
+def variants(scenario: ScenarioLike) -> List[Dict[str, Any]]: ...
+def measurements_frame(measurements: Measurements) -> Any: ...
+def replay(
+    scenario: ScenarioLike,
+    measurements: Measurements,
+    truth: Union[None, Any, npt.NDArray[np.float64]] = None,
+    seed: Optional[int] = None,
+    trial: int = 0,
+) -> Dict[str, Any]: ...

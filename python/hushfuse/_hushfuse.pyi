@@ -1,0 +1,112 @@
+"""Type stubs of the compiled module ``hushfuse._hushfuse`` (see ``python/src/lib.rs``)."""
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+class InputError(ValueError):
+    """Bad input: a scenario or recorded data that cannot be used."""
+
+class ScenarioError(InputError):
+    """A scenario that cannot be read or is inconsistent (names the file and the field)."""
+
+class DataError(InputError):
+    """Recorded data that cannot be replayed (names the file, line, row and column)."""
+
+class RunError(RuntimeError):
+    """A scheme could not take a step (names the scheme and the step)."""
+
+def run_json(
+    scenario: str, trials: Optional[int] = None, seed: Optional[int] = None, threads: int = 0
+) -> str: ...
+def simulate(scenario: str, trial: int = 0, seed: Optional[int] = None) -> Dict[str, Any]: ...
+def replay_csv(
+    scenario: str,
+    measurements_csv: str,
+    measurements_name: str,
+    truth_csv: Optional[str] = None,
+    truth_name: str = "truth",
+    seed: Optional[int] = None,
+    trial: int = 0,
+) -> Dict[str, Any]: ...
+def variants(scenario: str) -> List[Tuple[str, str, str]]: ...
+def builtins() -> List[Tuple[str, str]]: ...
+
+class Transmission:
+    """What one sensor put on the network at one step."""
+
+    @staticmethod
+    def silent() -> Transmission: ...
+    @property
+    def sent(self) -> bool: ...
+    @property
+    def kind(self) -> str:
+        """"silent", "measurement", "estimate" or "frame"."""
+    @property
+    def bits(self) -> int:
+        """Payload bits (0 for a silence)."""
+    @property
+    def frame_bits(self) -> int:
+        """Bits of the whole 802.15.4 MAC frame (0 for a silence)."""
+    @property
+    def value(self) -> Union[npt.NDArray[np.float64], bytes, None]:
+        """The sent vector, a frame's octets, or None for a silence."""
+
+class Feedback:
+    """What the fusion center tells the sensors before the next step."""
+
+    @property
+    def kind(self) -> str: ...
+    def bits(self, n_sensors: int) -> int: ...
+
+class SensorNode:
+    """The sensor side of a scheme: one node, one step per call."""
+
+    @property
+    def index(self) -> int: ...
+    @property
+    def dim(self) -> int: ...
+    def step(
+        self, k: int, z: npt.NDArray[np.float64], feedback: Optional[Feedback] = None
+    ) -> Transmission:
+        """Processes measurement z of step k (k >= 1) with the center's feedback of step k - 1."""
+
+class FusionCenter:
+    """The fusion side of a scheme."""
+
+    def step(self, k: int, inbox: Sequence[Optional[Transmission]]) -> None:
+        """Fuses step k's inbox: one Transmission per sensor, None for not scheduled / no reading."""
+    def estimate(self) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """(mean (n,), covariance (n, n)) after the last step."""
+    def feedback(self) -> Optional[Feedback]: ...
+    def ess(self) -> Optional[float]: ...
+
+class Scheme:
+    """One variant of a scenario built as the simulator builds it for one trial."""
+
+    def __init__(
+        self,
+        scenario: str,
+        variant: int = 0,
+        trial: int = 0,
+        seed: Optional[int] = None,
+        steps: Optional[int] = None,
+    ) -> None: ...
+    @property
+    def sensors(self) -> List[SensorNode]: ...
+    @property
+    def center(self) -> FusionCenter: ...
+    @property
+    def label(self) -> str: ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def variant(self) -> int: ...
+    @property
+    def steps(self) -> int: ...
+    @property
+    def state_dim(self) -> int: ...
+    def allows(self, k: int, i: int) -> bool:
+        """Whether the network lets sensor i send at step k."""

@@ -1,0 +1,644 @@
+//! `hushfuse._hushfuse`: the compiled half of the Python package. The Python half
+//! (`python/hushfuse/__init__.py`) turns numpy arrays and pandas frames into the command line's
+//! CSV layout and the results back into numpy arrays, so that every check and every message is
+//! the command line's own.
+use hushfuse::filter::Gaussian;
+use hushfuse::linalg::Vector;
+use hushfuse::link;
+use hushfuse::network::Schedule;
+use hushfuse::scheme;
+use hushfuse::sim::{build, builtin, replay, results, runner};
+use numpy::ndarray::{Array2, Array3};
+use numpy::{IntoPyArray, PyReadonlyArray1};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict, PyList};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use std::sync::{Arc, Mutex};
+
+create_exception!(
+    _hushfuse,
+    InputError,
+    PyValueError,
+    "Bad input: a scenario or recorded data that cannot be used (the message names the file and where)."
+);
+create_exception!(
+    _hushfuse,
+    ScenarioError,
+    InputError,
+    "A scenario that cannot be read or is inconsistent (the message names the file and the field)."
+);
+create_exception!(
+    _hushfuse,
+    DataError,
+    InputError,
+    "Recorded data that cannot be replayed (the message names the file, line, row and column)."
+);
+create_exception!(
+    _hushfuse,
+    RunError,
+    PyRuntimeError,
+    "A run that failed: a scheme could not take a step (the message names the scheme and the step)."
+);
+
+/// A scenario's text and source from a built-in name, a path or TOML text.
+fn resolve(scenario: &str) -> PyResult<(String, String)> {
+    builtin::resolve(scenario, true).map_err(ScenarioError::new_err)
+}
+
+fn load(
+    scenario: &str,
+    trials: Option<usize>,
+    seed: Option<u64>,
+    threads: usize,
+) -> PyResult<build::Experiment> {
+    let (text, source) = resolve(scenario)?;
+    let kind =
+        build::file_kind(&text, &source).map_err(|e| ScenarioError::new_err(e.to_string()))?;
+    if kind == build::FileKind::TableReport {
+        return Err(ScenarioError::new_err(format!(
+            "{source}: a table report, not a scenario (run it with `hushfuse reproduce`)"
+        )));
+    }
+    let opts = build::LoadOptions {
+        trials,
+        seed,
+        threads,
+        limits: None,
+    };
+    build::load_with(&text, &source, &opts).map_err(|e| ScenarioError::new_err(e.to_string()))
+}
+
+/// Runs a scenario (Monte Carlo) and returns its summary as JSON text: the summary.json of
+/// `hushfuse run` without the `paper` section.
+#[pyfunction]
+#[pyo3(signature = (scenario, trials=None, seed=None, threads=0))]
+fn run_json(
+    py: Python<'_>,
+    scenario: &str,
+    trials: Option<usize>,
+    seed: Option<u64>,
+    threads: usize,
+) -> PyResult<String> {
+    let exp = load(scenario, trials, seed, threads)?;
+    let sums = py
+        .allow_threads(|| runner::run(&exp, runner::RunOptions { threads }, &|_| {}))
+        .map_err(|e| RunError::new_err(e.to_string()))?;
+    let summary = results::summarize(&exp, &sums);
+    serde_json::to_string(&summary).map_err(|e| RunError::new_err(e.to_string()))
+}
+
+fn vectors_to_array2(rows: &[Vector], cols: usize) -> Array2<f64> {
+    let mut a = Array2::zeros((rows.len(), cols));
+    for (k, v) in rows.iter().enumerate() {
+        for (j, x) in v.iter().enumerate() {
+            a[(k, j)] = *x;
+        }
+    }
+    a
+}
+
+fn estimates_arrays(ests: &[Gaussian], n: usize) -> (Array2<f64>, Array3<f64>) {
+    let mut mean = Array2::zeros((ests.len(), n));
+    let mut cov = Array3::zeros((ests.len(), n, n));
+    for (k, e) in ests.iter().enumerate() {
+        for i in 0..n {
+            mean[(k, i)] = e.mean[i];
+            for j in 0..n {
+                cov[(k, i, j)] = e.cov[(i, j)];
+            }
+        }
+    }
+    (mean, cov)
+}
+
+/// Simulates trial `trial` of a scenario: truth (T, n) and per sensor its measurements
+/// (T, m_i), drawn exactly as `hushfuse run` draws them.
+#[pyfunction]
+#[pyo3(signature = (scenario, trial=0, seed=None))]
+fn simulate<'py>(
+    py: Python<'py>,
+    scenario: &str,
+    trial: usize,
+    seed: Option<u64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let exp = load(scenario, None, seed, 0)?;
+    let data = runner::draw_trial(&exp, trial);
+    let d = PyDict::new(py);
+    d.set_item(
+        "truth",
+        vectors_to_array2(&data.truth, exp.system.state_dim()).into_pyarray(py),
+    )?;
+    let per_sensor = PyList::empty(py);
+    for (i, s) in exp.system.sensors.iter().enumerate() {
+        let rows: Vec<Vector> = data.measurements.iter().map(|m| m[i].clone()).collect();
+        per_sensor.append(vectors_to_array2(&rows, s.meas_dim()).into_pyarray(py))?;
+    }
+    d.set_item("measurements", per_sensor)?;
+    d.set_item("steps", exp.steps)?;
+    d.set_item("seed", exp.seed)?;
+    Ok(d)
+}
+
+/// Replays CSV texts (the command line's layout) through every variant of a scenario.
+/// Returns a dict: `steps`, `available` (T, N), `schemes` (per variant: name, kind, variant,
+/// params, mean (T, n), cov (T, n, n), links (T x N names), bits (T, N)) and `summary_json`
+/// (None without truth).
+#[pyfunction]
+#[pyo3(signature = (scenario, measurements_csv, measurements_name, truth_csv=None, truth_name="truth", seed=None, trial=0))]
+#[allow(clippy::too_many_arguments)]
+fn replay_csv<'py>(
+    py: Python<'py>,
+    scenario: &str,
+    measurements_csv: &str,
+    measurements_name: &str,
+    truth_csv: Option<&str>,
+    truth_name: &str,
+    seed: Option<u64>,
+    trial: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (text, source) = resolve(scenario)?;
+    let opts = replay::ReplayOptions {
+        seed,
+        trial,
+        load: build::LoadOptions::default(),
+    };
+    let r = py
+        .allow_threads(|| {
+            replay::replay_csv(
+                &text,
+                &source,
+                (measurements_csv, measurements_name),
+                truth_csv.map(|t| (t, truth_name)),
+                &opts,
+            )
+        })
+        .map_err(|e| match e {
+            replay::ReplayError::Input(m) if m.starts_with(&format!("{source}:")) => {
+                ScenarioError::new_err(m)
+            }
+            replay::ReplayError::Input(m) => DataError::new_err(m),
+            replay::ReplayError::Run(m) => RunError::new_err(m),
+        })?;
+    let exp = &r.exp;
+    let n = exp.system.state_dim();
+    let ns = exp.system.n_sensors();
+    let d = PyDict::new(py);
+    d.set_item("steps", exp.steps)?;
+    d.set_item("seed", exp.seed)?;
+    d.set_item("notes", r.notes.clone())?;
+    let mut avail = Array2::from_elem((exp.steps, ns), false);
+    for (k, a) in r.recorded.available.iter().enumerate() {
+        for (i, b) in a.iter().enumerate() {
+            avail[(k, i)] = *b;
+        }
+    }
+    d.set_item("available", avail.into_pyarray(py))?;
+    let schemes = PyList::empty(py);
+    for (v, vr) in r.replayed.variants.iter().enumerate() {
+        let variant = &exp.variants[v];
+        let s = PyDict::new(py);
+        s.set_item("name", &exp.curves[variant.curve].label)?;
+        s.set_item("kind", variant.kind)?;
+        s.set_item("variant", v)?;
+        s.set_item(
+            "params",
+            serde_json::to_string(&variant.params).map_err(|e| RunError::new_err(e.to_string()))?,
+        )?;
+        let (mean, cov) = estimates_arrays(&vr.estimates, n);
+        s.set_item("mean", mean.into_pyarray(py))?;
+        s.set_item("cov", cov.into_pyarray(py))?;
+        let links: Vec<Vec<&str>> = vr
+            .links
+            .iter()
+            .zip(&r.recorded.available)
+            .map(|(l, a)| {
+                l.iter()
+                    .zip(a)
+                    .map(|(l, a)| replay::link_name(*l, *a))
+                    .collect()
+            })
+            .collect();
+        s.set_item("links", links)?;
+        let mut bits = Array2::<u64>::zeros((exp.steps, ns));
+        for (k, b) in vr.bits.iter().enumerate() {
+            for (i, x) in b.iter().enumerate() {
+                bits[(k, i)] = *x;
+            }
+        }
+        s.set_item("bits", bits.into_pyarray(py))?;
+        schemes.append(s)?;
+    }
+    d.set_item("schemes", schemes)?;
+    let summary = match &r.replayed.sums {
+        Some(sums) => Some(
+            serde_json::to_string(&results::summarize(exp, sums))
+                .map_err(|e| RunError::new_err(e.to_string()))?,
+        ),
+        None => None,
+    };
+    d.set_item("summary_json", summary)?;
+    Ok(d)
+}
+
+/// What one sensor put on the network at one step.
+#[pyclass(module = "hushfuse._hushfuse", frozen)]
+struct Transmission {
+    inner: link::Transmission,
+}
+
+#[pymethods]
+impl Transmission {
+    /// A silence (the sensor chose not to send).
+    #[staticmethod]
+    fn silent() -> Self {
+        Self {
+            inner: link::Transmission::Silent,
+        }
+    }
+    /// Whether a message was sent.
+    #[getter]
+    fn sent(&self) -> bool {
+        matches!(self.inner, link::Transmission::Send(_))
+    }
+    /// "silent", "measurement", "estimate" or "frame".
+    #[getter]
+    fn kind(&self) -> &'static str {
+        match &self.inner {
+            link::Transmission::Silent => "silent",
+            link::Transmission::Send(link::Message::Measurement(_)) => "measurement",
+            link::Transmission::Send(link::Message::Estimate(_)) => "estimate",
+            link::Transmission::Send(link::Message::Frame { .. }) => "frame",
+        }
+    }
+    /// Payload bits (0 for a silence), counted as the simulator counts them.
+    #[getter]
+    fn bits(&self) -> u64 {
+        match &self.inner {
+            link::Transmission::Silent => 0,
+            link::Transmission::Send(m) => m.bits(),
+        }
+    }
+    /// Bits of the whole 802.15.4 MAC frame that carries the message (0 for a silence).
+    #[getter]
+    fn frame_bits(&self) -> u64 {
+        match &self.inner {
+            link::Transmission::Silent => 0,
+            link::Transmission::Send(m) => m.frame_bits(),
+        }
+    }
+    /// The sent vector (measurement or estimate) as a numpy array, the octets of a frame as
+    /// bytes, or None for a silence.
+    #[getter]
+    fn value<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        Ok(match &self.inner {
+            link::Transmission::Silent => None,
+            link::Transmission::Send(link::Message::Measurement(v))
+            | link::Transmission::Send(link::Message::Estimate(v)) => {
+                Some(v.as_slice().to_vec().into_pyarray(py).into_any())
+            }
+            link::Transmission::Send(link::Message::Frame { octets, .. }) => {
+                Some(PyBytes::new(py, octets).into_any())
+            }
+        })
+    }
+    fn __repr__(&self) -> String {
+        format!("Transmission(kind={:?}, bits={})", self.kind(), self.bits())
+    }
+}
+
+/// What the fusion center tells the sensors before the next step (schemes with feedback).
+#[pyclass(module = "hushfuse._hushfuse", frozen)]
+struct Feedback {
+    inner: scheme::Feedback,
+}
+
+#[pymethods]
+impl Feedback {
+    /// "prediction" or "innovation_reference".
+    #[getter]
+    fn kind(&self) -> &'static str {
+        match self.inner {
+            scheme::Feedback::Prediction { .. } => "prediction",
+            scheme::Feedback::InnovationReference(_) => "innovation_reference",
+        }
+    }
+    /// Downlink bits of this feedback, as the simulator counts them.
+    fn bits(&self, n_sensors: usize) -> u64 {
+        self.inner.bits(n_sensors)
+    }
+    fn __repr__(&self) -> String {
+        format!("Feedback(kind={:?})", self.kind())
+    }
+}
+
+/// The sensor side of a scheme: one node, one step per call.
+#[pyclass(module = "hushfuse._hushfuse", frozen)]
+struct SensorNode {
+    node: Mutex<Box<dyn scheme::SensorNode>>,
+    rng: Arc<Mutex<Xoshiro256PlusPlus>>,
+    index: usize,
+    dim: usize,
+}
+
+fn lock<T: ?Sized>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+#[pymethods]
+impl SensorNode {
+    /// Processes measurement `z` of step `k` (k >= 1) with the fusion center's feedback of
+    /// step k - 1 (None if the scheme has none) and returns what the sensor transmits.
+    #[pyo3(signature = (k, z, feedback=None))]
+    fn step(
+        &self,
+        k: usize,
+        z: PyReadonlyArray1<'_, f64>,
+        feedback: Option<PyRef<'_, Feedback>>,
+    ) -> PyResult<Transmission> {
+        let z = z.as_array();
+        if z.len() != self.dim {
+            return Err(PyValueError::new_err(format!(
+                "sensor {}: z has {} components, the sensor measures {}",
+                self.index,
+                z.len(),
+                self.dim
+            )));
+        }
+        if k == 0 {
+            return Err(PyValueError::new_err("steps count from k = 1"));
+        }
+        if z.iter().any(|v| !v.is_finite()) {
+            return Err(PyValueError::new_err(format!(
+                "sensor {}: z is not finite: {z}",
+                self.index
+            )));
+        }
+        let z = Vector::from_iterator(self.dim, z.iter().copied());
+        let fb = feedback.as_ref().map(|f| &f.inner);
+        let mut rng = lock(&self.rng);
+        let t = lock(&self.node)
+            .step(k, &z, fb, &mut *rng)
+            .map_err(|e| RunError::new_err(format!("sensor {}, step {k}: {e}", self.index)))?;
+        Ok(Transmission { inner: t })
+    }
+    /// Index of the sensor in the scenario.
+    #[getter]
+    fn index(&self) -> usize {
+        self.index
+    }
+    /// Number of measurement components.
+    #[getter]
+    fn dim(&self) -> usize {
+        self.dim
+    }
+}
+
+/// The fusion side of a scheme: fuses what arrived and what the silences say.
+#[pyclass(module = "hushfuse._hushfuse", frozen)]
+struct FusionCenter {
+    center: Mutex<Box<dyn scheme::FusionCenter>>,
+    n_sensors: usize,
+}
+
+#[pymethods]
+impl FusionCenter {
+    /// Fuses the inbox of step `k`: one entry per sensor, in sensor order, each a
+    /// `Transmission` (what the sensor sent, or its silence) or None (the sensor was not
+    /// scheduled or had no reading).
+    fn step(&self, k: usize, inbox: Vec<Option<PyRef<'_, Transmission>>>) -> PyResult<()> {
+        if inbox.len() != self.n_sensors {
+            return Err(PyValueError::new_err(format!(
+                "inbox has {} entries, the scheme has {} sensors",
+                inbox.len(),
+                self.n_sensors
+            )));
+        }
+        if k == 0 {
+            return Err(PyValueError::new_err("steps count from k = 1"));
+        }
+        let inbox: Vec<link::Received> = inbox
+            .iter()
+            .map(|t| match t {
+                Some(t) => t.inner.clone().into(),
+                None => link::Received::NotScheduled,
+            })
+            .collect();
+        lock(&self.center)
+            .step(k, &inbox)
+            .map_err(|e| RunError::new_err(format!("fusion center, step {k}: {e}")))
+    }
+    /// The fused estimate after the last step (the prior before the first): (mean (n,),
+    /// covariance (n, n)).
+    fn estimate<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let c = lock(&self.center);
+        let e = c.estimate();
+        let (mean, cov) = estimates_arrays(std::slice::from_ref(e), e.dim());
+        let mean = mean
+            .into_shape_with_order(e.dim())
+            .map_err(|x| RunError::new_err(x.to_string()))?;
+        let cov = cov
+            .into_shape_with_order((e.dim(), e.dim()))
+            .map_err(|x| RunError::new_err(x.to_string()))?;
+        Ok((
+            mean.into_pyarray(py).into_any(),
+            cov.into_pyarray(py).into_any(),
+        ))
+    }
+    /// Feedback for the sensors' next step, or None.
+    fn feedback(&self) -> Option<Feedback> {
+        lock(&self.center)
+            .feedback()
+            .map(|inner| Feedback { inner })
+    }
+    /// Effective sample size of the particle weights after the last update (particle filters),
+    /// or None.
+    fn ess(&self) -> Option<f64> {
+        lock(&self.center).ess()
+    }
+}
+
+/// One variant of a scenario, built as the simulator builds it for one trial: its sensor
+/// nodes, its fusion center and its schedule, with the coins of (seed, trial, variant), so a
+/// loop that steps the sensors in order and then the center reproduces the simulator.
+#[pyclass(module = "hushfuse._hushfuse", frozen)]
+struct Scheme {
+    sensors: Vec<Py<SensorNode>>,
+    center: Py<FusionCenter>,
+    label: String,
+    kind: String,
+    variant: usize,
+    schedule: Schedule,
+    steps: usize,
+    state_dim: usize,
+}
+
+#[pymethods]
+impl Scheme {
+    /// Builds variant `variant` of `scenario` (a built-in name, a path or TOML text) for
+    /// `steps` steps (default: the scenario's), with the coins of trial `trial` of `seed`
+    /// (default: the scenario's seed).
+    #[new]
+    #[pyo3(signature = (scenario, variant=0, trial=0, seed=None, steps=None))]
+    fn new(
+        py: Python<'_>,
+        scenario: &str,
+        variant: usize,
+        trial: usize,
+        seed: Option<u64>,
+        steps: Option<usize>,
+    ) -> PyResult<Self> {
+        let (text, source) = resolve(scenario)?;
+        let exp = match steps {
+            Some(t) => {
+                replay::load_experiment(&text, &source, t, seed, &build::LoadOptions::default())
+                    .map(|(e, _)| e)
+            }
+            None => build::load_with(
+                &text,
+                &source,
+                &build::LoadOptions {
+                    seed,
+                    ..Default::default()
+                },
+            ),
+        }
+        .map_err(|e| ScenarioError::new_err(e.to_string()))?;
+        let Some(v) = exp.variants.get(variant) else {
+            return Err(PyValueError::new_err(format!(
+                "{source}: variant {variant} does not exist (the scenario has {} variants: 0 to {})",
+                exp.variants.len(),
+                exp.variants.len() - 1
+            )));
+        };
+        let stream = 1 + variant as u64;
+        let rng = runner::trial_rng(exp.seed, trial as u64, stream);
+        let inst = v
+            .scheme
+            .build_with_seed(runner::center_seed(exp.seed, trial as u64, stream))
+            .map_err(|e| RunError::new_err(e.to_string()))?;
+        let rng = Arc::new(Mutex::new(rng));
+        let sensors = inst
+            .sensors
+            .into_iter()
+            .enumerate()
+            .map(|(i, node)| {
+                Py::new(
+                    py,
+                    SensorNode {
+                        node: Mutex::new(node),
+                        rng: rng.clone(),
+                        index: i,
+                        dim: exp.system.sensors[i].meas_dim(),
+                    },
+                )
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        let center = Py::new(
+            py,
+            FusionCenter {
+                center: Mutex::new(inst.center),
+                n_sensors: exp.system.n_sensors(),
+            },
+        )?;
+        Ok(Self {
+            sensors,
+            center,
+            label: exp.curves[v.curve].label.clone(),
+            kind: v.kind.to_string(),
+            variant,
+            schedule: v.scheme.schedule(),
+            steps: exp.steps,
+            state_dim: exp.system.state_dim(),
+        })
+    }
+    /// The sensor nodes, in sensor order.
+    #[getter]
+    fn sensors(&self, py: Python<'_>) -> Vec<Py<SensorNode>> {
+        self.sensors.iter().map(|s| s.clone_ref(py)).collect()
+    }
+    /// The fusion center.
+    #[getter]
+    fn center(&self, py: Python<'_>) -> Py<FusionCenter> {
+        self.center.clone_ref(py)
+    }
+    #[getter]
+    fn label(&self) -> &str {
+        &self.label
+    }
+    #[getter]
+    fn kind(&self) -> &str {
+        &self.kind
+    }
+    #[getter]
+    fn variant(&self) -> usize {
+        self.variant
+    }
+    /// Steps the scheme was built for (its precomputed horizon).
+    #[getter]
+    fn steps(&self) -> usize {
+        self.steps
+    }
+    #[getter]
+    fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+    /// Whether the network lets sensor `i` send at step `k` (round-robin schemes: one sensor
+    /// per step). A sensor not allowed must not be stepped; its inbox entry is None.
+    fn allows(&self, k: usize, i: usize) -> bool {
+        self.schedule.allows(k, i, self.sensors.len())
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "Scheme(label={:?}, kind={:?}, variant={}, sensors={})",
+            self.label,
+            self.kind,
+            self.variant,
+            self.sensors.len()
+        )
+    }
+}
+
+/// Lists every variant of a scenario: (label, kind, params as JSON).
+#[pyfunction]
+fn variants(scenario: &str) -> PyResult<Vec<(String, String, String)>> {
+    let exp = load(scenario, None, None, 0)?;
+    exp.variants
+        .iter()
+        .map(|v| {
+            Ok((
+                exp.curves[v.curve].label.clone(),
+                v.kind.to_string(),
+                serde_json::to_string(&v.params).map_err(|e| RunError::new_err(e.to_string()))?,
+            ))
+        })
+        .collect()
+}
+
+/// The names of the built-in scenarios with their one-line descriptions.
+#[pyfunction]
+fn builtins() -> Vec<(&'static str, &'static str)> {
+    builtin::BUILTIN.iter().map(|(n, d, _)| (*n, *d)).collect()
+}
+
+#[pymodule]
+fn _hushfuse(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("InputError", py.get_type::<InputError>())?;
+    m.add("ScenarioError", py.get_type::<ScenarioError>())?;
+    m.add("DataError", py.get_type::<DataError>())?;
+    m.add("RunError", py.get_type::<RunError>())?;
+    m.add_function(wrap_pyfunction!(run_json, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(replay_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(variants, m)?)?;
+    m.add_function(wrap_pyfunction!(builtins, m)?)?;
+    m.add_class::<Scheme>()?;
+    m.add_class::<SensorNode>()?;
+    m.add_class::<FusionCenter>()?;
+    m.add_class::<Transmission>()?;
+    m.add_class::<Feedback>()?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,85 @@
+"""Errors are Python exceptions with the command line's messages, never a crash."""
+import numpy as np
+import pandas as pd
+import pytest
+
+import hushfuse
+from conftest import EXAMPLE, cli
+
+SCEN = str(EXAMPLE / "scenario.toml")
+
+
+def test_bad_scenarios_raise_scenario_error():
+    with pytest.raises(hushfuse.ScenarioError, match="neither a file nor a built-in scenario"):
+        hushfuse.run("no-such-scenario")
+    with pytest.raises(hushfuse.ScenarioError, match="cannot read"):
+        hushfuse.run("/nonexistent/dir/x.toml")
+    bad = (EXAMPLE / "scenario.toml").read_text().replace("trials = 1", "trials = 1\ntrails = 3")
+    with pytest.raises(hushfuse.ScenarioError, match="trails"):
+        hushfuse.run(bad)
+    with pytest.raises(hushfuse.ScenarioError, match=r"field `schemes\[0\]"):
+        hushfuse.replay(bad.replace("trails = 3\n", "").replace('kind = "centralized-kf"', 'kind = "no-such-kind"'), [np.zeros((3, 1))] * 4)
+    # ScenarioError is a ValueError.
+    with pytest.raises(ValueError):
+        hushfuse.simulate("no-such-scenario")
+    with pytest.raises(TypeError):
+        hushfuse.run(42)
+
+
+def test_wrong_array_shapes_raise():
+    with pytest.raises(ValueError, match="3-D array"):
+        hushfuse.replay(SCEN, np.zeros((40, 4)))
+    with pytest.raises(ValueError, match="same number of steps"):
+        hushfuse.replay(SCEN, [np.zeros((40, 1)), np.zeros((39, 1)), np.zeros((40, 2)), np.zeros((40, 2))])
+    # A sensor array of the wrong width: the replay's own error, naming column and row.
+    with pytest.raises(hushfuse.DataError, match=r"column 4 \(z1\): sensor 0 measures 1 component, this row has 2"):
+        hushfuse.replay(SCEN, [np.zeros((40, 2)), np.zeros((40, 1)), np.zeros((40, 2)), np.zeros((40, 2))])
+    # Too few sensors is no error by itself (the others have no readings); too many is.
+    with pytest.raises(hushfuse.DataError, match="the scenario has no sensor 4"):
+        hushfuse.replay(SCEN, [np.zeros((40, 1))] * 2 + [np.zeros((40, 2))] * 2 + [np.zeros((40, 1))])
+    with pytest.raises(ValueError, match="some components are NaN"):
+        hushfuse.replay(SCEN, [np.zeros((40, 1)), np.zeros((40, 1)), np.array([[np.nan, 1.0]] * 40), np.zeros((40, 2))])
+    with pytest.raises(ValueError, match="not finite"):
+        hushfuse.replay(SCEN, [np.full((40, 1), np.inf)])
+    # Truth of the wrong dimension.
+    with pytest.raises(hushfuse.DataError, match=r"truth: line 2 \(data row 1\), column 3 \(beyond the header\): the state has 2 components, this row has 1"):
+        hushfuse.replay(SCEN, [np.zeros((40, 1))], np.zeros((40, 1)))
+    with pytest.raises(ValueError, match="2-D array"):
+        hushfuse.replay(SCEN, [np.zeros((40, 1))], np.zeros((40, 2, 1)))
+
+
+def test_dataframe_errors_carry_the_cli_message(tmp_path):
+    meas = pd.read_csv(EXAMPLE / "measurements.csv").astype({"z0": object})
+    meas.loc[2, "z0"] = "oops"
+    meas.to_csv(tmp_path / "m.csv", index=False)
+    out = cli("replay", SCEN, "--measurements", "m.csv", cwd=tmp_path)
+    assert out.returncode == 2
+    cli_msg = out.stderr.strip().removeprefix("error: m.csv")
+    with pytest.raises(hushfuse.DataError) as e:
+        hushfuse.replay(SCEN, meas)
+    assert str(e.value) == "measurements (DataFrame)" + cli_msg
+    assert "line 4 (data row 3), column 3 (z0): expected a number" in cli_msg
+    # Steps out of order.
+    swapped = pd.read_csv(EXAMPLE / "measurements.csv").iloc[[4, 0, 1]]
+    with pytest.raises(hushfuse.DataError, match="steps out of order"):
+        hushfuse.replay(SCEN, swapped)
+
+
+def test_step_level_errors_raise():
+    s = hushfuse.Scheme(SCEN, variant=0)
+    with pytest.raises(ValueError, match="z has 2 components, the sensor measures 1"):
+        s.sensors[0].step(1, np.zeros(2))
+    with pytest.raises(ValueError, match="not finite"):
+        s.sensors[0].step(1, np.array([np.nan]))
+    with pytest.raises(ValueError, match="inbox has 1 entries, the scheme has 4 sensors"):
+        s.center.step(1, [None])
+    with pytest.raises(ValueError, match="variant 9 does not exist"):
+        hushfuse.Scheme(SCEN, variant=9)
+    with pytest.raises(TypeError):
+        s.center.step(1, ["not a transmission"] * 4)
+    # After errors the objects still work.
+    t = s.sensors[0].step(1, np.array([0.5]))
+    assert t.sent and t.bits == 32 and t.kind == "measurement"
+    s.center.step(1, [t, None, None, None])
+    mean, cov = s.center.estimate()
+    assert mean.shape == (2,) and cov.shape == (2, 2)

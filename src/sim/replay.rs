@@ -1,0 +1,834 @@
+//! Replaying recorded measurements through every scheme of a scenario (`hushfuse replay`).
+//!
+//! Each sensor node sees its recorded z_k and decides what to send exactly as in a simulation
+//! (the same loop, coins and bit counting as the runner: [`super::trace::run_variant_with`]).
+//! A sensor without a reading at a step is not asked and reaches the fusion center as not
+//! scheduled. With recorded truth, the usual metrics of one trial follow.
+//!
+//! # CSV layout
+//!
+//! Measurements, long form, one row per (step, sensor) that has a reading:
+//!
+//! ```text
+//! step,sensor,z0,z1
+//! 1,0,0.53
+//! 1,1,0.12,-1.5
+//! 2,1,0.40,-1.2
+//! ```
+//!
+//! - the header names the columns; the first two must be `step` and `sensor`, the others may
+//!   have any names;
+//! - `step` counts from 1; steps must not decrease from row to row, and a (step, sensor) pair
+//!   may appear once;
+//! - `sensor` is the index of the sensor in the scenario (0-based, the order of `[[sensors]]`
+//!   and `[[sensor_fields]]`);
+//! - then the sensor's measurement components, exactly as many as it measures; a row may end
+//!   in empty fields (a file that mixes sensors of different dimensions);
+//! - a missing row means the sensor had no reading at that step.
+//!
+//! Truth (optional), one row per step 1, 2, ..., T in order: `step,x0,x1,...` with as many
+//! components as the state. With truth, the run has T steps; without, as many as the last step
+//! of the measurements.
+use super::build::{self, Experiment, LoadOptions, ScenarioError};
+use super::metrics::Sums;
+use super::runner::TrialData;
+use super::trace::{self, Link, LoopOptions};
+use crate::filter::Gaussian;
+use crate::linalg::Vector;
+use std::collections::HashMap;
+use std::fmt::{self, Write as _};
+
+/// Bad recorded data: the file, the line (and data row) and the column it is about.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DataError {
+    pub file: String,
+    /// Line of the file (1-based; the header is line 1).
+    pub line: Option<usize>,
+    /// Data row (1-based: the first row after the header).
+    pub row: Option<usize>,
+    /// Column (1-based) and its header name.
+    pub column: Option<(usize, String)>,
+    pub message: String,
+}
+
+impl fmt::Display for DataError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:", self.file)?;
+        match (self.line, self.row) {
+            (Some(l), Some(r)) => write!(f, " line {l} (data row {r}),")?,
+            (Some(l), None) => write!(f, " line {l},")?,
+            _ => {}
+        }
+        if let Some((c, name)) = &self.column {
+            write!(f, " column {c} ({name}):")?;
+        }
+        write!(f, " {}", self.message)
+    }
+}
+
+impl std::error::Error for DataError {}
+
+/// Where in a file.
+#[derive(Debug, Clone, Copy)]
+struct At {
+    line: usize,
+    row: usize,
+}
+
+/// One measurement row as read (not yet checked against a scenario).
+#[derive(Debug, Clone)]
+pub struct MeasRow {
+    line: usize,
+    row: usize,
+    pub step: usize,
+    pub sensor: usize,
+    pub values: Vec<f64>,
+}
+
+/// A measurements file as read: rows whose numbers and order have been checked.
+#[derive(Debug, Clone)]
+pub struct MeasTable {
+    pub file: String,
+    header: Vec<String>,
+    pub rows: Vec<MeasRow>,
+}
+
+/// A truth file as read: one row per step 1..=T.
+#[derive(Debug, Clone)]
+pub struct TruthTable {
+    pub file: String,
+    header: Vec<String>,
+    rows: Vec<(At, Vec<f64>)>,
+}
+
+impl TruthTable {
+    /// Number of steps (rows).
+    pub fn steps(&self) -> usize {
+        self.rows.len()
+    }
+}
+
+fn col_name(header: &[String], c: usize) -> (usize, String) {
+    (
+        c + 1,
+        header
+            .get(c)
+            .cloned()
+            .unwrap_or_else(|| "beyond the header".to_string()),
+    )
+}
+
+fn err_at(file: &str, at: Option<At>, column: Option<(usize, String)>, m: String) -> DataError {
+    DataError {
+        file: file.to_string(),
+        line: at.map(|a| a.line),
+        row: at.map(|a| a.row),
+        column,
+        message: m,
+    }
+}
+
+fn reader(text: &str) -> csv::Reader<&[u8]> {
+    csv::ReaderBuilder::new()
+        .has_headers(true)
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes())
+}
+
+fn csv_error(file: &str, e: &csv::Error) -> DataError {
+    let line = e.position().map(|p| p.line() as usize);
+    DataError {
+        file: file.to_string(),
+        line,
+        row: None,
+        column: None,
+        message: format!("not a readable CSV file: {e}"),
+    }
+}
+
+fn header_of(
+    rdr: &mut csv::Reader<&[u8]>,
+    file: &str,
+    first: &[&str],
+) -> Result<Vec<String>, DataError> {
+    let header: Vec<String> = rdr
+        .headers()
+        .map_err(|e| csv_error(file, &e))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    let expected = format!("{},...", first.join(","));
+    if header.len() <= first.len() || header.iter().all(|h| h.is_empty()) {
+        return Err(err_at(
+            file,
+            None,
+            None,
+            format!(
+                "line 1: expected a header row `{expected}` with at least one component column, got {:?}",
+                header.join(",")
+            ),
+        ));
+    }
+    for (c, want) in first.iter().enumerate() {
+        if !header[c].eq_ignore_ascii_case(want) {
+            return Err(DataError {
+                file: file.to_string(),
+                line: Some(1),
+                row: None,
+                column: Some(col_name(&header, c)),
+                message: format!(
+                    "expected the header row to start with `{expected}`, got {:?} here",
+                    header[c]
+                ),
+            });
+        }
+    }
+    Ok(header)
+}
+
+/// Whole number >= 1 (steps) or >= 0 (sensors).
+fn parse_index(s: &str, min: usize, what: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(v) if v >= min => Ok(v),
+        Ok(v) => Err(format!("{what} must be at least {min}, got {v}")),
+        Err(_) => Err(format!(
+            "expected {what} as a whole number >= {min}, got {s:?}"
+        )),
+    }
+}
+
+/// The components of a row from column `from` on: numbers, then possibly empty fields.
+fn parse_components(
+    rec: &csv::StringRecord,
+    from: usize,
+    file: &str,
+    at: At,
+    header: &[String],
+) -> Result<Vec<f64>, DataError> {
+    let fields: Vec<&str> = rec.iter().skip(from).collect();
+    let used = fields.len() - fields.iter().rev().take_while(|f| f.is_empty()).count();
+    let mut values = Vec::with_capacity(used);
+    for (j, f) in fields[..used].iter().enumerate() {
+        let col = || Some(col_name(header, from + j));
+        if f.is_empty() {
+            return Err(err_at(
+                file,
+                Some(at),
+                col(),
+                "empty field before further components (only trailing fields may be empty)"
+                    .to_string(),
+            ));
+        }
+        let v: f64 = f.parse().map_err(|_| {
+            err_at(
+                file,
+                Some(at),
+                col(),
+                format!("expected a number, got {f:?}"),
+            )
+        })?;
+        if !v.is_finite() {
+            return Err(err_at(
+                file,
+                Some(at),
+                col(),
+                format!("{f:?} is not a finite number"),
+            ));
+        }
+        values.push(v);
+    }
+    if values.is_empty() {
+        return Err(err_at(
+            file,
+            Some(at),
+            Some(col_name(header, from)),
+            "no components: a row holds one reading (leave the row out when there is none)"
+                .to_string(),
+        ));
+    }
+    Ok(values)
+}
+
+/// Reads a measurements file: numbers, step order and duplicates are checked here, sensor
+/// indices and dimensions against a scenario by [`recorded`].
+pub fn parse_measurements(text: &str, file: &str) -> Result<MeasTable, DataError> {
+    let mut rdr = reader(text);
+    let header = header_of(&mut rdr, file, &["step", "sensor"])?;
+    let mut rows = Vec::new();
+    let mut seen: HashMap<(usize, usize), usize> = HashMap::new();
+    let mut last_step = 0;
+    for (r, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|e| csv_error(file, &e))?;
+        let line = rec.position().map_or(r + 2, |p| p.line() as usize);
+        let at = At { line, row: r + 1 };
+        let field = |c: usize| rec.get(c).unwrap_or("");
+        let step = parse_index(field(0), 1, "a step")
+            .map_err(|m| err_at(file, Some(at), Some(col_name(&header, 0)), m))?;
+        let sensor = parse_index(field(1), 0, "a sensor index")
+            .map_err(|m| err_at(file, Some(at), Some(col_name(&header, 1)), m))?;
+        if step < last_step {
+            return Err(err_at(
+                file,
+                Some(at),
+                Some(col_name(&header, 0)),
+                format!("step {step} after step {last_step}: steps out of order (rows must be sorted by step)"),
+            ));
+        }
+        last_step = step;
+        if let Some(first) = seen.insert((step, sensor), line) {
+            return Err(err_at(
+                file,
+                Some(at),
+                Some(col_name(&header, 1)),
+                format!("sensor {sensor} at step {step} is duplicated (first on line {first})"),
+            ));
+        }
+        let values = parse_components(&rec, 2, file, at, &header)?;
+        rows.push(MeasRow {
+            line,
+            row: r + 1,
+            step,
+            sensor,
+            values,
+        });
+    }
+    Ok(MeasTable {
+        file: file.to_string(),
+        header,
+        rows,
+    })
+}
+
+/// Reads a truth file: one row per step 1, 2, ..., T in order.
+pub fn parse_truth(text: &str, file: &str) -> Result<TruthTable, DataError> {
+    let mut rdr = reader(text);
+    let header = header_of(&mut rdr, file, &["step"])?;
+    let mut rows = Vec::new();
+    for (r, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|e| csv_error(file, &e))?;
+        let line = rec.position().map_or(r + 2, |p| p.line() as usize);
+        let at = At { line, row: r + 1 };
+        let col0 = || Some(col_name(&header, 0));
+        let step = parse_index(rec.get(0).unwrap_or(""), 1, "a step")
+            .map_err(|m| err_at(file, Some(at), col0(), m))?;
+        if step != r + 1 {
+            let what = if step <= r {
+                "out of order or duplicated"
+            } else {
+                "a gap"
+            };
+            return Err(err_at(
+                file,
+                Some(at),
+                col0(),
+                format!(
+                    "expected step {} here, got {step} ({what}): truth needs one row per step, in order, from step 1",
+                    r + 1
+                ),
+            ));
+        }
+        rows.push((at, parse_components(&rec, 1, file, at, &header)?));
+    }
+    if rows.is_empty() {
+        return Err(err_at(file, None, None, "no data rows".to_string()));
+    }
+    Ok(TruthTable {
+        file: file.to_string(),
+        header,
+        rows,
+    })
+}
+
+/// Steps of the replay: the truth's rows when there is truth (no measurement may lie beyond),
+/// otherwise the last step of the measurements.
+pub fn steps_of(meas: &MeasTable, truth: Option<&TruthTable>) -> Result<usize, DataError> {
+    let last = meas.rows.last().map_or(0, |r| r.step);
+    match truth {
+        Some(t) => {
+            if let Some(r) = meas.rows.iter().find(|r| r.step > t.steps()) {
+                return Err(err_at(
+                    &meas.file,
+                    Some(At {
+                        line: r.line,
+                        row: r.row,
+                    }),
+                    Some(col_name(&meas.header, 0)),
+                    format!(
+                        "step {} is beyond the last step of the truth ({}, {} steps)",
+                        r.step,
+                        t.file,
+                        t.steps()
+                    ),
+                ));
+            }
+            Ok(t.steps())
+        }
+        None if last == 0 => Err(err_at(
+            &meas.file,
+            None,
+            None,
+            "no data rows (and no truth to say how many steps there are)".to_string(),
+        )),
+        None => Ok(last),
+    }
+}
+
+/// Recorded data ready to replay: per step and sensor the reading (zeros where there is
+/// none), which readings exist, and the truth if recorded.
+#[derive(Debug, Clone)]
+pub struct Recorded {
+    pub measurements: Vec<Vec<Vector>>,
+    /// `available[k - 1][i]`.
+    pub available: Vec<Vec<bool>>,
+    pub truth: Option<Vec<Vector>>,
+}
+
+impl Recorded {
+    pub fn steps(&self) -> usize {
+        self.measurements.len()
+    }
+
+    /// Every reading of a simulated trial, with its truth.
+    pub fn from_trial(data: &TrialData) -> Self {
+        Self {
+            measurements: data.measurements.clone(),
+            available: data
+                .measurements
+                .iter()
+                .map(|m| vec![true; m.len()])
+                .collect(),
+            truth: Some(data.truth.clone()),
+        }
+    }
+
+    /// From per-step readings (`None`: no reading) and truth, checked against the experiment
+    /// (sensor count and dimensions, state dimension, number of steps, finite values).
+    pub fn from_parts(
+        exp: &Experiment,
+        readings: Vec<Vec<Option<Vector>>>,
+        truth: Option<Vec<Vector>>,
+    ) -> Result<Self, String> {
+        let sys = &exp.system;
+        if readings.len() != exp.steps {
+            return Err(format!(
+                "measurements cover {} steps, the replay has {}",
+                readings.len(),
+                exp.steps
+            ));
+        }
+        let mut measurements = Vec::with_capacity(readings.len());
+        let mut available = Vec::with_capacity(readings.len());
+        for (k, row) in readings.into_iter().enumerate() {
+            if row.len() != sys.n_sensors() {
+                return Err(format!(
+                    "step {}: {} sensors' readings, the scenario has {} sensors",
+                    k + 1,
+                    row.len(),
+                    sys.n_sensors()
+                ));
+            }
+            let mut m = Vec::with_capacity(row.len());
+            let mut a = Vec::with_capacity(row.len());
+            for (i, z) in row.into_iter().enumerate() {
+                let dim = sys.sensors[i].meas_dim();
+                match z {
+                    Some(z) => {
+                        if z.len() != dim {
+                            return Err(format!(
+                                "step {}, sensor {i}: {} components, the sensor measures {dim}",
+                                k + 1,
+                                z.len()
+                            ));
+                        }
+                        if z.iter().any(|v| !v.is_finite()) {
+                            return Err(format!(
+                                "step {}, sensor {i}: a component is not finite",
+                                k + 1
+                            ));
+                        }
+                        m.push(z);
+                        a.push(true);
+                    }
+                    None => {
+                        m.push(Vector::zeros(dim));
+                        a.push(false);
+                    }
+                }
+            }
+            measurements.push(m);
+            available.push(a);
+        }
+        if let Some(t) = &truth {
+            if t.len() != exp.steps {
+                return Err(format!(
+                    "truth covers {} steps, the measurements {}",
+                    t.len(),
+                    exp.steps
+                ));
+            }
+            for (k, x) in t.iter().enumerate() {
+                if x.len() != sys.state_dim() {
+                    return Err(format!(
+                        "truth at step {}: {} components, the state has {}",
+                        k + 1,
+                        x.len(),
+                        sys.state_dim()
+                    ));
+                }
+                if x.iter().any(|v| !v.is_finite()) {
+                    return Err(format!(
+                        "truth at step {}: a component is not finite",
+                        k + 1
+                    ));
+                }
+            }
+        }
+        Ok(Self {
+            measurements,
+            available,
+            truth,
+        })
+    }
+}
+
+/// Checks the tables against the experiment (built for [`steps_of`] steps) and assembles the
+/// data: sensor indices, each row's number of components, the truth's dimension.
+pub fn recorded(
+    exp: &Experiment,
+    meas: &MeasTable,
+    truth: Option<&TruthTable>,
+) -> Result<Recorded, DataError> {
+    let sys = &exp.system;
+    let n = sys.n_sensors();
+    let mut readings: Vec<Vec<Option<Vector>>> = vec![vec![None; n]; exp.steps];
+    for r in &meas.rows {
+        let at = Some(At {
+            line: r.line,
+            row: r.row,
+        });
+        if r.sensor >= n {
+            return Err(err_at(
+                &meas.file,
+                at,
+                Some(col_name(&meas.header, 1)),
+                format!(
+                    "the scenario has no sensor {} (it has {n}: indices 0 to {})",
+                    r.sensor,
+                    n - 1
+                ),
+            ));
+        }
+        let dim = sys.sensors[r.sensor].meas_dim();
+        if r.values.len() != dim {
+            let c = 2 + r.values.len().min(dim);
+            return Err(err_at(
+                &meas.file,
+                at,
+                Some(col_name(&meas.header, c)),
+                format!(
+                    "sensor {} measures {dim} component{}, this row has {}",
+                    r.sensor,
+                    if dim == 1 { "" } else { "s" },
+                    r.values.len()
+                ),
+            ));
+        }
+        readings[r.step - 1][r.sensor] = Some(Vector::from_vec(r.values.clone()));
+    }
+    let truth = match truth {
+        None => None,
+        Some(t) => {
+            let n_x = sys.state_dim();
+            let mut xs = Vec::with_capacity(t.rows.len());
+            for (at, v) in &t.rows {
+                if v.len() != n_x {
+                    let c = 1 + v.len().min(n_x);
+                    return Err(err_at(
+                        &t.file,
+                        Some(*at),
+                        Some(col_name(&t.header, c)),
+                        format!("the state has {n_x} components, this row has {}", v.len()),
+                    ));
+                }
+                xs.push(Vector::from_vec(v.clone()));
+            }
+            Some(xs)
+        }
+    };
+    Recorded::from_parts(exp, readings, truth).map_err(|m| err_at(&meas.file, None, None, m))
+}
+
+/// Loads a scenario for a replay of `steps` steps: one trial, `--seed` if given. A
+/// `steady_state_from` beyond the recorded steps falls back to the default (the second half),
+/// with a note saying so.
+pub fn load_experiment(
+    text: &str,
+    source: &str,
+    steps: usize,
+    seed: Option<u64>,
+    opts: &LoadOptions,
+) -> Result<(Experiment, Vec<String>), ScenarioError> {
+    let mut parsed = build::parse(text, source)?;
+    let mut notes = Vec::new();
+    if parsed.steady_state_from.is_some_and(|s| s > steps) {
+        notes.push(format!(
+            "the scenario's steady_state_from ({}) is beyond the {steps} recorded steps: steady-state averages from step {} instead",
+            parsed.steady_state_from.unwrap_or_default(),
+            steps / 2 + 1
+        ));
+        parsed.steady_state_from = None;
+    }
+    parsed.steps = steps;
+    parsed.trials = 1;
+    if let Some(s) = seed {
+        parsed.seed = s;
+    }
+    Ok((build::build_with(parsed, source, opts)?, notes))
+}
+
+/// One variant replayed.
+#[derive(Debug, Clone)]
+pub struct VariantReplay {
+    /// Fused estimate after step k (k = 1..T).
+    pub estimates: Vec<Gaussian>,
+    /// `links[k - 1][i]`: what sensor i did at step k (`NotScheduled` also where it had no
+    /// reading; [`Recorded::available`] tells the two apart).
+    pub links: Vec<Vec<Link>>,
+    /// `bits[k - 1][i]`: payload bits sensor i sent at step k.
+    pub bits: Vec<Vec<u64>>,
+}
+
+/// Every variant replayed, and with truth their metrics (one trial).
+#[derive(Debug, Clone)]
+pub struct Replayed {
+    pub variants: Vec<VariantReplay>,
+    pub sums: Option<Vec<Sums>>,
+}
+
+/// Replays every variant of `exp` (built by [`load_experiment`] for `rec.steps()` steps) on
+/// the recorded data. The coins are those of trial `trial` of the scenario's seed, so data
+/// written from trial `trial` of a simulation replays to that simulation.
+pub fn replay(exp: &Experiment, rec: &Recorded, trial: usize) -> Result<Replayed, String> {
+    if rec.steps() != exp.steps {
+        return Err(format!(
+            "the data has {} steps, the experiment {}",
+            rec.steps(),
+            exp.steps
+        ));
+    }
+    let all = rec.available.iter().all(|a| a.iter().all(|&b| b));
+    let opts = LoopOptions {
+        trial,
+        alone: false,
+        available: (!all).then_some(rec.available.as_slice()),
+    };
+    let mut variants = Vec::with_capacity(exp.variants.len());
+    let mut sums = Vec::new();
+    for v in 0..exp.variants.len() {
+        let mut vr = VariantReplay {
+            estimates: Vec::with_capacity(exp.steps),
+            links: Vec::with_capacity(exp.steps),
+            bits: Vec::with_capacity(exp.steps),
+        };
+        let mut f = |s: &trace::StepOutput| {
+            vr.estimates.push(s.estimate.clone());
+            vr.links.push(s.links.to_vec());
+            vr.bits.push(s.bits.to_vec());
+            Ok(())
+        };
+        match &rec.truth {
+            Some(truth) => {
+                let mut s = Sums::new(exp.groups.len(), exp.steps, exp.system.state_dim());
+                trace::run_variant_into(exp, &rec.measurements, truth, v, opts, &mut s, &mut f)?;
+                sums.push(s);
+            }
+            None => trace::run_variant_with(exp, &rec.measurements, v, opts, &mut f)?,
+        }
+        variants.push(vr);
+    }
+    Ok(Replayed {
+        variants,
+        sums: rec.truth.as_ref().map(|_| sums),
+    })
+}
+
+/// Name of a link in `estimates.csv`.
+pub fn link_name(link: Link, available: bool) -> &'static str {
+    match (link, available) {
+        (_, false) => "missing",
+        (Link::Sent, _) => "sent",
+        (Link::Silent, _) => "silent",
+        (Link::NotScheduled, _) => "not_scheduled",
+    }
+}
+
+fn quoted(s: &str) -> String {
+    format!("\"{}\"", s.replace('"', "\"\""))
+}
+
+/// `estimates.csv`: per variant and step the fused mean, the covariance diagonal, and per
+/// sensor what it did (`sent`, `silent`, `not_scheduled`, `missing`: no reading) and the
+/// payload bits it sent.
+pub fn estimates_csv(exp: &Experiment, rec: &Recorded, rep: &Replayed) -> String {
+    let n = exp.system.state_dim();
+    let ns = exp.system.n_sensors();
+    let mut out = String::from("scheme,params,variant,step");
+    (0..n).for_each(|j| {
+        let _ = write!(out, ",mean_{j}");
+    });
+    (0..n).for_each(|j| {
+        let _ = write!(out, ",var_{j}");
+    });
+    (0..ns).for_each(|i| {
+        let _ = write!(out, ",sensor_{i},bits_{i}");
+    });
+    out.push('\n');
+    for (v, vr) in rep.variants.iter().enumerate() {
+        let variant = &exp.variants[v];
+        let label = quoted(&exp.curves[variant.curve].label);
+        let params = quoted(&super::results::params_text(&variant.params));
+        for (k, est) in vr.estimates.iter().enumerate() {
+            let _ = write!(out, "{label},{params},{v},{}", k + 1);
+            est.mean.iter().for_each(|m| {
+                let _ = write!(out, ",{m}");
+            });
+            (0..n).for_each(|j| {
+                let _ = write!(out, ",{}", est.cov[(j, j)]);
+            });
+            for i in 0..ns {
+                let _ = write!(
+                    out,
+                    ",{},{}",
+                    link_name(vr.links[k][i], rec.available[k][i]),
+                    vr.bits[k][i]
+                );
+            }
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// A simulated trial's measurements in the layout [`parse_measurements`] reads (every
+/// reading; numbers written so that they read back to the same bits).
+pub fn measurements_csv(exp: &Experiment, data: &TrialData) -> String {
+    let width = exp
+        .system
+        .sensors
+        .iter()
+        .map(|s| s.meas_dim())
+        .max()
+        .unwrap_or(1);
+    let mut out = String::from("step,sensor");
+    (0..width).for_each(|j| {
+        let _ = write!(out, ",z{j}");
+    });
+    out.push('\n');
+    for (k, zs) in data.measurements.iter().enumerate() {
+        for (i, z) in zs.iter().enumerate() {
+            let _ = write!(out, "{},{i}", k + 1);
+            z.iter().for_each(|v| {
+                let _ = write!(out, ",{v}");
+            });
+            (z.len()..width).for_each(|_| out.push(','));
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// A simulated trial's truth in the layout [`parse_truth`] reads.
+pub fn truth_csv(data: &TrialData) -> String {
+    let n = data.truth.first().map_or(0, |x| x.len());
+    let mut out = String::from("step");
+    (0..n).for_each(|j| {
+        let _ = write!(out, ",x{j}");
+    });
+    out.push('\n');
+    for (k, x) in data.truth.iter().enumerate() {
+        let _ = write!(out, "{}", k + 1);
+        x.iter().for_each(|v| {
+            let _ = write!(out, ",{v}");
+        });
+        out.push('\n');
+    }
+    out
+}
+
+/// A whole replay from CSV texts, as `hushfuse replay` runs it: the experiment, the data and
+/// the replayed variants.
+pub struct CsvReplay {
+    pub exp: Experiment,
+    pub recorded: Recorded,
+    pub replayed: Replayed,
+    /// What was adapted to the data (printed by the command line).
+    pub notes: Vec<String>,
+}
+
+/// Why a replay failed: bad input (scenario or data; the command line exits 2) or a failed
+/// run (exit 1).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ReplayError {
+    Input(String),
+    Run(String),
+}
+
+impl fmt::Display for ReplayError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ReplayError::Input(m) | ReplayError::Run(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for ReplayError {}
+
+/// Options of [`replay_csv`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ReplayOptions {
+    /// Replaces the scenario's seed.
+    pub seed: Option<u64>,
+    /// Trial whose coins the schemes use (0 unless replaying data of another trial).
+    pub trial: usize,
+    pub load: LoadOptions,
+}
+
+/// Parses the measurements (and truth), loads the scenario for their number of steps, checks
+/// the data against it and replays every variant.
+pub fn replay_csv(
+    scenario_text: &str,
+    source: &str,
+    measurements: (&str, &str),
+    truth: Option<(&str, &str)>,
+    opts: &ReplayOptions,
+) -> Result<CsvReplay, ReplayError> {
+    let input = |e: &dyn fmt::Display| ReplayError::Input(e.to_string());
+    let meas = parse_measurements(measurements.0, measurements.1).map_err(|e| input(&e))?;
+    let truth = truth
+        .map(|(text, file)| parse_truth(text, file))
+        .transpose()
+        .map_err(|e| input(&e))?;
+    let steps = steps_of(&meas, truth.as_ref()).map_err(|e| input(&e))?;
+    let (exp, notes) = load_experiment(scenario_text, source, steps, opts.seed, &opts.load)
+        .map_err(|e| input(&e))?;
+    let recorded = recorded(&exp, &meas, truth.as_ref()).map_err(|e| input(&e))?;
+    let replayed = replay(&exp, &recorded, opts.trial).map_err(ReplayError::Run)?;
+    Ok(CsvReplay {
+        exp,
+        recorded,
+        replayed,
+        notes,
+    })
+}
+
+/// [`super::results::non_finite`] for a replay: one trial has no standard errors (they are
+/// NaN, written as null), which is not a failure; anything else not finite is.
+pub fn non_finite(summary: &super::results::Summary) -> Vec<String> {
+    let mut check = summary.clone();
+    for s in &mut check.schemes {
+        let ss = &mut s.steady_state;
+        (ss.mse_se, ss.trace_se, ss.rate_se) = (0.0, 0.0, 0.0);
+    }
+    super::results::non_finite(&check)
+}
