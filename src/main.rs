@@ -295,8 +295,7 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     .map_err(|e| Failure::Run(e.to_string()))?;
     bar.finish_and_clear();
     let elapsed = start.elapsed().as_secs_f64();
-    let mut summary = results::summarize(&exp, &sums);
-    summary.pcrb = hushfuse::sim::pcrb::compute(&exp).ok();
+    let summary = results::summarize(&exp, &sums);
 
     let mut text = format!(
         "{} — {} trials x {} steps, seed {}, {} sensors ({:.1} s)\n\n",

@@ -228,7 +228,7 @@ impl Evaluator<'_> {
             &|_| {},
         )
         .map_err(|e| e.to_string())?;
-        Ok(results::summarize(&exp, &sums))
+        Ok(results::summarize_schemes(&exp, &sums))
     }
 }
 
@@ -474,8 +474,7 @@ pub fn calibrate(
     let mut rows = Vec::new();
     let mut summaries = Vec::new();
     let mut texts = Vec::new();
-    let mut header = results::summarize(&full, &[]);
-    header.pcrb = super::pcrb::compute(&full).ok();
+    let header = results::summarize(&full, &[]);
     for b in 0..budgets.len() {
         let row: Vec<Calibrated> = per_scheme.iter().map(|r| r[b].clone()).collect();
         let tables: Vec<toml::Table> = list

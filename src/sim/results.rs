@@ -178,8 +178,17 @@ pub struct Summary {
     pub pcrb: Option<super::pcrb::Pcrb>,
 }
 
-/// Turns sums into per-scheme results.
+/// Turns sums into per-scheme results, with the model's posterior Cramér–Rao bound where it is
+/// defined.
 pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
+    let mut s = summarize_schemes(exp, sums);
+    s.pcrb = super::pcrb::compute(exp).ok();
+    s
+}
+
+/// [`summarize`] without the bound: for the many pilot runs of a calibration, whose bound is
+/// the scenario's and is computed once.
+pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
     let n = exp.system.state_dim() as f64;
     let n_sensors = exp.system.n_sensors() as f64;
     let trials = exp.trials as f64;
