@@ -372,6 +372,19 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         bar.set_position(done as u64);
     };
     let checkpoint = dir.join(durable::checkpoint_file_name(shard));
+    if let (Some((i, n)), true) = (shard, args.resume) {
+        // A requeued task whose shard is already written has nothing left to do.
+        let path = dir.join(durable::shard_file_name(i, n));
+        if let Ok(done) = State::read(&path) {
+            if key.mismatch(&done.key).is_none() && done.shard == shard && done.is_complete() {
+                print_out(&format!(
+                    "shard {i}/{n} is already done: {}\n",
+                    path.display()
+                ));
+                return Ok(());
+            }
+        }
+    }
     let state = compute(&exp, &key, shard, &checkpoint, args, &progress);
     bar.finish_and_clear();
     let state = state?;

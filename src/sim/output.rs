@@ -277,6 +277,18 @@ impl OutputDir {
     /// the earlier run's files stay and are listed too. Returns the files written.
     pub fn commit(mut self, mut manifest: Manifest, keep_old: bool) -> Result<Vec<String>, String> {
         let old_files = self.old.take().map(|m| m.files).unwrap_or_default();
+        let stale: Vec<String> = old_files
+            .iter()
+            .filter(|f| !self.staged.contains(f))
+            .cloned()
+            .collect();
+        let mut files = if keep_old { stale.clone() } else { Vec::new() };
+        files.extend(self.staged.iter().cloned());
+        manifest.files = files;
+        // The manifest is staged too: from here on nothing is written, only renamed, so a full
+        // disk cannot strike between the files moving in and the manifest that lists them.
+        let json = serde_json::to_string_pretty(&manifest).map_err(|e| e.to_string())?;
+        write_file(&self.staging()?.join(MANIFEST), json.as_bytes())?;
         for name in &self.staged {
             let from = self.staging.join(name);
             let to = self.dir.join(name);
@@ -290,16 +302,8 @@ impl OutputDir {
                 sync_dir(parent);
             }
         }
-        let mut files = Vec::new();
-        if keep_old {
-            files.extend(
-                old_files
-                    .iter()
-                    .filter(|f| !self.staged.contains(f))
-                    .cloned(),
-            );
-        } else {
-            for stale in old_files.iter().filter(|f| !self.staged.contains(f)) {
+        if !keep_old {
+            for stale in &stale {
                 let path = self.dir.join(stale);
                 match std::fs::remove_file(&path) {
                     Ok(()) => {}
@@ -316,10 +320,8 @@ impl OutputDir {
                 }
             }
         }
-        files.extend(self.staged.iter().cloned());
-        manifest.files = files;
-        let json = serde_json::to_string_pretty(&manifest).map_err(|e| e.to_string())?;
-        write_file(&self.dir.join(MANIFEST), json.as_bytes())?;
+        std::fs::rename(self.staging.join(MANIFEST), self.dir.join(MANIFEST))
+            .map_err(|e| format!("cannot move {} into place: {e}", MANIFEST))?;
         let _ = std::fs::remove_dir_all(&self.staging);
         sync_dir(&self.dir);
         self.committed = true;
