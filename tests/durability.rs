@@ -168,7 +168,11 @@ fn kill_and_resume(threads: usize, signal: &str) {
         if attempt < 5 {
             // The first kill lands well inside the run (after its first checkpoint, before
             // its end); the others anywhere in the first half of what is left.
-            let (lo, span) = if attempt == 0 { (0.2, 0.3) } else { (0.05, 0.5) };
+            let (lo, span) = if attempt == 0 {
+                (0.2, 0.3)
+            } else {
+                (0.05, 0.5)
+            };
             let delay = clean_time * (lo + span * rng.unit());
             std::thread::sleep(Duration::from_secs_f64(delay));
             let pid = child.id().to_string();
