@@ -244,7 +244,7 @@ fn sigint_stops_cleanly_with_exit_130_and_resume_gives_the_same_bytes_2_threads(
 fn shard_run(dir: &Path, scenario: &str, i: usize, n: usize, out: &str, extra: &[&str]) {
     let s = format!("{i}/{n}");
     // Odd shards on one thread, even ones on two: the thread count must not matter either.
-    let threads = if i % 2 == 0 { "2" } else { "1" };
+    let threads = if i.is_multiple_of(2) { "2" } else { "1" };
     ok(&hushfuse(
         &[
             &[
