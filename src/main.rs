@@ -488,6 +488,8 @@ fn compute(
     let every = std::time::Duration::from_secs_f64(args.checkpoint_every);
     let mut last_save = Instant::now();
     let mut save_warned = false;
+    let (mut saves, mut save_time) = (0usize, 0.0f64);
+    let run_start = Instant::now();
     let before = state.trials_done();
     let blocks = state.next_block()..state.end;
     let completion = runner::run_windows(
@@ -509,8 +511,12 @@ fn compute(
                 durable::Progress::Blocks(done) => done.extend(blocks),
             }
             if last_save.elapsed() >= every && !state.is_complete() {
+                let t = Instant::now();
+                saves += 1;
                 // A checkpoint that cannot be written costs only the resumability.
-                if let Err(e) = state.write(checkpoint) {
+                let written = state.write(checkpoint);
+                save_time += t.elapsed().as_secs_f64();
+                if let Err(e) = written {
                     if !save_warned {
                         eprintln!("warning: checkpoint not saved: {e}");
                         save_warned = true;
@@ -522,6 +528,14 @@ fn compute(
         },
     )
     .map_err(|e| Failure::Run(e.to_string()))?;
+    if std::env::var_os("HUSHFUSE_CHECKPOINT_STATS").is_some() {
+        // For measuring the cost of checkpointing (README, "Durable runs").
+        eprintln!(
+            "checkpoints: {saves} written in {save_time:.4} s of {:.3} s computing ({:.3}%)",
+            run_start.elapsed().as_secs_f64(),
+            100.0 * save_time / run_start.elapsed().as_secs_f64().max(1e-9)
+        );
+    }
     if completion == runner::Completion::Stopped {
         state.write(checkpoint).map_err(|e| {
             Failure::Run(format!(

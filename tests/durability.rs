@@ -567,3 +567,71 @@ fn a_full_tmpfs_leaves_the_old_complete_output() {
     assert!(stderr.contains("No space left on device"), "{stderr}");
     assert_same_files(&d.join("old"), &mnt.join("o"));
 }
+
+/// A shard stopped by SIGINT resumes too, and its merge is still the unsharded run's bytes.
+#[test]
+fn an_interrupted_shard_resumes_and_merges_to_the_bytes_of_the_unsharded_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let base = ["run", "default", "--trials", "600", "--threads", "1"];
+    let started = Instant::now();
+    ok(&hushfuse(&[&base[..], &["--out", "whole"]].concat(), d));
+    let clean_time = started.elapsed().as_secs_f64();
+    let shard = [
+        &base[..],
+        &["--checkpoint-every", "0", "--out", "s", "--shard", "1/2"],
+    ]
+    .concat();
+    let child = Command::new(env!("CARGO_BIN_EXE_hushfuse"))
+        .args(&shard)
+        .current_dir(d)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs_f64(clean_time * 0.3));
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(d
+        .join("s/hushfuse-checkpoint-shard-0001-of-0002.bin")
+        .exists());
+    let resumed = hushfuse(&[&shard[..], &["--resume"]].concat(), d);
+    ok(&resumed);
+    let err = String::from_utf8_lossy(&resumed.stderr);
+    assert!(
+        err.contains("resuming from") && !err.contains(" 0 of"),
+        "{err}"
+    );
+    // Run again (a requeued task): already done.
+    let again = ok(&hushfuse(&[&shard[..], &["--resume"]].concat(), d));
+    assert!(again.contains("already done"), "{again}");
+    ok(&hushfuse(
+        &[&base[..], &["--out", "s", "--shard", "2/2"]].concat(),
+        d,
+    ));
+    ok(&hushfuse(&["merge", "s", "--out", "merged"], d));
+    assert_same_files(&d.join("whole"), &d.join("merged"));
+}
+
+/// A checkpoint that cannot be written costs only resumability: the run warns and finishes.
+#[test]
+fn a_failed_checkpoint_write_warns_and_the_run_still_finishes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scenario = small(d);
+    let out = Command::new(env!("CARGO_BIN_EXE_hushfuse"))
+        .args(["run", &scenario, "--trials", "200", "--threads", "1"])
+        .args(["--checkpoint-every", "0", "--out", "o"])
+        .env("HUSHFUSE_TEST_FAIL_WRITE", "hushfuse-checkpoint.bin")
+        .current_dir(d)
+        .output()
+        .unwrap();
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("warning: checkpoint not saved"), "{err}");
+    assert!(!d.join("o/hushfuse-checkpoint.bin").exists());
+}

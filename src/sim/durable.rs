@@ -435,3 +435,90 @@ pub fn check_shape(exp: &Experiment, state: &State) -> Result<(), String> {
         Progress::Blocks(blocks) => blocks.iter().try_for_each(|b| check_block_shape(exp, b)),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::metrics::Sums;
+
+    fn state(values: &[f64]) -> State {
+        let mut s = Sums::new(1, 2, 2);
+        for (a, v) in s.per_step.iter_mut().zip(values.iter().cycle()) {
+            *a = *v;
+        }
+        s.per_trial.push(values.to_vec());
+        State {
+            key: RunKey {
+                hushfuse_version: env!("CARGO_PKG_VERSION").into(),
+                scenario: "t".into(),
+                scenario_sha256: scenario_hash("x", "y", 8, 1),
+                seed: 1,
+                trials: 8,
+                n_blocks: 2,
+                text: "x".into(),
+                source: "y".into(),
+                trials_override: None,
+                seed_override: None,
+                allow_large: false,
+                reproduce: false,
+            },
+            shard: Some((1, 1)),
+            start: 0,
+            end: 2,
+            progress: Progress::Blocks(vec![vec![s.clone()], vec![s]]),
+        }
+    }
+
+    #[test]
+    fn floats_round_trip_bit_for_bit() {
+        let values = [
+            0.1,
+            -0.0,
+            f64::MIN_POSITIVE / 3.0,
+            f64::INFINITY,
+            f64::NAN,
+            1e308,
+            std::f64::consts::PI,
+        ];
+        let s = state(&values);
+        let back = State::decode(&s.encode()).unwrap();
+        let bits = |s: &State| -> Vec<u64> {
+            let Progress::Blocks(b) = &s.progress else {
+                unreachable!()
+            };
+            b.iter()
+                .flat_map(|v| v[0].per_step.iter().chain(&v[0].per_trial[0]))
+                .map(|x| x.to_bits())
+                .collect()
+        };
+        assert_eq!(bits(&s), bits(&back));
+    }
+
+    #[test]
+    fn every_truncation_and_every_flipped_byte_is_an_error_not_a_panic() {
+        let bytes = state(&[1.5, 2.5]).encode();
+        for len in 0..bytes.len() {
+            assert!(
+                State::decode(&bytes[..len]).is_err(),
+                "prefix of {len} bytes"
+            );
+        }
+        for i in 0..bytes.len() {
+            let mut b = bytes.clone();
+            b[i] ^= 0x40;
+            assert!(State::decode(&b).is_err(), "byte {i} flipped");
+        }
+    }
+
+    #[test]
+    fn shards_cover_every_block_once_in_order() {
+        for nb in 0..20 {
+            for n in 1..=9 {
+                let all: Vec<usize> = (1..=n).flat_map(|i| shard_blocks(i, n, nb)).collect();
+                assert_eq!(all, (0..nb).collect::<Vec<_>>(), "{nb} blocks, {n} shards");
+            }
+        }
+        assert!(parse_shard("0/3").is_err() && parse_shard("3/2").is_err());
+        assert_eq!(parse_shard("2/3"), Ok((2, 3)));
+    }
+}
