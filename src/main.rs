@@ -431,6 +431,9 @@ fn compute(
     args: &RunArgs,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<State, Failure> {
+    if let Some(dir) = checkpoint.parent() {
+        output::remove_stale_temporaries(dir);
+    }
     let range = shard.map_or(0..key.n_blocks, |(i, n)| {
         durable::shard_blocks(i, n, key.n_blocks)
     });

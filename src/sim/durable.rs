@@ -308,7 +308,6 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
     let nb = key.n_blocks;
     // owner[b]: the file that holds block b.
     let mut owner: Vec<Option<usize>> = vec![None; nb];
-    let mut by_block: Vec<Option<Vec<Sums>>> = vec![None; nb];
     for (f, (path, s)) in shards.iter().enumerate() {
         if let Some(m) = key.mismatch(&s.key) {
             return Err(format!(
@@ -346,7 +345,10 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
                 path.display()
             ));
         };
-        for (b, sums) in (s.start..s.end).zip(blocks) {
+        if blocks.len() != s.end - s.start {
+            return Err(format!("{}: inconsistent block count", path.display()));
+        }
+        for b in s.start..s.end {
             if let Some(o) = owner[b] {
                 return Err(format!(
                     "block {b} is in two shards: {} and {} (shards of different splits?)",
@@ -355,7 +357,6 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
                 ));
             }
             owner[b] = Some(f);
-            by_block[b] = Some(sums.clone());
         }
     }
     // One split (every file says the same N): every shard of it must be there, empty ones too.
@@ -384,6 +385,15 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
             "blocks {lo}..={hi} of {nb} are in none of the shards given ({} blocks missing)",
             missing.len()
         ));
+    }
+    // Every block is owned by exactly one shard: move the sums out in block order.
+    let mut by_block: Vec<Option<Vec<Sums>>> = vec![None; nb];
+    for (_, s) in shards {
+        if let Progress::Blocks(blocks) = s.progress {
+            for (b, sums) in (s.start..s.end).zip(blocks) {
+                by_block[b] = Some(sums);
+            }
+        }
     }
     Ok((
         key,

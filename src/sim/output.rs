@@ -73,6 +73,35 @@ fn write_synced(path: &Path, name: &str, bytes: &[u8]) -> Result<(), String> {
     f.sync_all().map_err(err)
 }
 
+/// Removes the temporaries (`.NAME.tmp-PID`) that a process killed while writing left in
+/// `dir`, when that process is gone (so that a live writer's temporary in a shared shard folder
+/// stays). Best effort: where liveness cannot be told (no /proc), nothing is removed.
+pub fn remove_stale_temporaries(dir: &Path) {
+    let proc = Path::new("/proc");
+    if !proc.join("self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = name
+            .strip_prefix('.')
+            .and_then(|n| n.rsplit_once(".tmp-"))
+            .map(|(_, pid)| pid.to_string())
+        else {
+            continue;
+        };
+        if pid.parse::<u32>().is_ok()
+            && pid != std::process::id().to_string()
+            && !proc.join(&pid).exists()
+        {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
 /// Flushes a folder's entries (renames) to disk; best effort (not every file system can).
 fn sync_dir(dir: &Path) {
     if let Ok(d) = File::open(dir) {
@@ -187,6 +216,7 @@ impl OutputDir {
     pub fn open(dir: &Path) -> Result<Self, String> {
         std::fs::create_dir_all(dir)
             .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        remove_stale_temporaries(dir);
         let old = read_manifest(dir)?;
         let listed: Vec<&str> = old
             .as_ref()
@@ -371,6 +401,20 @@ mod tests {
             e.contains("a.txt") && e.contains("no hushfuse-manifest.json"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn temporaries_of_dead_writers_are_removed_and_live_ones_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let dead = dir.path().join(".summary.json.tmp-999999999");
+        let live = dir
+            .path()
+            .join(format!(".summary.json.tmp-{}", std::process::id()));
+        std::fs::write(&dead, "half").unwrap();
+        std::fs::write(&live, "writing").unwrap();
+        remove_stale_temporaries(dir.path());
+        assert!(!dead.exists() || !Path::new("/proc/self").exists());
+        assert!(live.exists());
     }
 
     #[test]
