@@ -317,6 +317,17 @@ fn missing_duplicated_foreign_corrupt_and_other_version_shards_are_refused_by_na
         err.contains("shard 2/3 is given twice") && err.contains("copy/"),
         "{err}"
     );
+    // Overlapping: a shard of another split of the same run.
+    shard_run(d, &scenario, 1, 2, "half", &[]);
+    let half = d
+        .join("half/shard-0001-of-0002.hfshard")
+        .display()
+        .to_string();
+    let err = refused(&hushfuse(&["merge", "s", &half, "--out", "m"], d));
+    assert!(
+        err.contains("in two shards") && err.contains(&half),
+        "{err}"
+    );
     // Foreign: a shard of the same scenario with another seed.
     shard_run(d, &scenario, 2, 3, "other", &["--seed", "8"]);
     let foreign = d.join("other").join(name(2)).display().to_string();

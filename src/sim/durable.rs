@@ -348,15 +348,15 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
         if blocks.len() != s.end - s.start {
             return Err(format!("{}: inconsistent block count", path.display()));
         }
-        for b in s.start..s.end {
-            if let Some(o) = owner[b] {
+        for (b, slot) in (s.start..).zip(&mut owner[s.start..s.end]) {
+            if let Some(o) = *slot {
                 return Err(format!(
                     "block {b} is in two shards: {} and {} (shards of different splits?)",
                     shards[o].0.display(),
                     path.display()
                 ));
             }
-            owner[b] = Some(f);
+            *slot = Some(f);
         }
     }
     // One split (every file says the same N): every shard of it must be there, empty ones too.
