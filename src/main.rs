@@ -664,13 +664,27 @@ fn check_finite(bad: Vec<String>) -> Result<(), Failure> {
 fn merge(inputs: &[PathBuf], out: &Path, report: bool) -> Result<(), Failure> {
     let start = Instant::now();
     let paths = durable::shard_paths(inputs).map_err(Failure::Input)?;
+    // First pass: every file read and checked, its sums dropped (memory: one shard at a time).
     let shards = paths
         .into_iter()
-        .map(|p| State::read(&p).map(|s| (p, s)))
+        .map(|p| {
+            State::read(&p).map(|mut s| {
+                if let durable::Progress::Blocks(b) = &mut s.progress {
+                    let n = b.len();
+                    *b = vec![Vec::new(); n];
+                }
+                (p, s)
+            })
+        })
         .collect::<Result<Vec<_>, _>>()
         .map_err(Failure::Input)?;
     let n_files = shards.len();
-    let (key, blocks) = durable::check_shards(shards).map_err(Failure::Input)?;
+    let mut order: Vec<(usize, usize, PathBuf)> = shards
+        .iter()
+        .map(|(p, s)| (s.start, s.end, p.clone()))
+        .collect();
+    order.sort();
+    let (key, _) = durable::check_shards(shards).map_err(Failure::Input)?;
     let this = env!("CARGO_PKG_VERSION");
     if key.hushfuse_version != this {
         return Err(Failure::Input(format!(
@@ -711,13 +725,31 @@ fn merge(inputs: &[PathBuf], out: &Path, report: bool) -> Result<(), Failure> {
             "the shards' scenario, rebuilt, {m}: the shards are inconsistent"
         )));
     }
-    for b in &blocks {
-        durable::check_block_shape(&exp, b)
-            .map_err(|e| Failure::Input(format!("the shards: {e}")))?;
-    }
     let out_dir = OutputDir::open(out).map_err(Failure::Input)?;
-    let sums = durable::fold(&exp, &blocks);
-    drop(blocks);
+    // Second pass: the shards in block order, each block folded in turn from empty sums.
+    let mut sums = runner::empty_sums(&exp);
+    for (start, end, path) in &order {
+        let s = State::read(path).map_err(Failure::Input)?;
+        if s.start != *start || s.end != *end || !s.is_complete() {
+            return Err(Failure::Input(format!(
+                "{}: it changed during the merge",
+                path.display()
+            )));
+        }
+        if let Some(m) = key.mismatch(&s.key) {
+            return Err(Failure::Input(format!(
+                "{} {m}: it changed during the merge",
+                path.display()
+            )));
+        }
+        durable::check_shape(&exp, &s)
+            .map_err(|e| Failure::Input(format!("{}: {e}", path.display())))?;
+        if let durable::Progress::Blocks(blocks) = &s.progress {
+            for b in blocks {
+                runner::fold_block(&mut sums, b);
+            }
+        }
+    }
     eprintln!(
         "merged {n_files} shard files: {} blocks, {} trials",
         key.n_blocks, key.trials
