@@ -311,6 +311,9 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         }
         return table_report(&text, &source, args);
     }
+    // From here on Ctrl-C stops the run cleanly (a signal before the first trial: a checkpoint
+    // of nothing, and exit 130).
+    install_stop_handler();
     let shard = args
         .shard
         .as_deref()
@@ -487,7 +490,6 @@ fn compute(
             },
         }
     };
-    install_stop_handler();
     let every = std::time::Duration::from_secs_f64(args.checkpoint_every);
     let mut last_save = Instant::now();
     let mut save_warned = false;
