@@ -1,5 +1,7 @@
 //! `hushfuse` command line: run scenarios, list the built-in ones, reproduce paper figures.
 use clap::{Parser, Subcommand};
+use hushfuse::sim::durable::{self, State};
+use hushfuse::sim::output::{self, OutputDir};
 use hushfuse::sim::{
     arena, build, builtin, calibrate, html, plot, replay, report, results, runner, tables,
 };
@@ -62,6 +64,17 @@ struct RunArgs {
     /// `hushfuse replay` reads).
     #[arg(long, hide = true, num_args = 2, value_names = ["K", "DIR"])]
     write_trial: Option<Vec<String>>,
+    /// Continue an interrupted run from the checkpoint in its output folder (same scenario and
+    /// arguments); starts from the first trial when there is none.
+    #[arg(long)]
+    resume: bool,
+    /// Run only shard I of N (1 <= I <= N; a fixed, contiguous part of the trial blocks) and
+    /// write OUT/shard-I-of-N.hfshard; `hushfuse merge` turns the N shards into the outputs.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<String>,
+    /// Seconds between checkpoints of finished trial blocks (0: after every window of blocks).
+    #[arg(long, default_value_t = 10.0, value_name = "SECS")]
+    checkpoint_every: f64,
 }
 
 #[derive(Subcommand)]
@@ -107,6 +120,19 @@ enum Command {
         #[arg(long)]
         allow_large: bool,
     },
+    /// Merge the shard files of `run --shard I/N` (files, or folders holding them) into the
+    /// outputs of the whole run, byte for byte those of an unsharded run.
+    Merge {
+        /// Shard files (*.hfshard) or folders holding them.
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Also write report.html.
+        #[arg(long)]
+        report: bool,
+    },
     /// List the built-in scenarios.
     List,
     /// List every scheme kind with its parameters and defaults.
@@ -124,10 +150,12 @@ enum Command {
     },
 }
 
-/// Exit codes: 2 for bad input (scenario, arguments), 1 for a failed run.
+/// Exit codes: 2 for bad input (scenario, arguments), 1 for a failed run, 130 for a run
+/// stopped by Ctrl-C (its finished trials kept in a checkpoint).
 enum Failure {
     Input(String),
     Run(String),
+    Interrupted(String),
 }
 
 fn main() -> ExitCode {
@@ -136,7 +164,14 @@ fn main() -> ExitCode {
         None => quick_arena(),
         Some(Command::Run { scenario, args }) => {
             if args.budget.is_some() || args.budgets.is_some() {
-                arena_run(&scenario, &args).map(|_| ())
+                if args.shard.is_some() || args.resume {
+                    Err(Failure::Input(
+                        "--shard and --resume apply to plain runs, not to --budget/--budgets"
+                            .into(),
+                    ))
+                } else {
+                    arena_run(&scenario, &args).map(|_| ())
+                }
             } else {
                 run(&scenario, &args, false)
             }
@@ -176,6 +211,11 @@ fn main() -> ExitCode {
             trial,
             allow_large,
         }),
+        Some(Command::Merge {
+            shards,
+            out,
+            report,
+        }) => merge(&shards, &out, report),
         Some(Command::List) => {
             let text: String = builtin::BUILTIN
                 .iter()
@@ -194,6 +234,10 @@ fn main() -> ExitCode {
         Err(Failure::Run(m)) => {
             eprintln!("error: {m}");
             ExitCode::from(1)
+        }
+        Err(Failure::Interrupted(m)) => {
+            eprintln!("{m}");
+            ExitCode::from(130)
         }
     }
 }
@@ -232,24 +276,62 @@ fn table_report(text: &str, source: &str, args: &RunArgs) -> Result<(), Failure>
     build::check_name(&file.name)
         .map_err(|m| Failure::Input(format!("{source}: field `name`: {m}")))?;
     let rows = tables::compare(&file).map_err(|e| Failure::Input(format!("{source}: {e}")))?;
-    let mut out = tables::render(&file, &rows);
+    let out = tables::render(&file, &rows);
     let dir = args
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(&file.name));
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
+    let mut out_dir = OutputDir::open(&dir).map_err(Failure::Input)?;
     let json =
         serde_json::json!({ "scenario": file.name, "citation": file.citation, "rows": rows });
-    let path = dir.join("summary.json");
-    std::fs::write(
-        &path,
-        serde_json::to_string_pretty(&json).expect("serializable"),
-    )
-    .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
-    out.push_str(&format!("\nwrote {}\n", path.display()));
     print_out(&out);
+    out_dir
+        .stage(
+            "summary.json",
+            serde_json::to_string_pretty(&json)
+                .expect("serializable")
+                .as_bytes(),
+        )
+        .map_err(Failure::Run)?;
+    let hash = output::sha256_hex(format!("{source}\0{text}").as_bytes());
+    out_dir
+        .commit(output::Manifest::new("table", &file.name, &hash), false)
+        .map_err(Failure::Run)?;
+    print_out(&format!("\nwrote {}\n", dir.join("summary.json").display()));
     Ok(())
+}
+
+/// Raised by the first Ctrl-C (SIGINT): the runner stops between trials and the finished
+/// blocks are checkpointed. A second Ctrl-C ends the process at once.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+fn install_stop_handler() {
+    let _ = ctrlc::set_handler(|| {
+        if STOP.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+    });
+}
+
+/// The command line of this process with `--resume` added (for the message of a stopped run).
+fn resume_command() -> String {
+    let mut args: Vec<String> = std::env::args().collect();
+    if let Some(first) = args.first_mut() {
+        *first = "hushfuse".into();
+    }
+    if !args.iter().any(|a| a == "--resume") {
+        args.push("--resume".into());
+    }
+    args.iter()
+        .map(|a| {
+            if a.is_empty() || a.contains(|c: char| c.is_whitespace() || "'\"$\\;&|".contains(c)) {
+                format!("'{}'", a.replace('\'', r"'\''"))
+            } else {
+                a.clone()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
@@ -257,7 +339,27 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     let text_in = text.clone();
     let kind = build::file_kind(&text, &source).map_err(|e| Failure::Input(e.to_string()))?;
     if kind == build::FileKind::TableReport {
+        if args.shard.is_some() || args.resume {
+            return Err(Failure::Input(format!(
+                "{source}: a table reproduction runs no trials; --shard and --resume do not apply"
+            )));
+        }
         return table_report(&text, &source, args);
+    }
+    // From here on Ctrl-C stops the run cleanly (a signal before the first trial: a checkpoint
+    // of nothing, and exit 130).
+    install_stop_handler();
+    let shard = args
+        .shard
+        .as_deref()
+        .map(durable::parse_shard)
+        .transpose()
+        .map_err(Failure::Input)?;
+    if !(args.checkpoint_every >= 0.0 && args.checkpoint_every.is_finite()) {
+        return Err(Failure::Input(format!(
+            "--checkpoint-every: expected a number of seconds >= 0, got {}",
+            args.checkpoint_every
+        )));
     }
     let options = build::LoadOptions {
         trials: args.trials,
@@ -267,6 +369,28 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
     };
     let exp =
         build::load_with(&text, &source, &options).map_err(|e| Failure::Input(e.to_string()))?;
+    let key = durable::RunKey::new(
+        &exp,
+        &text_in,
+        &source,
+        args.trials,
+        args.seed,
+        args.allow_large,
+        reproduce,
+    );
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(&exp.name));
+    // A folder that cannot take the outputs is refused before any trial runs.
+    let out_dir = match shard {
+        None => Some(OutputDir::open(&dir).map_err(Failure::Input)?),
+        Some(_) => {
+            std::fs::create_dir_all(&dir)
+                .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
+            None
+        }
+    };
     let start = Instant::now();
     let bar = ProgressBar::with_draw_target(Some(exp.trials as u64), ProgressDrawTarget::hidden());
     bar.set_style(
@@ -285,18 +409,206 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         }
         bar.set_position(done as u64);
     };
-    let sums = runner::run(
-        &exp,
+    let checkpoint = dir.join(durable::checkpoint_file_name(shard));
+    if let (Some((i, n)), true) = (shard, args.resume) {
+        // A requeued task whose shard is already written has nothing left to do.
+        let path = dir.join(durable::shard_file_name(i, n));
+        if let Ok(done) = State::read(&path) {
+            if key.mismatch(&done.key).is_none() && done.shard == shard && done.is_complete() {
+                print_out(&format!(
+                    "shard {i}/{n} is already done: {}\n",
+                    path.display()
+                ));
+                return Ok(());
+            }
+        }
+    }
+    let state = compute(&exp, &key, shard, &checkpoint, args, &progress);
+    bar.finish_and_clear();
+    let state = state?;
+    let elapsed = start.elapsed().as_secs_f64();
+    let Some(out_dir) = out_dir else {
+        let (i, n) = shard.expect("a shard run");
+        let path = dir.join(durable::shard_file_name(i, n));
+        state.write(&path).map_err(Failure::Run)?;
+        let _ = std::fs::remove_file(&checkpoint);
+        let trials = runner::block_trials(state.start, exp.trials).start
+            ..runner::block_trials(state.end, exp.trials).start;
+        print_out(&format!(
+            "{} — shard {i}/{n}: blocks {}..{} of {} (trials {}..{} of {}), {:.1} s\nwrote {}\nwhen all {n} shards are done: hushfuse merge {} --out <folder>\n",
+            exp.name,
+            state.start,
+            state.end,
+            key.n_blocks,
+            trials.start,
+            trials.end,
+            exp.trials,
+            elapsed,
+            path.display(),
+            dir.display()
+        ));
+        return Ok(());
+    };
+    let durable::Progress::Prefix { total, .. } = &state.progress else {
+        unreachable!("a whole run folds its blocks")
+    };
+    let bad = write_run_outputs(
+        &exp, total, &text_in, args, reproduce, elapsed, out_dir, "run", &key,
+    )?;
+    let _ = std::fs::remove_file(&checkpoint);
+    check_finite(bad)
+}
+
+/// Runs the trial blocks of a whole run (`shard` None) or of a shard, from its checkpoint
+/// with `--resume`, checkpointing every `--checkpoint-every` seconds and when stopped.
+fn compute(
+    exp: &build::Experiment,
+    key: &durable::RunKey,
+    shard: Option<(usize, usize)>,
+    checkpoint: &Path,
+    args: &RunArgs,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<State, Failure> {
+    if let Some(dir) = checkpoint.parent() {
+        output::remove_stale_temporaries(dir);
+    }
+    let range = shard.map_or(0..key.n_blocks, |(i, n)| {
+        durable::shard_blocks(i, n, key.n_blocks)
+    });
+    let mut state = if checkpoint.exists() {
+        if !args.resume {
+            return Err(Failure::Input(format!(
+                "{} holds the checkpoint of an interrupted run: add --resume to continue it, or remove the file to start over",
+                checkpoint.display()
+            )));
+        }
+        let s = State::read(checkpoint).map_err(Failure::Input)?;
+        let refuse = |why: String| {
+            Failure::Input(format!(
+                "{}: the checkpoint {why}; resume with the arguments of the interrupted run, or remove the file to start over",
+                checkpoint.display()
+            ))
+        };
+        if let Some(m) = key.mismatch(&s.key) {
+            return Err(refuse(m));
+        }
+        if s.shard != shard || s.start != range.start || s.end != range.end {
+            return Err(refuse("is of another shard".into()));
+        }
+        durable::check_shape(exp, &s).map_err(refuse)?;
+        eprintln!(
+            "resuming from {}: {} of {} trials already done",
+            checkpoint.display(),
+            s.trials_done(),
+            runner::block_trials(s.end, exp.trials).start
+                - runner::block_trials(s.start, exp.trials).start
+        );
+        s
+    } else {
+        if args.resume {
+            eprintln!(
+                "no checkpoint {} to resume from: starting from the first trial",
+                checkpoint.display()
+            );
+        }
+        State {
+            key: key.clone(),
+            shard,
+            start: range.start,
+            end: range.end,
+            progress: match shard {
+                Some(_) => durable::Progress::Blocks(Vec::new()),
+                None => durable::Progress::Prefix {
+                    next: range.start,
+                    total: runner::empty_sums(exp),
+                },
+            },
+        }
+    };
+    let every = std::time::Duration::from_secs_f64(args.checkpoint_every);
+    let mut last_save = Instant::now();
+    let mut save_warned = false;
+    let (mut saves, mut save_time) = (0usize, 0.0f64);
+    let run_start = Instant::now();
+    let before = state.trials_done();
+    let blocks = state.next_block()..state.end;
+    let completion = runner::run_windows(
+        exp,
         runner::RunOptions {
             threads: args.threads,
         },
-        &progress,
+        blocks,
+        Some(&STOP),
+        &|n| progress(before + n),
+        &mut |first, blocks| {
+            match &mut state.progress {
+                durable::Progress::Prefix { next, total } => {
+                    for b in &blocks {
+                        runner::fold_block(total, b);
+                    }
+                    *next = first + blocks.len();
+                }
+                durable::Progress::Blocks(done) => done.extend(blocks),
+            }
+            if last_save.elapsed() >= every && !state.is_complete() {
+                let t = Instant::now();
+                saves += 1;
+                // A checkpoint that cannot be written costs only the resumability.
+                let written = state.write(checkpoint);
+                save_time += t.elapsed().as_secs_f64();
+                if let Err(e) = written {
+                    if !save_warned {
+                        eprintln!("warning: checkpoint not saved: {e}");
+                        save_warned = true;
+                    }
+                }
+                last_save = Instant::now();
+            }
+            Ok(())
+        },
     )
     .map_err(|e| Failure::Run(e.to_string()))?;
-    bar.finish_and_clear();
-    let elapsed = start.elapsed().as_secs_f64();
-    let summary = results::summarize(&exp, &sums);
+    if std::env::var_os("HUSHFUSE_CHECKPOINT_STATS").is_some() {
+        // For measuring the cost of checkpointing (README, "Durable runs").
+        eprintln!(
+            "checkpoints: {saves} written in {save_time:.4} s of {:.3} s computing ({:.3}%)",
+            run_start.elapsed().as_secs_f64(),
+            100.0 * save_time / run_start.elapsed().as_secs_f64().max(1e-9)
+        );
+    }
+    if completion == runner::Completion::Stopped {
+        state.write(checkpoint).map_err(|e| {
+            Failure::Run(format!(
+                "interrupted, and the checkpoint could not be saved: {e}"
+            ))
+        })?;
+        return Err(Failure::Interrupted(format!(
+            "interrupted: {} of {} trials done, kept in {}\ncontinue with: {}",
+            state.trials_done(),
+            runner::block_trials(state.end, exp.trials).start
+                - runner::block_trials(state.start, exp.trials).start,
+            checkpoint.display(),
+            resume_command()
+        )));
+    }
+    Ok(state)
+}
 
+/// Prints the table of a finished run, then writes its outputs into `out_dir` (all or
+/// nothing) with a manifest.
+#[allow(clippy::too_many_arguments)]
+fn write_run_outputs(
+    exp: &build::Experiment,
+    sums: &[hushfuse::sim::metrics::Sums],
+    text_in: &str,
+    args: &RunArgs,
+    reproduce: bool,
+    elapsed: f64,
+    mut out_dir: OutputDir,
+    kind: &str,
+    key: &durable::RunKey,
+) -> Result<Vec<String>, Failure> {
+    let summary = results::summarize(exp, sums);
     let mut text = format!(
         "{} — {} trials x {} steps, seed {}, {} sensors ({:.1} s)\n\n",
         summary.scenario, summary.trials, summary.steps, summary.seed, summary.sensors, elapsed
@@ -311,8 +623,8 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         exp.paper.as_ref().map(|p| PaperOutput {
             citation: &p.citation,
             notes: &p.notes,
-            published: report::compare_published(&exp, &summary),
-            claims: report::check_claims(&exp, &summary),
+            published: report::compare_published(exp, &summary),
+            claims: report::check_claims(exp, &summary),
         })
     } else {
         None
@@ -321,41 +633,35 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         if let Some(p) = &paper {
             text.push_str(&format!(
                 "\n{}\n",
-                report::render(&exp, &p.published, &p.claims)
+                report::render(exp, &p.published, &p.claims)
             ));
         }
     }
+    // The results first: a failed write below loses no computed number from sight.
+    print_out(&text);
 
-    let dir = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(&summary.scenario));
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
     let out = Output {
         summary: &summary,
         paper,
     };
     let json = serde_json::to_string_pretty(&out).map_err(|e| Failure::Run(e.to_string()))?;
-    let write = |name: &str, text: &str| {
-        std::fs::write(dir.join(name), text)
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", dir.join(name).display())))
-    };
-    write("summary.json", &json)?;
-    write("per_step.csv", &results::per_step_csv(&summary))?;
-    let mut files = vec!["summary.json".to_string(), "per_step.csv".to_string()];
+    let mut stage = |name: &str, text: &str| out_dir.stage(name, text.as_bytes());
+    stage("summary.json", &json).map_err(Failure::Run)?;
+    stage("per_step.csv", &results::per_step_csv(&summary)).map_err(Failure::Run)?;
     if let (true, Some(p)) = (reproduce, &out.paper) {
         let md = report::render_markdown(&summary.scenario, elapsed, &p.published, &p.claims);
-        write("reproduction.md", &md)?;
-        files.push("reproduction.md".to_string());
+        stage("reproduction.md", &md).map_err(Failure::Run)?;
     }
-    files.extend(plot::write_all(&exp, &summary, &dir).map_err(Failure::Run)?);
-    let as_run = as_run_text(&text_in, args);
-    write("scenario_as_run.toml", &as_run)?;
-    files.push("scenario_as_run.toml".to_string());
+    let plots = plot::write_all(exp, &summary, out_dir.staging().map_err(Failure::Run)?)
+        .map_err(Failure::Run)?;
+    out_dir.record(plots);
+    let as_run = as_run_text(text_in, args);
+    out_dir
+        .stage("scenario_as_run.toml", as_run.as_bytes())
+        .map_err(Failure::Run)?;
     if args.report {
         let page = html::render(&html::Input {
-            exp: &exp,
+            exp,
             summary: &summary,
             scenario_text: &as_run,
             alone: false,
@@ -363,24 +669,31 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
             se_trials: exp.trials.min(200),
         })
         .map_err(Failure::Run)?;
-        write("report.html", &page)?;
-        files.push("report.html".to_string());
+        out_dir
+            .stage("report.html", page.as_bytes())
+            .map_err(Failure::Run)?;
     }
-    if let Some(wt) = &args.write_trial {
-        files.extend(write_trial(&exp, wt)?);
-    }
-    text.push_str(&format!(
+    // Trial K's data for `hushfuse replay`, outside the output folder (hidden option).
+    let extra = match &args.write_trial {
+        Some(wt) => write_trial(exp, wt)?,
+        None => Vec::new(),
+    };
+    let dir = out_dir.dir().to_path_buf();
+    let mut manifest = output::Manifest::new(kind, &key.scenario, &key.scenario_sha256);
+    manifest.seed = Some(key.seed);
+    manifest.trials = Some(key.trials);
+    let mut files = out_dir.commit(manifest, false).map_err(Failure::Run)?;
+    files.extend(extra);
+    print_out(&format!(
         "\nwrote {}: {}\n",
         dir.display(),
         files.join(", ")
     ));
-    print_out(&text);
-    // One trial has no standard errors (NaN): not a failure of the run.
-    let bad = if exp.trials == 1 {
-        replay::non_finite(&summary)
-    } else {
-        results::non_finite(&summary)
-    };
+    Ok(results::non_finite(&summary))
+}
+
+/// A run whose numbers are not all finite fails (after writing them, as null).
+fn check_finite(bad: Vec<String>) -> Result<(), Failure> {
     if !bad.is_empty() {
         return Err(Failure::Run(format!(
             "the run produced numbers that are not finite (written as null in summary.json), so its results cannot be trusted:\n  {}\nrescale the scenario's units or check its noise levels",
@@ -388,6 +701,115 @@ fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(), Failure> {
         )));
     }
     Ok(())
+}
+
+/// `hushfuse merge`: the outputs of a whole run from the shard files of `run --shard I/N`.
+fn merge(inputs: &[PathBuf], out: &Path, report: bool) -> Result<(), Failure> {
+    let start = Instant::now();
+    let paths = durable::shard_paths(inputs).map_err(Failure::Input)?;
+    // First pass: every file read and checked, its sums dropped (memory: one shard at a time).
+    let shards = paths
+        .into_iter()
+        .map(|p| {
+            State::read(&p).map(|mut s| {
+                if let durable::Progress::Blocks(b) = &mut s.progress {
+                    let n = b.len();
+                    *b = vec![Vec::new(); n];
+                }
+                (p, s)
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(Failure::Input)?;
+    let n_files = shards.len();
+    let mut order: Vec<(usize, usize, PathBuf)> = shards
+        .iter()
+        .map(|(p, s)| (s.start, s.end, p.clone()))
+        .collect();
+    order.sort();
+    let (key, _) = durable::check_shards(shards).map_err(Failure::Input)?;
+    let this = env!("CARGO_PKG_VERSION");
+    if key.hushfuse_version != this {
+        return Err(Failure::Input(format!(
+            "the shards were written by hushfuse {}; this is hushfuse {this}: merge them with that version",
+            key.hushfuse_version
+        )));
+    }
+    let args = RunArgs {
+        trials: key.trials_override,
+        seed: key.seed_override,
+        allow_large: key.allow_large,
+        out: Some(out.to_path_buf()),
+        report,
+        ..Default::default()
+    };
+    let exp = build::load_with(
+        &key.text,
+        &key.source,
+        &build::LoadOptions {
+            trials: args.trials,
+            seed: args.seed,
+            threads: 0,
+            limits: args.allow_large.then(hushfuse::sim::limits::Limits::none),
+        },
+    )
+    .map_err(|e| Failure::Input(format!("the shards' scenario: {e}")))?;
+    let rebuilt = durable::RunKey::new(
+        &exp,
+        &key.text,
+        &key.source,
+        key.trials_override,
+        key.seed_override,
+        key.allow_large,
+        key.reproduce,
+    );
+    if let Some(m) = key.mismatch(&rebuilt) {
+        return Err(Failure::Input(format!(
+            "the shards' scenario, rebuilt, {m}: the shards are inconsistent"
+        )));
+    }
+    let out_dir = OutputDir::open(out).map_err(Failure::Input)?;
+    // Second pass: the shards in block order, each block folded in turn from empty sums.
+    let mut sums = runner::empty_sums(&exp);
+    for (start, end, path) in &order {
+        let s = State::read(path).map_err(Failure::Input)?;
+        if s.start != *start || s.end != *end || !s.is_complete() {
+            return Err(Failure::Input(format!(
+                "{}: it changed during the merge",
+                path.display()
+            )));
+        }
+        if let Some(m) = key.mismatch(&s.key) {
+            return Err(Failure::Input(format!(
+                "{} {m}: it changed during the merge",
+                path.display()
+            )));
+        }
+        durable::check_shape(&exp, &s)
+            .map_err(|e| Failure::Input(format!("{}: {e}", path.display())))?;
+        if let durable::Progress::Blocks(blocks) = &s.progress {
+            for b in blocks {
+                runner::fold_block(&mut sums, b);
+            }
+        }
+    }
+    eprintln!(
+        "merged {n_files} shard files: {} blocks, {} trials",
+        key.n_blocks, key.trials
+    );
+    let bad = write_run_outputs(
+        &exp,
+        &sums,
+        &key.text,
+        &args,
+        key.reproduce,
+        start.elapsed().as_secs_f64(),
+        out_dir,
+        // The same manifest as the unsharded run's: every file of the folder is the same.
+        "run",
+        &key,
+    )?;
+    check_finite(bad)
 }
 
 /// Budgets from `--budget` or `--budgets`.
@@ -416,6 +838,19 @@ fn budgets_of(args: &RunArgs) -> Result<Vec<f64>, Failure> {
 fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, PathBuf), Failure> {
     let (text, source) = scenario_text(scenario)?;
     let budgets = budgets_of(args)?;
+    // The output folder is checked before the calibration runs, when its name is known.
+    let named_dir = args.out.clone().or_else(|| {
+        toml::from_str::<toml::Table>(&text)
+            .ok()
+            .and_then(|t| t.get("name").and_then(|n| n.as_str().map(str::to_string)))
+            .filter(|n| build::check_name(n).is_ok())
+            .map(|n| PathBuf::from("hushfuse-out").join(n))
+    });
+    let early_dir = named_dir
+        .as_deref()
+        .map(OutputDir::open)
+        .transpose()
+        .map_err(Failure::Input)?;
     let axis = calibrate::Axis::parse(&args.budget_axis).map_err(Failure::Input)?;
     let opts = calibrate::Options {
         axis,
@@ -468,17 +903,14 @@ fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, Path
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(&first.scenario));
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
-    let write = |name: &str, text: &str| {
-        let p = dir.join(name);
-        if let Some(parent) = p.parent() {
-            std::fs::create_dir_all(parent)
-                .map_err(|e| Failure::Run(format!("cannot create {}: {e}", parent.display())))?;
-        }
-        std::fs::write(&p, text)
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", p.display())))
+    let mut out_dir = match early_dir {
+        Some(d) if d.dir() == dir => d,
+        _ => OutputDir::open(&dir).map_err(Failure::Input)?,
     };
+    // The results first: a failed write below loses no computed number from sight.
+    print_out(&msg);
+    let mut write =
+        |name: &str, text: &str| out_dir.stage(name, text.as_bytes()).map_err(Failure::Run);
     let json = serde_json::json!({
         "scenario": first.scenario,
         "axis": axis.name(),
@@ -515,7 +947,15 @@ fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, Path
         write(&format!("{sub}/per_step.csv"), &results::per_step_csv(s))?;
         files.push(format!("{sub}/"));
     }
-    files.extend(arena::write_plots(&out, &group, &first.scenario, &dir).map_err(Failure::Run)?);
+    let plots = arena::write_plots(
+        &out,
+        &group,
+        &first.scenario,
+        out_dir.staging().map_err(Failure::Run)?,
+    )
+    .map_err(Failure::Run)?;
+    out_dir.record(plots.iter().cloned());
+    files.extend(plots);
     if args.report {
         let exp = build::load_with(&out.texts[0], &source, &opts.load)
             .map_err(|e| Failure::Run(e.to_string()))?;
@@ -528,15 +968,27 @@ fn arena_run(scenario: &str, args: &RunArgs) -> Result<(calibrate::Outcome, Path
             se_trials: exp.trials.min(200),
         })
         .map_err(Failure::Run)?;
-        write("report.html", &page)?;
+        out_dir
+            .stage("report.html", page.as_bytes())
+            .map_err(Failure::Run)?;
         files.push("report.html".into());
     }
-    msg.push_str(&format!(
+    let hash = output::sha256_hex(
+        format!(
+            "{source}\0{text}\0{:?}\0{:?}\0{:?}\0{}\0{:?}",
+            args.trials, args.seed, budgets, args.budget_axis, args.pilot_trials
+        )
+        .as_bytes(),
+    );
+    let mut manifest = output::Manifest::new("arena", &first.scenario, &hash);
+    manifest.seed = Some(first.seed);
+    manifest.trials = Some(first.trials);
+    out_dir.commit(manifest, false).map_err(Failure::Run)?;
+    print_out(&format!(
         "\nwrote {}: {}\n",
         dir.display(),
         files.join(", ")
     ));
-    print_out(&msg);
     Ok((out, dir))
 }
 
@@ -617,8 +1069,17 @@ fn report_dir(dir: &Path) -> Result<(), Failure> {
     })
     .map_err(Failure::Run)?;
     let path = dir.join("report.html");
-    std::fs::write(&path, page)
-        .map_err(|e| Failure::Run(format!("cannot write {}: {e}", path.display())))?;
+    match output::read_manifest(dir).map_err(Failure::Input)? {
+        // Joins the run's files in its manifest.
+        Some(manifest) => {
+            let mut out_dir = OutputDir::open_existing(dir).map_err(Failure::Input)?;
+            out_dir
+                .stage("report.html", page.as_bytes())
+                .map_err(Failure::Run)?;
+            out_dir.commit(manifest, true).map_err(Failure::Run)?;
+        }
+        None => output::write_file(&path, page.as_bytes()).map_err(Failure::Run)?,
+    }
     print_out(&format!("wrote {}\n", path.display()));
     Ok(())
 }
@@ -641,8 +1102,7 @@ fn write_trial(exp: &build::Experiment, args: &[String]) -> Result<Vec<String>, 
         ("truth.csv", replay::truth_csv(&data)),
     ] {
         let p = dir.join(name);
-        std::fs::write(&p, text)
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", p.display())))?;
+        output::write_file(&p, text.as_bytes()).map_err(Failure::Run)?;
         files.push(p.display().to_string());
     }
     Ok(files)
@@ -694,12 +1154,9 @@ fn replay(a: &ReplayArgs) -> Result<(), Failure> {
         .out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(format!("{}-replay", r.exp.name)));
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
-    let write = |name: &str, text: &str| {
-        std::fs::write(dir.join(name), text)
-            .map_err(|e| Failure::Run(format!("cannot write {}: {e}", dir.join(name).display())))
-    };
+    // Staged and committed with a manifest, like every run's output (all or nothing).
+    let mut out_dir = OutputDir::open(&dir).map_err(Failure::Input)?;
+    let mut staged: Vec<(&str, String)> = Vec::new();
     let readings: usize = r
         .recorded
         .available
@@ -717,10 +1174,10 @@ fn replay(a: &ReplayArgs) -> Result<(), Failure> {
         r.exp.variants.len(),
         elapsed
     );
-    write(
+    staged.push((
         "estimates.csv",
-        &replay::estimates_csv(&r.exp, &r.recorded, &r.replayed),
-    )?;
+        replay::estimates_csv(&r.exp, &r.recorded, &r.replayed),
+    ));
     for n in &r.notes {
         msg.push_str(&format!("note: {n}\n"));
     }
@@ -732,13 +1189,24 @@ fn replay(a: &ReplayArgs) -> Result<(), Failure> {
         msg.push_str(&results::table(&summary));
         let json =
             serde_json::to_string_pretty(&summary).map_err(|e| Failure::Run(e.to_string()))?;
-        write("summary.json", &json)?;
-        write("per_step.csv", &results::per_step_csv(&summary))?;
+        staged.push(("summary.json", json));
+        staged.push(("per_step.csv", results::per_step_csv(&summary)));
         files.extend(["summary.json".to_string(), "per_step.csv".to_string()]);
         bad = replay::non_finite(&summary);
     } else {
         msg.push_str("(no --truth: estimates only, no error metrics)\n");
     }
+    // The results first: a failed write below loses nothing from sight.
+    print_out(&msg);
+    msg.clear();
+    for (name, text) in &staged {
+        out_dir.stage(name, text.as_bytes()).map_err(Failure::Run)?;
+    }
+    let mut manifest =
+        output::Manifest::new("replay", &r.exp.name, &output::sha256_hex(text.as_bytes()));
+    manifest.seed = Some(r.exp.seed);
+    manifest.trials = Some(1);
+    out_dir.commit(manifest, false).map_err(Failure::Run)?;
     msg.push_str(&format!(
         "\nwrote {}: {}\n",
         dir.display(),

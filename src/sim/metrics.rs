@@ -41,7 +41,7 @@ impl Layout {
 }
 
 /// Per-trial steady-state quantities whose spread across trials gives standard errors.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrialStat {
     pub sum: f64,
     pub sum_sq: f64,
@@ -83,7 +83,7 @@ pub const DIVERGENCE_TAIL: f64 = 1e-3;
 /// A fixed log-spaced histogram of steady-state NEES / n: exact counts that merge by addition,
 /// from which the median is read by interpolating inside the bin that holds it (50 bins per
 /// decade from 1e-4 to 1e12; a few tenths of a percent for a smooth distribution).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct NeesHistogram {
     /// Bin 0: below 1e-4; bin BINS + 1: at or above 1e12, or not finite.
     pub counts: Vec<u64>,
@@ -157,7 +157,7 @@ impl NeesHistogram {
 }
 
 /// Sums for one scheme variant.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sums {
     pub layout_groups: usize,
     /// State dimension (for the NEES bound).

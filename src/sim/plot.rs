@@ -101,7 +101,7 @@ pub fn lines(
     data: &[Line],
 ) -> Result<(), String> {
     let svg = lines_svg(title, x_label, y_label, data)?;
-    std::fs::write(path, svg).map_err(|e| format!("plot: cannot write {}: {e}", path.display()))
+    super::output::write_file(path, svg.as_bytes()).map_err(|e| format!("plot: {e}"))
 }
 
 /// [`lines`] into a string (for inline SVG in `report.html`).

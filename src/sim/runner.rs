@@ -313,35 +313,72 @@ pub struct RunOptions {
     pub threads: usize,
 }
 
-/// Runs every trial of every variant and returns the merged sums, one per variant.
-/// `progress` is called with the number of finished trials.
-pub fn run(
+/// Number of fixed trial blocks of a run of `trials` trials: the unit of checkpoints and shards.
+pub fn n_blocks(trials: usize) -> usize {
+    trials.div_ceil(BLOCK)
+}
+
+/// Trials of block `b` (the last block may be short).
+pub fn block_trials(b: usize, trials: usize) -> std::ops::Range<usize> {
+    (b * BLOCK).min(trials)..((b + 1) * BLOCK).min(trials)
+}
+
+/// Per-variant sums with nothing added: where every fold of blocks starts.
+pub fn empty_sums(exp: &Experiment) -> Vec<Sums> {
+    exp.variants
+        .iter()
+        .map(|_| Sums::new(exp.groups.len(), exp.steps, exp.system.state_dim()))
+        .collect()
+}
+
+/// Adds one block's sums into a running total (the fold of [`run`], in block order).
+pub fn fold_block(total: &mut [Sums], block: &[Sums]) {
+    for (t, b) in total.iter_mut().zip(block) {
+        t.merge(b);
+    }
+}
+
+/// How [`run_windows`] ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Completion {
+    /// Every block of the range ran.
+    Done,
+    /// The stop flag was raised: the blocks delivered so far are complete; the window in
+    /// flight was dropped.
+    Stopped,
+}
+
+/// Runs the blocks of `blocks` a window at a time in parallel and hands each finished window's
+/// per-block sums (in block order, starting at block `first`) to `on_window`. `stop` is
+/// checked before every trial: once raised, the window in flight is dropped and the run
+/// returns [`Completion::Stopped`]. `progress` is called with the number of trials finished
+/// in this call.
+pub fn run_windows(
     exp: &Experiment,
     opts: RunOptions,
+    blocks: std::ops::Range<usize>,
+    stop: Option<&std::sync::atomic::AtomicBool>,
     progress: &(dyn Fn(usize) + Sync),
-) -> Result<Vec<Sums>, RunError> {
+    on_window: &mut dyn FnMut(usize, Vec<Vec<Sums>>) -> Result<(), RunError>,
+) -> Result<Completion, RunError> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads)
         .build()
         .map_err(|e| RunError::Pool(e.to_string()))?;
-    let n_blocks = exp.trials.div_ceil(BLOCK);
     let done = AtomicUsize::new(0);
-    let empty = || -> Vec<Sums> {
-        exp.variants
-            .iter()
-            .map(|_| Sums::new(exp.groups.len(), exp.steps, exp.system.state_dim()))
-            .collect()
-    };
-    // Blocks run in parallel a window at a time and are merged into the total in block order
-    // as each window finishes: memory stays flat in the number of trials (at most `window`
-    // blocks' sums are alive), and the summation order is the one of a sequential run.
+    let stopped = || stop.is_some_and(|s| s.load(Ordering::Relaxed));
+    // Blocks run in parallel a window at a time and are handed over in block order as each
+    // window finishes: memory stays flat in the number of trials (at most `window` blocks'
+    // sums are alive), and the summation order is the one of a sequential run.
     let window = WINDOW_PER_THREAD * pool.current_num_threads().max(1);
     let drawers = std::sync::Mutex::new(Vec::new());
-    let mut total = empty();
-    let mut start = 0;
-    while start < n_blocks {
-        let end = (start + window).min(n_blocks);
-        let blocks: Result<Vec<Vec<Sums>>, RunError> = pool.install(|| {
+    let mut start = blocks.start;
+    while start < blocks.end {
+        if stopped() {
+            return Ok(Completion::Stopped);
+        }
+        let end = (start + window).min(blocks.end);
+        let window_sums: Result<Vec<Option<Vec<Sums>>>, RunError> = pool.install(|| {
             (start..end)
                 .into_par_iter()
                 // One drawer (trial buffers) per worker task, not per block, recycled
@@ -350,22 +387,48 @@ pub fn run(
                     || PooledDrawer::take(&drawers, exp),
                     |drawer, b| {
                         let drawer = drawer.get();
-                        let mut sums = empty();
-                        for trial in b * BLOCK..((b + 1) * BLOCK).min(exp.trials) {
+                        let mut sums = empty_sums(exp);
+                        for trial in block_trials(b, exp.trials) {
+                            if stopped() {
+                                return Ok(None);
+                            }
                             run_trial(exp, trial, &mut sums, drawer)?;
                             progress(done.fetch_add(1, Ordering::Relaxed) + 1);
                         }
-                        Ok(sums)
+                        Ok(Some(sums))
                     },
                 )
                 .collect()
         });
-        for block in blocks? {
-            for (t, b) in total.iter_mut().zip(&block) {
-                t.merge(b);
-            }
-        }
+        let Some(window_sums) = window_sums?.into_iter().collect::<Option<Vec<_>>>() else {
+            return Ok(Completion::Stopped);
+        };
+        on_window(start, window_sums)?;
         start = end;
     }
+    Ok(Completion::Done)
+}
+
+/// Runs every trial of every variant and returns the merged sums, one per variant.
+/// `progress` is called with the number of finished trials.
+pub fn run(
+    exp: &Experiment,
+    opts: RunOptions,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<Vec<Sums>, RunError> {
+    let mut total = empty_sums(exp);
+    run_windows(
+        exp,
+        opts,
+        0..n_blocks(exp.trials),
+        None,
+        progress,
+        &mut |_, blocks| {
+            for block in &blocks {
+                fold_block(&mut total, block);
+            }
+            Ok(())
+        },
+    )?;
     Ok(total)
 }

@@ -1,0 +1,534 @@
+//! Checkpoints and shards: a run's finished work, persisted at the granularity of the runner's
+//! fixed trial blocks.
+//!
+//! The runner's result is the fold of per-block sums in block order, starting from empty sums.
+//! A checkpoint of a whole run therefore holds that fold up to a block (the running total and
+//! the next block): continuing the fold from there gives every bit of an uninterrupted run. A
+//! shard runs a contiguous range of blocks and keeps each block's sums apart, so that a merge
+//! folds all blocks of all shards in global block order from empty sums: the same additions in
+//! the same order as one run, whatever the split.
+//!
+//! File format (checkpoint `hushfuse-checkpoint*.bin` and shard `shard-I-of-N.hfshard`): the
+//! 8 bytes `HUSHFUSE`, the format version (u32, little endian), the payload length (u64, little
+//! endian), the SHA-256 of the payload (32 bytes), then the payload: a [`State`] in `postcard`
+//! (floats as their 8 IEEE bytes, so they round-trip exactly).
+use super::build::Experiment;
+use super::metrics::Sums;
+use super::runner;
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+const MAGIC: &[u8; 8] = b"HUSHFUSE";
+/// Version of the file layout and of [`State`]; files of another version are refused.
+pub const FORMAT: u32 = 1;
+const HEADER: usize = 8 + 4 + 8 + 32;
+
+/// What a run is, for telling whether a checkpoint or shard belongs to it, and how to rebuild
+/// its experiment (merge).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct RunKey {
+    pub hushfuse_version: String,
+    pub scenario: String,
+    /// SHA-256 of the scenario text, its source name, trials and seed.
+    pub scenario_sha256: String,
+    pub seed: u64,
+    pub trials: usize,
+    pub n_blocks: usize,
+    /// The scenario as given (file text or built-in text) and its source name.
+    pub text: String,
+    pub source: String,
+    /// `--trials` and `--seed` as given.
+    pub trials_override: Option<usize>,
+    pub seed_override: Option<u64>,
+    /// `--allow-large` as given.
+    pub allow_large: bool,
+    /// Whether the run was a `reproduce` (writes reproduction.md).
+    pub reproduce: bool,
+}
+
+/// SHA-256 (hex) of a scenario as run.
+pub fn scenario_hash(text: &str, source: &str, trials: usize, seed: u64) -> String {
+    let mut bytes = Vec::with_capacity(text.len() + source.len() + 48);
+    for part in [text.as_bytes(), source.as_bytes()] {
+        bytes.extend_from_slice(&(part.len() as u64).to_le_bytes());
+        bytes.extend_from_slice(part);
+    }
+    bytes.extend_from_slice(&(trials as u64).to_le_bytes());
+    bytes.extend_from_slice(&seed.to_le_bytes());
+    super::output::sha256_hex(&bytes)
+}
+
+impl RunKey {
+    /// The key of a run of `exp`, loaded from `text` (named `source`) with these overrides.
+    pub fn new(
+        exp: &Experiment,
+        text: &str,
+        source: &str,
+        trials_override: Option<usize>,
+        seed_override: Option<u64>,
+        allow_large: bool,
+        reproduce: bool,
+    ) -> Self {
+        Self {
+            hushfuse_version: env!("CARGO_PKG_VERSION").to_string(),
+            scenario: exp.name.clone(),
+            scenario_sha256: scenario_hash(text, source, exp.trials, exp.seed),
+            seed: exp.seed,
+            trials: exp.trials,
+            n_blocks: runner::n_blocks(exp.trials),
+            text: text.to_string(),
+            source: source.to_string(),
+            trials_override,
+            seed_override,
+            allow_large,
+            reproduce,
+        }
+    }
+
+    /// How `other` differs from this run, if it does in what matters for the numbers.
+    pub fn mismatch(&self, other: &RunKey) -> Option<String> {
+        if other.hushfuse_version != self.hushfuse_version {
+            Some(format!(
+                "was written by hushfuse {}, not {}",
+                other.hushfuse_version, self.hushfuse_version
+            ))
+        } else if other.scenario != self.scenario || other.scenario_sha256 != self.scenario_sha256 {
+            Some(format!(
+                "belongs to scenario {:?} ({} trials, seed {}, scenario hash {}), not {:?} ({} trials, seed {}, hash {})",
+                other.scenario,
+                other.trials,
+                other.seed,
+                &other.scenario_sha256[..12.min(other.scenario_sha256.len())],
+                self.scenario,
+                self.trials,
+                self.seed,
+                &self.scenario_sha256[..12.min(self.scenario_sha256.len())],
+            ))
+        } else if other.seed != self.seed || other.trials != self.trials {
+            Some(format!(
+                "is of a run with {} trials and seed {}, not {} trials and seed {}",
+                other.trials, other.seed, self.trials, self.seed
+            ))
+        } else {
+            None
+        }
+    }
+}
+
+/// Finished work of a run or a shard.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub enum Progress {
+    /// Blocks `start..next` folded in block order from empty sums (a whole run's checkpoint).
+    Prefix { next: usize, total: Vec<Sums> },
+    /// Each block's sums, for blocks `start..start + len` (a shard, or its checkpoint).
+    Blocks(Vec<Vec<Sums>>),
+}
+
+/// A checkpoint or shard file's content.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct State {
+    pub key: RunKey,
+    /// `(i, n)` for shard i of n (1-based), `None` for a whole run.
+    pub shard: Option<(usize, usize)>,
+    /// The blocks this run or shard is to run.
+    pub start: usize,
+    pub end: usize,
+    pub progress: Progress,
+}
+
+impl State {
+    /// The first block not yet done.
+    pub fn next_block(&self) -> usize {
+        match &self.progress {
+            Progress::Prefix { next, .. } => *next,
+            Progress::Blocks(b) => self.start + b.len(),
+        }
+    }
+
+    /// Whether every block of the range is done.
+    pub fn is_complete(&self) -> bool {
+        self.next_block() >= self.end
+    }
+
+    /// Trials done.
+    pub fn trials_done(&self) -> usize {
+        let t = self.key.trials;
+        runner::block_trials(self.next_block(), t).start - runner::block_trials(self.start, t).start
+    }
+
+    /// The bytes of the file.
+    pub fn encode(&self) -> Vec<u8> {
+        let payload = postcard::to_stdvec(self).expect("sums serialize");
+        let mut out = Vec::with_capacity(HEADER + payload.len());
+        out.extend_from_slice(MAGIC);
+        out.extend_from_slice(&FORMAT.to_le_bytes());
+        out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        use sha2::Digest;
+        out.extend_from_slice(&sha2::Sha256::digest(&payload));
+        out.extend_from_slice(&payload);
+        out
+    }
+
+    /// Reads a file's bytes; a clear message (without the file name) when they are not a
+    /// complete, intact file of this format.
+    pub fn decode(bytes: &[u8]) -> Result<Self, String> {
+        if bytes.len() < 8 || &bytes[..8] != MAGIC {
+            return Err("not a hushfuse checkpoint or shard file".into());
+        }
+        if bytes.len() < HEADER {
+            return Err("truncated (shorter than its header)".into());
+        }
+        let format = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
+        if format != FORMAT {
+            return Err(format!(
+                "file format {format}, but this hushfuse ({}) reads format {FORMAT}",
+                env!("CARGO_PKG_VERSION")
+            ));
+        }
+        let len = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
+        let payload = &bytes[HEADER..];
+        if (payload.len() as u64) < len {
+            return Err(format!(
+                "truncated ({} of {} bytes)",
+                bytes.len(),
+                HEADER as u64 + len
+            ));
+        }
+        if payload.len() as u64 > len {
+            return Err("corrupt (longer than its header says)".into());
+        }
+        use sha2::Digest;
+        if sha2::Sha256::digest(payload).as_slice() != &bytes[20..52] {
+            return Err("corrupt (checksum mismatch)".into());
+        }
+        let state: State =
+            postcard::from_bytes(payload).map_err(|e| format!("corrupt (cannot decode: {e})"))?;
+        state.check()?;
+        Ok(state)
+    }
+
+    /// Internal consistency (a well-formed file of a buggy writer, or one edited by hand).
+    fn check(&self) -> Result<(), String> {
+        let nb = self.key.n_blocks;
+        if self.start > self.end || self.end > nb || self.next_block() > self.end {
+            return Err(format!(
+                "inconsistent (blocks {}..{} of {nb}, next {})",
+                self.start,
+                self.end,
+                self.next_block()
+            ));
+        }
+        if let Some((i, n)) = self.shard {
+            if i == 0 || i > n || shard_blocks(i, n, nb) != (self.start..self.end) {
+                return Err(format!("inconsistent (shard {i}/{n} of {nb} blocks)"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads a checkpoint or shard file; errors name the file.
+    pub fn read(path: &Path) -> Result<Self, String> {
+        let bytes =
+            std::fs::read(path).map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+        Self::decode(&bytes).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    /// Writes the file durably (temporary name, fsync, rename).
+    pub fn write(&self, path: &Path) -> Result<(), String> {
+        super::output::write_file(path, &self.encode())
+    }
+}
+
+/// Parses `--shard I/N` (1 ≤ I ≤ N).
+pub fn parse_shard(text: &str) -> Result<(usize, usize), String> {
+    let bad = || {
+        format!("--shard: expected I/N with 1 <= I <= N (e.g. 2/4 for the second of four shards), got {text:?}")
+    };
+    let (i, n) = text.split_once('/').ok_or_else(bad)?;
+    let i: usize = i.trim().parse().map_err(|_| bad())?;
+    let n: usize = n.trim().parse().map_err(|_| bad())?;
+    if i == 0 || n == 0 || i > n {
+        return Err(bad());
+    }
+    Ok((i, n))
+}
+
+/// Blocks of shard `i` of `n` (1-based) of a run of `n_blocks` blocks: contiguous, in order,
+/// covering every block once across i = 1..n; empty when there are more shards than blocks.
+pub fn shard_blocks(i: usize, n: usize, n_blocks: usize) -> Range<usize> {
+    (i - 1) * n_blocks / n..i * n_blocks / n
+}
+
+/// File name of shard `i` of `n`.
+pub fn shard_file_name(i: usize, n: usize) -> String {
+    format!("shard-{i:04}-of-{n:04}.hfshard")
+}
+
+/// File name of the checkpoint of a whole run (`None`) or of shard `i` of `n`.
+pub fn checkpoint_file_name(shard: Option<(usize, usize)>) -> String {
+    match shard {
+        None => "hushfuse-checkpoint.bin".into(),
+        Some((i, n)) => format!("hushfuse-checkpoint-shard-{i:04}-of-{n:04}.bin"),
+    }
+}
+
+/// Shard files among `inputs`: files as given, folders by their `*.hfshard` files (sorted).
+pub fn shard_paths(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
+    let mut out = Vec::new();
+    for p in inputs {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| format!("{}: cannot read: {e}", p.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.extension().is_some_and(|x| x == "hfshard") && f.is_file())
+                .collect();
+            if found.is_empty() {
+                return Err(format!("{}: holds no shard files (*.hfshard)", p.display()));
+            }
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    if out.is_empty() {
+        return Err("no shard files given".into());
+    }
+    Ok(out)
+}
+
+/// Checks that `shards` (file, content) are complete shards of one run that together cover
+/// every block exactly once, and returns the run's key and every block's sums in block order.
+/// Errors name the offending file.
+pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Sums>>), String> {
+    let (first_path, first) = shards.first().ok_or("no shard files given")?;
+    let key = first.key.clone();
+    let first_path = first_path.clone();
+    let nb = key.n_blocks;
+    // owner[b]: the file that holds block b.
+    let mut owner: Vec<Option<usize>> = vec![None; nb];
+    for (f, (path, s)) in shards.iter().enumerate() {
+        if let Some(m) = key.mismatch(&s.key) {
+            return Err(format!(
+                "{} {m} (as {} is); it is a shard of another run",
+                path.display(),
+                first_path.display()
+            ));
+        }
+        let Some((i, n)) = s.shard else {
+            return Err(format!(
+                "{}: a checkpoint of a whole run, not a shard",
+                path.display()
+            ));
+        };
+        if !s.is_complete() {
+            return Err(format!(
+                "{}: shard {i}/{n} is unfinished ({} of {} blocks); rerun it with `--shard {i}/{n} --resume`",
+                path.display(),
+                s.next_block() - s.start,
+                s.end - s.start
+            ));
+        }
+        for (p2, s2) in shards.iter().take(f) {
+            if s2.shard == s.shard {
+                return Err(format!(
+                    "shard {i}/{n} is given twice: {} and {}",
+                    p2.display(),
+                    path.display()
+                ));
+            }
+        }
+        let Progress::Blocks(blocks) = &s.progress else {
+            return Err(format!(
+                "{}: a shard without per-block sums",
+                path.display()
+            ));
+        };
+        if blocks.len() != s.end - s.start {
+            return Err(format!("{}: inconsistent block count", path.display()));
+        }
+        for (b, slot) in (s.start..).zip(&mut owner[s.start..s.end]) {
+            if let Some(o) = *slot {
+                return Err(format!(
+                    "block {b} is in two shards: {} and {} (shards of different splits?)",
+                    shards[o].0.display(),
+                    path.display()
+                ));
+            }
+            *slot = Some(f);
+        }
+    }
+    // One split (every file says the same N): every shard of it must be there, empty ones too.
+    let splits: Vec<usize> = shards
+        .iter()
+        .filter_map(|(_, s)| s.shard.map(|x| x.1))
+        .collect();
+    if splits.iter().all(|&n| n == splits[0]) {
+        let n = splits[0];
+        let absent: Vec<String> = (1..=n)
+            .filter(|&i| !shards.iter().any(|(_, s)| s.shard == Some((i, n))))
+            .map(|i| format!("{i}/{n} ({})", shard_file_name(i, n)))
+            .collect();
+        if !absent.is_empty() {
+            return Err(format!(
+                "missing shard{} {} of the {n} shards of {:?}",
+                if absent.len() == 1 { "" } else { "s" },
+                absent.join(", "),
+                key.scenario
+            ));
+        }
+    }
+    let missing: Vec<usize> = (0..nb).filter(|&b| owner[b].is_none()).collect();
+    if let (Some(&lo), Some(&hi)) = (missing.first(), missing.last()) {
+        return Err(format!(
+            "blocks {lo}..={hi} of {nb} are in none of the shards given ({} blocks missing)",
+            missing.len()
+        ));
+    }
+    // Every block is owned by exactly one shard: move the sums out in block order.
+    let mut by_block: Vec<Option<Vec<Sums>>> = vec![None; nb];
+    for (_, s) in shards {
+        if let Progress::Blocks(blocks) = s.progress {
+            for (b, sums) in (s.start..s.end).zip(blocks) {
+                by_block[b] = Some(sums);
+            }
+        }
+    }
+    Ok((
+        key,
+        by_block
+            .into_iter()
+            .map(|b| b.expect("every block owned"))
+            .collect(),
+    ))
+}
+
+/// Folds every block's sums in block order from empty sums: the result of one run.
+pub fn fold(exp: &Experiment, blocks: &[Vec<Sums>]) -> Vec<Sums> {
+    let mut total = runner::empty_sums(exp);
+    for b in blocks {
+        runner::fold_block(&mut total, b);
+    }
+    total
+}
+
+/// Whether one block's (or a fold's) sums have the shape of `exp`'s: one per variant, of its
+/// steps and groups.
+pub fn check_block_shape(exp: &Experiment, sums: &[Sums]) -> Result<(), String> {
+    let shape = runner::empty_sums(exp);
+    let ok = sums.len() == shape.len()
+        && sums.iter().zip(&shape).all(|(s, e)| {
+            s.steps == e.steps
+                && s.layout_groups == e.layout_groups
+                && s.state_dim == e.state_dim
+                && s.per_step.len() == e.per_step.len()
+                && s.ess_min.len() == e.ess_min.len()
+                && s.nees_hist.counts.len() == e.nees_hist.counts.len()
+        });
+    if ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "sums of another shape than scenario {:?}'s ({} variants x {} steps)",
+            exp.name,
+            exp.variants.len(),
+            exp.steps
+        ))
+    }
+}
+
+/// [`check_block_shape`] for every part of a checkpoint or shard.
+pub fn check_shape(exp: &Experiment, state: &State) -> Result<(), String> {
+    match &state.progress {
+        Progress::Prefix { total, .. } => check_block_shape(exp, total),
+        Progress::Blocks(blocks) => blocks.iter().try_for_each(|b| check_block_shape(exp, b)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::metrics::Sums;
+
+    fn state(values: &[f64]) -> State {
+        let mut s = Sums::new(1, 2, 2);
+        for (a, v) in s.per_step.iter_mut().zip(values.iter().cycle()) {
+            *a = *v;
+        }
+        s.per_trial.push(values.to_vec());
+        State {
+            key: RunKey {
+                hushfuse_version: env!("CARGO_PKG_VERSION").into(),
+                scenario: "t".into(),
+                scenario_sha256: scenario_hash("x", "y", 8, 1),
+                seed: 1,
+                trials: 8,
+                n_blocks: 2,
+                text: "x".into(),
+                source: "y".into(),
+                trials_override: None,
+                seed_override: None,
+                allow_large: false,
+                reproduce: false,
+            },
+            shard: Some((1, 1)),
+            start: 0,
+            end: 2,
+            progress: Progress::Blocks(vec![vec![s.clone()], vec![s]]),
+        }
+    }
+
+    #[test]
+    fn floats_round_trip_bit_for_bit() {
+        let values = [
+            0.1,
+            -0.0,
+            f64::MIN_POSITIVE / 3.0,
+            f64::INFINITY,
+            f64::NAN,
+            1e308,
+            std::f64::consts::PI,
+        ];
+        let s = state(&values);
+        let back = State::decode(&s.encode()).unwrap();
+        let bits = |s: &State| -> Vec<u64> {
+            let Progress::Blocks(b) = &s.progress else {
+                unreachable!()
+            };
+            b.iter()
+                .flat_map(|v| v[0].per_step.iter().chain(&v[0].per_trial[0]))
+                .map(|x| x.to_bits())
+                .collect()
+        };
+        assert_eq!(bits(&s), bits(&back));
+    }
+
+    #[test]
+    fn every_truncation_and_every_flipped_byte_is_an_error_not_a_panic() {
+        let bytes = state(&[1.5, 2.5]).encode();
+        for len in 0..bytes.len() {
+            assert!(
+                State::decode(&bytes[..len]).is_err(),
+                "prefix of {len} bytes"
+            );
+        }
+        for i in 0..bytes.len() {
+            let mut b = bytes.clone();
+            b[i] ^= 0x40;
+            assert!(State::decode(&b).is_err(), "byte {i} flipped");
+        }
+    }
+
+    #[test]
+    fn shards_cover_every_block_once_in_order() {
+        for nb in 0..20 {
+            for n in 1..=9 {
+                let all: Vec<usize> = (1..=n).flat_map(|i| shard_blocks(i, n, nb)).collect();
+                assert_eq!(all, (0..nb).collect::<Vec<_>>(), "{nb} blocks, {n} shards");
+            }
+        }
+        assert!(parse_shard("0/3").is_err() && parse_shard("3/2").is_err());
+        assert_eq!(parse_shard("2/3"), Ok((2, 3)));
+    }
+}

@@ -1,0 +1,428 @@
+//! Durable output. Every file is written to a temporary name, flushed to disk and renamed into
+//! place, so a reader never sees a half-written file. A run's output folder is staged whole
+//! (every file written and flushed in a staging folder inside it) before anything is moved into
+//! place, so a failed write (a full disk) leaves the earlier run's complete output untouched.
+//! The folder carries a manifest of what the run wrote; files of an earlier run that the new
+//! one does not write are removed when the old manifest lists them, and a folder holding files
+//! that no manifest lists is refused before any work is done.
+use serde::{Deserialize, Serialize};
+use std::fs::File;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Name of the manifest of an output folder.
+pub const MANIFEST: &str = "hushfuse-manifest.json";
+/// Folder (inside the output folder) where a run's files are staged before they move in.
+const STAGING: &str = ".hushfuse-staging";
+/// Environment variable used only by tests: a write to a file of this name (its last path
+/// component) fails half-way with "no space left on device", as on a full disk.
+pub const FAIL_WRITE_ENV: &str = "HUSHFUSE_TEST_FAIL_WRITE";
+
+/// Hex of a SHA-256 digest.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// Writes `bytes` to `path` durably: to a temporary name beside it, flushed (fsync), then
+/// renamed into place and the folder flushed. Creates missing parent folders. On error the
+/// file at `path` is as before and no temporary file is left.
+pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    let name = path
+        .file_name()
+        .ok_or_else(|| format!("cannot write {}: not a file name", path.display()))?
+        .to_string_lossy()
+        .into_owned();
+    let parent = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent)
+        .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
+    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
+    let result = write_synced(&tmp, &name, bytes).and_then(|()| {
+        std::fs::rename(&tmp, path)
+            .map_err(|e| format!("cannot rename {} to {}: {e}", tmp.display(), path.display()))
+    });
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    sync_dir(parent);
+    Ok(())
+}
+
+/// Creates `path`, writes `bytes` and flushes it to disk. `name` is the name the test hook
+/// matches.
+fn write_synced(path: &Path, name: &str, bytes: &[u8]) -> Result<(), String> {
+    let err = |e: std::io::Error| format!("cannot write {}: {e}", path.display());
+    let mut f = File::create(path).map_err(err)?;
+    if std::env::var_os(FAIL_WRITE_ENV).is_some_and(|v| v == name) {
+        // Half the bytes reach the disk, then the disk is full.
+        let _ = f.write_all(&bytes[..bytes.len() / 2]);
+        let _ = f.sync_all();
+        return Err(err(std::io::Error::new(
+            std::io::ErrorKind::StorageFull,
+            format!("no space left on device (injected by {FAIL_WRITE_ENV})"),
+        )));
+    }
+    f.write_all(bytes).map_err(err)?;
+    f.sync_all().map_err(err)
+}
+
+/// Removes the temporaries (`.NAME.tmp-PID`) that a process killed while writing left in
+/// `dir`, when that process is gone (so that a live writer's temporary in a shared shard folder
+/// stays). Best effort: where liveness cannot be told (no /proc), nothing is removed.
+pub fn remove_stale_temporaries(dir: &Path) {
+    let proc = Path::new("/proc");
+    if !proc.join("self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = name
+            .strip_prefix('.')
+            .and_then(|n| n.rsplit_once(".tmp-"))
+            .map(|(_, pid)| pid.to_string())
+        else {
+            continue;
+        };
+        if pid.parse::<u32>().is_ok()
+            && pid != std::process::id().to_string()
+            && !proc.join(&pid).exists()
+        {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// Flushes a folder's entries (renames) to disk; best effort (not every file system can).
+fn sync_dir(dir: &Path) {
+    if let Ok(d) = File::open(dir) {
+        let _ = d.sync_all();
+    }
+}
+
+/// What an output folder holds and which run wrote it.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Manifest {
+    pub hushfuse_version: String,
+    /// `run`, `merge`, `arena` or `table`.
+    pub kind: String,
+    pub scenario: String,
+    /// SHA-256 of the scenario as run (text, source, trials and seed).
+    pub scenario_sha256: String,
+    pub seed: Option<u64>,
+    pub trials: Option<usize>,
+    /// Every file the run wrote, relative to the folder, in the order written.
+    pub files: Vec<String>,
+}
+
+impl Manifest {
+    /// A manifest of this version of hushfuse, with no files yet.
+    pub fn new(kind: &str, scenario: &str, scenario_sha256: &str) -> Self {
+        Self {
+            hushfuse_version: env!("CARGO_PKG_VERSION").to_string(),
+            kind: kind.to_string(),
+            scenario: scenario.to_string(),
+            scenario_sha256: scenario_sha256.to_string(),
+            seed: None,
+            trials: None,
+            files: Vec::new(),
+        }
+    }
+}
+
+/// Whether a file name is one hushfuse keeps in an output folder besides what a manifest
+/// lists: the manifest, checkpoints, shard files, and temporaries of an interrupted write.
+fn is_own_file(rel: &str) -> bool {
+    let name = rel.rsplit('/').next().unwrap_or(rel);
+    rel == MANIFEST
+        || rel.starts_with(&format!("{STAGING}/"))
+        || (name.starts_with("hushfuse-checkpoint") && name.ends_with(".bin"))
+        || name.ends_with(".hfshard")
+        || (name.starts_with('.') && name.contains(".tmp-"))
+}
+
+/// Every file under `dir`, relative to it with `/` separators, sorted.
+fn list_files(dir: &Path) -> Result<Vec<String>, String> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<String>) -> Result<(), String> {
+        let entries =
+            std::fs::read_dir(dir).map_err(|e| format!("cannot read {}: {e}", dir.display()))?;
+        for entry in entries {
+            let entry = entry.map_err(|e| format!("cannot read {}: {e}", dir.display()))?;
+            let path = entry.path();
+            let ft = entry
+                .file_type()
+                .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+            if ft.is_dir() {
+                walk(root, &path, out)?;
+            } else {
+                let rel = path.strip_prefix(root).unwrap_or(&path);
+                out.push(
+                    rel.components()
+                        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+                        .collect::<Vec<_>>()
+                        .join("/"),
+                );
+            }
+        }
+        Ok(())
+    }
+    let mut out = Vec::new();
+    if dir.is_dir() {
+        walk(dir, dir, &mut out)?;
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// Reads the manifest of `dir`, if it has one.
+pub fn read_manifest(dir: &Path) -> Result<Option<Manifest>, String> {
+    let path = dir.join(MANIFEST);
+    match std::fs::read_to_string(&path) {
+        Ok(text) => serde_json::from_str(&text).map(Some).map_err(|e| {
+            format!(
+                "{}: not a hushfuse manifest ({e}); remove it or choose another output folder",
+                path.display()
+            )
+        }),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(format!("cannot read {}: {e}", path.display())),
+    }
+}
+
+/// An output folder being written: files are staged, then moved in together by
+/// [`OutputDir::commit`]. Dropped without a commit, it removes what it staged and leaves the
+/// folder as it was.
+pub struct OutputDir {
+    dir: PathBuf,
+    staging: PathBuf,
+    old: Option<Manifest>,
+    staged: Vec<String>,
+    committed: bool,
+}
+
+impl OutputDir {
+    /// Opens `dir` for a new run's output, creating it. Refuses (before any work is done) when
+    /// it holds files that neither its manifest nor hushfuse's own naming accounts for: they
+    /// would otherwise sit beside the new results with nothing to tell them apart.
+    pub fn open(dir: &Path) -> Result<Self, String> {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        remove_stale_temporaries(dir);
+        let old = read_manifest(dir)?;
+        let listed: Vec<&str> = old
+            .as_ref()
+            .map(|m| m.files.iter().map(String::as_str).collect())
+            .unwrap_or_default();
+        let unknown: Vec<String> = list_files(dir)?
+            .into_iter()
+            .filter(|f| !is_own_file(f) && !listed.contains(&f.as_str()))
+            .collect();
+        if !unknown.is_empty() {
+            let why = if old.is_some() {
+                format!("its {MANIFEST} does not list")
+            } else {
+                format!("it has no {MANIFEST}, so they are not known to be an earlier run's")
+            };
+            let shown: Vec<&str> = unknown.iter().take(8).map(String::as_str).collect();
+            return Err(format!(
+                "output folder {} holds files that {why}: {}{}; remove them or choose another --out",
+                dir.display(),
+                shown.join(", "),
+                if unknown.len() > shown.len() {
+                    format!(" and {} more", unknown.len() - shown.len())
+                } else {
+                    String::new()
+                }
+            ));
+        }
+        Ok(Self::at(dir, old))
+    }
+
+    /// Opens an existing run's folder to add files to it (`hushfuse report`): the files its
+    /// manifest lists stay, and the new ones join the list.
+    pub fn open_existing(dir: &Path) -> Result<Self, String> {
+        let old = read_manifest(dir)?;
+        Ok(Self::at(dir, old))
+    }
+
+    fn at(dir: &Path, old: Option<Manifest>) -> Self {
+        let staging = dir.join(STAGING);
+        // Leftovers of a run that died while staging.
+        let _ = std::fs::remove_dir_all(&staging);
+        Self {
+            dir: dir.to_path_buf(),
+            staging,
+            old,
+            staged: Vec::new(),
+            committed: false,
+        }
+    }
+
+    /// The output folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The folder where writers that take a folder (plots) put their files; name them with
+    /// [`OutputDir::record`].
+    pub fn staging(&mut self) -> Result<&Path, String> {
+        std::fs::create_dir_all(&self.staging)
+            .map_err(|e| format!("cannot create {}: {e}", self.staging.display()))?;
+        Ok(&self.staging)
+    }
+
+    /// Stages file `name` (relative, `/`-separated; subfolders allowed).
+    pub fn stage(&mut self, name: &str, bytes: &[u8]) -> Result<(), String> {
+        let path = self.staging()?.join(name);
+        write_file(&path, bytes).map_err(|e| {
+            e.replace(
+                &self.staging.display().to_string(),
+                &self.dir.display().to_string(),
+            )
+        })?;
+        self.record([name.to_string()]);
+        Ok(())
+    }
+
+    /// Names files that were written into [`OutputDir::staging`] by someone else.
+    pub fn record(&mut self, names: impl IntoIterator<Item = String>) {
+        for n in names {
+            if !self.staged.contains(&n) {
+                self.staged.push(n);
+            }
+        }
+    }
+
+    /// Moves every staged file into place, removes the files of the earlier run (as listed
+    /// by its manifest) that this run did not write, and writes the manifest. With `keep_old`,
+    /// the earlier run's files stay and are listed too. Returns the files written.
+    pub fn commit(mut self, mut manifest: Manifest, keep_old: bool) -> Result<Vec<String>, String> {
+        let old_files = self.old.take().map(|m| m.files).unwrap_or_default();
+        let stale: Vec<String> = old_files
+            .iter()
+            .filter(|f| !self.staged.contains(f))
+            .cloned()
+            .collect();
+        let mut files = if keep_old { stale.clone() } else { Vec::new() };
+        files.extend(self.staged.iter().cloned());
+        manifest.files = files;
+        // The manifest is staged too: from here on nothing is written, only renamed, so a full
+        // disk cannot strike between the files moving in and the manifest that lists them.
+        let json = serde_json::to_string_pretty(&manifest).map_err(|e| e.to_string())?;
+        write_file(&self.staging()?.join(MANIFEST), json.as_bytes())?;
+        for name in &self.staged {
+            let from = self.staging.join(name);
+            let to = self.dir.join(name);
+            if let Some(parent) = to.parent() {
+                std::fs::create_dir_all(parent)
+                    .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
+            }
+            std::fs::rename(&from, &to)
+                .map_err(|e| format!("cannot move {} into place: {e}", to.display()))?;
+            if let Some(parent) = to.parent() {
+                sync_dir(parent);
+            }
+        }
+        if !keep_old {
+            for stale in &stale {
+                let path = self.dir.join(stale);
+                match std::fs::remove_file(&path) {
+                    Ok(()) => {}
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                    Err(e) => return Err(format!("cannot remove stale {}: {e}", path.display())),
+                }
+                // Folders (budget-*/) that the removal emptied.
+                let mut parent = path.parent();
+                while let Some(p) = parent.filter(|p| *p != self.dir) {
+                    if std::fs::remove_dir(p).is_err() {
+                        break;
+                    }
+                    parent = p.parent();
+                }
+            }
+        }
+        std::fs::rename(self.staging.join(MANIFEST), self.dir.join(MANIFEST))
+            .map_err(|e| format!("cannot move {} into place: {e}", MANIFEST))?;
+        let _ = std::fs::remove_dir_all(&self.staging);
+        sync_dir(&self.dir);
+        self.committed = true;
+        Ok(std::mem::take(&mut self.staged))
+    }
+}
+
+impl Drop for OutputDir {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_dir_all(&self.staging);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_rerun_removes_the_stale_files_its_manifest_lists_and_refuses_unknown_ones() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = Manifest::new("run", "s", "h");
+        let mut out = OutputDir::open(dir.path()).unwrap();
+        out.stage("a.txt", b"1").unwrap();
+        out.stage("sub/b.txt", b"2").unwrap();
+        out.commit(m.clone(), false).unwrap();
+        assert_eq!(std::fs::read(dir.path().join("sub/b.txt")).unwrap(), b"2");
+        let mut out = OutputDir::open(dir.path()).unwrap();
+        out.stage("a.txt", b"3").unwrap();
+        let files = out.commit(m.clone(), false).unwrap();
+        assert_eq!(files, vec!["a.txt".to_string()]);
+        assert!(
+            !dir.path().join("sub").exists(),
+            "stale file and its folder removed"
+        );
+        assert_eq!(read_manifest(dir.path()).unwrap().unwrap().files, files);
+        std::fs::write(dir.path().join("notes.txt"), "mine").unwrap();
+        let e = OutputDir::open(dir.path()).err().unwrap();
+        assert!(
+            e.contains("notes.txt") && e.contains("does not list"),
+            "{e}"
+        );
+        std::fs::remove_file(dir.path().join(MANIFEST)).unwrap();
+        let e = OutputDir::open(dir.path()).err().unwrap();
+        assert!(
+            e.contains("a.txt") && e.contains("no hushfuse-manifest.json"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn temporaries_of_dead_writers_are_removed_and_live_ones_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let dead = dir.path().join(".summary.json.tmp-999999999");
+        let live = dir
+            .path()
+            .join(format!(".summary.json.tmp-{}", std::process::id()));
+        std::fs::write(&dead, "half").unwrap();
+        std::fs::write(&live, "writing").unwrap();
+        remove_stale_temporaries(dir.path());
+        assert!(!dead.exists() || !Path::new("/proc/self").exists());
+        assert!(live.exists());
+    }
+
+    #[test]
+    fn an_uncommitted_output_leaves_the_folder_as_it_was() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut out = OutputDir::open(dir.path()).unwrap();
+        out.stage("a.txt", b"1").unwrap();
+        drop(out);
+        assert_eq!(list_files(dir.path()).unwrap(), Vec::<String>::new());
+    }
+}
