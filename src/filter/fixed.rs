@@ -98,6 +98,206 @@ pub fn mul_in_place(a: &Matrix, x: &mut Vector, tmp: &mut Vector) {
     std::mem::swap(x, tmp);
 }
 
+/// Runs `$body` with `N` bound to the dimension `$n` when it is 1..=6, else `$fallback`.
+macro_rules! with_dim {
+    ($n:expr, $body:ident ( $($arg:expr),* ), $fallback:expr) => {
+        match $n {
+            1 => $body::<1>($($arg),*),
+            2 => $body::<2>($($arg),*),
+            3 => $body::<3>($($arg),*),
+            4 => $body::<4>($($arg),*),
+            5 => $body::<5>($($arg),*),
+            6 => $body::<6>($($arg),*),
+            _ => $fallback,
+        }
+    };
+}
+
+/// `b <- P^{-1} b` with the Cholesky factor of P, bit for bit as nalgebra's
+/// `Cholesky::solve_mut` on a vector: forward substitution with L (`b_i /= L_ii`, then
+/// `b_j = -b_i L_ji + b_j` below), then back substitution with L^T (`b_i = (b_i - dot) / L_ii`,
+/// the dot accumulated from +0 in row order, as nalgebra's dynamic `dotc` does below 8 terms).
+pub fn chol_solve(chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>, b: &mut Vector) {
+    let l = chol.l_dirty();
+    assert_eq!(l.nrows(), b.len(), "chol_solve: dimensions mismatch");
+    with_dim!(
+        b.len(),
+        chol_solve_fixed(l.as_slice(), b.as_mut_slice()),
+        chol.solve_mut(b)
+    )
+}
+
+#[inline(always)]
+fn chol_solve_fixed<const N: usize>(l: &[f64], b: &mut [f64]) {
+    let (l, b): (&[f64], &mut [f64; N]) = (&l[..N * N], b.try_into().expect("N rows"));
+    lower_solve_fixed::<N>(l, b);
+    for i in (0..N).rev() {
+        let mut dot = 0.0;
+        for j in i + 1..N {
+            dot += l[i * N + j] * b[j];
+        }
+        b[i] = (b[i] - dot) / l[i * N + i];
+    }
+}
+
+/// Forward substitution with the lower triangle of the column-major N x N `l` (nalgebra's
+/// `solve_lower_triangular_unchecked_mut` on a vector). Returns false at a zero diagonal
+/// (as the checked version does; then `b` is partly solved).
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+fn lower_solve_fixed<const N: usize>(l: &[f64], b: &mut [f64; N]) -> bool {
+    for i in 0..N {
+        let d = l[i * N + i];
+        if d == 0.0 {
+            return false;
+        }
+        let coeff = b[i] / d;
+        b[i] = coeff;
+        for j in i + 1..N {
+            b[j] = -coeff * l[i * N + j] + b[j];
+        }
+    }
+    true
+}
+
+/// nalgebra's `Cholesky::new` on a column-major N x N matrix, in place: for each column j,
+/// `col_j[j..] = -L_jk col_k[j..] + col_j[j..]` for k < j, then the square root of the diagonal
+/// (refused when zero, negative or NaN) and the division of the rest of the column by it. The
+/// strict upper triangle is left as it was (nalgebra's "dirty" factor).
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+fn cholesky_fixed<const N: usize>(m: &mut [f64]) -> bool {
+    let m = &mut m[..N * N];
+    for j in 0..N {
+        for k in 0..j {
+            let factor = -m[k * N + j];
+            for r in j..N {
+                m[j * N + r] = factor * m[k * N + r] + m[j * N + r];
+            }
+        }
+        let diag = m[j * N + j];
+        // `is_zero` then `try_sqrt` (`v >= 0`): NaN and negatives fail.
+        if diag == 0.0 || diag.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return false;
+        }
+        let denom = diag.sqrt();
+        m[j * N + j] = denom;
+        for r in j + 1..N {
+            m[j * N + r] /= denom;
+        }
+    }
+    true
+}
+
+/// `e^T P^{-1} e` as [`crate::linalg::mahalanobis_sq`] computes it for a finite square `p` of
+/// dimension 1..=6 (nalgebra's Cholesky factorization, the checked forward substitution with
+/// L and the squared norm summed from +0 in order), in fixed-size buffers. `None` for other
+/// dimensions (the caller takes the dynamic path); `Some(None)` when P is not positive
+/// definite.
+pub fn mahalanobis_sq_small(e: &Vector, p: &Matrix) -> Option<Option<f64>> {
+    let n = e.len();
+    if p.nrows() != n || p.ncols() != n {
+        return None;
+    }
+    with_dim!(n, mahalanobis_fixed(e.as_slice(), p.as_slice()), None)
+}
+
+#[inline(always)]
+fn mahalanobis_fixed<const N: usize>(e: &[f64], p: &[f64]) -> Option<Option<f64>> {
+    let mut m = [[0.0; N]; N];
+    for (c, col) in m.iter_mut().enumerate() {
+        col.copy_from_slice(&p[c * N..(c + 1) * N]);
+    }
+    let m = m.as_flattened_mut();
+    if !cholesky_fixed::<N>(m) {
+        return Some(None);
+    }
+    let mut w: [f64; N] = e.try_into().expect("N rows");
+    if !lower_solve_fixed::<N>(m, &mut w) {
+        return Some(None);
+    }
+    let mut s = 0.0;
+    for v in w {
+        s += v * v;
+    }
+    Some(Some(s))
+}
+
+/// An LU factorization (`Δ.clone().lu()`) unpacked for [`lu_solve`]: the packed factors
+/// (unit lower L below the diagonal, U on and above it) and the row permutation as a gather.
+#[derive(Debug, Clone)]
+pub struct PackedLu {
+    n: usize,
+    /// Column-major n x n: L strictly below the diagonal, U on and above.
+    lu: Vec<f64>,
+    /// The permutation's swaps applied to the rows of b, as `out[i] = b[perm[i]]`.
+    perm: Vec<usize>,
+}
+
+impl PackedLu {
+    /// Unpacks `lu` (allocates; done once per factorization).
+    pub fn new(lu: &nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>) -> Self {
+        let l = lu.l();
+        let u = lu.u();
+        let n = l.nrows();
+        let packed = Matrix::from_fn(n, n, |r, c| if r > c { l[(r, c)] } else { u[(r, c)] });
+        // Applying the swaps to the indices moves them as it would move b's entries.
+        let mut idx = Vector::from_fn(n, |i, _| i as f64);
+        lu.p().permute_rows(&mut idx);
+        Self {
+            n,
+            lu: packed.as_slice().to_vec(),
+            perm: idx.iter().map(|&v| v as usize).collect(),
+        }
+    }
+
+    /// `b <- A^{-1} b`, bit for bit as nalgebra's `LU::solve_mut` on a vector (row swaps,
+    /// unit forward substitution `b_j = -b_i L_ji + b_j`, back substitution `b_i /= U_ii`,
+    /// `b_j = -b_i U_ji + b_j` above). Returns false at a zero pivot, as `solve_mut` does.
+    pub fn solve(
+        &self,
+        b: &mut Vector,
+        lu: &nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>,
+    ) -> bool {
+        assert_eq!(b.len(), self.n, "lu_solve: dimensions mismatch");
+        with_dim!(
+            self.n,
+            lu_solve_fixed(&self.lu, &self.perm, b.as_mut_slice()),
+            lu.solve_mut(b)
+        )
+    }
+}
+
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+fn lu_solve_fixed<const N: usize>(lu: &[f64], perm: &[usize], b: &mut [f64]) -> bool {
+    let (lu, perm, b): (&[f64], &[usize], &mut [f64; N]) =
+        (&lu[..N * N], &perm[..N], b.try_into().expect("N rows"));
+    let src = *b;
+    for i in 0..N {
+        b[i] = src[perm[i]];
+    }
+    // Unit lower triangle: nalgebra divides by the unit diagonal (exact) and never reads it.
+    for i in 0..N - 1 {
+        let coeff = b[i] / 1.0;
+        for j in i + 1..N {
+            b[j] = -coeff * lu[i * N + j] + b[j];
+        }
+    }
+    for i in (0..N).rev() {
+        let d = lu[i * N + i];
+        if d == 0.0 {
+            return false;
+        }
+        let coeff = b[i] / d;
+        b[i] = coeff;
+        for j in 0..i {
+            b[j] = -coeff * lu[i * N + j] + b[j];
+        }
+    }
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -135,6 +335,55 @@ mod tests {
             let expr = &a * &x;
             prop_assert_eq!(bits(&fast), bits(&dynamic));
             prop_assert_eq!(bits(&fast), bits(&expr));
+        }
+    }
+
+    fn spd(n: usize, vals: &[f64]) -> Matrix {
+        let g = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j) % vals.len()]);
+        &g * g.transpose() + Matrix::identity(n, n) * vals[0].abs().max(1e-3)
+    }
+
+    proptest! {
+        /// The fixed-size Cholesky solve, Mahalanobis distance and LU solve equal nalgebra's
+        /// dynamic ones bit for bit (dimension 7 takes the dynamic fallback).
+        #[test]
+        fn fixed_solves_are_bit_identical(
+            n in 1usize..=7,
+            vals in proptest::collection::vec(-10.0f64..10.0, 56),
+            scale in -30i32..30,
+        ) {
+            let p = spd(n, &vals) * 10f64.powi(scale);
+            let b = Vector::from_fn(n, |i, _| vals[(3 * i + 5) % 56] * 10f64.powi(-scale / 2));
+            let chol = nalgebra::Cholesky::new(p.clone()).unwrap();
+            let mut fast = b.clone();
+            chol_solve(&chol, &mut fast);
+            let mut dynamic = b.clone();
+            chol.solve_mut(&mut dynamic);
+            prop_assert_eq!(bits(&fast), bits(&dynamic));
+
+            let m = crate::linalg::mahalanobis_sq(&b, &p).unwrap();
+            match mahalanobis_sq_small(&b, &p) {
+                Some(v) => prop_assert_eq!(v.unwrap().to_bits(), m.to_bits()),
+                None => prop_assert_eq!(n, 7),
+            }
+            // Indefinite: refused by both.
+            let bad = &p - Matrix::identity(n, n) * (2.0 * p.amax());
+            if let Some(v) = mahalanobis_sq_small(&b, &bad) {
+                prop_assert!(v.is_none());
+                prop_assert!(crate::linalg::mahalanobis_sq(&b, &bad).is_err());
+            }
+
+            let a = Matrix::from_fn(n, n, |i, j| vals[(5 * i + 3 * j + 1) % 56]);
+            let lu = a.clone().lu();
+            let packed = PackedLu::new(&lu);
+            let mut fast = b.clone();
+            let ok_fast = packed.solve(&mut fast, &lu);
+            let mut dynamic = b.clone();
+            let ok_dyn = lu.solve_mut(&mut dynamic);
+            prop_assert_eq!(ok_fast, ok_dyn);
+            if ok_dyn {
+                prop_assert_eq!(bits(&fast), bits(&dynamic));
+            }
         }
     }
 }

@@ -208,7 +208,7 @@ impl CentralizedKf {
             self.system.transition.f(),
             &self.est.mean,
         );
-        step.pred_chol.solve_mut(&mut self.pred_mean);
+        crate::filter::fixed::chol_solve(&step.pred_chol, &mut self.pred_mean);
         // ... plus H_i^T R_i^{-1} z_i of each sensor, in sensor order (add_measurement) ...
         for (i, msg) in inbox.iter().enumerate() {
             let Received::Measurement(z) = msg else {
@@ -221,7 +221,7 @@ impl CentralizedKf {
         }
         // ... and back to covariance form (to_gaussian).
         self.est.mean.copy_from(&self.pred_mean);
-        step.fused_chol.solve_mut(&mut self.est.mean);
+        crate::filter::fixed::chol_solve(&step.fused_chol, &mut self.est.mean);
         self.est.cov.copy_from(&step.cov);
         Ok(true)
     }

@@ -126,7 +126,7 @@ pub struct DkfCenter {
     memo: Arc<CovarianceMemo>,
     /// Per sensor: the first sensor whose information matrix H^T R^{-1} H is bitwise the
     /// same (identical sensors remove identical information, see [`canonical_silence`]).
-    class: Vec<usize>,
+    pub(super) class: Vec<usize>,
     /// Work space.
     info_vec: Vector,
     tmp: Vector,
@@ -192,7 +192,7 @@ impl DkfCenter {
 
     /// The fused covariance of plan step `p` with the silent sensors `silent` (bit i = sensor
     /// i) of which `inexact` are extrapolated: memoized when there are at most 64 sensors.
-    fn fused_covariance(
+    pub(super) fn fused_covariance(
         &self,
         p: usize,
         silent: u64,
@@ -227,7 +227,7 @@ impl DkfCenter {
     /// (10): start from N (C̄^e)^{-1}, remove the information of each silent sensor (in sensor
     /// order), invert; Algorithm 2 adds (N - m - l)^2 C (C̄^p)^{-1} B (C̄^p)^{-1} C^T. The same
     /// operations in the same order as the direct per-step form.
-    fn compute_fused_covariance(
+    pub(super) fn compute_fused_covariance(
         &self,
         p: usize,
         is_silent: impl Fn(usize) -> bool,
@@ -339,7 +339,7 @@ impl FusionCenter for DkfCenter {
                                 let pd = self.held_delta[i].as_ref().expect("checked invertible");
                                 debiased_extrapolation_into(
                                     &m.delta_p[i],
-                                    &pd.lu,
+                                    pd,
                                     &self.held[i],
                                     &mut self.tmp2,
                                     &mut self.contribution,
@@ -371,7 +371,7 @@ impl FusionCenter for DkfCenter {
             )?)
         };
         self.est.mean.copy_from(&self.info_vec);
-        fused.chol.solve_mut(&mut self.est.mean);
+        crate::filter::fixed::chol_solve(&fused.chol, &mut self.est.mean);
         self.est.cov.copy_from(&fused.cov);
         Ok(())
     }
@@ -386,7 +386,7 @@ impl FusionCenter for DkfCenter {
 /// class after the previous choice. (10) subtracts H_i^T R_i^{-1} H_i in sensor order, so two
 /// sets with the same sequence of (bitwise equal) matrices give the same covariance bit for
 /// bit; seed 004's Fig. 1 has its sensors in identical pairs, and the memo keys halve.
-fn canonical_silence(class: &[usize], silent: u64) -> u64 {
+pub(super) fn canonical_silence(class: &[usize], silent: u64) -> u64 {
     let mut out = 0u64;
     let mut next = 0usize;
     for (i, &c) in class.iter().enumerate() {

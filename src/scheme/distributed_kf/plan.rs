@@ -63,6 +63,8 @@ pub struct PredictedDelta {
     pub delta: Matrix,
     /// Its LU factorization (as `Δ.clone().lu()`).
     pub lu: LU<f64, Dyn, Dyn>,
+    /// The same factors unpacked for the fixed-size solve.
+    pub packed: crate::filter::fixed::PackedLu,
     next: OnceLock<Arc<PredictedDelta>>,
 }
 
@@ -70,6 +72,7 @@ impl PredictedDelta {
     fn new(delta: Matrix) -> Self {
         let lu = delta.clone().lu();
         Self {
+            packed: crate::filter::fixed::PackedLu::new(&lu),
             delta,
             lu,
             next: OnceLock::new(),
