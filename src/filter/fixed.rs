@@ -298,6 +298,112 @@ fn lu_solve_fixed<const N: usize>(lu: &[f64], perm: &[usize], b: &mut [f64]) -> 
     true
 }
 
+/// `y = a b` for square n x n matrices, bit for bit as `y.gemm(1.0, a, b, 0.0)`: below 6
+/// nalgebra runs one gemv per column of b (as [`gemv`]); from 6 on it calls matrixmultiply,
+/// whose kernels on x86-64 with FMA (AVX2+FMA, AVX-512) accumulate each entry as a chain of
+/// fused multiply-adds over k from +0 and scale by alpha = 1 (exact). That chain is emulated
+/// at n = 6 when the CPU has those features; everything else takes nalgebra's own path.
+pub fn gemm(y: &mut Matrix, a: &Matrix, b: &Matrix) {
+    let n = a.nrows();
+    let square = |m: &Matrix| m.nrows() == n && m.ncols() == n;
+    if !(square(y) && square(a) && square(b)) {
+        y.gemm(1.0, a, b, 0.0);
+        return;
+    }
+    macro_rules! columns {
+        ($nn:literal) => {{
+            let (a, b) = (a.as_slice(), b.as_slice());
+            for (j, col) in y.as_mut_slice().chunks_exact_mut($nn).enumerate() {
+                gemv_fixed::<$nn, $nn>(col, a, &b[j * $nn..(j + 1) * $nn]);
+            }
+        }};
+    }
+    match n {
+        1 => columns!(1),
+        2 => columns!(2),
+        3 => columns!(3),
+        4 => columns!(4),
+        5 => columns!(5),
+        6 if matrixmultiply_uses_fma() => {
+            // SAFETY: the CPU has FMA (checked just above).
+            unsafe { gemm_fma_6(y.as_mut_slice(), a.as_slice(), b.as_slice()) }
+        }
+        _ => y.gemm(1.0, a, b, 0.0),
+    }
+}
+
+/// Whether matrixmultiply's f64 kernel on this CPU is one of its FMA kernels.
+fn matrixmultiply_uses_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// `y = a b`, 6 x 6 column-major: `y_ij = fma(a_i5, b_5j, ... fma(a_i0, b_0j, +0))`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "fma")]
+unsafe fn gemm_fma_6(y: &mut [f64], a: &[f64], b: &[f64]) {
+    const N: usize = 6;
+    let (y, a, b) = (&mut y[..N * N], &a[..N * N], &b[..N * N]);
+    for j in 0..N {
+        let mut acc = [0.0f64; N];
+        for k in 0..N {
+            let bkj = b[j * N + k];
+            for i in 0..N {
+                acc[i] = a[k * N + i].mul_add(bkj, acc[i]);
+            }
+        }
+        y[j * N..(j + 1) * N].copy_from_slice(&acc);
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+unsafe fn gemm_fma_6(_: &mut [f64], _: &[f64], _: &[f64]) {
+    unreachable!("only called when matrixmultiply_uses_fma")
+}
+
+/// `Cholesky::new(m)`, with the factorization in fixed size for dimensions 1..=6 (the same
+/// operations, see `cholesky_fixed`).
+pub fn cholesky(mut m: Matrix) -> Option<nalgebra::Cholesky<f64, nalgebra::Dyn>> {
+    let n = m.nrows();
+    if n != m.ncols() {
+        return nalgebra::Cholesky::new(m);
+    }
+    let ok = with_dim!(n, cholesky_fixed(m.as_mut_slice()), {
+        return nalgebra::Cholesky::new(m);
+    });
+    ok.then(|| nalgebra::Cholesky::pack_dirty(m))
+}
+
+/// `chol.solve_mut(b)` for a matrix b, column by column as [`chol_solve`] (nalgebra solves
+/// every column forward and then every column backward; the columns are independent).
+pub fn chol_solve_matrix(chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>, b: &mut Matrix) {
+    let l = chol.l_dirty();
+    let n = l.nrows();
+    assert_eq!(n, b.nrows(), "chol_solve_matrix: dimensions mismatch");
+    macro_rules! columns {
+        ($nn:literal) => {{
+            for col in b.as_mut_slice().chunks_exact_mut($nn) {
+                chol_solve_fixed::<$nn>(l.as_slice(), col);
+            }
+        }};
+    }
+    match n {
+        1 => columns!(1),
+        2 => columns!(2),
+        3 => columns!(3),
+        4 => columns!(4),
+        5 => columns!(5),
+        6 => columns!(6),
+        _ => chol.solve_mut(b),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -384,6 +490,39 @@ mod tests {
             if ok_dyn {
                 prop_assert_eq!(bits(&fast), bits(&dynamic));
             }
+        }
+    }
+
+    proptest! {
+        /// The fixed-size gemm, Cholesky factorization and matrix solve equal nalgebra's.
+        #[test]
+        fn fixed_gemm_and_cholesky_are_bit_identical(
+            n in 1usize..=7,
+            vals in proptest::collection::vec(-10.0f64..10.0, 56),
+            scale in -30i32..30,
+        ) {
+            let a = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j) % 56] * 10f64.powi(scale));
+            let b = Matrix::from_fn(n, n, |i, j| vals[(3 * i + 5 * j + 11) % 56]);
+            let mut fast = Matrix::zeros(n, n);
+            gemm(&mut fast, &a, &b);
+            let mut dynamic = Matrix::zeros(n, n);
+            dynamic.gemm(1.0, &a, &b, 0.0);
+            let mbits = |m: &Matrix| m.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(mbits(&fast), mbits(&dynamic));
+            prop_assert_eq!(mbits(&fast), mbits(&(&a * &b)));
+
+            let p = spd(n, &vals) * 10f64.powi(scale);
+            let fast = cholesky(p.clone()).unwrap();
+            let dynamic = nalgebra::Cholesky::new(p.clone()).unwrap();
+            prop_assert_eq!(mbits(fast.l_dirty()), mbits(dynamic.l_dirty()));
+            let mut x = b.clone();
+            chol_solve_matrix(&fast, &mut x);
+            let mut y = b.clone();
+            dynamic.solve_mut(&mut y);
+            prop_assert_eq!(mbits(&x), mbits(&y));
+            let bad = &p - Matrix::identity(n, n) * (2.0 * p.amax());
+            prop_assert!(cholesky(bad.clone()).is_none());
+            prop_assert!(nalgebra::Cholesky::new(bad).is_none());
         }
     }
 }

@@ -91,7 +91,7 @@ fn cholesky_in(
         _ => Matrix::zeros(a.nrows(), a.ncols()),
     };
     m.copy_from(a);
-    Cholesky::new(m).ok_or(err(crate::linalg::LinalgError::NotPositiveDefinite))
+    crate::filter::fixed::cholesky(m).ok_or(err(crate::linalg::LinalgError::NotPositiveDefinite))
 }
 
 impl CentralizedKf {
@@ -138,15 +138,15 @@ impl CentralizedKf {
         });
         // kf::predict: F x, and F P F^T + Q symmetrized.
         crate::filter::fixed::gemv(&mut self.pred_mean, t.f(), &self.est.mean);
-        w.fp.gemm(1.0, t.f(), &self.est.cov, 0.0);
-        w.pred_cov.gemm(1.0, &w.fp, &w.ft, 0.0);
+        crate::filter::fixed::gemm(&mut w.fp, t.f(), &self.est.cov);
+        crate::filter::fixed::gemm(&mut w.pred_cov, &w.fp, &w.ft);
         w.pred_cov += t.q();
         symmetrize(&mut w.pred_cov);
         // Information::from_gaussian: y = P^{-1} x, Y = P^{-1} symmetrized.
         let chol = cholesky_in(&w.pred_cov, &mut w.chol, "covariance")?;
-        chol.solve_mut(&mut self.pred_mean);
+        crate::filter::fixed::chol_solve(&chol, &mut self.pred_mean);
         w.info.fill_with_identity();
-        chol.solve_mut(&mut w.info);
+        crate::filter::fixed::chol_solve_matrix(&chol, &mut w.info);
         w.chol = Some(chol.unpack_dirty());
         symmetrize(&mut w.info);
         // add_measurement of each arrived measurement, in sensor order.
@@ -162,9 +162,9 @@ impl CentralizedKf {
         // Information::to_gaussian.
         let chol = cholesky_in(&w.info, &mut w.chol, "information matrix")?;
         self.est.mean.copy_from(&self.pred_mean);
-        chol.solve_mut(&mut self.est.mean);
+        crate::filter::fixed::chol_solve(&chol, &mut self.est.mean);
         self.est.cov.fill_with_identity();
-        chol.solve_mut(&mut self.est.cov);
+        crate::filter::fixed::chol_solve_matrix(&chol, &mut self.est.cov);
         w.chol = Some(chol.unpack_dirty());
         symmetrize(&mut self.est.cov);
         Ok(())

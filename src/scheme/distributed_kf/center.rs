@@ -103,6 +103,32 @@ impl CovarianceMemo {
     pub fn new() -> Self {
         Self::default()
     }
+
+    /// The memo of `plan` and `fusion`, shared with every other caller that asked for the same
+    /// plan (same `Arc`) and an equal fusion rule while that memo is alive. The fused
+    /// covariance depends on the plan step, the silence set, the inexact count and the rule
+    /// only, so the variants of a sweep (Algorithm 1's rates and alphas, Algorithm 2's alphas
+    /// at one B) see each other's entries instead of each computing its own.
+    pub fn shared(plan: &Arc<GlobalizedPlan>, fusion: &Fusion) -> Arc<Self> {
+        type Entry = (
+            std::sync::Weak<GlobalizedPlan>,
+            Fusion,
+            std::sync::Weak<CovarianceMemo>,
+        );
+        static CACHE: std::sync::Mutex<Vec<Entry>> = std::sync::Mutex::new(Vec::new());
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        cache.retain(|(p, _, m)| p.strong_count() > 0 && m.strong_count() > 0);
+        for (p, f, m) in cache.iter() {
+            if f == fusion && p.upgrade().is_some_and(|p| Arc::ptr_eq(&p, plan)) {
+                if let Some(m) = m.upgrade() {
+                    return m;
+                }
+            }
+        }
+        let memo = Arc::new(Self::new());
+        cache.push((Arc::downgrade(plan), fusion.clone(), Arc::downgrade(&memo)));
+        memo
+    }
 }
 
 /// The fusion center.

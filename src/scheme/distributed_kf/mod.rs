@@ -28,7 +28,8 @@ pub struct DistributedKfScheme {
     plan: Arc<GlobalizedPlan>,
     trigger: Trigger,
     fusion: Fusion,
-    /// Fused covariances by (step, silent set, inexact count), shared by the trials' centers.
+    /// Fused covariances by (step, silent set, inexact count), shared by the trials' centers
+    /// and by the other variants of the same plan and fusion rule.
     memo: Arc<CovarianceMemo>,
     /// A fresh center (sharing `memo`), for the fast trial's fused covariances.
     proto: Arc<DkfCenter>,
@@ -61,7 +62,7 @@ impl DistributedKfScheme {
             }
             _ => Fusion::OmittedEstimates,
         };
-        let memo = Arc::new(CovarianceMemo::new());
+        let memo = CovarianceMemo::shared(&plan, &fusion);
         let proto = Arc::new(DkfCenter::with_memo(
             plan.clone(),
             system.sensors.clone(),
