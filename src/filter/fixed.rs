@@ -19,52 +19,52 @@ pub fn gemv(y: &mut Vector, a: &Matrix, x: &Vector) {
         x.len(),
         y.len()
     );
-    macro_rules! dispatch {
-        ($(($rr:literal, $cc:literal)),*) => {
-            match (r, c) {
-                $(($rr, $cc) => gemv_fixed::<$rr, $cc>(y.as_mut_slice(), a.as_slice(), x.as_slice()),)*
-                _ => y.gemv(1.0, a, x, 0.0),
-            }
-        };
+    // One index for the shape, so that the dispatch is a jump table, not 36 comparisons.
+    let shape = if (1..=6).contains(&r) && (1..=6).contains(&c) {
+        r * 8 + c
+    } else {
+        0
+    };
+    let (ys, as_, xs) = (y.as_mut_slice(), a.as_slice(), x.as_slice());
+    match shape {
+        9 => gemv_fixed::<1, 1>(ys, as_, xs),
+        10 => gemv_fixed::<1, 2>(ys, as_, xs),
+        11 => gemv_fixed::<1, 3>(ys, as_, xs),
+        12 => gemv_fixed::<1, 4>(ys, as_, xs),
+        13 => gemv_fixed::<1, 5>(ys, as_, xs),
+        14 => gemv_fixed::<1, 6>(ys, as_, xs),
+        17 => gemv_fixed::<2, 1>(ys, as_, xs),
+        18 => gemv_fixed::<2, 2>(ys, as_, xs),
+        19 => gemv_fixed::<2, 3>(ys, as_, xs),
+        20 => gemv_fixed::<2, 4>(ys, as_, xs),
+        21 => gemv_fixed::<2, 5>(ys, as_, xs),
+        22 => gemv_fixed::<2, 6>(ys, as_, xs),
+        25 => gemv_fixed::<3, 1>(ys, as_, xs),
+        26 => gemv_fixed::<3, 2>(ys, as_, xs),
+        27 => gemv_fixed::<3, 3>(ys, as_, xs),
+        28 => gemv_fixed::<3, 4>(ys, as_, xs),
+        29 => gemv_fixed::<3, 5>(ys, as_, xs),
+        30 => gemv_fixed::<3, 6>(ys, as_, xs),
+        33 => gemv_fixed::<4, 1>(ys, as_, xs),
+        34 => gemv_fixed::<4, 2>(ys, as_, xs),
+        35 => gemv_fixed::<4, 3>(ys, as_, xs),
+        36 => gemv_fixed::<4, 4>(ys, as_, xs),
+        37 => gemv_fixed::<4, 5>(ys, as_, xs),
+        38 => gemv_fixed::<4, 6>(ys, as_, xs),
+        41 => gemv_fixed::<5, 1>(ys, as_, xs),
+        42 => gemv_fixed::<5, 2>(ys, as_, xs),
+        43 => gemv_fixed::<5, 3>(ys, as_, xs),
+        44 => gemv_fixed::<5, 4>(ys, as_, xs),
+        45 => gemv_fixed::<5, 5>(ys, as_, xs),
+        46 => gemv_fixed::<5, 6>(ys, as_, xs),
+        49 => gemv_fixed::<6, 1>(ys, as_, xs),
+        50 => gemv_fixed::<6, 2>(ys, as_, xs),
+        51 => gemv_fixed::<6, 3>(ys, as_, xs),
+        52 => gemv_fixed::<6, 4>(ys, as_, xs),
+        53 => gemv_fixed::<6, 5>(ys, as_, xs),
+        54 => gemv_fixed::<6, 6>(ys, as_, xs),
+        _ => y.gemv(1.0, a, x, 0.0),
     }
-    dispatch!(
-        (1, 1),
-        (1, 2),
-        (1, 3),
-        (1, 4),
-        (1, 5),
-        (1, 6),
-        (2, 1),
-        (2, 2),
-        (2, 3),
-        (2, 4),
-        (2, 5),
-        (2, 6),
-        (3, 1),
-        (3, 2),
-        (3, 3),
-        (3, 4),
-        (3, 5),
-        (3, 6),
-        (4, 1),
-        (4, 2),
-        (4, 3),
-        (4, 4),
-        (4, 5),
-        (4, 6),
-        (5, 1),
-        (5, 2),
-        (5, 3),
-        (5, 4),
-        (5, 5),
-        (5, 6),
-        (6, 1),
-        (6, 2),
-        (6, 3),
-        (6, 4),
-        (6, 5),
-        (6, 6)
-    );
 }
 
 /// `y = a x` for an R x C column-major `a`: nalgebra's operation order (see the module).
@@ -404,6 +404,54 @@ pub fn chol_solve_matrix(chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>, b: &mut 
     }
 }
 
+/// nalgebra's dot product of two dynamic vectors (`a.dot(b)`), bit for bit: eight partial
+/// sums over blocks of eight, folded as (0+4), (1+5), (2+6), (3+7) into a sum from +0, then the
+/// remaining terms one by one.
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len(), "dot: dimensions mismatch");
+    let n = a.len();
+    let mut acc = [0.0f64; 8];
+    let mut i = 0;
+    while n - i >= 8 {
+        for (j, s) in acc.iter_mut().enumerate() {
+            *s += a[i + j] * b[i + j];
+        }
+        i += 8;
+    }
+    let mut res = 0.0;
+    res += acc[0] + acc[4];
+    res += acc[1] + acc[5];
+    res += acc[2] + acc[6];
+    res += acc[3] + acc[7];
+    for k in i..n {
+        res += a[k] * b[k];
+    }
+    res
+}
+
+/// `v.norm()` of a dynamic vector, bit for bit: the square root of `0 + v.dot(v)`.
+pub fn norm(v: &[f64]) -> f64 {
+    let mut res = 0.0;
+    res += dot(v, v);
+    res.sqrt()
+}
+
+/// `a += b` element by element, as nalgebra's `+=` (`a_i + b_i`).
+pub fn add_assign(a: &mut [f64], b: &[f64]) {
+    assert_eq!(a.len(), b.len(), "add_assign: dimensions mismatch");
+    for (x, y) in a.iter_mut().zip(b) {
+        *x += y;
+    }
+}
+
+/// `a -= b` element by element, as nalgebra's `-=` (`a_i - b_i`).
+pub fn sub_assign(a: &mut [f64], b: &[f64]) {
+    assert_eq!(a.len(), b.len(), "sub_assign: dimensions mismatch");
+    for (x, y) in a.iter_mut().zip(b) {
+        *x -= y;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -523,6 +571,20 @@ mod tests {
             let bad = &p - Matrix::identity(n, n) * (2.0 * p.amax());
             prop_assert!(cholesky(bad.clone()).is_none());
             prop_assert!(nalgebra::Cholesky::new(bad).is_none());
+        }
+    }
+
+    proptest! {
+        /// dot and norm equal nalgebra's on dynamic vectors of every length up to 20.
+        #[test]
+        fn dot_and_norm_are_bit_identical(
+            n in 0usize..=20,
+            vals in proptest::collection::vec(-1e3f64..1e3, 40),
+        ) {
+            let a = Vector::from_fn(n, |i, _| vals[i]);
+            let b = Vector::from_fn(n, |i, _| vals[20 + i] * if i % 3 == 0 { -0.0 } else { 1.0 });
+            prop_assert_eq!(dot(a.as_slice(), b.as_slice()).to_bits(), a.dot(&b).to_bits());
+            prop_assert_eq!(norm(a.as_slice()).to_bits(), a.norm().to_bits());
         }
     }
 }

@@ -275,12 +275,21 @@ impl DkfCenter {
             what: "fused information matrix (10)",
             source,
         })?;
-        let mut cov = chol.inverse();
+        // `chol.inverse()` and the products of the inflation, in the fixed-size kernels (the
+        // same operations as nalgebra's, bit for bit).
+        let n = info.nrows();
+        let mut cov = Matrix::identity(n, n);
+        crate::filter::fixed::chol_solve_matrix(&chol, &mut cov);
         if let Fusion::Bounded { b } = &self.fusion {
             if inexact > 0 {
-                let g = &cov * &m.cbar_p_inv;
+                let product = |a: &Matrix, b: &Matrix| {
+                    let mut y = Matrix::zeros(a.nrows(), b.ncols());
+                    crate::filter::fixed::gemm(&mut y, a, b);
+                    y
+                };
+                let g = product(&cov, &m.cbar_p_inv);
                 let factor = (inexact * inexact) as f64;
-                cov += (&g * b * g.transpose()) * factor;
+                cov += product(&product(&g, b), &g.transpose()) * factor;
             }
         }
         symmetrize(&mut cov);

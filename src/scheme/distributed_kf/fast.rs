@@ -15,7 +15,7 @@ use super::center::canonical_silence;
 use super::plan::PredictedDelta;
 use super::sensor::{debiased_extrapolation_into, predict_in_place, Trigger};
 use super::{DistributedKfScheme, Fusion};
-use crate::filter::Gaussian;
+use crate::filter::{fixed, Gaussian};
 use crate::linalg::Vector;
 use crate::link::Message;
 use crate::network::Traffic;
@@ -74,6 +74,12 @@ impl Track {
         let mut xbar_p = Vector::zeros(n);
         let mut tmp = Vector::zeros(n);
         let mut tmp2 = Vector::zeros(n);
+        let mut zbuf: Vec<Vector> = sys
+            .sensors
+            .iter()
+            .map(|s| Vector::zeros(s.meas_dim()))
+            .collect();
+        let mut zbuf2 = zbuf.clone();
         for (k, zs) in (1..=steps).zip(measurements) {
             let m = plan.at(k).expect("checked horizon");
             for (i, (s, z)) in sys.sensors.iter().zip(zs).enumerate() {
@@ -84,16 +90,16 @@ impl Track {
                 crate::filter::fixed::gemv(&mut xbar_p, a, xbar);
                 crate::filter::fixed::gemv(xbar, &m.prediction_weight, &xbar_p);
                 crate::filter::fixed::gemv(&mut tmp, &m.measurement_weight[i], z);
-                *xbar += &tmp;
+                fixed::add_assign(xbar.as_mut_slice(), tmp.as_slice());
                 predict_in_place(a, kf, &mut tmp);
                 t.kf_p.extend_from_slice(kf.as_slice());
-                let mut zbuf2 = Vector::zeros(z.len());
-                crate::filter::fixed::gemv(&mut zbuf2, lin.h(), kf);
-                let mut zbuf = z.clone();
-                zbuf -= &zbuf2;
-                crate::filter::fixed::gemv(&mut tmp2, &m.kf_gain[i], &zbuf);
-                *kf += &tmp2;
-                t.correction_norm.push(tmp2.norm());
+                let (zbuf, zbuf2) = (&mut zbuf[i], &mut zbuf2[i]);
+                crate::filter::fixed::gemv(zbuf2, lin.h(), kf);
+                zbuf.copy_from_slice(z.as_slice());
+                fixed::sub_assign(zbuf.as_mut_slice(), zbuf2.as_slice());
+                crate::filter::fixed::gemv(&mut tmp2, &m.kf_gain[i], zbuf);
+                fixed::add_assign(kf.as_mut_slice(), tmp2.as_slice());
+                t.correction_norm.push(fixed::norm(tmp2.as_slice()));
                 t.xbar_p.extend_from_slice(xbar_p.as_slice());
                 t.xbar.extend_from_slice(xbar.as_slice());
                 t.kf.extend_from_slice(kf.as_slice());
@@ -109,9 +115,7 @@ impl Track {
 
 /// `v += w` as nalgebra's `+=` does it (element by element, `v_j + w_j`).
 fn add(v: &mut Vector, w: &[f64]) {
-    for (a, b) in v.iter_mut().zip(w) {
-        *a += b;
-    }
+    fixed::add_assign(v.as_mut_slice(), w);
 }
 
 /// Per-sensor state of Algorithm 2's replica of the center (the sensor's and the center's
@@ -237,18 +241,14 @@ fn run_variant(
                         )
                         .map_err(err(k))?;
                         // d̃ = x̃^{pp} - x̄^p.
-                        tmp.copy_from(&h.debiased);
-                        for (t, x) in tmp.iter_mut().zip(xbar_p) {
-                            *t -= x;
-                        }
-                        tmp2.copy_from(&h.kf_held);
-                        for (t, x) in tmp2.iter_mut().zip(kf) {
-                            *t -= x;
-                        }
-                        let far = tmp2.norm() > *alpha;
+                        tmp.copy_from_slice(h.debiased.as_slice());
+                        fixed::sub_assign(tmp.as_mut_slice(), xbar_p);
+                        tmp2.copy_from_slice(h.kf_held.as_slice());
+                        fixed::sub_assign(tmp2.as_mut_slice(), kf);
+                        let far = fixed::norm(tmp2.as_slice()) > *alpha;
                         far || {
                             crate::filter::fixed::gemv(&mut tmp2, b_inv, &tmp);
-                            tmp.dot(&tmp2) > 1.0
+                            fixed::dot(tmp.as_slice(), tmp2.as_slice()) > 1.0
                         }
                     }
                 };
@@ -283,7 +283,7 @@ fn run_variant(
                         Fusion::Bounded { .. } => {
                             inexact += 1;
                             crate::filter::fixed::gemv(&mut tmp, &m.cbar_p_inv, &held[i].debiased);
-                            est.mean += &tmp;
+                            add(&mut est.mean, tmp.as_slice());
                         }
                     }
                 }
@@ -293,7 +293,7 @@ fn run_variant(
             .fused_covariance(p, canonical_silence(&center.class, silent), inexact)
             .map_err(err(k))?;
         crate::filter::fixed::chol_solve(&fused.chol, &mut est.mean);
-        est.cov.copy_from(&fused.cov);
+        est.cov.copy_from_slice(fused.cov.as_slice());
         let traffic = Traffic {
             messages,
             bits: messages * msg_bits,
