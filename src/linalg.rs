@@ -28,11 +28,24 @@ pub enum LinalgError {
 /// drifts from symmetric eventually fails its Cholesky factorization.
 pub fn symmetrize(a: &mut Matrix) {
     let n = a.nrows();
+    if a.ncols() != n {
+        // Non-square: the indexing form (which panics out of range, as it always did).
+        for i in 0..n {
+            for j in (i + 1)..n {
+                let m = 0.5 * (a[(i, j)] + a[(j, i)]);
+                a[(i, j)] = m;
+                a[(j, i)] = m;
+            }
+        }
+        return;
+    }
+    // Column-major: (i, j) at j * n + i.
+    let s = a.as_mut_slice();
     for i in 0..n {
         for j in (i + 1)..n {
-            let m = 0.5 * (a[(i, j)] + a[(j, i)]);
-            a[(i, j)] = m;
-            a[(j, i)] = m;
+            let m = 0.5 * (s[j * n + i] + s[i * n + j]);
+            s[j * n + i] = m;
+            s[i * n + j] = m;
         }
     }
 }

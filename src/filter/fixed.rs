@@ -223,59 +223,78 @@ fn mahalanobis_fixed<const N: usize>(e: &[f64], p: &[f64]) -> Option<Option<f64>
     Some(Some(s))
 }
 
-/// An LU factorization (`Δ.clone().lu()`) unpacked for [`lu_solve`]: the packed factors
-/// (unit lower L below the diagonal, U on and above it) and the row permutation as a gather.
+/// An LU factorization (`A.clone().lu()`) ready to solve with: for dimensions 1..=6 the
+/// packed factors (unit lower L below the diagonal, U on and above it) and the row
+/// permutation as a gather, inline (no heap); nalgebra's own factorization otherwise.
+// The small case is inline on purpose: one per memoized Δ^pp, and no heap block each.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
-pub struct PackedLu {
-    n: usize,
-    /// Column-major n x n: L strictly below the diagonal, U on and above.
-    lu: Vec<f64>,
-    /// The permutation's swaps applied to the rows of b, as `out[i] = b[perm[i]]`.
-    perm: Vec<usize>,
+pub enum PackedLu {
+    Fixed {
+        n: usize,
+        /// Column-major n x n (stride n): L strictly below the diagonal, U on and above.
+        lu: [f64; 36],
+        /// The permutation's swaps applied to the rows of b, as `out[i] = b[perm[i]]`.
+        perm: [u8; 6],
+    },
+    Dynamic(Box<nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>>),
 }
 
 impl PackedLu {
-    /// Unpacks `lu` (allocates; done once per factorization).
-    pub fn new(lu: &nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>) -> Self {
+    /// Takes the factorization `lu` (of a square matrix).
+    pub fn new(lu: nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>) -> Self {
         let l = lu.l();
-        let u = lu.u();
         let n = l.nrows();
-        let packed = Matrix::from_fn(n, n, |r, c| if r > c { l[(r, c)] } else { u[(r, c)] });
+        if !(1..=6).contains(&n) || l.ncols() != n {
+            return PackedLu::Dynamic(Box::new(lu));
+        }
+        let u = lu.u();
+        let mut packed = [0.0; 36];
+        for c in 0..n {
+            for r in 0..n {
+                packed[c * n + r] = if r > c { l[(r, c)] } else { u[(r, c)] };
+            }
+        }
         // Applying the swaps to the indices moves them as it would move b's entries.
         let mut idx = Vector::from_fn(n, |i, _| i as f64);
         lu.p().permute_rows(&mut idx);
-        Self {
+        let mut perm = [0u8; 6];
+        for (p, &v) in perm.iter_mut().zip(idx.iter()) {
+            *p = v as u8;
+        }
+        PackedLu::Fixed {
             n,
-            lu: packed.as_slice().to_vec(),
-            perm: idx.iter().map(|&v| v as usize).collect(),
+            lu: packed,
+            perm,
         }
     }
 
     /// `b <- A^{-1} b`, bit for bit as nalgebra's `LU::solve_mut` on a vector (row swaps,
     /// unit forward substitution `b_j = -b_i L_ji + b_j`, back substitution `b_i /= U_ii`,
     /// `b_j = -b_i U_ji + b_j` above). Returns false at a zero pivot, as `solve_mut` does.
-    pub fn solve(
-        &self,
-        b: &mut Vector,
-        lu: &nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>,
-    ) -> bool {
-        assert_eq!(b.len(), self.n, "lu_solve: dimensions mismatch");
-        with_dim!(
-            self.n,
-            lu_solve_fixed(&self.lu, &self.perm, b.as_mut_slice()),
-            lu.solve_mut(b)
-        )
+    pub fn solve(&self, b: &mut Vector) -> bool {
+        match self {
+            PackedLu::Fixed { n, lu, perm } => {
+                assert_eq!(b.len(), *n, "lu_solve: dimensions mismatch");
+                with_dim!(
+                    *n,
+                    lu_solve_fixed(lu, perm, b.as_mut_slice()),
+                    unreachable!("packed only for n <= 6")
+                )
+            }
+            PackedLu::Dynamic(lu) => lu.solve_mut(b),
+        }
     }
 }
 
 #[inline(always)]
 #[allow(clippy::assign_op_pattern)]
-fn lu_solve_fixed<const N: usize>(lu: &[f64], perm: &[usize], b: &mut [f64]) -> bool {
-    let (lu, perm, b): (&[f64], &[usize], &mut [f64; N]) =
+fn lu_solve_fixed<const N: usize>(lu: &[f64], perm: &[u8], b: &mut [f64]) -> bool {
+    let (lu, perm, b): (&[f64], &[u8], &mut [f64; N]) =
         (&lu[..N * N], &perm[..N], b.try_into().expect("N rows"));
     let src = *b;
     for i in 0..N {
-        b[i] = src[perm[i]];
+        b[i] = src[usize::from(perm[i])];
     }
     // Unit lower triangle: nalgebra divides by the unit diagonal (exact) and never reads it.
     for i in 0..N - 1 {
@@ -529,9 +548,9 @@ mod tests {
 
             let a = Matrix::from_fn(n, n, |i, j| vals[(5 * i + 3 * j + 1) % 56]);
             let lu = a.clone().lu();
-            let packed = PackedLu::new(&lu);
+            let packed = PackedLu::new(lu.clone());
             let mut fast = b.clone();
-            let ok_fast = packed.solve(&mut fast, &lu);
+            let ok_fast = packed.solve(&mut fast);
             let mut dynamic = b.clone();
             let ok_dyn = lu.solve_mut(&mut dynamic);
             prop_assert_eq!(ok_fast, ok_dyn);

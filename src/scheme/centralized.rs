@@ -2,7 +2,7 @@
 //! bound every scheme is measured against), or each with probability `rate` (seed 004
 //! Section V: a measurement not sent is lost for good).
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
-use crate::filter::{kf, Gaussian};
+use crate::filter::{fixed, kf, Gaussian};
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
 use nalgebra::{Cholesky, Dyn};
@@ -76,6 +76,16 @@ struct DirectWork {
     chol: Option<Matrix>,
 }
 
+/// `m.fill_with_identity()` on the slice of a square matrix.
+fn identity(m: &mut Matrix) {
+    let n = m.nrows();
+    let s = m.as_mut_slice();
+    s.fill(0.0);
+    for i in 0..n {
+        s[i * n + i] = 1.0;
+    }
+}
+
 /// `cholesky(a)` of [`crate::linalg`] computed in `buf` (same checks, same factorization).
 fn cholesky_in(
     a: &Matrix,
@@ -83,14 +93,14 @@ fn cholesky_in(
     what: &'static str,
 ) -> Result<Cholesky<f64, Dyn>, SchemeError> {
     let err = |source| SchemeError::Filter(crate::filter::FilterError::Matrix { what, source });
-    if a.iter().any(|v| !v.is_finite()) {
+    if a.as_slice().iter().any(|v| !v.is_finite()) {
         return Err(err(crate::linalg::LinalgError::NonFinite));
     }
     let mut m = match buf.take() {
         Some(m) if m.shape() == a.shape() => m,
         _ => Matrix::zeros(a.nrows(), a.ncols()),
     };
-    m.copy_from(a);
+    m.as_mut_slice().copy_from_slice(a.as_slice());
     crate::filter::fixed::cholesky(m).ok_or(err(crate::linalg::LinalgError::NotPositiveDefinite))
 }
 
@@ -144,12 +154,12 @@ impl CentralizedKf {
         crate::filter::fixed::gemv(&mut self.pred_mean, t.f(), &self.est.mean);
         crate::filter::fixed::gemm(&mut w.fp, t.f(), &self.est.cov);
         crate::filter::fixed::gemm(&mut w.pred_cov, &w.fp, &w.ft);
-        w.pred_cov += t.q();
+        fixed::add_assign(w.pred_cov.as_mut_slice(), t.q().as_slice());
         symmetrize(&mut w.pred_cov);
         // Information::from_gaussian: y = P^{-1} x, Y = P^{-1} symmetrized.
         let chol = cholesky_in(&w.pred_cov, &mut w.chol, "covariance")?;
         crate::filter::fixed::chol_solve(&chol, &mut self.pred_mean);
-        w.info.fill_with_identity();
+        identity(&mut w.info);
         crate::filter::fixed::chol_solve_matrix(&chol, &mut w.info);
         w.chol = Some(chol.unpack_dirty());
         symmetrize(&mut w.info);
@@ -158,16 +168,16 @@ impl CentralizedKf {
             if let Some(z) = arrived(i)? {
                 let sensor = self.system.sensors[i].as_linear().expect("checked linear");
                 kf::check_measurement(sensor, z)?;
-                w.info += sensor.information();
+                fixed::add_assign(w.info.as_mut_slice(), sensor.information().as_slice());
                 crate::filter::fixed::gemv(&mut self.tmp, sensor.ht_rinv(), z);
-                self.pred_mean += &self.tmp;
+                fixed::add_assign(self.pred_mean.as_mut_slice(), self.tmp.as_slice());
             }
         }
         // Information::to_gaussian.
         let chol = cholesky_in(&w.info, &mut w.chol, "information matrix")?;
-        self.est.mean.copy_from(&self.pred_mean);
+        self.est.mean.copy_from_slice(self.pred_mean.as_slice());
         crate::filter::fixed::chol_solve(&chol, &mut self.est.mean);
-        self.est.cov.fill_with_identity();
+        identity(&mut self.est.cov);
         crate::filter::fixed::chol_solve_matrix(&chol, &mut self.est.cov);
         w.chol = Some(chol.unpack_dirty());
         symmetrize(&mut self.est.cov);

@@ -83,7 +83,7 @@ type KeyHash = BuildHasherDefault<KeyHasher>;
 
 /// Bytes all [`CovarianceMemo`]s of the process may keep together (kept entries are ~700
 /// bytes for a 6-D state), and keys seen once one memo may remember.
-const MEMO_BUDGET: usize = 32 << 20;
+const MEMO_BUDGET: usize = 8 << 20;
 const MEMO_SEEN: usize = 1 << 13;
 static MEMO_BYTES: AtomicUsize = AtomicUsize::new(0);
 

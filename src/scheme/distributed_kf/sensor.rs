@@ -221,7 +221,7 @@ pub fn debiased_extrapolation_into(
     out: &mut Vector,
 ) -> Result<(), SchemeError> {
     work.copy_from(held);
-    if !delta_pp.packed.solve(work, &delta_pp.lu) {
+    if !delta_pp.lu.solve(work) {
         return Err(SchemeError::Unsupported(
             "debiasing matrix Δ^pp is singular".into(),
         ));
