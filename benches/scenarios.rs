@@ -2,8 +2,9 @@
 //! Default: issue 12's workloads at one thread — `kfmc` (the peers' centralized KF Monte Carlo,
 //! 5000 trials x 20 steps, `benches/data/kfmc.toml` = `/work/shared/peers/kfmc.toml`) and the
 //! `dormann-fig1` sweep (93 scheme variants x 500 trials x 100 steps) — then `dormann-fig1`
-//! and the `zhang-fig5` run (4 schemes x 1000 trials x 100 steps, 50 range sensors) on all
-//! cores. Compare with the numpy peers (`/work/shared/peers/README.md`) in the same minute.
+//! on two threads (the scaling target) and the `zhang-fig5` run (4 schemes x 1000 trials x
+//! 100 steps, 50 range sensors) on one and two threads. Each line prints the time and the
+//! trial-steps per second. Compare with the numpy peers (`/work/shared/peers/README.md`) in the same minute.
 //! Environment: HUSHFUSE_BENCH_SCENARIOS (comma-separated names, `name@threads` pins the
 //! thread count of one entry), HUSHFUSE_BENCH_THREADS (pin the thread count of the others),
 //! HUSHFUSE_BENCH_REPEATS (default 3).
@@ -25,7 +26,7 @@ fn main() {
     let repeats: usize = env("HUSHFUSE_BENCH_REPEATS", 3);
     let names: String = env(
         "HUSHFUSE_BENCH_SCENARIOS",
-        "kfmc@1,dormann-fig1@1,dormann-fig1,zhang-fig5".to_string(),
+        "kfmc@1,dormann-fig1@1,dormann-fig1@2,zhang-fig5@1,zhang-fig5@2".to_string(),
     );
     // Under `cargo test --benches` (no --bench flag) do one tiny run of each only.
     let quick = !std::env::args().any(|a| a == "--bench");
@@ -51,15 +52,22 @@ fn main() {
             std::hint::black_box(sums);
         }
         times.sort_by(f64::total_cmp);
+        // Trial-steps: one trial's step of every variant (the data drawn once) counts once;
+        // variant-trial-steps count each variant's step.
+        let trial_steps = (exp.trials * exp.steps) as f64;
+        let variant_steps = trial_steps * exp.variants.len() as f64;
         println!(
-            "{name}: {} variants x {} trials x {} steps, threads={}: min {:.2} s, median {:.2} s over {} runs",
+            "{name}: {} variants x {} trials x {} steps, threads={}: min {:.4} s, median {:.4} s over {} runs; \
+             {:.3e} trial-steps/s, {:.3e} variant-trial-steps/s (at the min)",
             exp.variants.len(),
             exp.trials,
             exp.steps,
             if threads == 0 { "all".to_string() } else { threads.to_string() },
             times[0],
             times[times.len() / 2],
-            times.len()
+            times.len(),
+            trial_steps / times[0],
+            variant_steps / times[0],
         );
     }
 }

@@ -28,11 +28,24 @@ pub enum LinalgError {
 /// drifts from symmetric eventually fails its Cholesky factorization.
 pub fn symmetrize(a: &mut Matrix) {
     let n = a.nrows();
+    if a.ncols() != n {
+        // Non-square: the indexing form (which panics out of range, as it always did).
+        for i in 0..n {
+            for j in (i + 1)..n {
+                let m = 0.5 * (a[(i, j)] + a[(j, i)]);
+                a[(i, j)] = m;
+                a[(j, i)] = m;
+            }
+        }
+        return;
+    }
+    // Column-major: (i, j) at j * n + i.
+    let s = a.as_mut_slice();
     for i in 0..n {
         for j in (i + 1)..n {
-            let m = 0.5 * (a[(i, j)] + a[(j, i)]);
-            a[(i, j)] = m;
-            a[(j, i)] = m;
+            let m = 0.5 * (s[j * n + i] + s[i * n + j]);
+            s[j * n + i] = m;
+            s[i * n + j] = m;
         }
     }
 }
@@ -48,12 +61,16 @@ pub fn cholesky(a: &Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
     if a.iter().any(|v| !v.is_finite()) {
         return Err(LinalgError::NonFinite);
     }
-    Cholesky::new(a.clone()).ok_or(LinalgError::NotPositiveDefinite)
+    // Dimensions 1..=6 factor in fixed size (the same operations, bit for bit).
+    crate::filter::fixed::cholesky(a.clone()).ok_or(LinalgError::NotPositiveDefinite)
 }
 
 /// Inverse of a symmetric positive definite matrix through its Cholesky factor, symmetrized.
 pub fn spd_inverse(a: &Matrix) -> Result<Matrix, LinalgError> {
-    let mut inv = cholesky(a)?.inverse();
+    // `Cholesky::inverse`: the identity solved in place (fixed size for n <= 6).
+    let chol = cholesky(a)?;
+    let mut inv = Matrix::identity(a.nrows(), a.ncols());
+    crate::filter::fixed::chol_solve_matrix(&chol, &mut inv);
     symmetrize(&mut inv);
     Ok(inv)
 }
@@ -97,6 +114,12 @@ pub fn check_spd(a: &Matrix) -> Result<(), LinalgError> {
 
 /// Normalized estimation error squared `e^T P^{-1} e` through the Cholesky factor of `P`.
 pub fn mahalanobis_sq(e: &Vector, p: &Matrix) -> Result<f64, LinalgError> {
+    if p.nrows() == p.ncols() && p.iter().all(|v| v.is_finite()) {
+        // The checks of `cholesky` passed: the fixed-size path for n <= 6.
+        if let Some(r) = crate::filter::fixed::mahalanobis_sq_small(e, p) {
+            return r.ok_or(LinalgError::NotPositiveDefinite);
+        }
+    }
     let chol = cholesky(p)?;
     let y = chol
         .l()

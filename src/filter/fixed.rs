@@ -19,52 +19,52 @@ pub fn gemv(y: &mut Vector, a: &Matrix, x: &Vector) {
         x.len(),
         y.len()
     );
-    macro_rules! dispatch {
-        ($(($rr:literal, $cc:literal)),*) => {
-            match (r, c) {
-                $(($rr, $cc) => gemv_fixed::<$rr, $cc>(y.as_mut_slice(), a.as_slice(), x.as_slice()),)*
-                _ => y.gemv(1.0, a, x, 0.0),
-            }
-        };
+    // One index for the shape, so that the dispatch is a jump table, not 36 comparisons.
+    let shape = if (1..=6).contains(&r) && (1..=6).contains(&c) {
+        r * 8 + c
+    } else {
+        0
+    };
+    let (ys, as_, xs) = (y.as_mut_slice(), a.as_slice(), x.as_slice());
+    match shape {
+        9 => gemv_fixed::<1, 1>(ys, as_, xs),
+        10 => gemv_fixed::<1, 2>(ys, as_, xs),
+        11 => gemv_fixed::<1, 3>(ys, as_, xs),
+        12 => gemv_fixed::<1, 4>(ys, as_, xs),
+        13 => gemv_fixed::<1, 5>(ys, as_, xs),
+        14 => gemv_fixed::<1, 6>(ys, as_, xs),
+        17 => gemv_fixed::<2, 1>(ys, as_, xs),
+        18 => gemv_fixed::<2, 2>(ys, as_, xs),
+        19 => gemv_fixed::<2, 3>(ys, as_, xs),
+        20 => gemv_fixed::<2, 4>(ys, as_, xs),
+        21 => gemv_fixed::<2, 5>(ys, as_, xs),
+        22 => gemv_fixed::<2, 6>(ys, as_, xs),
+        25 => gemv_fixed::<3, 1>(ys, as_, xs),
+        26 => gemv_fixed::<3, 2>(ys, as_, xs),
+        27 => gemv_fixed::<3, 3>(ys, as_, xs),
+        28 => gemv_fixed::<3, 4>(ys, as_, xs),
+        29 => gemv_fixed::<3, 5>(ys, as_, xs),
+        30 => gemv_fixed::<3, 6>(ys, as_, xs),
+        33 => gemv_fixed::<4, 1>(ys, as_, xs),
+        34 => gemv_fixed::<4, 2>(ys, as_, xs),
+        35 => gemv_fixed::<4, 3>(ys, as_, xs),
+        36 => gemv_fixed::<4, 4>(ys, as_, xs),
+        37 => gemv_fixed::<4, 5>(ys, as_, xs),
+        38 => gemv_fixed::<4, 6>(ys, as_, xs),
+        41 => gemv_fixed::<5, 1>(ys, as_, xs),
+        42 => gemv_fixed::<5, 2>(ys, as_, xs),
+        43 => gemv_fixed::<5, 3>(ys, as_, xs),
+        44 => gemv_fixed::<5, 4>(ys, as_, xs),
+        45 => gemv_fixed::<5, 5>(ys, as_, xs),
+        46 => gemv_fixed::<5, 6>(ys, as_, xs),
+        49 => gemv_fixed::<6, 1>(ys, as_, xs),
+        50 => gemv_fixed::<6, 2>(ys, as_, xs),
+        51 => gemv_fixed::<6, 3>(ys, as_, xs),
+        52 => gemv_fixed::<6, 4>(ys, as_, xs),
+        53 => gemv_fixed::<6, 5>(ys, as_, xs),
+        54 => gemv_fixed::<6, 6>(ys, as_, xs),
+        _ => y.gemv(1.0, a, x, 0.0),
     }
-    dispatch!(
-        (1, 1),
-        (1, 2),
-        (1, 3),
-        (1, 4),
-        (1, 5),
-        (1, 6),
-        (2, 1),
-        (2, 2),
-        (2, 3),
-        (2, 4),
-        (2, 5),
-        (2, 6),
-        (3, 1),
-        (3, 2),
-        (3, 3),
-        (3, 4),
-        (3, 5),
-        (3, 6),
-        (4, 1),
-        (4, 2),
-        (4, 3),
-        (4, 4),
-        (4, 5),
-        (4, 6),
-        (5, 1),
-        (5, 2),
-        (5, 3),
-        (5, 4),
-        (5, 5),
-        (5, 6),
-        (6, 1),
-        (6, 2),
-        (6, 3),
-        (6, 4),
-        (6, 5),
-        (6, 6)
-    );
 }
 
 /// `y = a x` for an R x C column-major `a`: nalgebra's operation order (see the module).
@@ -96,6 +96,379 @@ fn gemv_fixed<const R: usize, const C: usize>(y: &mut [f64], a: &[f64], x: &[f64
 pub fn mul_in_place(a: &Matrix, x: &mut Vector, tmp: &mut Vector) {
     gemv(tmp, a, x);
     std::mem::swap(x, tmp);
+}
+
+/// Runs `$body` with `N` bound to the dimension `$n` when it is 1..=6, else `$fallback`.
+macro_rules! with_dim {
+    ($n:expr, $body:ident ( $($arg:expr),* ), $fallback:expr) => {
+        match $n {
+            1 => $body::<1>($($arg),*),
+            2 => $body::<2>($($arg),*),
+            3 => $body::<3>($($arg),*),
+            4 => $body::<4>($($arg),*),
+            5 => $body::<5>($($arg),*),
+            6 => $body::<6>($($arg),*),
+            _ => $fallback,
+        }
+    };
+}
+
+/// `b <- P^{-1} b` with the Cholesky factor of P, bit for bit as nalgebra's
+/// `Cholesky::solve_mut` on a vector: forward substitution with L (`b_i /= L_ii`, then
+/// `b_j = -b_i L_ji + b_j` below), then back substitution with L^T (`b_i = (b_i - dot) / L_ii`,
+/// the dot accumulated from +0 in row order, as nalgebra's dynamic `dotc` does below 8 terms).
+pub fn chol_solve(chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>, b: &mut Vector) {
+    let l = chol.l_dirty();
+    assert_eq!(l.nrows(), b.len(), "chol_solve: dimensions mismatch");
+    with_dim!(
+        b.len(),
+        chol_solve_fixed(l.as_slice(), b.as_mut_slice()),
+        chol.solve_mut(b)
+    )
+}
+
+#[inline(always)]
+fn chol_solve_fixed<const N: usize>(l: &[f64], b: &mut [f64]) {
+    let (l, b): (&[f64], &mut [f64; N]) = (&l[..N * N], b.try_into().expect("N rows"));
+    lower_solve_fixed::<N>(l, b);
+    for i in (0..N).rev() {
+        let mut dot = 0.0;
+        for j in i + 1..N {
+            dot += l[i * N + j] * b[j];
+        }
+        b[i] = (b[i] - dot) / l[i * N + i];
+    }
+}
+
+/// Forward substitution with the lower triangle of the column-major N x N `l` (nalgebra's
+/// `solve_lower_triangular_unchecked_mut` on a vector). Returns false at a zero diagonal
+/// (as the checked version does; then `b` is partly solved).
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+fn lower_solve_fixed<const N: usize>(l: &[f64], b: &mut [f64; N]) -> bool {
+    for i in 0..N {
+        let d = l[i * N + i];
+        if d == 0.0 {
+            return false;
+        }
+        let coeff = b[i] / d;
+        b[i] = coeff;
+        for j in i + 1..N {
+            b[j] = -coeff * l[i * N + j] + b[j];
+        }
+    }
+    true
+}
+
+/// nalgebra's `Cholesky::new` on a column-major N x N matrix, in place: for each column j,
+/// `col_j[j..] = -L_jk col_k[j..] + col_j[j..]` for k < j, then the square root of the diagonal
+/// (refused when zero, negative or NaN) and the division of the rest of the column by it. The
+/// strict upper triangle is left as it was (nalgebra's "dirty" factor).
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+fn cholesky_fixed<const N: usize>(m: &mut [f64]) -> bool {
+    let m = &mut m[..N * N];
+    for j in 0..N {
+        for k in 0..j {
+            let factor = -m[k * N + j];
+            for r in j..N {
+                m[j * N + r] = factor * m[k * N + r] + m[j * N + r];
+            }
+        }
+        let diag = m[j * N + j];
+        // `is_zero` then `try_sqrt` (`v >= 0`): NaN and negatives fail.
+        if diag == 0.0 || diag.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return false;
+        }
+        let denom = diag.sqrt();
+        m[j * N + j] = denom;
+        for r in j + 1..N {
+            m[j * N + r] /= denom;
+        }
+    }
+    true
+}
+
+/// `e^T P^{-1} e` as [`crate::linalg::mahalanobis_sq`] computes it for a finite square `p` of
+/// dimension 1..=6 (nalgebra's Cholesky factorization, the checked forward substitution with
+/// L and the squared norm summed from +0 in order), in fixed-size buffers. `None` for other
+/// dimensions (the caller takes the dynamic path); `Some(None)` when P is not positive
+/// definite.
+pub fn mahalanobis_sq_small(e: &Vector, p: &Matrix) -> Option<Option<f64>> {
+    let n = e.len();
+    if p.nrows() != n || p.ncols() != n {
+        return None;
+    }
+    with_dim!(n, mahalanobis_fixed(e.as_slice(), p.as_slice()), None)
+}
+
+#[inline(always)]
+fn mahalanobis_fixed<const N: usize>(e: &[f64], p: &[f64]) -> Option<Option<f64>> {
+    let mut m = [[0.0; N]; N];
+    for (c, col) in m.iter_mut().enumerate() {
+        col.copy_from_slice(&p[c * N..(c + 1) * N]);
+    }
+    let m = m.as_flattened_mut();
+    if !cholesky_fixed::<N>(m) {
+        return Some(None);
+    }
+    let mut w: [f64; N] = e.try_into().expect("N rows");
+    if !lower_solve_fixed::<N>(m, &mut w) {
+        return Some(None);
+    }
+    let mut s = 0.0;
+    for v in w {
+        s += v * v;
+    }
+    Some(Some(s))
+}
+
+/// An LU factorization (`A.clone().lu()`) ready to solve with: for dimensions 1..=6 the
+/// packed factors (unit lower L below the diagonal, U on and above it) and the row
+/// permutation as a gather, inline (no heap); nalgebra's own factorization otherwise.
+// The small case is inline on purpose: one per memoized Δ^pp, and no heap block each.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub enum PackedLu {
+    Fixed {
+        n: usize,
+        /// Column-major n x n (stride n): L strictly below the diagonal, U on and above.
+        lu: [f64; 36],
+        /// The permutation's swaps applied to the rows of b, as `out[i] = b[perm[i]]`.
+        perm: [u8; 6],
+    },
+    Dynamic(Box<nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>>),
+}
+
+impl PackedLu {
+    /// Takes the factorization `lu` (of a square matrix).
+    pub fn new(lu: nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>) -> Self {
+        let l = lu.l();
+        let n = l.nrows();
+        if !(1..=6).contains(&n) || l.ncols() != n {
+            return PackedLu::Dynamic(Box::new(lu));
+        }
+        let u = lu.u();
+        let mut packed = [0.0; 36];
+        for c in 0..n {
+            for r in 0..n {
+                packed[c * n + r] = if r > c { l[(r, c)] } else { u[(r, c)] };
+            }
+        }
+        // Applying the swaps to the indices moves them as it would move b's entries.
+        let mut idx = Vector::from_fn(n, |i, _| i as f64);
+        lu.p().permute_rows(&mut idx);
+        let mut perm = [0u8; 6];
+        for (p, &v) in perm.iter_mut().zip(idx.iter()) {
+            *p = v as u8;
+        }
+        PackedLu::Fixed {
+            n,
+            lu: packed,
+            perm,
+        }
+    }
+
+    /// `b <- A^{-1} b`, bit for bit as nalgebra's `LU::solve_mut` on a vector (row swaps,
+    /// unit forward substitution `b_j = -b_i L_ji + b_j`, back substitution `b_i /= U_ii`,
+    /// `b_j = -b_i U_ji + b_j` above). Returns false at a zero pivot, as `solve_mut` does.
+    pub fn solve(&self, b: &mut Vector) -> bool {
+        match self {
+            PackedLu::Fixed { n, lu, perm } => {
+                assert_eq!(b.len(), *n, "lu_solve: dimensions mismatch");
+                with_dim!(
+                    *n,
+                    lu_solve_fixed(lu, perm, b.as_mut_slice()),
+                    unreachable!("packed only for n <= 6")
+                )
+            }
+            PackedLu::Dynamic(lu) => lu.solve_mut(b),
+        }
+    }
+}
+
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+fn lu_solve_fixed<const N: usize>(lu: &[f64], perm: &[u8], b: &mut [f64]) -> bool {
+    let (lu, perm, b): (&[f64], &[u8], &mut [f64; N]) =
+        (&lu[..N * N], &perm[..N], b.try_into().expect("N rows"));
+    let src = *b;
+    for i in 0..N {
+        b[i] = src[usize::from(perm[i])];
+    }
+    // Unit lower triangle: nalgebra divides by the unit diagonal (exact) and never reads it.
+    for i in 0..N - 1 {
+        let coeff = b[i] / 1.0;
+        for j in i + 1..N {
+            b[j] = -coeff * lu[i * N + j] + b[j];
+        }
+    }
+    for i in (0..N).rev() {
+        let d = lu[i * N + i];
+        if d == 0.0 {
+            return false;
+        }
+        let coeff = b[i] / d;
+        b[i] = coeff;
+        for j in 0..i {
+            b[j] = -coeff * lu[i * N + j] + b[j];
+        }
+    }
+    true
+}
+
+/// `y = a b` for square n x n matrices, bit for bit as `y.gemm(1.0, a, b, 0.0)`: below 6
+/// nalgebra runs one gemv per column of b (as [`gemv`]); from 6 on it calls matrixmultiply,
+/// whose kernels on x86-64 with FMA (AVX2+FMA, AVX-512) accumulate each entry as a chain of
+/// fused multiply-adds over k from +0 and scale by alpha = 1 (exact). That chain is emulated
+/// at n = 6 when the CPU has those features; everything else takes nalgebra's own path.
+pub fn gemm(y: &mut Matrix, a: &Matrix, b: &Matrix) {
+    let n = a.nrows();
+    let square = |m: &Matrix| m.nrows() == n && m.ncols() == n;
+    if !(square(y) && square(a) && square(b)) {
+        y.gemm(1.0, a, b, 0.0);
+        return;
+    }
+    macro_rules! columns {
+        ($nn:literal) => {{
+            let (a, b) = (a.as_slice(), b.as_slice());
+            for (j, col) in y.as_mut_slice().chunks_exact_mut($nn).enumerate() {
+                gemv_fixed::<$nn, $nn>(col, a, &b[j * $nn..(j + 1) * $nn]);
+            }
+        }};
+    }
+    match n {
+        1 => columns!(1),
+        2 => columns!(2),
+        3 => columns!(3),
+        4 => columns!(4),
+        5 => columns!(5),
+        6 if matrixmultiply_uses_fma() => {
+            // SAFETY: the CPU has FMA (checked just above).
+            unsafe { gemm_fma_6(y.as_mut_slice(), a.as_slice(), b.as_slice()) }
+        }
+        _ => y.gemm(1.0, a, b, 0.0),
+    }
+}
+
+/// Whether matrixmultiply's f64 kernel on this CPU is one of its FMA kernels.
+fn matrixmultiply_uses_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// `y = a b`, 6 x 6 column-major: `y_ij = fma(a_i5, b_5j, ... fma(a_i0, b_0j, +0))`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "fma")]
+unsafe fn gemm_fma_6(y: &mut [f64], a: &[f64], b: &[f64]) {
+    const N: usize = 6;
+    let (y, a, b) = (&mut y[..N * N], &a[..N * N], &b[..N * N]);
+    for j in 0..N {
+        let mut acc = [0.0f64; N];
+        for k in 0..N {
+            let bkj = b[j * N + k];
+            for i in 0..N {
+                acc[i] = a[k * N + i].mul_add(bkj, acc[i]);
+            }
+        }
+        y[j * N..(j + 1) * N].copy_from_slice(&acc);
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+unsafe fn gemm_fma_6(_: &mut [f64], _: &[f64], _: &[f64]) {
+    unreachable!("only called when matrixmultiply_uses_fma")
+}
+
+/// `Cholesky::new(m)`, with the factorization in fixed size for dimensions 1..=6 (the same
+/// operations, see `cholesky_fixed`).
+pub fn cholesky(mut m: Matrix) -> Option<nalgebra::Cholesky<f64, nalgebra::Dyn>> {
+    let n = m.nrows();
+    if n != m.ncols() {
+        return nalgebra::Cholesky::new(m);
+    }
+    let ok = with_dim!(n, cholesky_fixed(m.as_mut_slice()), {
+        return nalgebra::Cholesky::new(m);
+    });
+    ok.then(|| nalgebra::Cholesky::pack_dirty(m))
+}
+
+/// `chol.solve_mut(b)` for a matrix b, column by column as [`chol_solve`] (nalgebra solves
+/// every column forward and then every column backward; the columns are independent).
+pub fn chol_solve_matrix(chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>, b: &mut Matrix) {
+    let l = chol.l_dirty();
+    let n = l.nrows();
+    assert_eq!(n, b.nrows(), "chol_solve_matrix: dimensions mismatch");
+    macro_rules! columns {
+        ($nn:literal) => {{
+            for col in b.as_mut_slice().chunks_exact_mut($nn) {
+                chol_solve_fixed::<$nn>(l.as_slice(), col);
+            }
+        }};
+    }
+    match n {
+        1 => columns!(1),
+        2 => columns!(2),
+        3 => columns!(3),
+        4 => columns!(4),
+        5 => columns!(5),
+        6 => columns!(6),
+        _ => chol.solve_mut(b),
+    }
+}
+
+/// nalgebra's dot product of two dynamic vectors (`a.dot(b)`), bit for bit: eight partial
+/// sums over blocks of eight, folded as (0+4), (1+5), (2+6), (3+7) into a sum from +0, then the
+/// remaining terms one by one.
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len(), "dot: dimensions mismatch");
+    let n = a.len();
+    let mut acc = [0.0f64; 8];
+    let mut i = 0;
+    while n - i >= 8 {
+        for (j, s) in acc.iter_mut().enumerate() {
+            *s += a[i + j] * b[i + j];
+        }
+        i += 8;
+    }
+    let mut res = 0.0;
+    res += acc[0] + acc[4];
+    res += acc[1] + acc[5];
+    res += acc[2] + acc[6];
+    res += acc[3] + acc[7];
+    for k in i..n {
+        res += a[k] * b[k];
+    }
+    res
+}
+
+/// `v.norm()` of a dynamic vector, bit for bit: the square root of `0 + v.dot(v)`.
+pub fn norm(v: &[f64]) -> f64 {
+    let mut res = 0.0;
+    res += dot(v, v);
+    res.sqrt()
+}
+
+/// `a += b` element by element, as nalgebra's `+=` (`a_i + b_i`).
+pub fn add_assign(a: &mut [f64], b: &[f64]) {
+    assert_eq!(a.len(), b.len(), "add_assign: dimensions mismatch");
+    for (x, y) in a.iter_mut().zip(b) {
+        *x += y;
+    }
+}
+
+/// `a -= b` element by element, as nalgebra's `-=` (`a_i - b_i`).
+pub fn sub_assign(a: &mut [f64], b: &[f64]) {
+    assert_eq!(a.len(), b.len(), "sub_assign: dimensions mismatch");
+    for (x, y) in a.iter_mut().zip(b) {
+        *x -= y;
+    }
 }
 
 #[cfg(test)]
@@ -135,6 +508,102 @@ mod tests {
             let expr = &a * &x;
             prop_assert_eq!(bits(&fast), bits(&dynamic));
             prop_assert_eq!(bits(&fast), bits(&expr));
+        }
+    }
+
+    fn spd(n: usize, vals: &[f64]) -> Matrix {
+        let g = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j) % vals.len()]);
+        &g * g.transpose() + Matrix::identity(n, n) * vals[0].abs().max(1e-3)
+    }
+
+    proptest! {
+        /// The fixed-size Cholesky solve, Mahalanobis distance and LU solve equal nalgebra's
+        /// dynamic ones bit for bit (dimension 7 takes the dynamic fallback).
+        #[test]
+        fn fixed_solves_are_bit_identical(
+            n in 1usize..=7,
+            vals in proptest::collection::vec(-10.0f64..10.0, 56),
+            scale in -30i32..30,
+        ) {
+            let p = spd(n, &vals) * 10f64.powi(scale);
+            let b = Vector::from_fn(n, |i, _| vals[(3 * i + 5) % 56] * 10f64.powi(-scale / 2));
+            let chol = nalgebra::Cholesky::new(p.clone()).unwrap();
+            let mut fast = b.clone();
+            chol_solve(&chol, &mut fast);
+            let mut dynamic = b.clone();
+            chol.solve_mut(&mut dynamic);
+            prop_assert_eq!(bits(&fast), bits(&dynamic));
+
+            let m = crate::linalg::mahalanobis_sq(&b, &p).unwrap();
+            match mahalanobis_sq_small(&b, &p) {
+                Some(v) => prop_assert_eq!(v.unwrap().to_bits(), m.to_bits()),
+                None => prop_assert_eq!(n, 7),
+            }
+            // Indefinite: refused by both.
+            let bad = &p - Matrix::identity(n, n) * (2.0 * p.amax());
+            if let Some(v) = mahalanobis_sq_small(&b, &bad) {
+                prop_assert!(v.is_none());
+                prop_assert!(crate::linalg::mahalanobis_sq(&b, &bad).is_err());
+            }
+
+            let a = Matrix::from_fn(n, n, |i, j| vals[(5 * i + 3 * j + 1) % 56]);
+            let lu = a.clone().lu();
+            let packed = PackedLu::new(lu.clone());
+            let mut fast = b.clone();
+            let ok_fast = packed.solve(&mut fast);
+            let mut dynamic = b.clone();
+            let ok_dyn = lu.solve_mut(&mut dynamic);
+            prop_assert_eq!(ok_fast, ok_dyn);
+            if ok_dyn {
+                prop_assert_eq!(bits(&fast), bits(&dynamic));
+            }
+        }
+    }
+
+    proptest! {
+        /// The fixed-size gemm, Cholesky factorization and matrix solve equal nalgebra's.
+        #[test]
+        fn fixed_gemm_and_cholesky_are_bit_identical(
+            n in 1usize..=7,
+            vals in proptest::collection::vec(-10.0f64..10.0, 56),
+            scale in -30i32..30,
+        ) {
+            let a = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j) % 56] * 10f64.powi(scale));
+            let b = Matrix::from_fn(n, n, |i, j| vals[(3 * i + 5 * j + 11) % 56]);
+            let mut fast = Matrix::zeros(n, n);
+            gemm(&mut fast, &a, &b);
+            let mut dynamic = Matrix::zeros(n, n);
+            dynamic.gemm(1.0, &a, &b, 0.0);
+            let mbits = |m: &Matrix| m.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(mbits(&fast), mbits(&dynamic));
+            prop_assert_eq!(mbits(&fast), mbits(&(&a * &b)));
+
+            let p = spd(n, &vals) * 10f64.powi(scale);
+            let fast = cholesky(p.clone()).unwrap();
+            let dynamic = nalgebra::Cholesky::new(p.clone()).unwrap();
+            prop_assert_eq!(mbits(fast.l_dirty()), mbits(dynamic.l_dirty()));
+            let mut x = b.clone();
+            chol_solve_matrix(&fast, &mut x);
+            let mut y = b.clone();
+            dynamic.solve_mut(&mut y);
+            prop_assert_eq!(mbits(&x), mbits(&y));
+            let bad = &p - Matrix::identity(n, n) * (2.0 * p.amax());
+            prop_assert!(cholesky(bad.clone()).is_none());
+            prop_assert!(nalgebra::Cholesky::new(bad).is_none());
+        }
+    }
+
+    proptest! {
+        /// dot and norm equal nalgebra's on dynamic vectors of every length up to 20.
+        #[test]
+        fn dot_and_norm_are_bit_identical(
+            n in 0usize..=20,
+            vals in proptest::collection::vec(-1e3f64..1e3, 40),
+        ) {
+            let a = Vector::from_fn(n, |i, _| vals[i]);
+            let b = Vector::from_fn(n, |i, _| vals[20 + i] * if i % 3 == 0 { -0.0 } else { 1.0 });
+            prop_assert_eq!(dot(a.as_slice(), b.as_slice()).to_bits(), a.dot(&b).to_bits());
+            prop_assert_eq!(norm(a.as_slice()).to_bits(), a.norm().to_bits());
         }
     }
 }

@@ -15,9 +15,15 @@ pub fn predict(model: &LinearTransition, est: &Gaussian) -> Gaussian {
 
 /// The covariance half of [`predict`]: `F P F^T + Q`, symmetrized.
 pub fn predict_cov(model: &LinearTransition, cov: &Matrix) -> Matrix {
-    let mut cov = model.f() * cov * model.f().transpose() + model.q();
-    symmetrize(&mut cov);
-    cov
+    // The products in the exact fixed-size gemm (`F * cov`, then `* F^T`), then `+ Q`.
+    let n = cov.nrows();
+    let mut fp = Matrix::zeros(n, cov.ncols());
+    super::fixed::gemm(&mut fp, model.f(), cov);
+    let mut out = Matrix::zeros(n, n);
+    super::fixed::gemm(&mut out, &fp, &model.f().transpose());
+    super::fixed::add_assign(out.as_mut_slice(), model.q().as_slice());
+    symmetrize(&mut out);
+    out
 }
 
 /// Innovation nu = z - h(x), its covariance S = H P H^T + R and the Jacobian H used.

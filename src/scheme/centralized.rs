@@ -2,7 +2,7 @@
 //! bound every scheme is measured against), or each with probability `rate` (seed 004
 //! Section V: a measurement not sent is lost for good).
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
-use crate::filter::{kf, Gaussian};
+use crate::filter::{fixed, kf, Gaussian};
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
 use nalgebra::{Cholesky, Dyn};
@@ -76,6 +76,16 @@ struct DirectWork {
     chol: Option<Matrix>,
 }
 
+/// `m.fill_with_identity()` on the slice of a square matrix.
+fn identity(m: &mut Matrix) {
+    let n = m.nrows();
+    let s = m.as_mut_slice();
+    s.fill(0.0);
+    for i in 0..n {
+        s[i * n + i] = 1.0;
+    }
+}
+
 /// `cholesky(a)` of [`crate::linalg`] computed in `buf` (same checks, same factorization).
 fn cholesky_in(
     a: &Matrix,
@@ -83,15 +93,15 @@ fn cholesky_in(
     what: &'static str,
 ) -> Result<Cholesky<f64, Dyn>, SchemeError> {
     let err = |source| SchemeError::Filter(crate::filter::FilterError::Matrix { what, source });
-    if a.iter().any(|v| !v.is_finite()) {
+    if a.as_slice().iter().any(|v| !v.is_finite()) {
         return Err(err(crate::linalg::LinalgError::NonFinite));
     }
     let mut m = match buf.take() {
         Some(m) if m.shape() == a.shape() => m,
         _ => Matrix::zeros(a.nrows(), a.ncols()),
     };
-    m.copy_from(a);
-    Cholesky::new(m).ok_or(err(crate::linalg::LinalgError::NotPositiveDefinite))
+    m.as_mut_slice().copy_from_slice(a.as_slice());
+    crate::filter::fixed::cholesky(m).ok_or(err(crate::linalg::LinalgError::NotPositiveDefinite))
 }
 
 impl CentralizedKf {
@@ -124,7 +134,11 @@ impl CentralizedKf {
     /// factorizations and solves in the same order, hence the same numbers), without
     /// allocating. Seed 004 Section II: the centralized KF fuses what arrived by a sum of
     /// H_i^T R_i^{-1} H_i and H_i^T R_i^{-1} z_i (eq. (8)-(9) for a subset).
-    fn direct_linear_step(&mut self, inbox: &[Received]) -> Result<(), SchemeError> {
+    fn direct_linear_step<'a>(
+        &mut self,
+        len: usize,
+        arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
+    ) -> Result<(), SchemeError> {
         let t = &self.system.transition;
         let n = self.est.dim();
         let w = self.work.get_or_insert_with(|| {
@@ -138,33 +152,33 @@ impl CentralizedKf {
         });
         // kf::predict: F x, and F P F^T + Q symmetrized.
         crate::filter::fixed::gemv(&mut self.pred_mean, t.f(), &self.est.mean);
-        w.fp.gemm(1.0, t.f(), &self.est.cov, 0.0);
-        w.pred_cov.gemm(1.0, &w.fp, &w.ft, 0.0);
-        w.pred_cov += t.q();
+        crate::filter::fixed::gemm(&mut w.fp, t.f(), &self.est.cov);
+        crate::filter::fixed::gemm(&mut w.pred_cov, &w.fp, &w.ft);
+        fixed::add_assign(w.pred_cov.as_mut_slice(), t.q().as_slice());
         symmetrize(&mut w.pred_cov);
         // Information::from_gaussian: y = P^{-1} x, Y = P^{-1} symmetrized.
         let chol = cholesky_in(&w.pred_cov, &mut w.chol, "covariance")?;
-        chol.solve_mut(&mut self.pred_mean);
-        w.info.fill_with_identity();
-        chol.solve_mut(&mut w.info);
+        crate::filter::fixed::chol_solve(&chol, &mut self.pred_mean);
+        identity(&mut w.info);
+        crate::filter::fixed::chol_solve_matrix(&chol, &mut w.info);
         w.chol = Some(chol.unpack_dirty());
         symmetrize(&mut w.info);
         // add_measurement of each arrived measurement, in sensor order.
-        for (i, msg) in inbox.iter().enumerate() {
-            if let Some(z) = measurement(i, msg)? {
+        for i in 0..len {
+            if let Some(z) = arrived(i)? {
                 let sensor = self.system.sensors[i].as_linear().expect("checked linear");
                 kf::check_measurement(sensor, z)?;
-                w.info += sensor.information();
+                fixed::add_assign(w.info.as_mut_slice(), sensor.information().as_slice());
                 crate::filter::fixed::gemv(&mut self.tmp, sensor.ht_rinv(), z);
-                self.pred_mean += &self.tmp;
+                fixed::add_assign(self.pred_mean.as_mut_slice(), self.tmp.as_slice());
             }
         }
         // Information::to_gaussian.
         let chol = cholesky_in(&w.info, &mut w.chol, "information matrix")?;
-        self.est.mean.copy_from(&self.pred_mean);
-        chol.solve_mut(&mut self.est.mean);
-        self.est.cov.fill_with_identity();
-        chol.solve_mut(&mut self.est.cov);
+        self.est.mean.copy_from_slice(self.pred_mean.as_slice());
+        crate::filter::fixed::chol_solve(&chol, &mut self.est.mean);
+        identity(&mut self.est.cov);
+        crate::filter::fixed::chol_solve_matrix(&chol, &mut self.est.cov);
         w.chol = Some(chol.unpack_dirty());
         symmetrize(&mut self.est.cov);
         Ok(())
@@ -174,7 +188,7 @@ impl CentralizedKf {
     fn direct_step(&mut self, inbox: &[Received]) -> Result<(), SchemeError> {
         let all_linear = self.system.sensors.iter().all(|s| s.as_linear().is_some());
         if all_linear {
-            self.direct_linear_step(inbox)?;
+            self.direct_linear_step(inbox.len(), |i| measurement(i, &inbox[i]))?;
         } else {
             let mut e = kf::predict(&self.system.transition, &self.est);
             for (i, msg) in inbox.iter().enumerate() {
@@ -187,15 +201,31 @@ impl CentralizedKf {
         Ok(())
     }
 
+    /// [`FusionCenter::step`] for linear sensors with the measurements that arrived
+    /// (`arrived[i]`, in sensor order) instead of an inbox: the same operations.
+    fn step_linear(&mut self, arrived: &[Option<&Vector>]) -> Result<(), SchemeError> {
+        let scheduled = self.scheduled_step(arrived.len(), |i| Ok(arrived[i]))?;
+        self.steps_done += 1;
+        if scheduled {
+            return Ok(());
+        }
+        self.schedule = None;
+        self.direct_linear_step(arrived.len(), |i| Ok(arrived[i]))
+    }
+
     /// The scheduled step: the mean half of [`CentralizedKf::direct_step`] with the step's
     /// precomputed Cholesky factors, the covariance copied. `Ok(false)` when the step is not
     /// on the schedule (a measurement missing, or the schedule could not be computed).
-    fn scheduled_step(&mut self, inbox: &[Received]) -> Result<bool, SchemeError> {
+    fn scheduled_step<'a>(
+        &mut self,
+        len: usize,
+        arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
+    ) -> Result<bool, SchemeError> {
         let Some(schedule) = &self.schedule else {
             return Ok(false);
         };
-        let all_arrived = inbox.len() == self.system.n_sensors()
-            && inbox.iter().all(|m| matches!(m, Received::Measurement(_)));
+        let all_arrived =
+            len == self.system.n_sensors() && (0..len).all(|i| matches!(arrived(i), Ok(Some(_))));
         if !all_arrived {
             return Ok(false);
         }
@@ -208,10 +238,10 @@ impl CentralizedKf {
             self.system.transition.f(),
             &self.est.mean,
         );
-        step.pred_chol.solve_mut(&mut self.pred_mean);
+        crate::filter::fixed::chol_solve(&step.pred_chol, &mut self.pred_mean);
         // ... plus H_i^T R_i^{-1} z_i of each sensor, in sensor order (add_measurement) ...
-        for (i, msg) in inbox.iter().enumerate() {
-            let Received::Measurement(z) = msg else {
+        for i in 0..len {
+            let Ok(Some(z)) = arrived(i) else {
                 unreachable!("checked above")
             };
             let sensor = self.system.sensors[i].as_linear().expect("checked linear");
@@ -221,7 +251,7 @@ impl CentralizedKf {
         }
         // ... and back to covariance form (to_gaussian).
         self.est.mean.copy_from(&self.pred_mean);
-        step.fused_chol.solve_mut(&mut self.est.mean);
+        crate::filter::fixed::chol_solve(&step.fused_chol, &mut self.est.mean);
         self.est.cov.copy_from(&step.cov);
         Ok(true)
     }
@@ -229,7 +259,7 @@ impl CentralizedKf {
 
 impl FusionCenter for CentralizedKf {
     fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
-        let scheduled = self.scheduled_step(inbox)?;
+        let scheduled = self.scheduled_step(inbox.len(), |i| measurement(i, &inbox[i]))?;
         self.steps_done += 1;
         if scheduled {
             return Ok(());
@@ -369,6 +399,71 @@ impl CentralizedScheme {
 }
 
 impl Scheme for CentralizedScheme {
+    /// The generic loop's [`ForwardingSensor`] coins and [`CentralizedKf`] steps without the
+    /// messages, boxes and inbox: linear sensors and well-formed data only.
+    fn run_trial_fast(
+        &self,
+        measurements: &[Vec<Vector>],
+        steps: usize,
+        rng: &mut dyn RngCore,
+        _cache: &mut super::TrialCache,
+        sink: &mut dyn super::StepSink,
+    ) -> Option<Result<(), super::FastTrialError>> {
+        let sys = &self.system;
+        let ns = sys.n_sensors();
+        let covered = measurements.len() >= steps
+            && measurements[..steps].iter().all(|zs| {
+                zs.len() == ns
+                    && zs.iter().zip(&sys.sensors).all(|(z, s)| {
+                        s.as_linear().is_some()
+                            && z.len() == s.meas_dim()
+                            && z.iter().all(|v| v.is_finite())
+                    })
+            });
+        if !covered {
+            return None;
+        }
+        let mut center = match &self.schedule {
+            Some(s) => CentralizedKf::with_schedule(sys.clone(), s.clone()),
+            None => CentralizedKf::new(sys.clone()),
+        };
+        // What network::deliver counts for each sensor's message.
+        let cost: Vec<(u64, u64)> = sys
+            .sensors
+            .iter()
+            .map(|s| {
+                let m = Message::Measurement(Vector::zeros(s.meas_dim()));
+                (m.bits(), m.frame_bits())
+            })
+            .collect();
+        let mut arrived: Vec<Option<&Vector>> = Vec::with_capacity(ns);
+        let mut run = || -> Result<(), super::FastTrialError> {
+            for (k, zs) in (1..=steps).zip(measurements) {
+                arrived.clear();
+                let mut traffic = crate::network::Traffic::default();
+                for (z, (bits, frame_bits)) in zs.iter().zip(&cost) {
+                    // ForwardingSensor::step: always draw, send if u < rate.
+                    let u: f64 = rng.random();
+                    if u < self.rate {
+                        arrived.push(Some(z));
+                        traffic.messages += 1;
+                        traffic.bits += bits;
+                        traffic.frame_bits += frame_bits;
+                    } else {
+                        arrived.push(None);
+                    }
+                }
+                center
+                    .step_linear(&arrived)
+                    .map_err(|source| super::FastTrialError::Scheme { k, source })?;
+                sink.step(k, center.estimate(), traffic)
+                    .map_err(|source| super::FastTrialError::Sink { k, source })?;
+            }
+            Ok(())
+        };
+        Some(run())
+    }
+
     fn build(&self) -> Result<SchemeInstance, SchemeError> {
         Ok(SchemeInstance {
             sensors: (0..self.system.n_sensors())

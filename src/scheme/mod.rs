@@ -182,6 +182,82 @@ pub trait Scheme: Send + Sync + Debug {
     fn footprint(&self) -> Option<Footprint> {
         None
     }
+    /// Runs one whole trial on `measurements` (`measurements[k - 1][i]` = z_k^i, k = 1..=steps)
+    /// without the generic per-step loop, reporting each step's fused estimate and traffic to
+    /// `sink`, with the same coin draws from `rng` and the same numbers as that loop gives.
+    /// `cache` lives for one trial and is shared by its variants (work that depends on the
+    /// data but not on the variant is done once). `None`: no fast path for this scheme or this
+    /// data (nothing has been drawn from `rng`; the generic loop runs).
+    fn run_trial_fast(
+        &self,
+        measurements: &[Vec<Vector>],
+        steps: usize,
+        rng: &mut dyn RngCore,
+        cache: &mut TrialCache,
+        sink: &mut dyn StepSink,
+    ) -> Option<Result<(), FastTrialError>> {
+        let _ = (measurements, steps, rng, cache, sink);
+        None
+    }
+}
+
+/// Receives the steps of a [`Scheme::run_trial_fast`] trial.
+pub trait StepSink {
+    /// The fused estimate after step `k` (1-based) and the traffic of the step.
+    fn step(
+        &mut self,
+        k: usize,
+        estimate: &Gaussian,
+        traffic: crate::network::Traffic,
+    ) -> Result<(), LinalgError>;
+}
+
+/// Why a fast trial stopped: the scheme failed at step `k`, or the sink refused step `k`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FastTrialError {
+    Scheme { k: usize, source: SchemeError },
+    Sink { k: usize, source: LinalgError },
+}
+
+/// Per-trial memory shared by the variants of one trial, by key (see
+/// [`Scheme::run_trial_fast`]). A few entries at most: a linear search.
+#[derive(Default)]
+pub struct TrialCache {
+    entries: Vec<(CacheKey, Box<dyn std::any::Any + Send>)>,
+}
+
+/// Key of a [`TrialCache`] entry: which shared object (an address) and which data.
+pub type CacheKey = (usize, usize);
+
+impl TrialCache {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The entry of `key`, made by `make` if absent (or of another type).
+    pub fn get_or_insert_with<T: std::any::Any + Send>(
+        &mut self,
+        key: CacheKey,
+        make: impl FnOnce() -> T,
+    ) -> &mut T {
+        let pos = self
+            .entries
+            .iter()
+            .position(|(k, v)| *k == key && v.is::<T>());
+        let pos = pos.unwrap_or_else(|| {
+            self.entries.push((key, Box::new(make())));
+            self.entries.len() - 1
+        });
+        self.entries[pos]
+            .1
+            .downcast_mut::<T>()
+            .expect("checked type")
+    }
+
+    /// Forgets every entry (a new trial).
+    pub fn clear(&mut self) {
+        self.entries.clear();
+    }
 }
 
 /// Rough resources of one scheme instance.

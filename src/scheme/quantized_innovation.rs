@@ -271,7 +271,15 @@ impl QuantizedFusionCenter {
                         ((x[indices[0]] - p[0]).hypot(x[indices[1]] - p[1]), i)
                     })
                     .collect();
-                by_distance.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                // The `count` nearest in (distance, index) order: a total order, so selecting
+                // them and sorting only those gives the sort's first `count` exactly.
+                let order =
+                    |a: &(f64, usize), b: &(f64, usize)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+                if count < by_distance.len() {
+                    by_distance.select_nth_unstable_by(count, order);
+                    by_distance.truncate(count);
+                }
+                by_distance.sort_by(order);
                 by_distance
                     .into_iter()
                     .take(count)
@@ -283,7 +291,7 @@ impl QuantizedFusionCenter {
         for i in chosen {
             let s = &self.system.sensors[i];
             let h = s.jacobian(x);
-            let s2 = (&h * &self.prediction.cov * h.transpose())[(0, 0)] + s.noise_cov()[(0, 0)];
+            let s2 = h_p_ht(&h, &self.prediction.cov) + s.noise_cov()[(0, 0)];
             self.active.push(Activated {
                 index: i,
                 y_hat: s.predict(x)[0],
@@ -449,6 +457,31 @@ impl Scheme for QuantizedInnovationScheme {
             center: Box::new(center),
         })
     }
+}
+
+/// `(h * p * h^T)[(0, 0)]` for a 1 x n row h, without the temporaries, in nalgebra's order:
+/// `h p` column by column as gemv (`h_0 p_0j`, then `h_k p_kj + acc`), then `(h p) h^T` the
+/// same way (`(hp)_0 h_0`, then `(hp)_k h_k + acc`). Other shapes take the matrix products.
+#[allow(clippy::assign_op_pattern)]
+fn h_p_ht(h: &crate::linalg::Matrix, p: &crate::linalg::Matrix) -> f64 {
+    let n = h.ncols();
+    if h.nrows() != 1 || n == 0 || p.nrows() != n || p.ncols() != n {
+        return (h * p * h.transpose())[(0, 0)];
+    }
+    let (h, p) = (h.as_slice(), p.as_slice());
+    let hp = |j: usize| {
+        let col = &p[j * n..(j + 1) * n];
+        let mut acc = h[0] * col[0];
+        for (hk, ck) in h.iter().zip(col).skip(1) {
+            acc = hk * ck + acc;
+        }
+        acc
+    };
+    let mut acc = hp(0) * h[0];
+    for (k, hk) in h.iter().enumerate().skip(1) {
+        acc = hp(k) * hk + acc;
+    }
+    acc
 }
 
 #[cfg(test)]

@@ -474,6 +474,10 @@ fn nees_buffered(
     if p.iter().any(|v| !v.is_finite()) {
         return Err(LinalgError::NonFinite);
     }
+    // Dimensions 1..=6: the same factorization, solve and sum in fixed-size buffers.
+    if let Some(r) = crate::filter::fixed::mahalanobis_sq_small(e, p) {
+        return r.ok_or(LinalgError::NotPositiveDefinite);
+    }
     let mut m = match buf.take() {
         Some(m) if m.shape() == p.shape() => m,
         _ => crate::linalg::Matrix::zeros(p.nrows(), p.ncols()),

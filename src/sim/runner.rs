@@ -226,6 +226,10 @@ pub fn run_trial_on(
 struct Scratch {
     inbox: Vec<crate::link::Received>,
     transmissions: Vec<crate::link::Transmission>,
+    /// Work shared by the variants of one trial (fast paths), and which trial and data it
+    /// belongs to.
+    cache: crate::scheme::TrialCache,
+    cache_of: Option<(usize, *const Vec<Vector>)>,
 }
 
 impl Scratch {
@@ -233,6 +237,8 @@ impl Scratch {
         Self {
             inbox: Vec::with_capacity(n_sensors),
             transmissions: Vec::with_capacity(n_sensors),
+            cache: crate::scheme::TrialCache::new(),
+            cache_of: None,
         }
     }
 }
@@ -250,6 +256,8 @@ fn run_variant(
     let Scratch {
         inbox,
         transmissions,
+        cache,
+        cache_of,
     } = scratch;
     let variant = &exp.variants[v];
     let label = &exp.curves[variant.curve].label;
@@ -261,6 +269,58 @@ fn run_variant(
         source,
     };
     let mut rng = trial_rng(exp.seed, trial as u64, 1 + v as u64);
+    // The fast path of the scheme, if it has one for this data: the same numbers.
+    let of = Some((trial, data.measurements.as_ptr()));
+    if *cache_of != of {
+        cache.clear();
+        *cache_of = of;
+    }
+    let mut obs = sums.trial(&exp.groups, exp.steady_from);
+    {
+        struct Sink<'a, 'b> {
+            obs: &'b mut super::metrics::TrialObserver<'a>,
+            truth: &'b [Vector],
+        }
+        impl crate::scheme::StepSink for Sink<'_, '_> {
+            fn step(
+                &mut self,
+                k: usize,
+                estimate: &crate::filter::Gaussian,
+                traffic: network::Traffic,
+            ) -> Result<(), crate::linalg::LinalgError> {
+                self.obs.record(k, &self.truth[k - 1], estimate, traffic)?;
+                self.obs.record_ess(k, None);
+                Ok(())
+            }
+        }
+        let mut sink = Sink {
+            obs: &mut obs,
+            truth: &data.truth,
+        };
+        if let Some(r) =
+            variant
+                .scheme
+                .run_trial_fast(&data.measurements, exp.steps, &mut rng, cache, &mut sink)
+        {
+            return match r {
+                Ok(()) => {
+                    obs.finish();
+                    Ok(())
+                }
+                Err(crate::scheme::FastTrialError::Scheme { k, source }) => {
+                    Err(scheme_err(k, source))
+                }
+                Err(crate::scheme::FastTrialError::Sink { k, source }) => {
+                    Err(RunError::Covariance {
+                        label: label.clone(),
+                        trial,
+                        k,
+                        source,
+                    })
+                }
+            };
+        }
+    }
     // The fusion center's own stream (particle filters) is independent of the sensors'.
     let center_seed = center_seed(exp.seed, trial as u64, 1 + v as u64);
     let mut inst = variant
@@ -268,7 +328,6 @@ fn run_variant(
         .build_with_seed(center_seed)
         .map_err(|e| scheme_err(0, e))?;
     let schedule = variant.scheme.schedule();
-    let mut obs = sums.trial(&exp.groups, exp.steady_from);
     // What the fusion center tells the sensors before the first measurement.
     let mut feedback = inst.center.feedback();
     for k in 1..=exp.steps {

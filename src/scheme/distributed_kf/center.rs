@@ -83,7 +83,7 @@ type KeyHash = BuildHasherDefault<KeyHasher>;
 
 /// Bytes all [`CovarianceMemo`]s of the process may keep together (kept entries are ~700
 /// bytes for a 6-D state), and keys seen once one memo may remember.
-const MEMO_BUDGET: usize = 32 << 20;
+const MEMO_BUDGET: usize = 8 << 20;
 const MEMO_SEEN: usize = 1 << 13;
 static MEMO_BYTES: AtomicUsize = AtomicUsize::new(0);
 
@@ -102,6 +102,32 @@ impl Drop for Memo {
 impl CovarianceMemo {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// The memo of `plan` and `fusion`, shared with every other caller that asked for the same
+    /// plan (same `Arc`) and an equal fusion rule while that memo is alive. The fused
+    /// covariance depends on the plan step, the silence set, the inexact count and the rule
+    /// only, so the variants of a sweep (Algorithm 1's rates and alphas, Algorithm 2's alphas
+    /// at one B) see each other's entries instead of each computing its own.
+    pub fn shared(plan: &Arc<GlobalizedPlan>, fusion: &Fusion) -> Arc<Self> {
+        type Entry = (
+            std::sync::Weak<GlobalizedPlan>,
+            Fusion,
+            std::sync::Weak<CovarianceMemo>,
+        );
+        static CACHE: std::sync::Mutex<Vec<Entry>> = std::sync::Mutex::new(Vec::new());
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        cache.retain(|(p, _, m)| p.strong_count() > 0 && m.strong_count() > 0);
+        for (p, f, m) in cache.iter() {
+            if f == fusion && p.upgrade().is_some_and(|p| Arc::ptr_eq(&p, plan)) {
+                if let Some(m) = m.upgrade() {
+                    return m;
+                }
+            }
+        }
+        let memo = Arc::new(Self::new());
+        cache.push((Arc::downgrade(plan), fusion.clone(), Arc::downgrade(&memo)));
+        memo
     }
 }
 
@@ -126,7 +152,7 @@ pub struct DkfCenter {
     memo: Arc<CovarianceMemo>,
     /// Per sensor: the first sensor whose information matrix H^T R^{-1} H is bitwise the
     /// same (identical sensors remove identical information, see [`canonical_silence`]).
-    class: Vec<usize>,
+    pub(super) class: Vec<usize>,
     /// Work space.
     info_vec: Vector,
     tmp: Vector,
@@ -192,7 +218,7 @@ impl DkfCenter {
 
     /// The fused covariance of plan step `p` with the silent sensors `silent` (bit i = sensor
     /// i) of which `inexact` are extrapolated: memoized when there are at most 64 sensors.
-    fn fused_covariance(
+    pub(super) fn fused_covariance(
         &self,
         p: usize,
         silent: u64,
@@ -227,7 +253,7 @@ impl DkfCenter {
     /// (10): start from N (C̄^e)^{-1}, remove the information of each silent sensor (in sensor
     /// order), invert; Algorithm 2 adds (N - m - l)^2 C (C̄^p)^{-1} B (C̄^p)^{-1} C^T. The same
     /// operations in the same order as the direct per-step form.
-    fn compute_fused_covariance(
+    pub(super) fn compute_fused_covariance(
         &self,
         p: usize,
         is_silent: impl Fn(usize) -> bool,
@@ -249,12 +275,21 @@ impl DkfCenter {
             what: "fused information matrix (10)",
             source,
         })?;
-        let mut cov = chol.inverse();
+        // `chol.inverse()` and the products of the inflation, in the fixed-size kernels (the
+        // same operations as nalgebra's, bit for bit).
+        let n = info.nrows();
+        let mut cov = Matrix::identity(n, n);
+        crate::filter::fixed::chol_solve_matrix(&chol, &mut cov);
         if let Fusion::Bounded { b } = &self.fusion {
             if inexact > 0 {
-                let g = &cov * &m.cbar_p_inv;
+                let product = |a: &Matrix, b: &Matrix| {
+                    let mut y = Matrix::zeros(a.nrows(), b.ncols());
+                    crate::filter::fixed::gemm(&mut y, a, b);
+                    y
+                };
+                let g = product(&cov, &m.cbar_p_inv);
                 let factor = (inexact * inexact) as f64;
-                cov += (&g * b * g.transpose()) * factor;
+                cov += product(&product(&g, b), &g.transpose()) * factor;
             }
         }
         symmetrize(&mut cov);
@@ -339,7 +374,7 @@ impl FusionCenter for DkfCenter {
                                 let pd = self.held_delta[i].as_ref().expect("checked invertible");
                                 debiased_extrapolation_into(
                                     &m.delta_p[i],
-                                    &pd.lu,
+                                    pd,
                                     &self.held[i],
                                     &mut self.tmp2,
                                     &mut self.contribution,
@@ -371,7 +406,7 @@ impl FusionCenter for DkfCenter {
             )?)
         };
         self.est.mean.copy_from(&self.info_vec);
-        fused.chol.solve_mut(&mut self.est.mean);
+        crate::filter::fixed::chol_solve(&fused.chol, &mut self.est.mean);
         self.est.cov.copy_from(&fused.cov);
         Ok(())
     }
@@ -386,7 +421,7 @@ impl FusionCenter for DkfCenter {
 /// class after the previous choice. (10) subtracts H_i^T R_i^{-1} H_i in sensor order, so two
 /// sets with the same sequence of (bitwise equal) matrices give the same covariance bit for
 /// bit; seed 004's Fig. 1 has its sensors in identical pairs, and the memo keys halve.
-fn canonical_silence(class: &[usize], silent: u64) -> u64 {
+pub(super) fn canonical_silence(class: &[usize], silent: u64) -> u64 {
     let mut out = 0u64;
     let mut next = 0usize;
     for (i, &c) in class.iter().enumerate() {

@@ -7,6 +7,7 @@
 //! they share only the data-independent [`GlobalizedPlan`], which each side could compute on
 //! its own.
 pub mod center;
+mod fast;
 pub mod params;
 pub mod plan;
 pub mod sensor;
@@ -27,8 +28,11 @@ pub struct DistributedKfScheme {
     plan: Arc<GlobalizedPlan>,
     trigger: Trigger,
     fusion: Fusion,
-    /// Fused covariances by (step, silent set, inexact count), shared by the trials' centers.
+    /// Fused covariances by (step, silent set, inexact count), shared by the trials' centers
+    /// and by the other variants of the same plan and fusion rule.
     memo: Arc<CovarianceMemo>,
+    /// A fresh center (sharing `memo`), for the fast trial's fused covariances.
+    proto: Arc<DkfCenter>,
 }
 
 impl DistributedKfScheme {
@@ -58,12 +62,21 @@ impl DistributedKfScheme {
             }
             _ => Fusion::OmittedEstimates,
         };
+        let memo = CovarianceMemo::shared(&plan, &fusion);
+        let proto = Arc::new(DkfCenter::with_memo(
+            plan.clone(),
+            system.sensors.clone(),
+            system.prior.clone(),
+            fusion.clone(),
+            memo.clone(),
+        ));
         Ok(Self {
             system,
             plan,
             trigger,
             fusion,
-            memo: Arc::new(CovarianceMemo::new()),
+            memo,
+            proto,
         })
     }
 
@@ -159,6 +172,17 @@ impl Scheme for DistributedKfScheme {
             self.memo.clone(),
         ));
         Ok(SchemeInstance { sensors, center })
+    }
+
+    fn run_trial_fast(
+        &self,
+        measurements: &[Vec<crate::linalg::Vector>],
+        steps: usize,
+        rng: &mut dyn rand::RngCore,
+        cache: &mut crate::scheme::TrialCache,
+        sink: &mut dyn crate::scheme::StepSink,
+    ) -> Option<Result<(), crate::scheme::FastTrialError>> {
+        fast::run(self, measurements, steps, rng, cache, sink)
     }
 }
 

@@ -5,7 +5,6 @@
 //! fusion center compute them identically; we compute them once and share them.
 use crate::linalg::{relative_difference, spd_inverse, symmetrize, Matrix};
 use crate::scheme::{SchemeError, System};
-use nalgebra::{Dyn, LU};
 use std::sync::{Arc, Mutex, OnceLock, Weak};
 
 /// Matrices of one time step k.
@@ -61,14 +60,14 @@ pub struct GlobalizedPlan {
 pub struct PredictedDelta {
     /// Δ^{pp,i}.
     pub delta: Matrix,
-    /// Its LU factorization (as `Δ.clone().lu()`).
-    pub lu: LU<f64, Dyn, Dyn>,
+    /// Its LU factorization (as `Δ.clone().lu()`), ready for the fixed-size solve.
+    pub lu: crate::filter::fixed::PackedLu,
     next: OnceLock<Arc<PredictedDelta>>,
 }
 
 impl PredictedDelta {
     fn new(delta: Matrix) -> Self {
-        let lu = delta.clone().lu();
+        let lu = crate::filter::fixed::PackedLu::new(delta.clone().lu());
         Self {
             delta,
             lu,

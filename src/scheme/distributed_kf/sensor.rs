@@ -8,7 +8,6 @@ use crate::linalg::{Matrix, Vector};
 use crate::link::{Message, Transmission};
 use crate::model::MeasurementModel;
 use crate::scheme::{Feedback, SchemeError, SensorNode};
-use nalgebra::{Dyn, LU};
 use rand::{Rng, RngCore};
 use std::sync::Arc;
 
@@ -180,7 +179,7 @@ impl SensorNode for DkfSensor {
                     // d̃ = x̃^{pp} - x̄^p, into `tmp`.
                     debiased_extrapolation_into(
                         &m.delta_p[i],
-                        &pd.lu,
+                        pd,
                         &self.held,
                         &mut self.tmp2,
                         &mut self.tmp,
@@ -212,16 +211,17 @@ impl SensorNode for DkfSensor {
 }
 
 /// `out = Δ^{p,i}_k (Δ^{pp,i}_k)^{-1} x̄^{pp,i}_k` with the LU factors of Δ^{pp,i} given and
-/// `work` as scratch: [`debiased_extrapolation`] without allocating, same operations.
+/// `work` as scratch: [`debiased_extrapolation`] without allocating, same operations (the
+/// fixed-size LU solve is bit for bit nalgebra's).
 pub fn debiased_extrapolation_into(
     delta_p: &Matrix,
-    delta_pp_lu: &LU<f64, Dyn, Dyn>,
+    delta_pp: &PredictedDelta,
     held: &Vector,
     work: &mut Vector,
     out: &mut Vector,
 ) -> Result<(), SchemeError> {
     work.copy_from(held);
-    if !delta_pp_lu.solve_mut(work) {
+    if !delta_pp.lu.solve(work) {
         return Err(SchemeError::Unsupported(
             "debiasing matrix Δ^pp is singular".into(),
         ));
