@@ -156,6 +156,24 @@ impl NeesHistogram {
     }
 }
 
+/// The chi-square(n) 99%, 95% and 99.9% quantiles that NEES is compared with: computed once
+/// per state dimension for the whole process (an iterative inversion, once per trial and
+/// variant before), the same numbers.
+fn nees_bounds(n: usize) -> [f64; 3] {
+    use std::sync::OnceLock;
+    const CACHED: usize = 32;
+    static BOUNDS: [OnceLock<[f64; 3]>; CACHED] = [const { OnceLock::new() }; CACHED];
+    let compute = || {
+        let q =
+            |tail: f64| crate::stats::chi2::upper_quantile(n as f64, tail).unwrap_or(f64::INFINITY);
+        [q(0.01), q(0.05), q(DIVERGENCE_TAIL)]
+    };
+    match BOUNDS.get(n) {
+        Some(cell) => *cell.get_or_init(compute),
+        None => compute(),
+    }
+}
+
 /// Sums for one scheme variant.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sums {
@@ -254,13 +272,7 @@ impl Sums {
         groups: &'a [(String, Vec<usize>)],
         steady_from: usize,
     ) -> TrialObserver<'a> {
-        let nees_bound = crate::stats::chi2::upper_quantile(self.state_dim as f64, 0.01)
-            .unwrap_or(f64::INFINITY);
-        let quantile = |tail: f64| {
-            crate::stats::chi2::upper_quantile(self.state_dim as f64, tail).unwrap_or(f64::INFINITY)
-        };
-        let nees_bound_95 = quantile(0.05);
-        let divergence_bound = quantile(DIVERGENCE_TAIL);
+        let [nees_bound, nees_bound_95, divergence_bound] = nees_bounds(self.state_dim);
         let width = self.layout().width();
         TrialObserver {
             sums: self,
