@@ -1,49 +1,10 @@
 //! The command line as a user meets it: bad scenario files get exit code 2 and a message that
 //! names the field; good runs write their outputs; the thread count never changes a result.
-use std::path::Path;
-use std::process::{Command, Output};
+#[path = "common/cli.rs"]
+mod common;
+use common::hushfuse;
 
-const VALID: &str = r#"
-name = "tiny"
-trials = 8
-steps = 20
-seed = 1
-
-[model]
-kind = "constant-velocity-1d"
-dt = 1.0
-sigma2 = 0.1
-
-[prior]
-mean = [0.0, 1.0]
-cov_diag = [1.0, 1.0]
-
-[groups]
-position = [0]
-
-[[sensors]]
-observe = [0]
-R_diag = [1.0]
-
-[[sensors]]
-H = [[1.0, 0.0]]
-R = [[2.0]]
-
-[[schemes]]
-kind = "centralized-kf"
-
-[[schemes]]
-kind = "dkf-alg1-random"
-sweep.rate = [0.5, 1.0]
-"#;
-
-fn hushfuse(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hushfuse"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("binary runs")
-}
+use common::TINY as VALID;
 
 fn run_text(text: &str) -> (Option<i32>, String) {
     let dir = tempfile::tempdir().unwrap();

@@ -1,6 +1,9 @@
 //! Runs that survive: killed runs resume to the bytes of a clean run, shards merge to the bytes
 //! of the unsharded run whatever the split, bad shards and checkpoints are refused with a
 //! message naming them, and a failed write leaves the old complete output.
+#[path = "common/cli.rs"]
+mod common;
+use common::hushfuse;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -8,46 +11,12 @@ use std::time::{Duration, Instant};
 
 /// A small scenario: 5 blocks of 4 trials (the last one short), so that splits into 1 to 7
 /// shards include empty shards.
-const SMALL: &str = r#"
-name = "small"
-trials = 18
-steps = 30
-seed = 7
-
-[model]
-kind = "constant-velocity-1d"
-dt = 1.0
-sigma2 = 0.1
-
-[prior]
-mean = [0.0, 1.0]
-cov_diag = [1.0, 1.0]
-
-[groups]
-position = [0]
-
-[[sensors]]
-observe = [0]
-R_diag = [1.0]
-
-[[sensors]]
-H = [[1.0, 0.0]]
-R = [[2.0]]
-
-[[schemes]]
-kind = "centralized-kf"
-
-[[schemes]]
-kind = "dkf-alg1-random"
-sweep.rate = [0.5, 1.0]
-"#;
-
-fn hushfuse(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hushfuse"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("binary runs")
+fn small_text() -> String {
+    common::TINY
+        .replacen("name = \"tiny\"", "name = \"small\"", 1)
+        .replacen("trials = 8", "trials = 18", 1)
+        .replacen("steps = 20", "steps = 30", 1)
+        .replacen("seed = 1", "seed = 7", 1)
 }
 
 fn ok(out: &Output) -> String {
@@ -107,7 +76,7 @@ fn assert_same_files(a: &Path, b: &Path) {
 
 fn small(dir: &Path) -> String {
     let p = dir.join("small.toml");
-    std::fs::write(&p, SMALL).unwrap();
+    std::fs::write(&p, small_text()).unwrap();
     p.to_str().unwrap().to_string()
 }
 

@@ -1,11 +1,14 @@
 //! `hushfuse replay`: recorded data through every scheme. Data written from a simulation
 //! replays to that simulation's summary.json; a missing reading is a sensor not scheduled;
 //! every kind of bad data gets an error naming the file, the line (data row) and the column.
+#[path = "common/cli.rs"]
+mod common;
+use common::hushfuse;
 use hushfuse::sim::build;
 use hushfuse::sim::replay::{self, DataError, ReplayError, ReplayOptions};
 use hushfuse::sim::runner;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 const SCENARIO: &str = include_str!("../examples/replay/scenario.toml");
 
@@ -21,14 +24,6 @@ fn scenario_with_more_schemes() -> String {
         "[[sensors]]\nname = \"pos-vel\"\nobserve = [0, 1]\nR_diag = [1.5, 0.5]\n\n[[sensors]]\nname = \"pos-vel-b\"\nobserve = [0, 1]\nR_diag = [3.0, 1.0]\n",
         "",
     )
-}
-
-fn hushfuse(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hushfuse"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("binary runs")
 }
 
 fn ok(out: &Output) {

@@ -1,7 +1,8 @@
 //! Issue 9's "tried as a new user would" cases: each bad file exits with code 2, names the file
 //! and the right field, and never panics, aborts or hangs.
-use std::path::Path;
-use std::process::{Command, Output};
+#[path = "common/cli.rs"]
+mod common;
+use common::hushfuse;
 
 const BASE: &str = r#"
 name = "tiny"
@@ -31,14 +32,6 @@ kind = "centralized-kf"
 "#;
 
 const SCHEME: &str = "kind = \"centralized-kf\"";
-
-fn hushfuse(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hushfuse"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("binary runs")
-}
 
 /// Runs `text` and returns (exit code, stderr, the temporary folder).
 fn run(text: &str) -> (Option<i32>, String, tempfile::TempDir) {
