@@ -127,6 +127,8 @@ pub struct LocalKfSensor {
     est: Gaussian,
     /// The center's copy of this sensor's estimate, mirrored.
     copy: Gaussian,
+    /// The last step this node was called at (0: none yet).
+    last_k: usize,
 }
 
 impl LocalKfSensor {
@@ -140,6 +142,7 @@ impl LocalKfSensor {
             system,
             index,
             delta,
+            last_k: 0,
         })
     }
 
@@ -152,13 +155,20 @@ impl LocalKfSensor {
 impl SensorNode for LocalKfSensor {
     fn step(
         &mut self,
-        _k: usize,
+        k: usize,
         z: &Vector,
         _feedback: Option<&Feedback>,
         _rng: &mut dyn RngCore,
     ) -> Result<Transmission, SchemeError> {
         let model = &self.system.transition;
         let sensor = self.system.sensors[self.index].as_ref();
+        // Steps this node was not called at (no reading: not scheduled) pass in time for
+        // the local filter and the mirrored copy alike, as the center's copy and replica do.
+        for _ in self.last_k + 1..k {
+            self.est = kf::predict(model, &self.est);
+            self.copy = kf::predict(model, &self.copy);
+        }
+        self.last_k = k;
         self.est = kf::step(model, &self.est, &[(sensor, z)])?;
         self.copy = kf::predict(model, &self.copy);
         let d = &self.est.mean - &self.copy.mean;
@@ -233,13 +243,18 @@ impl FusionCenter for EstimateFusionCenter {
         let n = self.system.state_dim();
         for (i, msg) in inbox.iter().enumerate() {
             // The local Riccati recursion, by the very operations the sensor's KF performs
-            // (its covariance does not depend on the mean for a linear sensor).
+            // (its covariance does not depend on the mean for a linear sensor); a sensor that
+            // was not scheduled (no reading) only predicted.
             if let Some(p) = &self.replicas[i] {
-                let sensor = self.system.sensors[i].as_ref();
-                let zero = Vector::zeros(n);
-                let pred = Gaussian::new(zero.clone(), kf::predict_cov(model, p));
-                let z = sensor.predict(&zero);
-                self.replicas[i] = Some(kf::update(sensor, pred, &z)?.cov);
+                let pred_cov = kf::predict_cov(model, p);
+                self.replicas[i] = Some(if matches!(msg, Received::NotScheduled) {
+                    pred_cov
+                } else {
+                    let sensor = self.system.sensors[i].as_ref();
+                    let zero = Vector::zeros(n);
+                    let z = sensor.predict(&zero);
+                    kf::update(sensor, Gaussian::new(zero, pred_cov), &z)?.cov
+                });
             }
             self.copies[i] = match msg {
                 Received::Estimate(v) => match &self.replicas[i] {

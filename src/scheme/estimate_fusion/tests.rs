@@ -221,6 +221,42 @@ fn replica_covariance_and_send_rate() {
     assert!(rates.windows(2).all(|w| w[1] < w[0]), "{rates:?}");
 }
 
+/// A sensor with no reading for a few steps (not scheduled: its node is not called) passes
+/// them in time: after the gap its estimate, and the center's replica of its covariance, are
+/// those of a filter that predicted across the gap.
+#[test]
+fn a_gap_without_readings_is_predicted_across_by_node_and_center() {
+    let system = correlated_system();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+    let mut node = LocalKfSensor::new(system.clone(), 0, 0.0).unwrap();
+    let mut reference = system.prior.clone();
+    let mut c = EstimateFusionCenter::new(system.clone(), FusionRule::CovarianceIntersection);
+    let mut x = system.prior.mean.clone();
+    let gap = 4..8;
+    for k in 1..=10 {
+        x = system.transition.sample_next(&x, &mut rng);
+        let z = system.sensors[0].sample(&x, &mut rng);
+        let mut inbox = vec![Received::NotScheduled, Received::NotScheduled];
+        if gap.contains(&k) {
+            reference = kf::predict(&system.transition, &reference);
+        } else {
+            reference = kf::step(
+                &system.transition,
+                &reference,
+                &[(system.sensors[0].as_ref(), &z)],
+            )
+            .unwrap();
+            inbox[0] = Received::from(node.step(k, &z, None, &mut rng).unwrap());
+        }
+        c.step(k, &inbox).unwrap();
+        if !gap.contains(&k) {
+            assert_eq!(node.estimate().mean, reference.mean, "step {k}");
+            assert_eq!(node.estimate().cov, reference.cov, "step {k}");
+            assert_eq!(c.copies()[0].cov, reference.cov, "center replica, step {k}");
+        }
+    }
+}
+
 // A linear sensor that hides its linearity: its covariance must travel.
 use crate::model::Opaque;
 
