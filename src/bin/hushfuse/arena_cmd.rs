@@ -1,0 +1,213 @@
+//! `hushfuse run --budget/--budgets` (the arena: calibration to bit budgets) and the quick
+//! arena of `hushfuse` without arguments.
+use super::*;
+
+/// Budgets from `--budget` or `--budgets`.
+pub(crate) fn budgets_of(args: &RunArgs) -> Result<Vec<f64>, Failure> {
+    if let Some(b) = args.budget {
+        return Ok(vec![b]);
+    }
+    let text = args.budgets.as_deref().unwrap_or_default();
+    text.split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|b| b.is_finite() && *b > 0.0)
+                .ok_or_else(|| {
+                    Failure::Input(format!(
+                        "--budgets: expected positive numbers separated by commas, got {t:?}"
+                    ))
+                })
+        })
+        .collect()
+}
+
+/// `run --budget` / `--budgets`: calibrate every scheme to each budget, print and write the
+/// comparison. Returns the outcome and the output folder.
+pub(crate) fn arena_run(
+    scenario: &str,
+    args: &RunArgs,
+) -> Result<(calibrate::Outcome, PathBuf), Failure> {
+    let (text, source) = scenario_text(scenario)?;
+    let budgets = budgets_of(args)?;
+    // The output folder is checked before the calibration runs, when its name is known.
+    let named_dir = args.out.clone().or_else(|| {
+        toml::from_str::<toml::Table>(&text)
+            .ok()
+            .and_then(|t| t.get("name").and_then(|n| n.as_str().map(str::to_string)))
+            .filter(|n| build::check_name(n).is_ok())
+            .map(|n| PathBuf::from("hushfuse-out").join(n))
+    });
+    let early_dir = named_dir
+        .as_deref()
+        .map(OutputDir::open)
+        .transpose()
+        .map_err(Failure::Input)?;
+    let axis = calibrate::Axis::parse(&args.budget_axis).map_err(Failure::Input)?;
+    let opts = calibrate::Options {
+        axis,
+        pilot_trials: args.pilot_trials,
+        threads: args.threads,
+        load: build::LoadOptions {
+            trials: args.trials,
+            seed: args.seed,
+            threads: args.threads,
+            limits: args.allow_large.then(hushfuse::sim::limits::Limits::none),
+        },
+        ..Default::default()
+    };
+    let start = Instant::now();
+    let out = calibrate::calibrate(&text, &source, &budgets, &opts).map_err(|e| {
+        if e.contains("field `") || e.starts_with(&source) {
+            Failure::Input(e)
+        } else {
+            Failure::Run(e)
+        }
+    })?;
+    let elapsed = start.elapsed().as_secs_f64();
+    let first = &out.summaries[0];
+    let group = first.group_order[0].clone();
+    let mut msg = format!(
+        "{} — {} trials x {} steps, seed {}, {} sensors: {} schemes calibrated to {} budget(s) on the {} axis ({} pilot runs, {:.1} s)\n",
+        first.scenario,
+        first.trials,
+        first.steps,
+        first.seed,
+        first.sensors,
+        out.rows[0].len(),
+        budgets.len(),
+        axis.name(),
+        out.evaluations,
+        elapsed
+    );
+    for (b, budget) in budgets.iter().enumerate() {
+        msg.push_str(&format!(
+            "\nbudget {} {} bits/step (tolerance {}%):\n",
+            calibrate::short(*budget),
+            axis.name(),
+            calibrate::short(100.0 * out.tolerance)
+        ));
+        msg.push_str(&calibrate::table(&out, b, &group));
+    }
+    msg.push_str("\nbest scheme per budget (lowest mean RMSE among schemes within the budget):\n");
+    msg.push_str(&arena::best_table(&out, &group));
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(&first.scenario));
+    let mut out_dir = match early_dir {
+        Some(d) if d.dir() == dir => d,
+        _ => OutputDir::open(&dir).map_err(Failure::Input)?,
+    };
+    // The results first: a failed write below loses no computed number from sight.
+    print_out(&msg);
+    let mut write =
+        |name: &str, text: &str| out_dir.stage(name, text.as_bytes()).map_err(Failure::Run);
+    let json = serde_json::json!({
+        "scenario": first.scenario,
+        "axis": axis.name(),
+        "tolerance": out.tolerance,
+        "pilot_runs": out.evaluations,
+        "seconds": elapsed,
+        "budgets": budgets,
+        "rows": out.rows.iter().map(|row| row.iter().map(|c| serde_json::json!({
+            "scheme": c.label, "kind": c.kind, "knob": c.knob, "value": c.value,
+            "target": c.target, "achieved": c.achieved, "status": c.status,
+            "bits_per_step": c.result.bits_per_step,
+            "frame_bits_per_step": c.result.frame_bits_per_step,
+            "downlink_bits_per_step": c.result.downlink_bits_per_step,
+            "mean_rmse": c.result.mean_rmse, "anees": c.result.anees,
+            "steady_state": c.result.steady_state,
+        })).collect::<Vec<_>>()).collect::<Vec<_>>(),
+    });
+    write(
+        "calibration.json",
+        &serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?,
+    )?;
+    write("best_per_budget.md", &arena::best_markdown(&out, &group))?;
+    let mut files = vec![
+        "calibration.json".to_string(),
+        "best_per_budget.md".to_string(),
+    ];
+    for (b, s) in out.summaries.iter().enumerate() {
+        let sub = format!("budget-{}", calibrate::short(budgets[b]));
+        write(&format!("{sub}/scenario.toml"), &out.texts[b])?;
+        write(
+            &format!("{sub}/summary.json"),
+            &serde_json::to_string_pretty(s).map_err(|e| Failure::Run(e.to_string()))?,
+        )?;
+        write(&format!("{sub}/per_step.csv"), &results::per_step_csv(s))?;
+        files.push(format!("{sub}/"));
+    }
+    let plots = arena::write_plots(
+        &out,
+        &group,
+        &first.scenario,
+        out_dir.staging().map_err(Failure::Run)?,
+    )
+    .map_err(Failure::Run)?;
+    out_dir.record(plots.iter().cloned());
+    files.extend(plots);
+    if args.report {
+        let exp = build::load_with(&out.texts[0], &source, &opts.load)
+            .map_err(|e| Failure::Run(e.to_string()))?;
+        let page = html::render(&html::Input {
+            exp: &exp,
+            summary: &out.summaries[0],
+            scenario_text: &out.texts[0],
+            alone: true,
+            arena: Some(&out),
+            se_trials: exp.trials.min(200),
+        })
+        .map_err(Failure::Run)?;
+        out_dir
+            .stage("report.html", page.as_bytes())
+            .map_err(Failure::Run)?;
+        files.push("report.html".into());
+    }
+    let hash = output::sha256_hex(
+        format!(
+            "{source}\0{text}\0{:?}\0{:?}\0{:?}\0{}\0{:?}",
+            args.trials, args.seed, budgets, args.budget_axis, args.pilot_trials
+        )
+        .as_bytes(),
+    );
+    let mut manifest = output::Manifest::new("arena", &first.scenario, &hash);
+    manifest.seed = Some(first.seed);
+    manifest.trials = Some(first.trials);
+    out_dir.commit(manifest, false).map_err(Failure::Run)?;
+    print_out(&format!(
+        "\nwrote {}: {}\n",
+        dir.display(),
+        files.join(", ")
+    ));
+    Ok((out, dir))
+}
+
+/// `hushfuse` without arguments: the quick arena, and which scheme wins at which budget.
+pub(crate) fn quick_arena() -> Result<(), Failure> {
+    let (name, trials, budgets) = arena::QUICK;
+    let text = builtin::get(name).expect("built-in quick arena");
+    let opts = calibrate::Options {
+        load: build::LoadOptions {
+            trials: Some(trials),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let start = Instant::now();
+    let out = calibrate::calibrate(text, &format!("built-in:{name}"), budgets, &opts)
+        .map_err(Failure::Run)?;
+    let group = out.summaries[0].group_order[0].clone();
+    let mut msg = arena::quick_description(trials, budgets);
+    msg.push('\n');
+    msg.push_str(&arena::best_table(&out, &group));
+    msg.push_str(&format!(
+        "\n({} pilot runs, {:.1} s. `hushfuse list` shows the built-in scenarios, `hushfuse run default` the seed 004 comparison, `hushfuse --help` the commands.)\n",
+        out.evaluations,
+        start.elapsed().as_secs_f64()
+    ));
+    print_out(&msg);
+    Ok(())
+}

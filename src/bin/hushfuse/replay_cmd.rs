@@ -1,0 +1,116 @@
+//! `hushfuse replay`: every scheme of a scenario on recorded measurements.
+use super::*;
+
+pub(crate) struct ReplayArgs<'a> {
+    pub(crate) scenario: &'a str,
+    pub(crate) measurements: &'a Path,
+    pub(crate) truth: Option<&'a Path>,
+    pub(crate) out: Option<&'a Path>,
+    pub(crate) seed: Option<u64>,
+    pub(crate) trial: usize,
+    pub(crate) allow_large: bool,
+}
+
+/// `hushfuse replay`: every scheme of the scenario on recorded measurements.
+pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
+    let (text, source) = scenario_text(a.scenario)?;
+    let read = |p: &Path| {
+        std::fs::read_to_string(p)
+            .map_err(|e| Failure::Input(format!("{}: cannot read: {e}", p.display())))
+    };
+    let meas_name = a.measurements.display().to_string();
+    let meas = read(a.measurements)?;
+    let truth_name = a.truth.map(|p| p.display().to_string());
+    let truth = a.truth.map(read).transpose()?;
+    let opts = replay::ReplayOptions {
+        seed: a.seed,
+        trial: a.trial,
+        load: build::LoadOptions {
+            limits: a.allow_large.then(hushfuse::sim::limits::Limits::none),
+            ..Default::default()
+        },
+    };
+    let start = Instant::now();
+    let r = replay::replay_csv(
+        &text,
+        &source,
+        (&meas, &meas_name),
+        truth.as_deref().zip(truth_name.as_deref()),
+        &opts,
+    )
+    .map_err(|e| match e {
+        replay::ReplayError::Input(m) => Failure::Input(m),
+        replay::ReplayError::Run(m) => Failure::Run(m),
+    })?;
+    let elapsed = start.elapsed().as_secs_f64();
+    let dir = a
+        .out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(format!("{}-replay", r.exp.name)));
+    // Staged and committed with a manifest, like every run's output (all or nothing).
+    let mut out_dir = OutputDir::open(&dir).map_err(Failure::Input)?;
+    let mut staged: Vec<(&str, String)> = Vec::new();
+    let readings: usize = r
+        .recorded
+        .available
+        .iter()
+        .map(|a| a.iter().filter(|&&b| b).count())
+        .sum();
+    let mut msg = format!(
+        "{} — replay of {} ({} steps, {} readings of {} sensors), seed {}, {} scheme variants ({:.1} s)\n",
+        r.exp.name,
+        meas_name,
+        r.exp.steps,
+        readings,
+        r.exp.system.n_sensors(),
+        r.exp.seed,
+        r.exp.variants.len(),
+        elapsed
+    );
+    staged.push((
+        "estimates.csv",
+        replay::estimates_csv(&r.exp, &r.recorded, &r.replayed),
+    ));
+    for n in &r.notes {
+        msg.push_str(&format!("note: {n}\n"));
+    }
+    let mut files = vec!["estimates.csv".to_string()];
+    let mut bad = Vec::new();
+    if let Some(sums) = &r.replayed.sums {
+        let summary = results::summarize(&r.exp, sums);
+        msg.push('\n');
+        msg.push_str(&results::table(&summary));
+        let json =
+            serde_json::to_string_pretty(&summary).map_err(|e| Failure::Run(e.to_string()))?;
+        staged.push(("summary.json", json));
+        staged.push(("per_step.csv", results::per_step_csv(&summary)));
+        files.extend(["summary.json".to_string(), "per_step.csv".to_string()]);
+        bad = replay::non_finite(&summary);
+    } else {
+        msg.push_str("(no --truth: estimates only, no error metrics)\n");
+    }
+    // The results first: a failed write below loses nothing from sight.
+    print_out(&msg);
+    msg.clear();
+    for (name, text) in &staged {
+        out_dir.stage(name, text.as_bytes()).map_err(Failure::Run)?;
+    }
+    let mut manifest =
+        output::Manifest::new("replay", &r.exp.name, &output::sha256_hex(text.as_bytes()));
+    manifest.seed = Some(r.exp.seed);
+    manifest.trials = Some(1);
+    out_dir.commit(manifest, false).map_err(Failure::Run)?;
+    msg.push_str(&format!(
+        "\nwrote {}: {}\n",
+        dir.display(),
+        files.join(", ")
+    ));
+    print_out(&msg);
+    if !bad.is_empty() {
+        return Err(Failure::Run(format!(
+            "the replay produced numbers that are not finite (written as null in summary.json):\n  {}",
+            bad.join("\n  ")
+        )));
+    }
+    Ok(())
+}
