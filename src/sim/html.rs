@@ -432,7 +432,8 @@ fn timeline(input: &Input, tr: &trace::Trace, sel: &[usize]) -> String {
     let rh = (160.0 / n as f64).clamp(2.0, 12.0);
     let left = 230.0;
     let block = 22.0 + rh * n as f64 + 10.0;
-    let width = left + cw * steps as f64 + 20.0;
+    // Wide enough for the legend line even when there are few steps.
+    let width = (left + cw * steps as f64 + 20.0).max(left + 560.0);
     let height = 40.0 + block * sel.len() as f64;
     let mut s = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{height:.0}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
