@@ -50,18 +50,9 @@ fn html_table(rows: &[Vec<String>]) -> String {
     s
 }
 
-const PALETTE: [RGBColor; 10] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(23, 190, 207),
-    RGBColor(188, 189, 34),
-    RGBColor(127, 127, 127),
-];
+/// The report's scheme colours: the first ten of the plots' palette (its black and light
+/// orange are kept for fronts and bounds there).
+const PALETTE: &[RGBColor] = super::plot::COLORS.split_at(10).0;
 
 fn pe(e: impl std::fmt::Display) -> String {
     format!("plot: {e}")

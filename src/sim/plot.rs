@@ -5,7 +5,8 @@ use super::results::{curve_points, Summary};
 use plotters::prelude::*;
 use std::path::Path;
 
-const COLORS: [RGBColor; 12] = [
+/// The line colours, in order (shared with the report).
+pub(super) const COLORS: [RGBColor; 12] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
