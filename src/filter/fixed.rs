@@ -92,6 +92,87 @@ fn gemv_fixed<const R: usize, const C: usize>(y: &mut [f64], a: &[f64], x: &[f64
     *y = acc;
 }
 
+/// `a x` for an R x C column-major `a` on arrays: [`gemv`]'s operations (nalgebra's order),
+/// for callers that keep their small vectors on the stack.
+#[inline(always)]
+pub fn mat_vec<const R: usize, const C: usize>(a: &[f64], x: &[f64; C]) -> [f64; R] {
+    let mut y = [0.0; R];
+    gemv_fixed::<R, C>(&mut y, a, x);
+    y
+}
+
+/// `y = a x` for a column-major `a` of `y.len()` rows and C columns: [`gemv`]'s operations
+/// with the row count known only at run time (a sensor's measurement dimension).
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+pub fn mat_vec_rows<const C: usize>(y: &mut [f64], a: &[f64], x: &[f64; C]) {
+    let r = y.len();
+    let a = &a[..r * C];
+    for (i, yi) in y.iter_mut().enumerate() {
+        let mut acc = a[i] * x[0];
+        for j in 1..C {
+            acc = a[j * r + i] * x[j] + acc;
+        }
+        *yi = acc;
+    }
+}
+
+/// `a x` for a column-major `a` of R rows and `x.len()` columns (a sensor's H^T R^{-1}):
+/// [`gemv`]'s operations with the column count known only at run time.
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+pub fn mat_vec_cols<const R: usize>(a: &[f64], x: &[f64]) -> [f64; R] {
+    let mut acc = [0.0; R];
+    let Some((&x0, rest)) = x.split_first() else {
+        return acc;
+    };
+    let a = &a[..R * x.len()];
+    for r in 0..R {
+        acc[r] = a[r] * x0;
+    }
+    for (j, &xj) in rest.iter().enumerate() {
+        let col = &a[(j + 1) * R..(j + 2) * R];
+        for r in 0..R {
+            acc[r] = col[r] * xj + acc[r];
+        }
+    }
+    acc
+}
+
+/// `y = a x` for a column-major `a` of `y.len()` rows and `x.len()` columns, both known only
+/// at run time: [`gemv`]'s operations, in a loop.
+#[inline]
+#[allow(clippy::assign_op_pattern)]
+pub fn mat_vec_dyn(y: &mut [f64], a: &[f64], x: &[f64]) {
+    let (r, c) = (y.len(), x.len());
+    if c == 0 {
+        y.fill(0.0);
+        return;
+    }
+    let a = &a[..r * c];
+    for (i, yi) in y.iter_mut().enumerate() {
+        let mut acc = a[i] * x[0];
+        for j in 1..c {
+            acc = a[j * r + i] * x[j] + acc;
+        }
+        *yi = acc;
+    }
+}
+
+/// `b <- P^{-1} b` with the (dirty) column-major Cholesky factor `l` of an N x N P:
+/// [`chol_solve`]'s operations on an array.
+#[inline(always)]
+pub fn chol_solve_array<const N: usize>(l: &[f64], b: &mut [f64; N]) {
+    chol_solve_fixed::<N>(l, b);
+}
+
+/// `e^T P^{-1} e` for an N x N column-major `p`: [`mahalanobis_sq_small`]'s operations on an
+/// array (`None` when P is not positive definite).
+#[inline(always)]
+pub fn mahalanobis_array<const N: usize>(e: &[f64; N], p: &[f64]) -> Option<f64> {
+    mahalanobis_fixed::<N>(e, p).expect("fixed dimension")
+}
+
 /// `x <- a x` through the buffer `tmp` (no allocation), bit for bit as `a * &x`.
 pub fn mul_in_place(a: &Matrix, x: &mut Vector, tmp: &mut Vector) {
     gemv(tmp, a, x);

@@ -357,6 +357,79 @@ fn schedule_step(system: &System, prev: &Matrix) -> Option<ScheduledStep> {
     })
 }
 
+/// The all-data trial of [`CentralizedScheme::run_trial_fast`].
+struct AllData<'a> {
+    sys: &'a System,
+    /// Per sensor: measurement dimension and H^T R^{-1}.
+    linear: &'a [(usize, Matrix)],
+    schedule: &'a AllDataSchedule,
+    /// Where the estimate handed to the sink is written.
+    est: &'a mut Gaussian,
+}
+
+impl AllData<'_> {
+    /// For state dimension N: the scheduled step's operations
+    /// ([`CentralizedKf::scheduled_step`]: F x, the solve with the predicted covariance's
+    /// factor, the sum of H_i^T R_i^{-1} z_i in sensor order, the solve with the fused factor)
+    /// on stack arrays, the covariance copied from the shared schedule. The forwarding coins
+    /// are not drawn: at rate 1 every measurement is sent whatever the coin, and the variant's
+    /// stream serves nothing else. `None` (nothing reported yet) when the schedule does not
+    /// reach `steps`; the caller then runs the general step, which reports the failure at its
+    /// step. Measurements are checked (dimensions, finite) by the caller.
+    fn trial<const N: usize>(
+        self,
+        measurements: &[Vec<Vector>],
+        steps: usize,
+        sink: &mut dyn super::StepSink,
+    ) -> Option<Result<(), super::FastTrialError>> {
+        use crate::filter::fixed::{chol_solve_array, mat_vec, mat_vec_cols};
+        let sys = self.sys;
+        if steps == 0 {
+            return None;
+        }
+        self.schedule.step(sys, steps)?;
+        let sched = self
+            .schedule
+            .steps
+            .read()
+            .unwrap_or_else(|e| e.into_inner());
+        // What network::deliver counts when every sensor sends its measurement.
+        let mut traffic = crate::network::Traffic::default();
+        for s in &sys.sensors {
+            let m = Message::Measurement(Vector::zeros(s.meas_dim()));
+            traffic.messages += 1;
+            traffic.bits += m.bits();
+            traffic.frame_bits += m.frame_bits();
+        }
+        let f = sys.transition.f().as_slice();
+        let est = self.est;
+        let mut x: [f64; N] = sys.prior.mean.as_slice().try_into().ok()?;
+        let mut run = || -> Result<(), super::FastTrialError> {
+            for (k, (zs, step)) in (1..=steps).zip(measurements.iter().zip(&sched.steps)) {
+                // from_gaussian: P^{-1} (F x) ...
+                let mut y: [f64; N] = mat_vec(f, &x);
+                chol_solve_array(step.pred_chol.l_dirty().as_slice(), &mut y);
+                // ... plus H_i^T R_i^{-1} z_i of each sensor, in sensor order ...
+                for ((_, ht_rinv), z) in self.linear.iter().zip(zs) {
+                    let t: [f64; N] = mat_vec_cols(ht_rinv.as_slice(), z.as_slice());
+                    for (yi, ti) in y.iter_mut().zip(t) {
+                        *yi = *yi + ti;
+                    }
+                }
+                // ... and back to covariance form.
+                chol_solve_array(step.fused_chol.l_dirty().as_slice(), &mut y);
+                x = y;
+                est.mean.as_mut_slice().copy_from_slice(&x);
+                est.cov.as_mut_slice().copy_from_slice(step.cov.as_slice());
+                sink.step(k, est, traffic)
+                    .map_err(|source| super::FastTrialError::Sink { k, source })?;
+            }
+            Ok(())
+        };
+        Some(run())
+    }
+}
+
 fn measurement(i: usize, msg: &Received) -> Result<Option<&Vector>, SchemeError> {
     match msg {
         Received::Measurement(z) => Ok(Some(z)),
@@ -376,6 +449,9 @@ pub struct CentralizedScheme {
     rate: f64,
     /// At rate 1 with linear sensors every measurement arrives: the shared covariance schedule.
     schedule: Option<Arc<AllDataSchedule>>,
+    /// Per sensor, when every sensor is linear: its measurement dimension and H^T R^{-1}
+    /// (what the fast trial reads per step, without a virtual call).
+    linear: Option<Vec<(usize, Matrix)>>,
 }
 
 impl CentralizedScheme {
@@ -390,10 +466,16 @@ impl CentralizedScheme {
         // The coin u is in [0, 1): at rate >= 1 every measurement is forwarded.
         let all_data = rate >= 1.0 && system.sensors.iter().all(|s| s.as_linear().is_some());
         let schedule = all_data.then(|| Arc::new(AllDataSchedule::new()));
+        let linear = system
+            .sensors
+            .iter()
+            .map(|s| s.as_linear().map(|l| (s.meas_dim(), l.ht_rinv().clone())))
+            .collect();
         Ok(Self {
             system,
             rate,
             schedule,
+            linear,
         })
     }
 }
@@ -406,22 +488,46 @@ impl Scheme for CentralizedScheme {
         measurements: &[Vec<Vector>],
         steps: usize,
         rng: &mut dyn RngCore,
-        _cache: &mut super::TrialCache,
+        cache: &mut super::TrialCache,
         sink: &mut dyn super::StepSink,
     ) -> Option<Result<(), super::FastTrialError>> {
         let sys = &self.system;
         let ns = sys.n_sensors();
+        let linear = self.linear.as_ref()?;
         let covered = measurements.len() >= steps
             && measurements[..steps].iter().all(|zs| {
                 zs.len() == ns
-                    && zs.iter().zip(&sys.sensors).all(|(z, s)| {
-                        s.as_linear().is_some()
-                            && z.len() == s.meas_dim()
-                            && z.iter().all(|v| v.is_finite())
+                    && zs.iter().zip(linear).all(|(z, (m, _))| {
+                        z.len() == *m && z.as_slice().iter().all(|v| v.is_finite())
                     })
             });
         if !covered {
             return None;
+        }
+        if let Some(schedule) = &self.schedule {
+            let n = sys.state_dim();
+            // The estimate handed to the sink, kept from trial to trial.
+            let est = cache.scratch((Arc::as_ptr(schedule) as usize, 0), || sys.prior.clone());
+            let all = AllData {
+                sys,
+                linear,
+                schedule,
+                est,
+            };
+            // State dimensions 1..=6 while the shared covariance schedule holds: the mean
+            // recursion on the stack.
+            let fixed = match n {
+                1 => all.trial::<1>(measurements, steps, sink),
+                2 => all.trial::<2>(measurements, steps, sink),
+                3 => all.trial::<3>(measurements, steps, sink),
+                4 => all.trial::<4>(measurements, steps, sink),
+                5 => all.trial::<5>(measurements, steps, sink),
+                6 => all.trial::<6>(measurements, steps, sink),
+                _ => None,
+            };
+            if fixed.is_some() {
+                return fixed;
+            }
         }
         let mut center = match &self.schedule {
             Some(s) => CentralizedKf::with_schedule(sys.clone(), s.clone()),

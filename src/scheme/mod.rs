@@ -221,9 +221,13 @@ pub enum FastTrialError {
 
 /// Per-trial memory shared by the variants of one trial, by key (see
 /// [`Scheme::run_trial_fast`]). A few entries at most: a linear search.
+///
+/// It also keeps work space that outlives the trial ([`TrialCache::scratch`]): buffers a fast
+/// trial would otherwise allocate every trial.
 #[derive(Default)]
 pub struct TrialCache {
     entries: Vec<(CacheKey, Box<dyn std::any::Any + Send>)>,
+    scratch: Vec<(CacheKey, Box<dyn std::any::Any + Send>)>,
 }
 
 /// Key of a [`TrialCache`] entry: which shared object (an address) and which data.
@@ -254,9 +258,31 @@ impl TrialCache {
             .expect("checked type")
     }
 
-    /// Forgets every entry (a new trial).
+    /// Forgets every entry (a new trial); the scratch space stays.
     pub fn clear(&mut self) {
         self.entries.clear();
+    }
+
+    /// Work space of `key`, made by `make` if absent, kept from trial to trial (and from
+    /// variant to variant: it must hold buffers only, whose contents a trial overwrites before
+    /// it reads them, never results).
+    pub fn scratch<T: std::any::Any + Send>(
+        &mut self,
+        key: CacheKey,
+        make: impl FnOnce() -> T,
+    ) -> &mut T {
+        let pos = self
+            .scratch
+            .iter()
+            .position(|(k, v)| *k == key && v.is::<T>());
+        let pos = pos.unwrap_or_else(|| {
+            self.scratch.push((key, Box::new(make())));
+            self.scratch.len() - 1
+        });
+        self.scratch[pos]
+            .1
+            .downcast_mut::<T>()
+            .expect("checked type")
     }
 }
 

@@ -60,8 +60,9 @@ fn columns(groups: usize) -> f64 {
 
 /// What the run needs apart from the schemes themselves: the per-trial truth and measurements
 /// (one trial per worker, each a heap vector), the per-step sums of every variant (the runner
-/// keeps one set per block of a window of 8 blocks per thread, merged in block order as the
-/// window finishes, plus the total) and the per-trial steady-state values kept for paired
+/// keeps one set per block of a window of blocks, merged in block order as the window
+/// finishes, plus the total: two blocks per thread, or up to `runner::WINDOW_MAX_BYTES` when
+/// the blocks are small) and the per-trial steady-state values kept for paired
 /// comparisons.
 pub fn baseline(
     system: &System,
@@ -76,9 +77,12 @@ pub fn baseline(
     let vectors = 1.0 + system.n_sensors() as f64;
     let (steps, trials, variants) = (steps as f64, trials as f64, variants as f64);
     let workers = threads.max(1) as f64;
-    let blocks = (trials / 4.0).ceil().min(8.0 * workers);
+    let blocks = (trials / 4.0)
+        .ceil()
+        .min(crate::sim::runner::WINDOW_PER_THREAD as f64 * workers);
     let trial_data = steps * (8.0 * (n + m) + 64.0 * vectors) * workers;
-    let sums = steps * columns(groups) * variants * 8.0 * (blocks + 1.0);
+    let block = steps * columns(groups) * variants * 16.0;
+    let sums = block + (block * blocks).max(crate::sim::runner::WINDOW_MAX_BYTES as f64);
     let per_trial = trials * variants * (columns(groups) * 8.0 + 24.0);
     // A Kalman step: prediction n^3 plus an update per measured component.
     let kf_flops = 2.0 * n * n * n + 4.0 * n * n * m.max(1.0);

@@ -28,7 +28,7 @@ impl Layout {
     pub const ESS: usize = 9;
     /// Steps whose NEES was below the 95% quantile of chi-square with n degrees of freedom.
     pub const NEES_COVERED_95: usize = 10;
-    const FIXED: usize = 11;
+    pub const FIXED: usize = 11;
 
     /// Entries per step.
     pub fn width(&self) -> usize {
@@ -37,6 +37,45 @@ impl Layout {
     /// Index of group g's squared error.
     pub fn group(&self, g: usize) -> usize {
         Self::FIXED + g
+    }
+}
+
+/// Row widths (groups + fixed fields) whose step values and trial sums are kept on the stack.
+const STACK_WIDTH: usize = 16;
+
+/// A row of zeros of a given length, on the stack up to [`STACK_WIDTH`]: a trial's running
+/// sums without a heap allocation per trial.
+enum Row {
+    Stack([f64; STACK_WIDTH], usize),
+    Heap(Vec<f64>),
+}
+
+impl Row {
+    fn zeros(len: usize) -> Self {
+        if len <= STACK_WIDTH {
+            Row::Stack([0.0; STACK_WIDTH], len)
+        } else {
+            Row::Heap(vec![0.0; len])
+        }
+    }
+}
+
+impl std::ops::Deref for Row {
+    type Target = [f64];
+    fn deref(&self) -> &[f64] {
+        match self {
+            Row::Stack(a, n) => &a[..*n],
+            Row::Heap(v) => v,
+        }
+    }
+}
+
+impl std::ops::DerefMut for Row {
+    fn deref_mut(&mut self) -> &mut [f64] {
+        match self {
+            Row::Stack(a, n) => &mut a[..*n],
+            Row::Heap(v) => v,
+        }
     }
 }
 
@@ -225,9 +264,9 @@ pub struct TrialObserver<'a> {
     run: usize,
     diverged: bool,
     acc: [f64; 4],
-    group_acc: Vec<f64>,
+    group_acc: Row,
     /// This trial's per-field sums over all steps (for [`Sums::whole_run`]).
-    run_acc: Vec<f64>,
+    run_acc: Row,
     count: usize,
     /// Work space, so that a step allocates nothing: the error, its whitened form and the
     /// matrix the NEES Cholesky factor is computed in.
@@ -260,6 +299,20 @@ impl Sums {
         }
     }
 
+    /// Heap bytes of these sums before any trial is added (the per-step rows, the whole-run
+    /// stats, the ESS minima and the NEES histogram).
+    pub fn heap_bytes(&self) -> usize {
+        8 * (self.per_step.len() + self.per_step_sq.len() + self.ess_min.len())
+            + std::mem::size_of::<TrialStat>() * self.whole_run.len()
+            + 8 * self.nees_hist.counts.len()
+    }
+
+    /// Heap bytes each trial adds (its row of [`Sums::per_trial`] and its steady NEES), with
+    /// the allocator's header.
+    pub fn per_trial_bytes(groups: usize) -> usize {
+        8 * (1 + groups) + 16 + std::mem::size_of::<Vec<f64>>() + 8
+    }
+
     pub fn layout(&self) -> Layout {
         Layout {
             groups: self.layout_groups,
@@ -284,13 +337,21 @@ impl Sums {
             run: 0,
             diverged: false,
             acc: [0.0; 4],
-            group_acc: vec![0.0; groups.len()],
-            run_acc: vec![0.0; width],
+            group_acc: Row::zeros(groups.len()),
+            run_acc: Row::zeros(width),
             count: 0,
             err: Vector::zeros(0),
             white: Vector::zeros(0),
             chol_buf: None,
         }
+    }
+
+    /// [`Sums::merge`] of sums that are no longer needed: the per-trial rows are moved, not
+    /// copied (the same result).
+    pub fn merge_owned(&mut self, mut o: Sums) {
+        let rows = std::mem::take(&mut o.per_trial);
+        self.merge(&o);
+        self.per_trial.extend(rows);
     }
 
     /// Adds another block's sums (same shape).
@@ -348,34 +409,28 @@ impl TrialObserver<'_> {
     ) -> Result<(), crate::linalg::LinalgError> {
         let layout = self.sums.layout();
         let w = layout.width();
-        // err = mean - truth, in the buffer.
+        // err = mean - truth, in the buffer (slices: nalgebra's `-=`, element by element).
         if self.err.len() != est.mean.len() {
             self.err = Vector::zeros(est.mean.len());
             self.white = Vector::zeros(est.mean.len());
         }
-        self.err.copy_from(&est.mean);
-        self.err -= truth;
-        let nees_direct = nees_buffered(&self.err, &est.cov, &mut self.white, &mut self.chol_buf);
-        let err = &self.err;
-        let row = &mut self.sums.per_step[(k - 1) * w..k * w];
-        let row_sq = &mut self.sums.per_step_sq[(k - 1) * w..k * w];
-        let run_acc = &mut self.run_acc;
-        // Every per-(trial, step) value goes into the sum, the sum of squares and this
-        // trial's whole-run sum.
-        let mut add = |f: usize, v: f64| {
-            row[f] += v;
-            row_sq[f] += v * v;
-            run_acc[f] += v;
-        };
-        let total: f64 = err.iter().map(|e| e * e).sum();
-        let steady = k >= self.steady_from;
-        for (g, (_, idx)) in self.groups.iter().enumerate() {
-            let se = idx.iter().map(|&j| err[j] * err[j]).sum::<f64>();
-            add(layout.group(g), se);
-            if steady {
-                self.group_acc[g] += se;
-            }
+        assert_eq!(
+            truth.len(),
+            est.mean.len(),
+            "record: truth and estimate dimensions"
+        );
+        for ((e, m), t) in self
+            .err
+            .as_mut_slice()
+            .iter_mut()
+            .zip(est.mean.as_slice())
+            .zip(truth.as_slice())
+        {
+            *e = m - t;
         }
+        let nees_direct = nees_buffered(&self.err, &est.cov, &mut self.white, &mut self.chol_buf);
+        let err = self.err.as_slice();
+        let total: f64 = err.iter().map(|e| e * e).sum();
         // A particle cloud can collapse onto one particle: its covariance is then singular.
         // NEES is computed with a tiny relative jitter (so the claim of certainty shows as a
         // huge NEES) and the step is counted as degenerate; NaN/inf remain errors.
@@ -385,27 +440,41 @@ impl TrialObserver<'_> {
                 let n = est.cov.nrows();
                 let scale = (est.cov.trace().abs() / n as f64).max(1e-12);
                 let jittered = &est.cov + crate::linalg::Matrix::identity(n, n) * (1e-9 * scale);
-                (mahalanobis_sq(err, &jittered)?, true)
+                (mahalanobis_sq(&self.err, &jittered)?, true)
             }
             Err(e) => return Err(e),
         };
         let trace = est.cov.trace();
-        add(Layout::TOTAL_SE, total);
-        add(Layout::NEES, nees);
-        add(Layout::TRACE, trace);
-        add(Layout::MESSAGES, traffic.messages as f64);
-        add(Layout::BITS, traffic.bits as f64);
-        add(Layout::FRAME_BITS, traffic.frame_bits as f64);
-        add(Layout::DOWNLINK_BITS, traffic.downlink_bits as f64);
-        add(Layout::DEGENERATE, f64::from(u8::from(degenerate)));
-        add(
-            Layout::NEES_COVERED,
-            f64::from(u8::from(nees <= self.nees_bound)),
-        );
-        add(
-            Layout::NEES_COVERED_95,
-            f64::from(u8::from(nees <= self.nees_bound_95)),
-        );
+        let flag = |b: bool| f64::from(u8::from(b));
+        // This step's value of every field, at its layout index. ESS is left at +0, which adds
+        // nothing to any of its sums (they start at +0 and only ever add ESS values >= 0); it
+        // is recorded by `record_ess`.
+        let mut vals = Row::zeros(w);
+        vals[Layout::TOTAL_SE] = total;
+        vals[Layout::NEES] = nees;
+        vals[Layout::TRACE] = trace;
+        vals[Layout::MESSAGES] = traffic.messages as f64;
+        vals[Layout::BITS] = traffic.bits as f64;
+        vals[Layout::FRAME_BITS] = traffic.frame_bits as f64;
+        vals[Layout::DOWNLINK_BITS] = traffic.downlink_bits as f64;
+        vals[Layout::DEGENERATE] = flag(degenerate);
+        vals[Layout::NEES_COVERED] = flag(nees <= self.nees_bound);
+        vals[Layout::NEES_COVERED_95] = flag(nees <= self.nees_bound_95);
+        let steady = k >= self.steady_from;
+        for (g, (_, idx)) in self.groups.iter().enumerate() {
+            let se = idx.iter().map(|&j| err[j] * err[j]).sum::<f64>();
+            vals[layout.group(g)] = se;
+            if steady {
+                self.group_acc[g] += se;
+            }
+        }
+        // Every per-(trial, step) value goes into the sum, the sum of squares and this
+        // trial's whole-run sum.
+        add_row(&mut self.sums.per_step[(k - 1) * w..k * w], &vals, |v| v);
+        add_row(&mut self.sums.per_step_sq[(k - 1) * w..k * w], &vals, |v| {
+            v * v
+        });
+        add_row(&mut self.run_acc[..w], &vals, |v| v);
         // Divergence: a run of NEES beyond the 99.9% quantile, or anything not finite.
         if !(total.is_finite() && nees.is_finite()) {
             self.diverged = true;
@@ -461,9 +530,19 @@ impl TrialObserver<'_> {
         row.extend(self.group_acc.iter().map(|v| v / c));
         self.sums.per_trial.push(row);
         let steps = self.sums.steps.max(1) as f64;
-        for (stat, v) in self.sums.whole_run.iter_mut().zip(&self.run_acc) {
+        for (stat, v) in self.sums.whole_run.iter_mut().zip(self.run_acc.iter()) {
             stat.add(v / steps);
         }
+    }
+}
+
+/// `acc[f] += g(vals[f])` for every field of a row (equal lengths; element-wise, so the
+/// compiler may vectorize it).
+#[inline(always)]
+fn add_row(acc: &mut [f64], vals: &[f64], g: impl Fn(f64) -> f64) {
+    let acc = &mut acc[..vals.len()];
+    for i in 0..vals.len() {
+        acc[i] += g(vals[i]);
     }
 }
 
@@ -483,7 +562,7 @@ fn nees_buffered(
             cols: p.ncols(),
         });
     }
-    if p.iter().any(|v| !v.is_finite()) {
+    if p.as_slice().iter().any(|v| !v.is_finite()) {
         return Err(LinalgError::NonFinite);
     }
     // Dimensions 1..=6: the same factorization, solve and sum in fixed-size buffers.

@@ -17,11 +17,25 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// and hence every bit of the result, is the same for 1 or many threads.
 const BLOCK: usize = 4;
 
-/// Blocks in flight at once, per worker thread. Only memory and load balance depend on it,
-/// never the result: blocks are merged in block order whatever the window. Two keeps the
-/// in-flight sums of a 93-variant sweep (dormann-fig1) at a few MB: 8 cost 17 MB more peak
-/// memory for no measurable speed.
-const WINDOW_PER_THREAD: usize = 2;
+/// Blocks in flight at once, per worker thread, at the start of a run. Only memory, load
+/// balance and speed depend on the window, never the result: blocks are merged in block order
+/// whatever the window. Two keeps the in-flight sums of a 93-variant sweep (dormann-fig1) at a
+/// few MB: 8 cost 17 MB more peak memory for no measurable speed.
+pub const WINDOW_PER_THREAD: usize = 2;
+
+/// The window grows (doubling) while a window takes less than this: each window ends in a
+/// barrier of the thread pool (tens of microseconds), which cost the 5000 short trials of the
+/// peers' KF Monte Carlo 40% of their time at two blocks per thread.
+const WINDOW_MIN_SECONDS: f64 = 0.025;
+
+/// Bytes of in-flight block sums the window may grow to (it never shrinks below
+/// [`WINDOW_PER_THREAD`] blocks per thread), so memory stays flat in the number of trials.
+pub const WINDOW_MAX_BYTES: usize = 4 << 20;
+
+/// Blocks per window at most, whatever the size of a block's sums: a window is also what a
+/// Ctrl-C drops, so it stays short in time too (it only grows while it is under
+/// [`WINDOW_MIN_SECONDS`]).
+const WINDOW_MAX_BLOCKS: usize = 1024;
 
 /// Stream 0 of a trial draws truth and measurements; stream 1 + v is variant v's coins.
 pub fn trial_rng(seed: u64, trial: u64, stream: u64) -> Xoshiro256PlusPlus {
@@ -97,6 +111,8 @@ struct Drawer {
     /// Per sensor: its noise draw v and R^{1/2} v.
     v: Vec<Vector>,
     rv: Vec<Vector>,
+    /// The variants' work space, kept from trial to trial.
+    scratch: Scratch,
 }
 
 impl Drawer {
@@ -120,10 +136,79 @@ impl Drawer {
             b: zeros(n),
             v: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
             rv: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
+            scratch: Scratch::new(sys.n_sensors()),
         }
     }
 
     fn draw(&mut self, exp: &Experiment, trial: usize) {
+        // State dimensions 1..=6: the same operations on stack arrays.
+        match exp.system.state_dim() {
+            1 => self.draw_fixed::<1>(exp, trial),
+            2 => self.draw_fixed::<2>(exp, trial),
+            3 => self.draw_fixed::<3>(exp, trial),
+            4 => self.draw_fixed::<4>(exp, trial),
+            5 => self.draw_fixed::<5>(exp, trial),
+            6 => self.draw_fixed::<6>(exp, trial),
+            _ => self.draw_dynamic(exp, trial),
+        }
+    }
+
+    /// [`Drawer::draw_dynamic`] for state dimension N: the same normal draws in the same order
+    /// and the same products (`fixed`'s kernels repeat nalgebra's gemv), with the state on the
+    /// stack.
+    fn draw_fixed<const N: usize>(&mut self, exp: &Experiment, trial: usize) {
+        use crate::filter::fixed::{mat_vec, mat_vec_dyn, mat_vec_rows};
+        let sys = &exp.system;
+        let mut rng = trial_rng(exp.seed, trial as u64, 0);
+        let normal = |rng: &mut Xoshiro256PlusPlus| -> f64 {
+            rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
+        };
+        let normals =
+            |rng: &mut Xoshiro256PlusPlus| -> [f64; N] { std::array::from_fn(|_| normal(rng)) };
+        let arr = |v: &Vector| -> [f64; N] { v.as_slice().try_into().expect("state dimension") };
+        // x_0 = mean + S n_0.
+        let a: [f64; N] = mat_vec(self.x0_sqrt.as_slice(), &normals(&mut rng));
+        let mean = arr(&exp.initial_truth.mean);
+        let mut x: [f64; N] = std::array::from_fn(|i| mean[i] + a[i]);
+        let t = &sys.transition;
+        let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
+        let linear: Vec<_> = sys.sensors.iter().map(|s| s.as_linear()).collect();
+        let any_nonlinear = linear.iter().any(Option::is_none);
+        for k in 0..exp.steps {
+            // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
+            let w = normals(&mut rng);
+            let a: [f64; N] = mat_vec(f, &x);
+            let b: [f64; N] = mat_vec(q_sqrt, &w);
+            x = std::array::from_fn(|i| a[i] + b[i]);
+            if any_nonlinear {
+                self.x.as_mut_slice().copy_from_slice(&x);
+            }
+            for (i, (s, z)) in sys
+                .sensors
+                .iter()
+                .zip(self.data.measurements[k].iter_mut())
+                .enumerate()
+            {
+                match linear[i] {
+                    // z = H x + R^{1/2} v (MeasurementModel::sample).
+                    Some(lin) => {
+                        let (v, rv) = (self.v[i].as_mut_slice(), self.rv[i].as_mut_slice());
+                        v.iter_mut().for_each(|e| *e = normal(&mut rng));
+                        let z = z.as_mut_slice();
+                        mat_vec_rows::<N>(z, lin.h().as_slice(), &x);
+                        mat_vec_dyn(rv, s.noise_sqrt().as_slice(), v);
+                        for (z, r) in z.iter_mut().zip(rv.iter()) {
+                            *z += r;
+                        }
+                    }
+                    None => *z = s.sample(&self.x, &mut rng),
+                }
+            }
+            self.data.truth[k].as_mut_slice().copy_from_slice(&x);
+        }
+    }
+
+    fn draw_dynamic(&mut self, exp: &Experiment, trial: usize) {
         let sys = &exp.system;
         let mut rng = trial_rng(exp.seed, trial as u64, 0);
         let normal = |rng: &mut Xoshiro256PlusPlus| -> f64 {
@@ -205,7 +290,7 @@ fn run_trial(
     drawer: &mut Drawer,
 ) -> Result<(), RunError> {
     drawer.draw(exp, trial);
-    run_trial_on(exp, trial, &drawer.data, sums)
+    run_trial_with(exp, trial, &drawer.data, sums, &mut drawer.scratch)
 }
 
 /// Runs one trial of every variant on the given truth and measurements (drawn by
@@ -217,9 +302,25 @@ pub fn run_trial_on(
     data: &TrialData,
     sums: &mut [Sums],
 ) -> Result<(), RunError> {
-    let mut scratch = Scratch::new(exp.system.n_sensors());
+    run_trial_with(
+        exp,
+        trial,
+        data,
+        sums,
+        &mut Scratch::new(exp.system.n_sensors()),
+    )
+}
+
+/// [`run_trial_on`] in the given work space.
+fn run_trial_with(
+    exp: &Experiment,
+    trial: usize,
+    data: &TrialData,
+    sums: &mut [Sums],
+    scratch: &mut Scratch,
+) -> Result<(), RunError> {
     for (v, s) in sums.iter_mut().enumerate().take(exp.variants.len()) {
-        run_variant(exp, trial, v, data, s, &mut scratch)?;
+        run_variant(exp, trial, v, data, s, scratch)?;
     }
     Ok(())
 }
@@ -231,7 +332,8 @@ struct Scratch {
     /// Work shared by the variants of one trial (fast paths), and which trial and data it
     /// belongs to.
     cache: crate::scheme::TrialCache,
-    cache_of: Option<(usize, *const Vec<Vector>)>,
+    /// (trial, address of its measurements): an identity only, never dereferenced.
+    cache_of: Option<(usize, usize)>,
 }
 
 impl Scratch {
@@ -272,7 +374,7 @@ fn run_variant(
     };
     let mut rng = trial_rng(exp.seed, trial as u64, 1 + v as u64);
     // The fast path of the scheme, if it has one for this data: the same numbers.
-    let of = Some((trial, data.measurements.as_ptr()));
+    let of = Some((trial, data.measurements.as_ptr() as usize));
     if *cache_of != of {
         cache.clear();
         *cache_of = of;
@@ -399,6 +501,13 @@ pub fn fold_block(total: &mut [Sums], block: &[Sums]) {
     }
 }
 
+/// [`fold_block`] of a block that is no longer needed (its per-trial rows are moved).
+pub fn fold_block_owned(total: &mut [Sums], block: Vec<Sums>) {
+    for (t, b) in total.iter_mut().zip(block) {
+        t.merge_owned(b);
+    }
+}
+
 /// How [`run_windows`] ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Completion {
@@ -431,10 +540,17 @@ pub fn run_windows(
     // Blocks run in parallel a window at a time and are handed over in block order as each
     // window finishes: memory stays flat in the number of trials (at most `window` blocks'
     // sums are alive), and the summation order is the one of a sequential run.
-    let window = WINDOW_PER_THREAD * pool.current_num_threads().max(1);
+    let min_window = WINDOW_PER_THREAD * pool.current_num_threads().max(1);
+    let block_bytes = empty_sums(exp).iter().map(Sums::heap_bytes).sum::<usize>()
+        + BLOCK * exp.variants.len() * Sums::per_trial_bytes(exp.groups.len());
+    let max_window = (WINDOW_MAX_BYTES / block_bytes.max(1))
+        .min(WINDOW_MAX_BLOCKS)
+        .max(min_window);
+    let mut window = min_window;
     let drawers = std::sync::Mutex::new(Vec::new());
     let mut start = blocks.start;
     while start < blocks.end {
+        let began = std::time::Instant::now();
         if stopped() {
             return Ok(Completion::Stopped);
         }
@@ -466,6 +582,9 @@ pub fn run_windows(
         };
         on_window(start, window_sums)?;
         start = end;
+        if began.elapsed().as_secs_f64() < WINDOW_MIN_SECONDS {
+            window = (2 * window).min(max_window);
+        }
     }
     Ok(Completion::Done)
 }
@@ -485,8 +604,8 @@ pub fn run(
         None,
         progress,
         &mut |_, blocks| {
-            for block in &blocks {
-                fold_block(&mut total, block);
+            for block in blocks {
+                fold_block_owned(&mut total, block);
             }
             Ok(())
         },

@@ -292,10 +292,10 @@ pub(crate) fn compute(
         &mut |first, blocks| {
             match &mut state.progress {
                 durable::Progress::Prefix { next, total } => {
-                    for b in &blocks {
-                        runner::fold_block(total, b);
-                    }
                     *next = first + blocks.len();
+                    for b in blocks {
+                        runner::fold_block_owned(total, b);
+                    }
                 }
                 durable::Progress::Blocks(done) => done.extend(blocks),
             }
