@@ -140,7 +140,35 @@ impl NeesHistogram {
     }
 
     fn add(&mut self, v: f64) {
-        let b = if !v.is_finite() {
+        self.counts[Self::bin(v)] += 1;
+    }
+
+    /// The bin of `v`: 0 below 1e-4 (and for v <= 0), `BINS + 1` at or above 1e12 (and for
+    /// anything not finite), else `1 + floor((log10 v - LO) * PER_DECADE)` with the library's
+    /// log10. That log10 costs more than the rest of a step's bookkeeping, so the bin is first
+    /// read from a cheap approximation of t = (log10 v - LO) * PER_DECADE that is within
+    /// [`APPROX_T_ERROR`] of it; only when t is that close to a bin edge (a few in a million
+    /// values) is the library's log10 called. Either way the bin is the one `exact_bin` gives.
+    fn bin(v: f64) -> usize {
+        if let Some(t) = approx_t(v) {
+            let (lo, hi) = (t - APPROX_T_ERROR, t + APPROX_T_ERROR);
+            // Truncation is the floor here (lo >= 0), and needs no call into libm.
+            if lo >= 0.0 && hi < Self::BINS as f64 && lo as usize == hi as usize {
+                return 1 + lo as usize;
+            }
+            if hi < 0.0 {
+                return 0;
+            }
+            if lo >= Self::BINS as f64 {
+                return Self::BINS + 1;
+            }
+        }
+        Self::exact_bin(v)
+    }
+
+    /// The bin by the definition (see [`NeesHistogram::bin`]).
+    fn exact_bin(v: f64) -> usize {
+        if !v.is_finite() {
             Self::BINS + 1
         } else if v <= 0.0 {
             0
@@ -153,8 +181,7 @@ impl NeesHistogram {
             } else {
                 1 + t as usize
             }
-        };
-        self.counts[b] += 1;
+        }
     }
 
     fn merge(&mut self, o: &NeesHistogram) {
@@ -211,6 +238,48 @@ fn nees_bounds(n: usize) -> [f64; 3] {
         Some(cell) => *cell.get_or_init(compute),
         None => compute(),
     }
+}
+
+/// A bound on |approx_t(v) - t(v)|, where t(v) = (log10 v - LO) * PER_DECADE as
+/// [`NeesHistogram::exact_bin`] computes it. The approximation's own error is below 1e-8 (see
+/// [`approx_t`]); the library's log10 and the two roundings of t add a few 1e-13 at most.
+const APPROX_T_ERROR: f64 = 1e-6;
+
+/// Entries of the table of log10 over the leading mantissa bits.
+const LOG_TABLE_BITS: u32 = 8;
+
+/// Per leading-mantissa cell i (mantissa m in [1 + i/256, 1 + (i+1)/256)): the cell's centre
+/// c, 1/c and log10(c).
+fn log_table() -> &'static [[f64; 2]; 1 << LOG_TABLE_BITS] {
+    use std::sync::OnceLock;
+    static TABLE: OnceLock<[[f64; 2]; 1 << LOG_TABLE_BITS]> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        let cells = (1u32 << LOG_TABLE_BITS) as f64;
+        std::array::from_fn(|i| {
+            let c = 1.0 + (i as f64 + 0.5) / cells;
+            [1.0 / c, c.log10()]
+        })
+    })
+}
+
+/// (log10 v - LO) * PER_DECADE within 1e-8, for a positive normal v (`None` otherwise):
+/// v = 2^e m with m in [1, 2); log10 v = e log10 2 + log10 c + log10(m / c) for the centre c
+/// of m's table cell, the last term by three terms of the series of ln(1 + d) / ln 10 with
+/// |d| < 1/512 (the first omitted term is below 1e-11, times 50 per decade below 1e-9; the
+/// rounding of a dozen operations on numbers below 1000 adds about 1e-13).
+fn approx_t(v: f64) -> Option<f64> {
+    if !(v.is_normal() && v > 0.0) {
+        return None;
+    }
+    let bits = v.to_bits();
+    let e = ((bits >> 52) & 0x7ff) as i64 - 1023;
+    let cell = ((bits >> (52 - LOG_TABLE_BITS)) & ((1 << LOG_TABLE_BITS) - 1)) as usize;
+    let m = f64::from_bits((bits & ((1u64 << 52) - 1)) | (1023u64 << 52));
+    let [inv_c, log_c] = log_table()[cell];
+    let d = m * inv_c - 1.0;
+    let ln1p = d * (1.0 - d * (0.5 - d * (1.0 / 3.0)));
+    let log10 = e as f64 * std::f64::consts::LOG10_2 + log_c + ln1p * std::f64::consts::LOG10_E;
+    Some((log10 - NeesHistogram::LO) * NeesHistogram::PER_DECADE)
 }
 
 /// Sums for one scheme variant.
@@ -346,12 +415,30 @@ impl Sums {
         }
     }
 
-    /// [`Sums::merge`] of sums that are no longer needed: the per-trial rows are moved, not
-    /// copied (the same result).
-    pub fn merge_owned(&mut self, mut o: Sums) {
+    /// [`Sums::merge`] of sums that are no longer needed: the per-trial rows are moved out
+    /// of `o`, not copied (the same result).
+    pub fn merge_taking(&mut self, o: &mut Sums) {
         let rows = std::mem::take(&mut o.per_trial);
-        self.merge(&o);
+        self.merge(o);
         self.per_trial.extend(rows);
+    }
+
+    /// Back to [`Sums::new`] of the same shape, keeping the allocations.
+    pub fn clear(&mut self) {
+        self.per_step.fill(0.0);
+        self.per_step_sq.fill(0.0);
+        self.whole_run.fill(TrialStat::default());
+        self.trials = 0;
+        self.steady_mse = TrialStat::default();
+        self.steady_trace = TrialStat::default();
+        self.steady_nees = TrialStat::default();
+        self.steady_messages = TrialStat::default();
+        self.per_trial.clear();
+        self.per_trial_nees.clear();
+        self.diverged = 0;
+        self.ess_min.fill(f64::INFINITY);
+        self.has_ess = false;
+        self.nees_hist.counts.fill(0);
     }
 
     /// Adds another block's sums (same shape).
@@ -591,6 +678,60 @@ mod tests {
     use crate::linalg::Matrix;
 
     #[test]
+    fn the_fast_histogram_bin_is_the_bin_of_the_library_log10() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(7);
+        let mut worst: f64 = 0.0;
+        let mut check = |v: f64| {
+            assert_eq!(
+                NeesHistogram::bin(v),
+                NeesHistogram::exact_bin(v),
+                "value {v:e}"
+            );
+            if let Some(t) = approx_t(v) {
+                let exact = (v.log10() - NeesHistogram::LO) * NeesHistogram::PER_DECADE;
+                worst = worst.max((t - exact).abs());
+            }
+        };
+        // Log-uniform over 1e-8 .. 1e16 (beyond both ends of the histogram).
+        for _ in 0..400_000 {
+            let v = 10f64.powf(rng.random_range(-8.0..16.0));
+            check(v);
+        }
+        // Every bin edge and its floating-point neighbours, where the cheap value cannot
+        // decide and the library's log10 must.
+        for b in 0..=NeesHistogram::BINS + 1 {
+            let edge = 10f64.powf(NeesHistogram::LO + b as f64 / NeesHistogram::PER_DECADE);
+            let mut v = edge;
+            for _ in 0..4 {
+                v = v.next_down();
+            }
+            for _ in 0..9 {
+                check(v);
+                v = v.next_up();
+            }
+        }
+        for v in [
+            0.0,
+            -0.0,
+            -1.0,
+            f64::MIN_POSITIVE,
+            f64::MIN_POSITIVE / 4.0,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            1.0,
+            1e-4,
+            1e12,
+        ] {
+            check(v);
+        }
+        assert!(worst < 1e-8, "approximation error {worst:e}");
+        assert!(worst < APPROX_T_ERROR / 100.0);
+    }
+
+    #[test]
     fn records_hand_computed_errors_and_merges() {
         let groups = vec![("a".to_string(), vec![0]), ("b".to_string(), vec![1])];
         let mut s = Sums::new(2, 2, 2);
@@ -623,6 +764,14 @@ mod tests {
         let mut m = s.clone();
         m.merge(&s);
         assert_eq!(m.trials, 2);
+        // Cleared sums are new sums; merging by taking the rows gives what merging gives.
+        let mut taken = Sums::new(2, 2, 2);
+        taken.merge_taking(&mut s.clone());
+        taken.merge_taking(&mut s.clone());
+        assert_eq!(taken, m);
+        let mut cleared = m.clone();
+        cleared.clear();
+        assert_eq!(cleared, Sums::new(2, 2, 2));
         assert_eq!(m.at(1, Layout::TOTAL_SE), 10.0);
         let (mean, se) = m.steady_mse.mean_se(2);
         assert_eq!((mean, se), (5.0, 0.0));

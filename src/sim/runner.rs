@@ -501,10 +501,11 @@ pub fn fold_block(total: &mut [Sums], block: &[Sums]) {
     }
 }
 
-/// [`fold_block`] of a block that is no longer needed (its per-trial rows are moved).
-pub fn fold_block_owned(total: &mut [Sums], block: Vec<Sums>) {
+/// [`fold_block`] of a block that is no longer needed: its per-trial rows are moved, not
+/// copied (the same total).
+pub fn fold_block_taking(total: &mut [Sums], block: &mut [Sums]) {
     for (t, b) in total.iter_mut().zip(block) {
-        t.merge_owned(b);
+        t.merge_taking(b);
     }
 }
 
@@ -519,7 +520,9 @@ pub enum Completion {
 }
 
 /// Runs the blocks of `blocks` a window at a time in parallel and hands each finished window's
-/// per-block sums (in block order, starting at block `first`) to `on_window`. `stop` is
+/// per-block sums (in block order, starting at block `first`) to `on_window`, which folds
+/// them or takes them out of the vector; what it leaves there is cleared and reused for later
+/// blocks (fresh sums cost an allocation and page faults per block). `stop` is
 /// checked before every trial: once raised, the window in flight is dropped and the run
 /// returns [`Completion::Stopped`]. `progress` is called with the number of trials finished
 /// in this call.
@@ -529,7 +532,7 @@ pub fn run_windows(
     blocks: std::ops::Range<usize>,
     stop: Option<&std::sync::atomic::AtomicBool>,
     progress: &(dyn Fn(usize) + Sync),
-    on_window: &mut dyn FnMut(usize, Vec<Vec<Sums>>) -> Result<(), RunError>,
+    on_window: &mut dyn FnMut(usize, &mut Vec<Vec<Sums>>) -> Result<(), RunError>,
 ) -> Result<Completion, RunError> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads)
@@ -548,6 +551,12 @@ pub fn run_windows(
         .max(min_window);
     let mut window = min_window;
     let drawers = std::sync::Mutex::new(Vec::new());
+    // Block sums left by `on_window`, cleared, for the next blocks.
+    let spare: std::sync::Mutex<Vec<Vec<Sums>>> = std::sync::Mutex::new(Vec::new());
+    let fresh_sums = || {
+        let reused = spare.lock().unwrap_or_else(|e| e.into_inner()).pop();
+        reused.unwrap_or_else(|| empty_sums(exp))
+    };
     let mut start = blocks.start;
     while start < blocks.end {
         let began = std::time::Instant::now();
@@ -564,7 +573,7 @@ pub fn run_windows(
                     || PooledDrawer::take(&drawers, exp),
                     |drawer, b| {
                         let drawer = drawer.get();
-                        let mut sums = empty_sums(exp);
+                        let mut sums = fresh_sums();
                         for trial in block_trials(b, exp.trials) {
                             if stopped() {
                                 return Ok(None);
@@ -577,10 +586,16 @@ pub fn run_windows(
                 )
                 .collect()
         });
-        let Some(window_sums) = window_sums?.into_iter().collect::<Option<Vec<_>>>() else {
+        let Some(mut window_sums) = window_sums?.into_iter().collect::<Option<Vec<_>>>() else {
             return Ok(Completion::Stopped);
         };
-        on_window(start, window_sums)?;
+        on_window(start, &mut window_sums)?;
+        let mut spare = spare.lock().unwrap_or_else(|e| e.into_inner());
+        for mut block in window_sums {
+            block.iter_mut().for_each(Sums::clear);
+            spare.push(block);
+        }
+        drop(spare);
         start = end;
         if began.elapsed().as_secs_f64() < WINDOW_MIN_SECONDS {
             window = (2 * window).min(max_window);
@@ -604,8 +619,8 @@ pub fn run(
         None,
         progress,
         &mut |_, blocks| {
-            for block in blocks {
-                fold_block_owned(&mut total, block);
+            for block in blocks.iter_mut() {
+                fold_block_taking(&mut total, block);
             }
             Ok(())
         },

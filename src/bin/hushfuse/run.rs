@@ -293,11 +293,11 @@ pub(crate) fn compute(
             match &mut state.progress {
                 durable::Progress::Prefix { next, total } => {
                     *next = first + blocks.len();
-                    for b in blocks {
-                        runner::fold_block_owned(total, b);
+                    for b in blocks.iter_mut() {
+                        runner::fold_block_taking(total, b);
                     }
                 }
-                durable::Progress::Blocks(done) => done.extend(blocks),
+                durable::Progress::Blocks(done) => done.append(blocks),
             }
             if last_save.elapsed() >= every && !state.is_complete() {
                 let t = Instant::now();
