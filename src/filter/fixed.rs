@@ -304,6 +304,42 @@ fn mahalanobis_fixed<const N: usize>(e: &[f64], p: &[f64]) -> Option<Option<f64>
     Some(Some(s))
 }
 
+/// The dirty Cholesky factor [`mahalanobis_sq_small`] computes from a finite square `p` of
+/// dimension 1..=6 (column-major, strict upper triangle as in `p`); `None` for other
+/// dimensions, for a non-finite `p` and when P is not positive definite.
+pub fn nees_factor(p: &Matrix) -> Option<Vec<f64>> {
+    let n = p.nrows();
+    if !(1..=6).contains(&n) || p.ncols() != n || p.as_slice().iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let mut m = p.as_slice().to_vec();
+    with_dim!(n, cholesky_fixed(&mut m), false).then_some(m)
+}
+
+/// `e^T P^{-1} e` from the factor of [`nees_factor`]: the forward substitution and the sum of
+/// squares of [`mahalanobis_sq_small`], hence its number. `None` for dimensions it does not
+/// cover (the factor of a positive definite P has no zero diagonal).
+pub fn mahalanobis_sq_factored(e: &[f64], factor: &[f64]) -> Option<f64> {
+    let n = e.len();
+    if factor.len() != n * n {
+        return None;
+    }
+    with_dim!(n, mahalanobis_from_factor(e, factor), None)
+}
+
+#[inline(always)]
+fn mahalanobis_from_factor<const N: usize>(e: &[f64], l: &[f64]) -> Option<f64> {
+    let mut w: [f64; N] = e.try_into().ok()?;
+    if !lower_solve_fixed::<N>(l, &mut w) {
+        return None;
+    }
+    let mut s = 0.0;
+    for v in w {
+        s += v * v;
+    }
+    Some(s)
+}
+
 /// An LU factorization (`A.clone().lu()`) ready to solve with: for dimensions 1..=6 the
 /// packed factors (unit lower L below the diagonal, U on and above it) and the row
 /// permutation as a gather, inline (no heap); nalgebra's own factorization otherwise.

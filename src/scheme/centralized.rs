@@ -283,6 +283,8 @@ pub struct ScheduledStep {
     pub fused_chol: Cholesky<f64, Dyn>,
     /// The filtered covariance.
     pub cov: Matrix,
+    /// Its Cholesky factor as NEES computes it ([`fixed::nees_factor`]), when it has one.
+    pub nees_factor: Option<Vec<f64>>,
 }
 
 /// The covariance recursion of the centralized KF that receives every measurement of every
@@ -353,6 +355,7 @@ fn schedule_step(system: &System, prev: &Matrix) -> Option<ScheduledStep> {
     Some(ScheduledStep {
         pred_chol,
         fused_chol,
+        nees_factor: fixed::nees_factor(&cov),
         cov,
     })
 }
@@ -421,8 +424,11 @@ impl AllData<'_> {
                 x = y;
                 est.mean.as_mut_slice().copy_from_slice(&x);
                 est.cov.as_mut_slice().copy_from_slice(step.cov.as_slice());
-                sink.step(k, est, traffic)
-                    .map_err(|source| super::FastTrialError::Sink { k, source })?;
+                match &step.nees_factor {
+                    Some(f) => sink.step_factored(k, est, f, traffic),
+                    None => sink.step(k, est, traffic),
+                }
+                .map_err(|source| super::FastTrialError::Sink { k, source })?;
             }
             Ok(())
         };

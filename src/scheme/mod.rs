@@ -210,6 +210,21 @@ pub trait StepSink {
         estimate: &Gaussian,
         traffic: crate::network::Traffic,
     ) -> Result<(), LinalgError>;
+
+    /// [`StepSink::step`] with the Cholesky factor of the estimate's covariance, when the
+    /// scheme has it at hand (a covariance shared by every trial): `factor` is the dirty
+    /// column-major lower factor that `fixed::nees_factor` computes from exactly these
+    /// covariance bits, so a sink that needs NEES need not factor the covariance again.
+    fn step_factored(
+        &mut self,
+        k: usize,
+        estimate: &Gaussian,
+        factor: &[f64],
+        traffic: crate::network::Traffic,
+    ) -> Result<(), LinalgError> {
+        let _ = factor;
+        self.step(k, estimate, traffic)
+    }
 }
 
 /// Why a fast trial stopped: the scheme failed at step `k`, or the sink refused step `k`.

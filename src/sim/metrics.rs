@@ -494,6 +494,31 @@ impl TrialObserver<'_> {
         est: &Gaussian,
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
+        self.record_inner(k, truth, est, None, traffic)
+    }
+
+    /// [`TrialObserver::record`] with the Cholesky factor of the estimate's covariance from
+    /// [`crate::filter::fixed::nees_factor`] (the same factor record would compute, so the
+    /// same NEES): a covariance shared by all trials is factored once, not once per trial.
+    pub fn record_factored(
+        &mut self,
+        k: usize,
+        truth: &Vector,
+        est: &Gaussian,
+        factor: &[f64],
+        traffic: Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        self.record_inner(k, truth, est, Some(factor), traffic)
+    }
+
+    fn record_inner(
+        &mut self,
+        k: usize,
+        truth: &Vector,
+        est: &Gaussian,
+        factor: Option<&[f64]>,
+        traffic: Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
         let layout = self.sums.layout();
         let w = layout.width();
         // err = mean - truth, in the buffer (slices: nalgebra's `-=`, element by element).
@@ -515,7 +540,12 @@ impl TrialObserver<'_> {
         {
             *e = m - t;
         }
-        let nees_direct = nees_buffered(&self.err, &est.cov, &mut self.white, &mut self.chol_buf);
+        let factored = factor
+            .and_then(|f| crate::filter::fixed::mahalanobis_sq_factored(self.err.as_slice(), f));
+        let nees_direct = match factored {
+            Some(v) => Ok(v),
+            None => nees_buffered(&self.err, &est.cov, &mut self.white, &mut self.chol_buf),
+        };
         let err = self.err.as_slice();
         let total: f64 = err.iter().map(|e| e * e).sum();
         // A particle cloud can collapse onto one particle: its covariance is then singular.

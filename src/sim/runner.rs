@@ -113,6 +113,15 @@ struct Drawer {
     rv: Vec<Vector>,
     /// The variants' work space, kept from trial to trial.
     scratch: Scratch,
+    /// Per sensor, when it is linear: H and R^{1/2} (column-major), read per step without a
+    /// virtual call.
+    linear: Vec<Option<LinearDraw>>,
+}
+
+/// A linear sensor's matrices as the drawer reads them.
+struct LinearDraw {
+    h: Vec<f64>,
+    r_sqrt: Vec<f64>,
 }
 
 impl Drawer {
@@ -137,6 +146,16 @@ impl Drawer {
             v: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
             rv: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
             scratch: Scratch::new(sys.n_sensors()),
+            linear: sys
+                .sensors
+                .iter()
+                .map(|s| {
+                    s.as_linear().map(|l| LinearDraw {
+                        h: l.h().as_slice().to_vec(),
+                        r_sqrt: s.noise_sqrt().as_slice().to_vec(),
+                    })
+                })
+                .collect(),
         }
     }
 
@@ -172,8 +191,7 @@ impl Drawer {
         let mut x: [f64; N] = std::array::from_fn(|i| mean[i] + a[i]);
         let t = &sys.transition;
         let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
-        let linear: Vec<_> = sys.sensors.iter().map(|s| s.as_linear()).collect();
-        let any_nonlinear = linear.iter().any(Option::is_none);
+        let any_nonlinear = self.linear.iter().any(Option::is_none);
         for k in 0..exp.steps {
             // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
             let w = normals(&mut rng);
@@ -183,25 +201,27 @@ impl Drawer {
             if any_nonlinear {
                 self.x.as_mut_slice().copy_from_slice(&x);
             }
-            for (i, (s, z)) in sys
-                .sensors
-                .iter()
-                .zip(self.data.measurements[k].iter_mut())
-                .enumerate()
-            {
-                match linear[i] {
-                    // z = H x + R^{1/2} v (MeasurementModel::sample).
-                    Some(lin) => {
+            let zs = &mut self.data.measurements[k];
+            for (i, (plan, zv)) in self.linear.iter().zip(zs.iter_mut()).enumerate() {
+                let z = zv.as_mut_slice();
+                match plan {
+                    // z = H x + R^{1/2} v (MeasurementModel::sample); a scalar measurement
+                    // without the loops (the same products and sum).
+                    Some(LinearDraw { h, r_sqrt }) if z.len() == 1 => {
+                        let v = normal(&mut rng);
+                        let hx: [f64; 1] = mat_vec(h, &x);
+                        z[0] = hx[0] + r_sqrt[0] * v;
+                    }
+                    Some(LinearDraw { h, r_sqrt }) => {
                         let (v, rv) = (self.v[i].as_mut_slice(), self.rv[i].as_mut_slice());
                         v.iter_mut().for_each(|e| *e = normal(&mut rng));
-                        let z = z.as_mut_slice();
-                        mat_vec_rows::<N>(z, lin.h().as_slice(), &x);
-                        mat_vec_dyn(rv, s.noise_sqrt().as_slice(), v);
+                        mat_vec_rows::<N>(z, h, &x);
+                        mat_vec_dyn(rv, r_sqrt, v);
                         for (z, r) in z.iter_mut().zip(rv.iter()) {
                             *z += r;
                         }
                     }
-                    None => *z = s.sample(&self.x, &mut rng),
+                    None => *zv = sys.sensors[i].sample(&self.x, &mut rng),
                 }
             }
             self.data.truth[k].as_mut_slice().copy_from_slice(&x);
@@ -393,6 +413,18 @@ fn run_variant(
                 traffic: network::Traffic,
             ) -> Result<(), crate::linalg::LinalgError> {
                 self.obs.record(k, &self.truth[k - 1], estimate, traffic)?;
+                self.obs.record_ess(k, None);
+                Ok(())
+            }
+            fn step_factored(
+                &mut self,
+                k: usize,
+                estimate: &crate::filter::Gaussian,
+                factor: &[f64],
+                traffic: network::Traffic,
+            ) -> Result<(), crate::linalg::LinalgError> {
+                self.obs
+                    .record_factored(k, &self.truth[k - 1], estimate, factor, traffic)?;
                 self.obs.record_ess(k, None);
                 Ok(())
             }
