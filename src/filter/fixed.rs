@@ -471,6 +471,29 @@ pub fn sub_assign(a: &mut [f64], b: &[f64]) {
     }
 }
 
+/// `y = a x` for a square `a`, on slices (vectors kept in flat buffers), bit for bit as
+/// [`gemv`]: the same fixed-size kernel for dimensions 1..=6, nalgebra's gemv on views of the
+/// slices otherwise (the same generic code as on owned vectors).
+pub fn gemv_square(y: &mut [f64], a: &Matrix, x: &[f64]) {
+    let n = a.nrows();
+    assert!(
+        a.ncols() == n && x.len() == n && y.len() == n,
+        "gemv_square: dimensions mismatch ({n}x{} times {}, into {})",
+        a.ncols(),
+        x.len(),
+        y.len()
+    );
+    with_dim!(n, gemv_fixed_square(y, a.as_slice(), x), {
+        let x = nalgebra::DVectorView::from_slice(x, n);
+        nalgebra::DVectorViewMut::from_slice(y, n).gemv(1.0, a, &x, 0.0)
+    })
+}
+
+#[inline(always)]
+fn gemv_fixed_square<const N: usize>(y: &mut [f64], a: &[f64], x: &[f64]) {
+    gemv_fixed::<N, N>(y, a, x)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -604,6 +627,32 @@ mod tests {
             let b = Vector::from_fn(n, |i, _| vals[20 + i] * if i % 3 == 0 { -0.0 } else { 1.0 });
             prop_assert_eq!(dot(a.as_slice(), b.as_slice()).to_bits(), a.dot(&b).to_bits());
             prop_assert_eq!(norm(a.as_slice()).to_bits(), a.norm().to_bits());
+        }
+    }
+
+    proptest! {
+        /// The slice kernel for square matrices equals [`gemv`] (and hence nalgebra's) bit for
+        /// bit, for every dimension up to 7 (7 takes nalgebra's gemv on views).
+        #[test]
+        fn gemv_square_is_bit_identical(
+            n in 1usize..=7,
+            vals in proptest::collection::vec(
+                prop_oneof![
+                    8 => -1e3f64..1e3,
+                    1 => (-300i32..300).prop_map(|e| 10f64.powi(e)),
+                    1 => Just(-0.0f64),
+                    1 => Just(f64::INFINITY),
+                ],
+                56,
+            ),
+        ) {
+            let a = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j) % 56]);
+            let x = Vector::from_fn(n, |i, _| vals[(49 + i) % 56]);
+            let mut want = Vector::zeros(n);
+            gemv(&mut want, &a, &x);
+            let mut got = vec![f64::NAN; n];
+            gemv_square(&mut got, &a, x.as_slice());
+            prop_assert_eq!(got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), bits(&want));
         }
     }
 }

@@ -307,6 +307,11 @@ impl GlobalizedPlan {
         self.n_sensors
     }
 
+    /// How many distinct plan steps there are: every [`GlobalizedPlan::index`] is below it.
+    pub fn step_count(&self) -> usize {
+        self.steps.len()
+    }
+
     /// Whether the recursion converged before the horizon.
     pub fn converged(&self) -> bool {
         self.converged
