@@ -494,6 +494,32 @@ fn gemv_fixed_square<const N: usize>(y: &mut [f64], a: &[f64], x: &[f64]) {
     gemv_fixed::<N, N>(y, a, x)
 }
 
+impl PackedLu {
+    /// [`PackedLu::new`] without unpacking L and U into matrices of their own: nalgebra keeps
+    /// both in one matrix (`lu_internal`: L strictly below the diagonal, U on and above it),
+    /// which is the packed layout already. The same factors and permutation, bit for bit.
+    pub fn from_packed(lu: nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>) -> Self {
+        let m = lu.lu_internal();
+        let n = m.nrows();
+        if !(1..=6).contains(&n) || m.ncols() != n {
+            return PackedLu::Dynamic(Box::new(lu));
+        }
+        let mut packed = [0.0; 36];
+        packed[..n * n].copy_from_slice(m.as_slice());
+        let mut idx = Vector::from_fn(n, |i, _| i as f64);
+        lu.p().permute_rows(&mut idx);
+        let mut perm = [0u8; 6];
+        for (p, &v) in perm.iter_mut().zip(idx.iter()) {
+            *p = v as u8;
+        }
+        PackedLu::Fixed {
+            n,
+            lu: packed,
+            perm,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -653,6 +679,35 @@ mod tests {
             let mut got = vec![f64::NAN; n];
             gemv_square(&mut got, &a, x.as_slice());
             prop_assert_eq!(got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), bits(&want));
+        }
+    }
+
+    proptest! {
+        /// Packing nalgebra's internal LU matrix gives [`PackedLu::new`]'s factors and
+        /// permutation bit for bit (dimension 7 keeps nalgebra's factorization).
+        #[test]
+        fn packed_lu_from_internal_matrix_is_bit_identical(
+            n in 1usize..=7,
+            vals in proptest::collection::vec(-10.0f64..10.0, 56),
+            zero_col in proptest::option::of(0usize..7),
+        ) {
+            let mut a = Matrix::from_fn(n, n, |i, j| vals[(5 * i + 3 * j + 1) % 56]);
+            if let Some(c) = zero_col.filter(|&c| c < n) {
+                a.column_mut(c).fill(0.0);
+            }
+            match (PackedLu::new(a.clone().lu()), PackedLu::from_packed(a.clone().lu())) {
+                (
+                    PackedLu::Fixed { n: n1, lu: lu1, perm: p1 },
+                    PackedLu::Fixed { n: n2, lu: lu2, perm: p2 },
+                ) => {
+                    prop_assert_eq!(n1, n2);
+                    let b = |v: &[f64; 36]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    prop_assert_eq!(b(&lu1), b(&lu2));
+                    prop_assert_eq!(p1, p2);
+                }
+                (PackedLu::Dynamic(_), PackedLu::Dynamic(_)) => prop_assert_eq!(n, 7),
+                _ => prop_assert!(false, "different representations"),
+            }
         }
     }
 }

@@ -356,18 +356,41 @@ pub(super) fn unit_inflation(raw: &Matrix, cbar_p_inv: &Matrix, b: &Matrix) -> M
 
 /// `out = sym(raw + unit * l^2)` for `inexact` = l extrapolated sensors: each product
 /// `unit_j * l^2` rounded, then added to `raw_j` (as `raw += unit * factor` does), then
-/// symmetrized.
+/// symmetrized as [`symmetrize`] does it — in fixed size for dimensions 1..=6 (the same
+/// operations, unrolled).
 pub(super) fn inflate_into(raw: &Matrix, unit: &Matrix, inexact: usize, out: &mut Matrix) {
     let factor = (inexact * inexact) as f64;
-    for ((o, &r), &u) in out
-        .as_mut_slice()
-        .iter_mut()
-        .zip(raw.as_slice())
-        .zip(unit.as_slice())
-    {
-        *o = r + u * factor;
+    let (r, u) = (raw.as_slice(), unit.as_slice());
+    match out.nrows() {
+        1 => inflate_fixed::<1>(r, u, factor, out.as_mut_slice()),
+        2 => inflate_fixed::<2>(r, u, factor, out.as_mut_slice()),
+        3 => inflate_fixed::<3>(r, u, factor, out.as_mut_slice()),
+        4 => inflate_fixed::<4>(r, u, factor, out.as_mut_slice()),
+        5 => inflate_fixed::<5>(r, u, factor, out.as_mut_slice()),
+        6 => inflate_fixed::<6>(r, u, factor, out.as_mut_slice()),
+        _ => {
+            for ((o, &r), &u) in out.as_mut_slice().iter_mut().zip(r).zip(u) {
+                *o = r + u * factor;
+            }
+            symmetrize(out);
+        }
     }
-    symmetrize(out);
+}
+
+#[inline(always)]
+fn inflate_fixed<const N: usize>(raw: &[f64], unit: &[f64], factor: f64, out: &mut [f64]) {
+    let (raw, unit, out) = (&raw[..N * N], &unit[..N * N], &mut out[..N * N]);
+    for j in 0..N * N {
+        out[j] = raw[j] + unit[j] * factor;
+    }
+    // `symmetrize`: (i, j) at j * N + i, the mean of each pair above the diagonal.
+    for i in 0..N {
+        for j in (i + 1)..N {
+            let m = 0.5 * (out[j * N + i] + out[i * N + j]);
+            out[j * N + i] = m;
+            out[i * N + j] = m;
+        }
+    }
 }
 
 impl FusionCenter for DkfCenter {

@@ -254,6 +254,10 @@ fn run_variant(
     let mut state = vec![SensorState::default(); ns];
     let mut est = Gaussian::new(Vector::zeros(n), sys.prior.cov.clone());
     let mut tmp = vec![0.0; n];
+    let bound = match &scheme.trigger {
+        Trigger::Bounded { b_inv, .. } => replicas.bound(b_inv),
+        _ => 0,
+    };
     let err = |k: usize| move |source: SchemeError| FastTrialError::Scheme { k, source };
     for k in 1..=steps {
         let p = plan.index(k).map_err(err(k))?;
@@ -270,14 +274,14 @@ fn run_variant(
                     Trigger::Always => true,
                     Trigger::Random { send_probability } => u < *send_probability,
                     Trigger::Event { alpha } => signals.correction_norm[(k - 1) * ns + i] > *alpha,
-                    Trigger::Bounded { alpha, b_inv } => {
+                    Trigger::Bounded { alpha, .. } => {
                         st.entry = if st.silent_steps == 0 {
                             replicas.after_send(plan, signals, i, k - 1)
                         } else {
                             replicas.advance(plan, signals, st.entry, i, k)
                         }
                         .map_err(err(k))?;
-                        replicas.test_13(st.entry, *alpha, b_inv, &mut tmp)
+                        replicas.test_13(st.entry, *alpha, bound, &mut tmp)
                     }
                 };
             // The center's bookkeeping (DkfCenter::step).
@@ -340,7 +344,7 @@ fn fuse(
             center.fused_covariance(p, canonical_silence(&center.class, silent), inexact)?;
         information_sum(signals, replicas, state, k, est.mean.as_mut_slice());
         fixed::chol_solve(&fused.chol, &mut est.mean);
-        est.cov.copy_from(&fused.cov);
+        est.cov.as_mut_slice().copy_from_slice(fused.cov.as_slice());
         return Ok(());
     };
     let set = dense.canonical(center, silent);
@@ -360,7 +364,8 @@ fn fuse(
 
 /// (11): Σ_i of (C̄^e_k)^{-1} x̄^{e,i}_k for a sensor that sent, (C̄^p_k)^{-1} x̄^{p,i}_k for one
 /// that sent at k - 1, (C̄^p_k)^{-1} x̃^{pp,i}_k (Algorithm 2) for one silent longer; from zero,
-/// in sensor order, each `+=` as nalgebra's (element by element).
+/// in sensor order, each `+=` as nalgebra's (element by element) — in fixed size for
+/// dimensions 1..=6.
 fn information_sum(
     signals: &Signals,
     replicas: &Replicas,
@@ -368,13 +373,38 @@ fn information_sum(
     k: usize,
     out: &mut [f64],
 ) {
-    out.fill(0.0);
-    for (i, st) in state.iter().enumerate() {
-        let term = match st.silent_steps {
+    let terms = state
+        .iter()
+        .enumerate()
+        .map(|(i, st)| match st.silent_steps {
             0 => signals.at(&signals.info_sent, k, i),
             1 => signals.at(&signals.info_omitted, k, i),
             _ => replicas.info(st.entry),
-        };
-        fixed::add_assign(out, term);
+        });
+    match out.len() {
+        1 => sum_fixed::<1>(terms, out),
+        2 => sum_fixed::<2>(terms, out),
+        3 => sum_fixed::<3>(terms, out),
+        4 => sum_fixed::<4>(terms, out),
+        5 => sum_fixed::<5>(terms, out),
+        6 => sum_fixed::<6>(terms, out),
+        _ => {
+            out.fill(0.0);
+            for term in terms {
+                fixed::add_assign(out, term);
+            }
+        }
     }
+}
+
+#[inline(always)]
+fn sum_fixed<'a, const N: usize>(terms: impl Iterator<Item = &'a [f64]>, out: &mut [f64]) {
+    let mut acc = [0.0; N];
+    for term in terms {
+        let term: &[f64; N] = term.try_into().expect("N entries");
+        for j in 0..N {
+            acc[j] += term[j];
+        }
+    }
+    out.copy_from_slice(&acc);
 }

@@ -135,7 +135,7 @@ impl DenseMemo {
         let b = match center.fusion() {
             Fusion::Bounded { b } if inexact > 0 => b,
             _ => {
-                out.copy_from(&base.cov);
+                out.as_mut_slice().copy_from_slice(base.cov.as_slice());
                 return Ok(());
             }
         };

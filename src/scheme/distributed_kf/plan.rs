@@ -67,7 +67,7 @@ pub struct PredictedDelta {
 
 impl PredictedDelta {
     fn new(delta: Matrix) -> Self {
-        let lu = crate::filter::fixed::PackedLu::new(delta.clone().lu());
+        let lu = crate::filter::fixed::PackedLu::from_packed(delta.clone().lu());
         Self {
             delta,
             lu,
@@ -84,10 +84,21 @@ impl PredictedDelta {
                     .a_inv
                     .as_ref()
                     .expect("a chain exists only for invertible A");
-                Arc::new(Self::new(&plan.a * &self.delta * a_inv))
+                Arc::new(Self::new(predict_delta(&plan.a, &self.delta, a_inv)))
             })
             .clone()
     }
+}
+
+/// (A Δ) A^{-1} as `&a * &delta * a_inv` computes it, in the fixed-size gemm (the same
+/// operations as nalgebra's product, bit for bit).
+fn predict_delta(a: &Matrix, delta: &Matrix, a_inv: &Matrix) -> Matrix {
+    let product = |x: &Matrix, y: &Matrix| {
+        let mut out = Matrix::zeros(x.nrows(), y.ncols());
+        crate::filter::fixed::gemm(&mut out, x, y);
+        out
+    };
+    product(&product(a, delta), a_inv)
 }
 
 impl Drop for PredictedDelta {

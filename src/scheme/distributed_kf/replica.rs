@@ -22,7 +22,18 @@ use std::sync::Arc;
 /// No entry yet.
 const NONE: u32 = u32::MAX;
 
-/// The entries of one trial, each `n` long in the flat buffers, in the order they were made.
+/// Offsets of an entry's values in its record of `4 n + 1` numbers.
+const HELD: usize = 0;
+/// x̂^{pp,i}_k at `n`, d̃ at `2 n`, (C̄^p_k)^{-1} x̃^{pp,i}_k at `3 n`, the gap at `4 n`.
+const KF_HELD: usize = 1;
+const DTILDE: usize = 2;
+const INFO: usize = 3;
+const GAP: usize = 4;
+
+/// The entries of one trial, in the order they were made. Entry e's record, at
+/// `e * (4 n + 1)` in `records`, holds x̄^{pp,i}_k, x̂^{pp,i}_k, d̃ = x̃^{pp,i}_k - x̄^{p,i}_k,
+/// (C̄^p_k)^{-1} x̃^{pp,i}_k (the center's term (11) of a sensor silent since s < k - 1; zeros
+/// for s = k - 1, whose term is exact and in [`Signals`]) and ||x̂^{pp,i}_k - x̂^{e,i}_k||.
 pub(super) struct Replicas {
     n: usize,
     sensors: usize,
@@ -30,22 +41,15 @@ pub(super) struct Replicas {
     first: Vec<u32>,
     /// Per entry (i, s, k): entry (i, s, k + 1).
     next: Vec<u32>,
-    /// x̄^{pp,i}_k.
-    held: Vec<f64>,
-    /// x̂^{pp,i}_k.
-    kf_held: Vec<f64>,
-    /// Δ^{pp,i}_k, a link of the plan's shared chain.
+    records: Vec<f64>,
+    /// Per entry: Δ^{pp,i}_k, a link of the plan's shared chain.
     delta: Vec<Arc<PredictedDelta>>,
-    /// ||x̂^{pp,i}_k - x̂^{e,i}_k||: test (13)'s first part.
-    kf_gap: Vec<f64>,
-    /// d̃ = x̃^{pp,i}_k - x̄^{p,i}_k: test (13)'s second part.
-    dtilde: Vec<f64>,
-    /// (C̄^p_k)^{-1} x̃^{pp,i}_k, the center's term (11) of a sensor silent since s < k - 1
-    /// (zeros for s = k - 1, whose term is exact and in [`Signals`]).
-    info: Vec<f64>,
-    /// Scratch: the next entry's x̄^{pp} and x̂^{pp}, the LU solve, x̃^{pp}, a product.
-    held_new: Vector,
-    kf_held_new: Vector,
+    /// The bounds B^{-1} of the variants so far (bitwise distinct), and per bound and entry
+    /// the outcome of d̃^T B^{-1} d̃ > 1: 0 not yet evaluated, 1 false, 2 true. It depends
+    /// on the entry and B only, and the alphas of a sweep share each B.
+    bounds: Vec<Matrix>,
+    quadratic: Vec<Vec<u8>>,
+    /// Scratch: the LU solve, x̃^{pp}, a product.
     work: Vector,
     debiased: Vector,
     tmp: Vector,
@@ -58,23 +62,24 @@ impl Replicas {
             sensors,
             first: vec![NONE; steps * sensors],
             next: Vec::new(),
-            held: Vec::new(),
-            kf_held: Vec::new(),
+            records: Vec::new(),
             delta: Vec::new(),
-            kf_gap: Vec::new(),
-            dtilde: Vec::new(),
-            info: Vec::new(),
-            held_new: Vector::zeros(n),
-            kf_held_new: Vector::zeros(n),
+            bounds: Vec::new(),
+            quadratic: Vec::new(),
             work: Vector::zeros(n),
             debiased: Vector::zeros(n),
             tmp: Vector::zeros(n),
         }
     }
 
-    fn slice(v: &[f64], n: usize, e: u32) -> &[f64] {
-        let o = e as usize * n;
-        &v[o..o + n]
+    fn stride(&self) -> usize {
+        4 * self.n + 1
+    }
+
+    /// Value `part` (HELD, KF_HELD, DTILDE, INFO) of entry `e`.
+    fn part(&self, e: u32, part: usize) -> &[f64] {
+        let o = e as usize * self.stride() + part * self.n;
+        &self.records[o..o + self.n]
     }
 
     /// Entry (i, s, s + 1): sensor i sent at step s (0: the common prior, which every node
@@ -92,18 +97,19 @@ impl Replicas {
             return Ok(self.first[slot]);
         }
         let k = s + 1;
-        self.held_new.copy_from_slice(signals.xbar_p(k, i));
-        self.kf_held_new.copy_from_slice(signals.kf_p(k, i));
+        let (o, n) = self.open_record();
+        self.records[o..o + n].copy_from_slice(signals.xbar_p(k, i));
+        self.records[o + n..o + 2 * n].copy_from_slice(signals.kf_p(k, i));
         let head = plan
             .delta_head(i, plan.index(s)?)
             .expect("A is invertible for Algorithm 2");
-        let e = self.push(plan, signals, i, k, false, head.next(plan))?;
+        let e = self.close_record(plan, signals, i, k, false, head.next(plan))?;
         self.first[slot] = e;
         Ok(e)
     }
 
     /// Entry (i, s, k) from entry `e` = (i, s, k - 1): sensor i silent at k - 1 too. Its
-    /// replica predicts both held estimates and steps Δ^{pp} along its chain.
+    /// replica predicts both held estimates (x <- A x) and steps Δ^{pp} along its chain.
     pub fn advance(
         &mut self,
         plan: &GlobalizedPlan,
@@ -115,28 +121,28 @@ impl Replicas {
         if self.next[e as usize] != NONE {
             return Ok(self.next[e as usize]);
         }
-        let n = self.n;
-        let a = plan.a();
-        fixed::gemv_square(
-            self.held_new.as_mut_slice(),
-            a,
-            Self::slice(&self.held, n, e),
-        );
-        fixed::gemv_square(
-            self.kf_held_new.as_mut_slice(),
-            a,
-            Self::slice(&self.kf_held, n, e),
-        );
+        let (o, n) = self.open_record();
+        let from = e as usize * self.stride();
+        let (old, new) = self.records.split_at_mut(o);
+        fixed::gemv_square(&mut new[..n], plan.a(), &old[from..from + n]);
+        fixed::gemv_square(&mut new[n..2 * n], plan.a(), &old[from + n..from + 2 * n]);
         let delta = self.delta[e as usize].next(plan);
-        let next = self.push(plan, signals, i, k, true, delta)?;
+        let next = self.close_record(plan, signals, i, k, true, delta)?;
         self.next[e as usize] = next;
         Ok(next)
     }
 
-    /// Completes and appends the entry of sensor i at step k whose held estimates are in
-    /// `held_new` and `kf_held_new` (nothing is appended when the debiasing fails). `inexact`:
-    /// silent since before k - 1, so the center needs (C̄^p_k)^{-1} x̃^{pp}.
-    fn push(
+    /// Appends a record (zeros) for the held estimates to be written into: its offset and n.
+    fn open_record(&mut self) -> (usize, usize) {
+        let o = self.records.len();
+        self.records.resize(o + self.stride(), 0.0);
+        (o, self.n)
+    }
+
+    /// Completes the last record, of sensor i at step k with Δ^{pp} = `delta`, and makes it an
+    /// entry; on a failed debiasing the record is dropped. `inexact`: silent since before
+    /// k - 1, so the center needs (C̄^p_k)^{-1} x̃^{pp}.
+    fn close_record(
         &mut self,
         plan: &GlobalizedPlan,
         signals: &Signals,
@@ -145,48 +151,78 @@ impl Replicas {
         inexact: bool,
         delta: Arc<PredictedDelta>,
     ) -> Result<u32, SchemeError> {
+        let (n, o) = (self.n, self.records.len() - self.stride());
         let m = plan.at(k)?;
-        debiased_extrapolation_into(
+        let record = &mut self.records[o..];
+        let debiased = debiased_extrapolation_into(
             &m.delta_p[i],
             &delta,
-            self.held_new.as_slice(),
+            &record[HELD * n..(HELD + 1) * n],
             &mut self.work,
             &mut self.debiased,
-        )?;
-        let e = u32::try_from(self.next.len()).expect("fewer than 2^32 entries");
-        self.next.push(NONE);
-        self.held.extend_from_slice(self.held_new.as_slice());
-        self.kf_held.extend_from_slice(self.kf_held_new.as_slice());
-        self.delta.push(delta);
+        );
+        if let Err(e) = debiased {
+            self.records.truncate(o);
+            return Err(e);
+        }
         // d̃ = x̃^{pp} - x̄^p.
-        let o = self.dtilde.len();
-        self.dtilde.extend_from_slice(self.debiased.as_slice());
-        fixed::sub_assign(&mut self.dtilde[o..], signals.xbar_p(k, i));
+        let dtilde = &mut record[DTILDE * n..(DTILDE + 1) * n];
+        dtilde.copy_from_slice(self.debiased.as_slice());
+        fixed::sub_assign(dtilde, signals.xbar_p(k, i));
         // x̂^{pp} - x̂^e, in `tmp`.
-        self.tmp.copy_from(&self.kf_held_new);
+        self.tmp
+            .copy_from_slice(&record[KF_HELD * n..(KF_HELD + 1) * n]);
         fixed::sub_assign(self.tmp.as_mut_slice(), signals.kf(k, i));
-        self.kf_gap.push(fixed::norm(self.tmp.as_slice()));
+        record[GAP * n] = fixed::norm(self.tmp.as_slice());
         if inexact {
             fixed::gemv(&mut self.tmp, &m.cbar_p_inv, &self.debiased);
-            self.info.extend_from_slice(self.tmp.as_slice());
-        } else {
-            self.info.resize(self.info.len() + self.n, 0.0);
+            record[INFO * n..(INFO + 1) * n].copy_from_slice(self.tmp.as_slice());
         }
+        let e = u32::try_from(self.next.len()).expect("fewer than 2^32 entries");
+        self.next.push(NONE);
+        self.delta.push(delta);
         Ok(e)
     }
 
-    /// Test (13) of entry `e`: ||x̂^{pp} - x̂^e|| > alpha, or d̃^T B^{-1} d̃ > 1 (the product
-    /// into `tmp`), in the sensor's order (the second part only when the first fails).
-    pub fn test_13(&self, e: u32, alpha: f64, b_inv: &Matrix, tmp: &mut [f64]) -> bool {
-        self.kf_gap[e as usize] > alpha || {
-            let d = Self::slice(&self.dtilde, self.n, e);
-            fixed::gemv_square(tmp, b_inv, d);
-            fixed::dot(d, tmp) > 1.0
+    /// The index of the bound B^{-1} for [`Replicas::test_13`], registered if new.
+    pub fn bound(&mut self, b_inv: &Matrix) -> usize {
+        let same = |m: &Matrix| {
+            m.shape() == b_inv.shape()
+                && m.iter()
+                    .zip(b_inv.iter())
+                    .all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+        self.bounds.iter().position(same).unwrap_or_else(|| {
+            self.bounds.push(b_inv.clone());
+            self.quadratic.push(Vec::new());
+            self.bounds.len() - 1
+        })
+    }
+
+    /// Test (13) of entry `e`: ||x̂^{pp} - x̂^e|| > alpha, or else d̃^T B^{-1} d̃ > 1 for the
+    /// bound `bound` (the product into `tmp`), as the sensor evaluates it.
+    pub fn test_13(&mut self, e: u32, alpha: f64, bound: usize, tmp: &mut [f64]) -> bool {
+        let eu = e as usize;
+        if self.records[eu * self.stride() + GAP * self.n] > alpha {
+            return true;
         }
+        let known = self.quadratic[bound].get(eu).copied().unwrap_or(0);
+        if known != 0 {
+            return known == 2;
+        }
+        let d = self.part(e, DTILDE);
+        fixed::gemv_square(tmp, &self.bounds[bound], d);
+        let outside = fixed::dot(d, tmp) > 1.0;
+        let q = &mut self.quadratic[bound];
+        if q.len() <= eu {
+            q.resize(self.next.len(), 0);
+        }
+        q[eu] = 1 + u8::from(outside);
+        outside
     }
 
     /// The center's term (11) of a sensor silent at entry `e` since before k - 1.
     pub fn info(&self, e: u32) -> &[f64] {
-        Self::slice(&self.info, self.n, e)
+        self.part(e, INFO)
     }
 }
