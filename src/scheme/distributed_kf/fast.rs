@@ -373,35 +373,51 @@ fn information_sum(
     k: usize,
     out: &mut [f64],
 ) {
-    let terms = state
-        .iter()
-        .enumerate()
-        .map(|(i, st)| match st.silent_steps {
-            0 => signals.at(&signals.info_sent, k, i),
-            1 => signals.at(&signals.info_omitted, k, i),
-            _ => replicas.info(st.entry),
-        });
     match out.len() {
-        1 => sum_fixed::<1>(terms, out),
-        2 => sum_fixed::<2>(terms, out),
-        3 => sum_fixed::<3>(terms, out),
-        4 => sum_fixed::<4>(terms, out),
-        5 => sum_fixed::<5>(terms, out),
-        6 => sum_fixed::<6>(terms, out),
+        1 => sum_fixed::<1>(signals, replicas, state, k, out),
+        2 => sum_fixed::<2>(signals, replicas, state, k, out),
+        3 => sum_fixed::<3>(signals, replicas, state, k, out),
+        4 => sum_fixed::<4>(signals, replicas, state, k, out),
+        5 => sum_fixed::<5>(signals, replicas, state, k, out),
+        6 => sum_fixed::<6>(signals, replicas, state, k, out),
         _ => {
             out.fill(0.0);
-            for term in terms {
-                fixed::add_assign(out, term);
+            for (i, st) in state.iter().enumerate() {
+                fixed::add_assign(out, information_term(signals, replicas, st, k, i));
             }
         }
     }
 }
 
+/// Sensor i's term of (11) (see [`information_sum`]).
 #[inline(always)]
-fn sum_fixed<'a, const N: usize>(terms: impl Iterator<Item = &'a [f64]>, out: &mut [f64]) {
+fn information_term<'a>(
+    signals: &'a Signals,
+    replicas: &'a Replicas,
+    st: &SensorState,
+    k: usize,
+    i: usize,
+) -> &'a [f64] {
+    match st.silent_steps {
+        0 => signals.at(&signals.info_sent, k, i),
+        1 => signals.at(&signals.info_omitted, k, i),
+        _ => replicas.info(st.entry),
+    }
+}
+
+#[inline(always)]
+fn sum_fixed<const N: usize>(
+    signals: &Signals,
+    replicas: &Replicas,
+    state: &[SensorState],
+    k: usize,
+    out: &mut [f64],
+) {
     let mut acc = [0.0; N];
-    for term in terms {
-        let term: &[f64; N] = term.try_into().expect("N entries");
+    for (i, st) in state.iter().enumerate() {
+        let term: &[f64; N] = information_term(signals, replicas, st, k, i)
+            .try_into()
+            .expect("N entries");
         for j in 0..N {
             acc[j] += term[j];
         }

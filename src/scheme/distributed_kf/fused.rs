@@ -109,8 +109,22 @@ impl DenseMemo {
     }
 
     /// The base of plan step `p` and the canonical silence set `set`.
+    #[inline]
     pub fn base(&self, center: &DkfCenter, p: usize, set: u64) -> Result<&FusedBase, SchemeError> {
         let slot = &self.bases.slots[p * self.bases.sets + set as usize];
+        match slot.get() {
+            Some(base) => Ok(base),
+            None => Self::make_base(slot, center, p, set),
+        }
+    }
+
+    #[inline(never)]
+    fn make_base<'a>(
+        slot: &'a OnceLock<Box<FusedBase>>,
+        center: &DkfCenter,
+        p: usize,
+        set: u64,
+    ) -> Result<&'a FusedBase, SchemeError> {
         get_or_try(slot, || {
             let chol = center.fused_information_cholesky(p, |i| set >> i & 1 == 1)?;
             let raw = unsymmetrized_inverse(&chol);
@@ -123,6 +137,7 @@ impl DenseMemo {
     /// The fused covariance of plan step `p`, canonical set `set` (whose base is `base`) and
     /// `inexact` inexactly extrapolated sensors, into `out`: sym(C) as kept, or Algorithm 2's
     /// inflation of C by `inexact`^2 times the kept unit inflation.
+    #[inline]
     pub fn covariance_into(
         &self,
         center: &DkfCenter,
@@ -132,13 +147,29 @@ impl DenseMemo {
         inexact: usize,
         out: &mut Matrix,
     ) -> Result<(), SchemeError> {
-        let b = match center.fusion() {
-            Fusion::Bounded { b } if inexact > 0 => b,
+        match center.fusion() {
+            Fusion::Bounded { b } if inexact > 0 => {
+                self.inflated_into(center, p, set, base, b, inexact, out)
+            }
             _ => {
                 out.as_mut_slice().copy_from_slice(base.cov.as_slice());
-                return Ok(());
+                Ok(())
             }
-        };
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn inflated_into(
+        &self,
+        center: &DkfCenter,
+        p: usize,
+        set: u64,
+        base: &FusedBase,
+        b: &Matrix,
+        inexact: usize,
+        out: &mut Matrix,
+    ) -> Result<(), SchemeError> {
         let slot = &self.inflations[p * self.bases.sets + set as usize];
         let unit = get_or_try(slot, || {
             Ok(unit_inflation(

@@ -83,8 +83,8 @@ impl Replicas {
     }
 
     /// Entry (i, s, s + 1): sensor i sent at step s (0: the common prior, which every node
-    /// starts from). The center then holds the sensor's own predictions (the same gemv of
-    /// the same estimate), and Δ^{e,i}_s predicted once.
+    /// starts from).
+    #[inline]
     pub fn after_send(
         &mut self,
         plan: &GlobalizedPlan,
@@ -92,10 +92,22 @@ impl Replicas {
         i: usize,
         s: usize,
     ) -> Result<u32, SchemeError> {
-        let slot = s * self.sensors + i;
-        if self.first[slot] != NONE {
-            return Ok(self.first[slot]);
+        match self.first[s * self.sensors + i] {
+            NONE => self.make_after_send(plan, signals, i, s),
+            e => Ok(e),
         }
+    }
+
+    /// Makes entry (i, s, s + 1): the center then holds the sensor's own predictions (the
+    /// same gemv of the same estimate), and Δ^{e,i}_s predicted once.
+    #[inline(never)]
+    fn make_after_send(
+        &mut self,
+        plan: &GlobalizedPlan,
+        signals: &Signals,
+        i: usize,
+        s: usize,
+    ) -> Result<u32, SchemeError> {
         let k = s + 1;
         let (o, n) = self.open_record();
         self.records[o..o + n].copy_from_slice(signals.xbar_p(k, i));
@@ -104,12 +116,12 @@ impl Replicas {
             .delta_head(i, plan.index(s)?)
             .expect("A is invertible for Algorithm 2");
         let e = self.close_record(plan, signals, i, k, false, head.next(plan))?;
-        self.first[slot] = e;
+        self.first[s * self.sensors + i] = e;
         Ok(e)
     }
 
-    /// Entry (i, s, k) from entry `e` = (i, s, k - 1): sensor i silent at k - 1 too. Its
-    /// replica predicts both held estimates (x <- A x) and steps Δ^{pp} along its chain.
+    /// Entry (i, s, k) from entry `e` = (i, s, k - 1): sensor i silent at k - 1 too.
+    #[inline]
     pub fn advance(
         &mut self,
         plan: &GlobalizedPlan,
@@ -118,9 +130,23 @@ impl Replicas {
         i: usize,
         k: usize,
     ) -> Result<u32, SchemeError> {
-        if self.next[e as usize] != NONE {
-            return Ok(self.next[e as usize]);
+        match self.next[e as usize] {
+            NONE => self.make_advance(plan, signals, e, i, k),
+            next => Ok(next),
         }
+    }
+
+    /// Makes entry (i, s, k) from `e`: the replica predicts both held estimates (x <- A x)
+    /// and steps Δ^{pp} along its chain.
+    #[inline(never)]
+    fn make_advance(
+        &mut self,
+        plan: &GlobalizedPlan,
+        signals: &Signals,
+        e: u32,
+        i: usize,
+        k: usize,
+    ) -> Result<u32, SchemeError> {
         let (o, n) = self.open_record();
         let from = e as usize * self.stride();
         let (old, new) = self.records.split_at_mut(o);
@@ -200,24 +226,31 @@ impl Replicas {
     }
 
     /// Test (13) of entry `e`: ||x̂^{pp} - x̂^e|| > alpha, or else d̃^T B^{-1} d̃ > 1 for the
-    /// bound `bound` (the product into `tmp`), as the sensor evaluates it.
+    /// bound `bound`, as the sensor evaluates it.
+    #[inline]
     pub fn test_13(&mut self, e: u32, alpha: f64, bound: usize, tmp: &mut [f64]) -> bool {
         let eu = e as usize;
         if self.records[eu * self.stride() + GAP * self.n] > alpha {
             return true;
         }
-        let known = self.quadratic[bound].get(eu).copied().unwrap_or(0);
-        if known != 0 {
-            return known == 2;
+        match self.quadratic[bound].get(eu) {
+            Some(1) => false,
+            Some(2) => true,
+            _ => self.evaluate_quadratic(e, bound, tmp),
         }
+    }
+
+    /// d̃^T B^{-1} d̃ > 1 for entry `e` (the product into `tmp`), remembered.
+    #[inline(never)]
+    fn evaluate_quadratic(&mut self, e: u32, bound: usize, tmp: &mut [f64]) -> bool {
         let d = self.part(e, DTILDE);
         fixed::gemv_square(tmp, &self.bounds[bound], d);
         let outside = fixed::dot(d, tmp) > 1.0;
         let q = &mut self.quadratic[bound];
-        if q.len() <= eu {
+        if q.len() <= e as usize {
             q.resize(self.next.len(), 0);
         }
-        q[eu] = 1 + u8::from(outside);
+        q[e as usize] = 1 + u8::from(outside);
         outside
     }
 
