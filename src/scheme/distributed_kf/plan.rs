@@ -58,8 +58,9 @@ pub struct GlobalizedPlan {
 /// steps to [`PredictedDelta::next`] each step (a lock-free read once computed).
 #[derive(Debug)]
 pub struct PredictedDelta {
-    /// Δ^{pp,i}.
-    pub delta: Matrix,
+    /// Δ^{pp,i}, until the next link is made from it: then only the factors are needed, and
+    /// a long sweep keeps thousands of links (`dormann-fig1`: 2 MB of matrices otherwise).
+    delta: Mutex<Option<Matrix>>,
     /// Its LU factorization (as `Δ.clone().lu()`), ready for the fixed-size solve.
     pub lu: crate::filter::fixed::PackedLu,
     next: OnceLock<Arc<PredictedDelta>>,
@@ -69,7 +70,7 @@ impl PredictedDelta {
     fn new(delta: Matrix) -> Self {
         let lu = crate::filter::fixed::PackedLu::from_packed(delta.clone().lu());
         Self {
-            delta,
+            delta: Mutex::new(Some(delta)),
             lu,
             next: OnceLock::new(),
         }
@@ -84,7 +85,13 @@ impl PredictedDelta {
                     .a_inv
                     .as_ref()
                     .expect("a chain exists only for invertible A");
-                Arc::new(Self::new(predict_delta(&plan.a, &self.delta, a_inv)))
+                let delta = self
+                    .delta
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .take()
+                    .expect("the next link is made once, from the matrix");
+                Arc::new(Self::new(predict_delta(&plan.a, &delta, a_inv)))
             })
             .clone()
     }
