@@ -6,11 +6,14 @@
 //! only, and so are the fusion center's terms of (11) for an estimate that arrives
 //! ((C̄^e_k)^{-1} x̄^{e,i}_k) and for one sent at k-1 and omitted at k ((C̄^p_k)^{-1} A x̄^{e,i}_{k-1},
 //! since the center's held estimate is then exactly the sensor's prediction). A trial computes
-//! them once in a [`Track`] shared by every variant of the plan (a sweep of rates, alphas and
-//! bounds); a variant then only draws its coins, runs its trigger, and — for Algorithm 2 — the
-//! extrapolation of estimates silent for two steps or more, which the sensor's test (13) and
-//! the center's debiased contribution share. Every number is computed by the operations the
-//! generic path performs, on the same operands, so it is the same bit for bit.
+//! them once in its [`Signals`], shared by every variant of the plan (a sweep of rates, alphas
+//! and bounds). Algorithm 2's replicas of the center — what test (13) and the center's
+//! debiased term of a sensor silent for two steps or more need — depend on the data and on
+//! (sensor, last transmission, step) only, and are shared per trial too ([`Replicas`]); so are
+//! the fused means of steps whose silent sensors all sent at k-1 ([`Means`]), and the fused
+//! covariances are shared by every trial ([`super::fused`]). A variant then only draws its
+//! coins, runs its trigger and looks its step up. Every number is computed by the operations
+//! the generic path performs, on the same operands, so it is the same bit for bit.
 use super::center::{canonical_silence, DkfCenter};
 use super::replica::Replicas;
 use super::sensor::{predict_in_place, Trigger};
