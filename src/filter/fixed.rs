@@ -588,6 +588,55 @@ pub fn sub_assign(a: &mut [f64], b: &[f64]) {
     }
 }
 
+/// `y = a x` for a square `a`, on slices (vectors kept in flat buffers), bit for bit as
+/// [`gemv`]: the same fixed-size kernel for dimensions 1..=6, nalgebra's gemv on views of the
+/// slices otherwise (the same generic code as on owned vectors).
+pub fn gemv_square(y: &mut [f64], a: &Matrix, x: &[f64]) {
+    let n = a.nrows();
+    assert!(
+        a.ncols() == n && x.len() == n && y.len() == n,
+        "gemv_square: dimensions mismatch ({n}x{} times {}, into {})",
+        a.ncols(),
+        x.len(),
+        y.len()
+    );
+    with_dim!(n, gemv_fixed_square(y, a.as_slice(), x), {
+        let x = nalgebra::DVectorView::from_slice(x, n);
+        nalgebra::DVectorViewMut::from_slice(y, n).gemv(1.0, a, &x, 0.0)
+    })
+}
+
+#[inline(always)]
+fn gemv_fixed_square<const N: usize>(y: &mut [f64], a: &[f64], x: &[f64]) {
+    gemv_fixed::<N, N>(y, a, x)
+}
+
+impl PackedLu {
+    /// [`PackedLu::new`] without unpacking L and U into matrices of their own: nalgebra keeps
+    /// both in one matrix (`lu_internal`: L strictly below the diagonal, U on and above it),
+    /// which is the packed layout already. The same factors and permutation, bit for bit.
+    pub fn from_packed(lu: nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>) -> Self {
+        let m = lu.lu_internal();
+        let n = m.nrows();
+        if !(1..=6).contains(&n) || m.ncols() != n {
+            return PackedLu::Dynamic(Box::new(lu));
+        }
+        let mut packed = [0.0; 36];
+        packed[..n * n].copy_from_slice(m.as_slice());
+        let mut idx = Vector::from_fn(n, |i, _| i as f64);
+        lu.p().permute_rows(&mut idx);
+        let mut perm = [0u8; 6];
+        for (p, &v) in perm.iter_mut().zip(idx.iter()) {
+            *p = v as u8;
+        }
+        PackedLu::Fixed {
+            n,
+            lu: packed,
+            perm,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -721,6 +770,61 @@ mod tests {
             let b = Vector::from_fn(n, |i, _| vals[20 + i] * if i % 3 == 0 { -0.0 } else { 1.0 });
             prop_assert_eq!(dot(a.as_slice(), b.as_slice()).to_bits(), a.dot(&b).to_bits());
             prop_assert_eq!(norm(a.as_slice()).to_bits(), a.norm().to_bits());
+        }
+    }
+
+    proptest! {
+        /// The slice kernel for square matrices equals [`gemv`] (and hence nalgebra's) bit for
+        /// bit, for every dimension up to 7 (7 takes nalgebra's gemv on views).
+        #[test]
+        fn gemv_square_is_bit_identical(
+            n in 1usize..=7,
+            vals in proptest::collection::vec(
+                prop_oneof![
+                    8 => -1e3f64..1e3,
+                    1 => (-300i32..300).prop_map(|e| 10f64.powi(e)),
+                    1 => Just(-0.0f64),
+                    1 => Just(f64::INFINITY),
+                ],
+                56,
+            ),
+        ) {
+            let a = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j) % 56]);
+            let x = Vector::from_fn(n, |i, _| vals[(49 + i) % 56]);
+            let mut want = Vector::zeros(n);
+            gemv(&mut want, &a, &x);
+            let mut got = vec![f64::NAN; n];
+            gemv_square(&mut got, &a, x.as_slice());
+            prop_assert_eq!(got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), bits(&want));
+        }
+    }
+
+    proptest! {
+        /// Packing nalgebra's internal LU matrix gives [`PackedLu::new`]'s factors and
+        /// permutation bit for bit (dimension 7 keeps nalgebra's factorization).
+        #[test]
+        fn packed_lu_from_internal_matrix_is_bit_identical(
+            n in 1usize..=7,
+            vals in proptest::collection::vec(-10.0f64..10.0, 56),
+            zero_col in proptest::option::of(0usize..7),
+        ) {
+            let mut a = Matrix::from_fn(n, n, |i, j| vals[(5 * i + 3 * j + 1) % 56]);
+            if let Some(c) = zero_col.filter(|&c| c < n) {
+                a.column_mut(c).fill(0.0);
+            }
+            match (PackedLu::new(a.clone().lu()), PackedLu::from_packed(a.clone().lu())) {
+                (
+                    PackedLu::Fixed { n: n1, lu: lu1, perm: p1 },
+                    PackedLu::Fixed { n: n2, lu: lu2, perm: p2 },
+                ) => {
+                    prop_assert_eq!(n1, n2);
+                    let b = |v: &[f64; 36]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    prop_assert_eq!(b(&lu1), b(&lu2));
+                    prop_assert_eq!(p1, p2);
+                }
+                (PackedLu::Dynamic(_), PackedLu::Dynamic(_)) => prop_assert_eq!(n, 7),
+                _ => prop_assert!(false, "different representations"),
+            }
         }
     }
 }

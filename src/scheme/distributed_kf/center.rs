@@ -46,9 +46,13 @@ type CovKey = (usize, u64, usize);
 /// once, and keeping them would cost memory (hundreds of MB for `dormann-fig1`) for no reuse.
 /// Both sets are capped; beyond the caps the covariance is simply recomputed. Which entries
 /// are kept never changes a number, only how often one is recomputed.
+///
+/// The fast trial does not use these entries but the dense tables of [`super::fused`], which
+/// the memos made by [`CovarianceMemo::shared`] carry.
 #[derive(Debug, Default)]
 pub struct CovarianceMemo {
     entries: RwLock<Memo>,
+    dense: Option<super::fused::DenseMemo>,
 }
 
 #[derive(Debug, Default)]
@@ -109,6 +113,9 @@ impl CovarianceMemo {
     /// covariance depends on the plan step, the silence set, the inexact count and the rule
     /// only, so the variants of a sweep (Algorithm 1's rates and alphas, Algorithm 2's alphas
     /// at one B) see each other's entries instead of each computing its own.
+    ///
+    /// Memos of one plan share the fast trial's table of fused bases (which does not depend
+    /// on the rule, see [`super::fused`]).
     pub fn shared(plan: &Arc<GlobalizedPlan>, fusion: &Fusion) -> Arc<Self> {
         type Entry = (
             std::sync::Weak<GlobalizedPlan>,
@@ -118,14 +125,22 @@ impl CovarianceMemo {
         static CACHE: std::sync::Mutex<Vec<Entry>> = std::sync::Mutex::new(Vec::new());
         let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
         cache.retain(|(p, _, m)| p.strong_count() > 0 && m.strong_count() > 0);
+        let mut bases = None;
         for (p, f, m) in cache.iter() {
-            if f == fusion && p.upgrade().is_some_and(|p| Arc::ptr_eq(&p, plan)) {
+            if p.upgrade().is_some_and(|p| Arc::ptr_eq(&p, plan)) {
                 if let Some(m) = m.upgrade() {
-                    return m;
+                    if f == fusion {
+                        return m;
+                    }
+                    // The same plan under another rule: its base table serves this one too.
+                    bases = bases.or_else(|| m.dense.as_ref().map(|d| d.bases().clone()));
                 }
             }
         }
-        let memo = Arc::new(Self::new());
+        let memo = Arc::new(Self {
+            entries: RwLock::default(),
+            dense: super::fused::DenseMemo::new(plan, fusion, bases),
+        });
         cache.push((Arc::downgrade(plan), fusion.clone(), Arc::downgrade(&memo)));
         memo
     }
@@ -252,13 +267,38 @@ impl DkfCenter {
 
     /// (10): start from N (C̄^e)^{-1}, remove the information of each silent sensor (in sensor
     /// order), invert; Algorithm 2 adds (N - m - l)^2 C (C̄^p)^{-1} B (C̄^p)^{-1} C^T. The same
-    /// operations in the same order as the direct per-step form.
+    /// operations in the same order as the direct per-step form, in the stages the fast
+    /// trial's dense memo ([`super::fused`]) keeps separately.
     pub(super) fn compute_fused_covariance(
         &self,
         p: usize,
         is_silent: impl Fn(usize) -> bool,
         inexact: usize,
     ) -> Result<FusedCovariance, SchemeError> {
+        let chol = self.fused_information_cholesky(p, is_silent)?;
+        let raw = unsymmetrized_inverse(&chol);
+        let mut cov = Matrix::zeros(raw.nrows(), raw.ncols());
+        match &self.fusion {
+            Fusion::Bounded { b } if inexact > 0 => {
+                let unit = unit_inflation(&raw, &self.plan.at(p)?.cbar_p_inv, b);
+                inflate_into(&raw, &unit, inexact, &mut cov);
+            }
+            _ => {
+                cov.copy_from(&raw);
+                symmetrize(&mut cov);
+            }
+        }
+        Ok(FusedCovariance { chol, cov })
+    }
+
+    /// The Cholesky factor of (10)'s information matrix N (C̄^e_k)^{-1} - Σ_silent H_i^T R_i^{-1}
+    /// H_i (subtracted in sensor order, then symmetrized). It does not depend on the fusion
+    /// rule.
+    pub(super) fn fused_information_cholesky(
+        &self,
+        p: usize,
+        is_silent: impl Fn(usize) -> bool,
+    ) -> Result<Cholesky<f64, Dyn>, SchemeError> {
         let m = self.plan.at(p)?;
         let nf = self.sensors.len() as f64;
         let mut info = &m.cbar_e_inv * nf;
@@ -271,29 +311,85 @@ impl DkfCenter {
             }
         }
         symmetrize(&mut info);
-        let chol = cholesky(&info).map_err(|source| SchemeError::Matrix {
+        cholesky(&info).map_err(|source| SchemeError::Matrix {
             what: "fused information matrix (10)",
             source,
-        })?;
-        // `chol.inverse()` and the products of the inflation, in the fixed-size kernels (the
-        // same operations as nalgebra's, bit for bit).
-        let n = info.nrows();
-        let mut cov = Matrix::identity(n, n);
-        crate::filter::fixed::chol_solve_matrix(&chol, &mut cov);
-        if let Fusion::Bounded { b } = &self.fusion {
-            if inexact > 0 {
-                let product = |a: &Matrix, b: &Matrix| {
-                    let mut y = Matrix::zeros(a.nrows(), b.ncols());
-                    crate::filter::fixed::gemm(&mut y, a, b);
-                    y
-                };
-                let g = product(&cov, &m.cbar_p_inv);
-                let factor = (inexact * inexact) as f64;
-                cov += product(&product(&g, b), &g.transpose()) * factor;
+        })
+    }
+
+    /// The plan the center fuses with.
+    pub(super) fn plan(&self) -> &GlobalizedPlan {
+        &self.plan
+    }
+
+    /// Which fusion rule the center applies.
+    pub(super) fn fusion(&self) -> &Fusion {
+        &self.fusion
+    }
+
+    /// The fast trial's dense tables of the shared memo, if it has them.
+    pub(super) fn dense_memo(&self) -> Option<&super::fused::DenseMemo> {
+        self.memo.dense.as_ref()
+    }
+}
+
+/// `chol.inverse()` before its symmetrization: the identity solved in place, in the
+/// fixed-size kernels (the same operations as nalgebra's, bit for bit).
+pub(super) fn unsymmetrized_inverse(chol: &Cholesky<f64, Dyn>) -> Matrix {
+    let n = chol.l_dirty().nrows();
+    let mut cov = Matrix::identity(n, n);
+    crate::filter::fixed::chol_solve_matrix(chol, &mut cov);
+    cov
+}
+
+/// Algorithm 2's inflation for one inexact extrapolation, C (C̄^p)^{-1} B (C̄^p)^{-1} C^T with
+/// C = `raw` (the unsymmetrized inverse): G = C (C̄^p)^{-1}, then (G B) G^T.
+pub(super) fn unit_inflation(raw: &Matrix, cbar_p_inv: &Matrix, b: &Matrix) -> Matrix {
+    let product = |a: &Matrix, b: &Matrix| {
+        let mut y = Matrix::zeros(a.nrows(), b.ncols());
+        crate::filter::fixed::gemm(&mut y, a, b);
+        y
+    };
+    let g = product(raw, cbar_p_inv);
+    product(&product(&g, b), &g.transpose())
+}
+
+/// `out = sym(raw + unit * l^2)` for `inexact` = l extrapolated sensors: each product
+/// `unit_j * l^2` rounded, then added to `raw_j` (as `raw += unit * factor` does), then
+/// symmetrized as [`symmetrize`] does it — in fixed size for dimensions 1..=6 (the same
+/// operations, unrolled).
+pub(super) fn inflate_into(raw: &Matrix, unit: &Matrix, inexact: usize, out: &mut Matrix) {
+    let factor = (inexact * inexact) as f64;
+    let (r, u) = (raw.as_slice(), unit.as_slice());
+    match out.nrows() {
+        1 => inflate_fixed::<1>(r, u, factor, out.as_mut_slice()),
+        2 => inflate_fixed::<2>(r, u, factor, out.as_mut_slice()),
+        3 => inflate_fixed::<3>(r, u, factor, out.as_mut_slice()),
+        4 => inflate_fixed::<4>(r, u, factor, out.as_mut_slice()),
+        5 => inflate_fixed::<5>(r, u, factor, out.as_mut_slice()),
+        6 => inflate_fixed::<6>(r, u, factor, out.as_mut_slice()),
+        _ => {
+            for ((o, &r), &u) in out.as_mut_slice().iter_mut().zip(r).zip(u) {
+                *o = r + u * factor;
             }
+            symmetrize(out);
         }
-        symmetrize(&mut cov);
-        Ok(FusedCovariance { chol, cov })
+    }
+}
+
+#[inline(always)]
+fn inflate_fixed<const N: usize>(raw: &[f64], unit: &[f64], factor: f64, out: &mut [f64]) {
+    let (raw, unit, out) = (&raw[..N * N], &unit[..N * N], &mut out[..N * N]);
+    for j in 0..N * N {
+        out[j] = raw[j] + unit[j] * factor;
+    }
+    // `symmetrize`: (i, j) at j * N + i, the mean of each pair above the diagonal.
+    for i in 0..N {
+        for j in (i + 1)..N {
+            let m = 0.5 * (out[j * N + i] + out[i * N + j]);
+            out[j * N + i] = m;
+            out[i * N + j] = m;
+        }
     }
 }
 
@@ -375,7 +471,7 @@ impl FusionCenter for DkfCenter {
                                 debiased_extrapolation_into(
                                     &m.delta_p[i],
                                     pd,
-                                    &self.held[i],
+                                    self.held[i].as_slice(),
                                     &mut self.tmp2,
                                     &mut self.contribution,
                                 )?;

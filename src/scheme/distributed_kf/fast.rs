@@ -6,14 +6,17 @@
 //! only, and so are the fusion center's terms of (11) for an estimate that arrives
 //! ((C̄^e_k)^{-1} x̄^{e,i}_k) and for one sent at k-1 and omitted at k ((C̄^p_k)^{-1} A x̄^{e,i}_{k-1},
 //! since the center's held estimate is then exactly the sensor's prediction). A trial computes
-//! them once in a [`Track`] shared by every variant of the plan (a sweep of rates, alphas and
-//! bounds); a variant then only draws its coins, runs its trigger, and — for Algorithm 2 — the
-//! extrapolation of estimates silent for two steps or more, which the sensor's test (13) and
-//! the center's debiased contribution share. Every number is computed by the operations the
-//! generic path performs, on the same operands, so it is the same bit for bit.
-use super::center::canonical_silence;
-use super::plan::PredictedDelta;
-use super::sensor::{debiased_extrapolation_into, predict_in_place, Trigger};
+//! them once in its [`Signals`], shared by every variant of the plan (a sweep of rates, alphas
+//! and bounds). Algorithm 2's replicas of the center — what test (13) and the center's
+//! debiased term of a sensor silent for two steps or more need — depend on the data and on
+//! (sensor, last transmission, step) only, and are shared per trial too ([`Replicas`]); so are
+//! the fused means of steps whose silent sensors all sent at k-1 ([`Means`]), and the fused
+//! covariances are shared by every trial ([`super::fused`]). A variant then only draws its
+//! coins, runs its trigger and looks its step up. Every number is computed by the operations
+//! the generic path performs, on the same operands, so it is the same bit for bit.
+use super::center::{canonical_silence, DkfCenter};
+use super::replica::Replicas;
+use super::sensor::{predict_in_place, Trigger};
 use super::{DistributedKfScheme, Fusion};
 use crate::filter::{fixed, Gaussian};
 use crate::linalg::Vector;
@@ -23,16 +26,14 @@ use crate::scheme::{FastTrialError, SchemeError, StepSink, TrialCache};
 use rand::{Rng, RngCore};
 use std::sync::Arc;
 
-/// The variant-independent part of one trial, per step k and sensor i (index
+/// The variant-independent signals of one trial, per step k and sensor i (index
 /// `(k - 1) * sensors + i`, each entry `n` long).
-pub(super) struct Track {
+pub(super) struct Signals {
     n: usize,
     sensors: usize,
     /// x̄^{p,i}_k = A x̄^{e,i}_{k-1}.
     xbar_p: Vec<f64>,
-    /// x̄^{e,i}_k, the estimate a sensor sends.
-    xbar: Vec<f64>,
-    /// The standard local KF's prediction and estimate.
+    /// The standard local KF's prediction and estimate (Algorithm 2's test (13)).
     kf_p: Vec<f64>,
     kf: Vec<f64>,
     /// ||K^i_k (z^i_k - H^i x̂^{p,i}_k)||, the norm of test (12); one per (k, i).
@@ -43,10 +44,25 @@ pub(super) struct Track {
     info_omitted: Vec<f64>,
 }
 
-impl Track {
+impl Signals {
     fn at<'a>(&self, v: &'a [f64], k: usize, i: usize) -> &'a [f64] {
         let o = ((k - 1) * self.sensors + i) * self.n;
         &v[o..o + self.n]
+    }
+
+    /// x̄^{p,i}_k.
+    pub fn xbar_p(&self, k: usize, i: usize) -> &[f64] {
+        self.at(&self.xbar_p, k, i)
+    }
+
+    /// The standard local KF's prediction x̂^{p,i}_k.
+    pub fn kf_p(&self, k: usize, i: usize) -> &[f64] {
+        self.at(&self.kf_p, k, i)
+    }
+
+    /// The standard local KF's estimate x̂^{e,i}_k.
+    pub fn kf(&self, k: usize, i: usize) -> &[f64] {
+        self.at(&self.kf, k, i)
     }
 
     /// The sensors' steps of [`super::DkfSensor::step`] that do not depend on the trigger,
@@ -57,11 +73,10 @@ impl Track {
         let n = sys.state_dim();
         let ns = sys.n_sensors();
         let len = steps * ns * n;
-        let mut t = Track {
+        let mut t = Self {
             n,
             sensors: ns,
             xbar_p: Vec::with_capacity(len),
-            xbar: Vec::with_capacity(len),
             kf_p: Vec::with_capacity(len),
             kf: Vec::with_capacity(len),
             correction_norm: Vec::with_capacity(steps * ns),
@@ -101,7 +116,6 @@ impl Track {
                 fixed::add_assign(kf.as_mut_slice(), tmp2.as_slice());
                 t.correction_norm.push(fixed::norm(tmp2.as_slice()));
                 t.xbar_p.extend_from_slice(xbar_p.as_slice());
-                t.xbar.extend_from_slice(xbar.as_slice());
                 t.kf.extend_from_slice(kf.as_slice());
                 crate::filter::fixed::gemv(&mut tmp, &m.cbar_e_inv, xbar);
                 t.info_sent.extend_from_slice(tmp.as_slice());
@@ -113,22 +127,55 @@ impl Track {
     }
 }
 
-/// `v += w` as nalgebra's `+=` does it (element by element, `v_j + w_j`).
-fn add(v: &mut Vector, w: &[f64]) {
-    fixed::add_assign(v.as_mut_slice(), w);
+/// Fused means of one trial for steps without inexact extrapolations, by (k, silence set).
+/// Such a mean is (10)-(11) solved with the sensors' exact terms of [`Signals`] — summed in
+/// sensor order from zero — and the Cholesky factor of (k's plan step, the set): a function of
+/// the data, k and the set only, the same for every variant (of either algorithm) that has
+/// that set at k. Dense: up to 2^[`MEAN_MEMO_SENSORS`] sets per step.
+struct Means {
+    n: usize,
+    sets: usize,
+    /// The entry of (k, set) at `(k - 1) * sets + set`, or `NONE`.
+    slot: Vec<u32>,
+    values: Vec<f64>,
 }
 
-/// Per-sensor state of Algorithm 2's replica of the center (the sensor's and the center's
-/// copies are the same numbers, so one serves both).
-struct Held {
-    /// x̄^{pp,i}: the last sent estimate, predicted since.
-    held: Vector,
-    /// x̂^{pp,i}: the standard KF at the last transmission, predicted since.
-    kf_held: Vector,
-    /// Δ^{pp,i}.
-    delta: Option<Arc<PredictedDelta>>,
-    /// This step's debiased extrapolation x̃^{pp,i} (test (13) and the center's term).
-    debiased: Vector,
+const MEAN_MEMO_SENSORS: usize = 8;
+const NONE: u32 = u32::MAX;
+
+impl Means {
+    fn new(n: usize, sensors: usize, steps: usize) -> Self {
+        let sets = if sensors <= MEAN_MEMO_SENSORS {
+            1 << sensors
+        } else {
+            0
+        };
+        Self {
+            n,
+            sets,
+            slot: vec![NONE; steps * sets],
+            values: Vec::new(),
+        }
+    }
+
+    fn get(&self, k: usize, silent: u64) -> Option<&[f64]> {
+        let e = *self.slot.get((k - 1) * self.sets + silent as usize)?;
+        (e != NONE).then(|| &self.values[e as usize * self.n..(e as usize + 1) * self.n])
+    }
+
+    fn put(&mut self, k: usize, silent: u64, mean: &[f64]) {
+        if let Some(slot) = self.slot.get_mut((k - 1) * self.sets + silent as usize) {
+            *slot = (self.values.len() / self.n) as u32;
+            self.values.extend_from_slice(mean);
+        }
+    }
+}
+
+/// What a trial's variants share: the signals, Algorithm 2's replicas and the fused means.
+pub(super) struct Track {
+    signals: Signals,
+    replicas: Replicas,
+    means: Means,
 }
 
 /// The fast trial; `None` when the data or the system is outside what it covers (the generic
@@ -142,9 +189,30 @@ pub(super) fn run(
     sink: &mut dyn StepSink,
 ) -> Option<Result<(), FastTrialError>> {
     let plan = &scheme.plan;
+    let key = (Arc::as_ptr(plan) as usize, measurements.as_ptr() as usize);
+    // Whether the trial is covered depends on the plan and the data only (the key), so it is
+    // checked once per trial too.
+    let track: &mut Option<Track> = cache.get_or_insert_with(key, || {
+        covered(scheme, measurements, steps).then(|| {
+            let sys = &scheme.system;
+            let (n, ns) = (sys.state_dim(), sys.n_sensors());
+            Track {
+                signals: Signals::compute(scheme, measurements, steps),
+                replicas: Replicas::new(n, ns, steps),
+                means: Means::new(n, ns, steps),
+            }
+        })
+    });
+    Some(run_variant(scheme, track.as_mut()?, steps, rng, sink))
+}
+
+/// Whether the fast trial covers these data: finite measurements of the right sizes for every
+/// step, a plan that reaches the last step, and silence sets that fit a bit set.
+fn covered(scheme: &DistributedKfScheme, measurements: &[Vec<Vector>], steps: usize) -> bool {
+    let plan = &scheme.plan;
     let sys = &scheme.system;
     let ns = sys.n_sensors();
-    let covered = ns <= 64
+    ns <= 64
         && measurements.len() >= steps
         && plan.at(steps).is_ok()
         && plan.index(steps).is_ok()
@@ -154,121 +222,79 @@ pub(super) fn run(
                     .iter()
                     .zip(&sys.sensors)
                     .all(|(z, s)| z.len() == s.meas_dim() && z.iter().all(|v| v.is_finite()))
-        });
-    if !covered {
-        return None;
-    }
-    let key = (Arc::as_ptr(plan) as usize, measurements.as_ptr() as usize);
-    let track: &Track =
-        cache.get_or_insert_with(key, || Track::compute(scheme, measurements, steps));
-    Some(run_variant(scheme, track, steps, rng, sink))
+        })
+}
+
+/// Where a variant's sensor stands: consecutive silent steps before the current one (the
+/// center's count after a silent step is this plus one: every sensor is scheduled at every
+/// step), and for Algorithm 2 its replica's entry at the current step.
+#[derive(Clone, Copy, Default)]
+struct SensorState {
+    silent_steps: usize,
+    entry: u32,
 }
 
 fn run_variant(
     scheme: &DistributedKfScheme,
-    track: &Track,
+    track: &mut Track,
     steps: usize,
     rng: &mut dyn RngCore,
     sink: &mut dyn StepSink,
 ) -> Result<(), FastTrialError> {
+    let Track {
+        signals,
+        replicas,
+        means,
+    } = track;
     let plan = &scheme.plan;
     let sys = &scheme.system;
     let center = &scheme.proto;
     let n = sys.state_dim();
     let ns = sys.n_sensors();
-    let a = plan.a();
-    let bounded = matches!(scheme.trigger, Trigger::Bounded { .. });
     let every_other = scheme.trigger.every_other_step();
     let message = Message::Estimate(Vector::zeros(n));
     let (msg_bits, msg_frame_bits) = (message.bits(), message.frame_bits());
-    // Sensor i's consecutive silent steps before the current one (the center's count after
-    // a silent step is this plus one: every sensor is scheduled at every step).
-    let mut silent_steps = vec![0usize; ns];
-    let mut held: Vec<Held> = if bounded {
-        (0..ns)
-            .map(|i| Held {
-                held: sys.prior.mean.clone(),
-                kf_held: sys.prior.mean.clone(),
-                delta: plan.delta_head(i, 0),
-                debiased: Vector::zeros(n),
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
+    let mut state = vec![SensorState::default(); ns];
     let mut est = Gaussian::new(Vector::zeros(n), sys.prior.cov.clone());
-    let (mut tmp, mut tmp2, mut work) = (Vector::zeros(n), Vector::zeros(n), Vector::zeros(n));
+    let mut tmp = vec![0.0; n];
+    let bound = match &scheme.trigger {
+        Trigger::Bounded { b_inv, .. } => replicas.bound(b_inv),
+        _ => 0,
+    };
     let err = |k: usize| move |source: SchemeError| FastTrialError::Scheme { k, source };
     for k in 1..=steps {
         let p = plan.index(k).map_err(err(k))?;
-        let m = plan.at(k).map_err(err(k))?;
-        est.mean.fill(0.0);
         let mut silent = 0u64;
         let mut inexact = 0usize;
         let mut messages = 0u64;
-        for i in 0..ns {
-            let xbar_p = track.at(&track.xbar_p, k, i);
-            let kf = track.at(&track.kf, k, i);
-            // The sensor (DkfSensor::step): its replica of the center, then the trigger.
-            if bounded {
-                let h = &mut held[i];
-                if silent_steps[i] == 0 {
-                    // Sent at k-1: the prediction of what was sent is the sensor's own.
-                    h.held.copy_from_slice(xbar_p);
-                    h.kf_held.copy_from_slice(track.at(&track.kf_p, k, i));
-                } else {
-                    predict_in_place(a, &mut h.held, &mut tmp);
-                    predict_in_place(a, &mut h.kf_held, &mut tmp);
-                }
-                h.delta = h.delta.as_ref().map(|d| d.next(plan));
-            }
+        for (i, st) in state.iter_mut().enumerate() {
+            // The sensor (DkfSensor::step): its trigger, with Algorithm 2's replica of the
+            // center at this step.
             let u: f64 = rng.random();
-            let must_send = every_other && silent_steps[i] >= 1;
+            let must_send = every_other && st.silent_steps >= 1;
             let send = must_send
                 || match &scheme.trigger {
                     Trigger::Always => true,
                     Trigger::Random { send_probability } => u < *send_probability,
-                    Trigger::Event { alpha } => track.correction_norm[(k - 1) * ns + i] > *alpha,
-                    Trigger::Bounded { alpha, b_inv } => {
-                        let h = &mut held[i];
-                        let pd = h.delta.as_ref().expect("A is invertible for Algorithm 2");
-                        debiased_extrapolation_into(
-                            &m.delta_p[i],
-                            pd,
-                            &h.held,
-                            &mut work,
-                            &mut h.debiased,
-                        )
-                        .map_err(err(k))?;
-                        // d̃ = x̃^{pp} - x̄^p.
-                        tmp.copy_from_slice(h.debiased.as_slice());
-                        fixed::sub_assign(tmp.as_mut_slice(), xbar_p);
-                        tmp2.copy_from_slice(h.kf_held.as_slice());
-                        fixed::sub_assign(tmp2.as_mut_slice(), kf);
-                        let far = fixed::norm(tmp2.as_slice()) > *alpha;
-                        far || {
-                            crate::filter::fixed::gemv(&mut tmp2, b_inv, &tmp);
-                            fixed::dot(tmp.as_slice(), tmp2.as_slice()) > 1.0
+                    Trigger::Event { alpha } => signals.correction_norm[(k - 1) * ns + i] > *alpha,
+                    Trigger::Bounded { alpha, .. } => {
+                        st.entry = if st.silent_steps == 0 {
+                            replicas.after_send(plan, signals, i, k - 1)
+                        } else {
+                            replicas.advance(plan, signals, st.entry, i, k)
                         }
+                        .map_err(err(k))?;
+                        replicas.test_13(st.entry, *alpha, bound, &mut tmp)
                     }
                 };
-            // The center (DkfCenter::step): (11) in sensor order.
+            // The center's bookkeeping (DkfCenter::step).
             if send {
-                if bounded {
-                    let h = &mut held[i];
-                    h.held.copy_from_slice(track.at(&track.xbar, k, i));
-                    h.kf_held.copy_from_slice(kf);
-                    h.delta = plan.delta_head(i, p);
-                }
-                silent_steps[i] = 0;
+                st.silent_steps = 0;
                 messages += 1;
-                add(&mut est.mean, track.at(&track.info_sent, k, i));
             } else {
-                silent_steps[i] += 1;
+                st.silent_steps += 1;
                 silent |= 1 << i;
-                if silent_steps[i] == 1 {
-                    add(&mut est.mean, track.at(&track.info_omitted, k, i));
-                } else {
+                if st.silent_steps >= 2 {
                     match &scheme.fusion {
                         Fusion::OmittedEstimates => {
                             return Err(err(k)(SchemeError::Protocol {
@@ -276,24 +302,19 @@ fn run_variant(
                                 message: format!(
                                     "silent for {} steps; Algorithm 1 needs a \
                                      transmission at least every other step",
-                                    silent_steps[i]
+                                    st.silent_steps
                                 ),
                             }))
                         }
-                        Fusion::Bounded { .. } => {
-                            inexact += 1;
-                            crate::filter::fixed::gemv(&mut tmp, &m.cbar_p_inv, &held[i].debiased);
-                            add(&mut est.mean, tmp.as_slice());
-                        }
+                        Fusion::Bounded { .. } => inexact += 1,
                     }
                 }
             }
         }
-        let fused = center
-            .fused_covariance(p, canonical_silence(&center.class, silent), inexact)
-            .map_err(err(k))?;
-        crate::filter::fixed::chol_solve(&fused.chol, &mut est.mean);
-        est.cov.copy_from_slice(fused.cov.as_slice());
+        fuse(
+            center, signals, replicas, means, &state, k, p, silent, inexact, &mut est,
+        )
+        .map_err(err(k))?;
         let traffic = Traffic {
             messages,
             bits: messages * msg_bits,
@@ -304,4 +325,105 @@ fn run_variant(
             .map_err(|source| FastTrialError::Sink { k, source })?;
     }
     Ok(())
+}
+
+/// The center's step k (DkfCenter::step): (11)'s information vector in sensor order, solved
+/// with (10)'s Cholesky factor, and the fused covariance, into `est`.
+#[allow(clippy::too_many_arguments)]
+fn fuse(
+    center: &DkfCenter,
+    signals: &Signals,
+    replicas: &Replicas,
+    means: &mut Means,
+    state: &[SensorState],
+    k: usize,
+    p: usize,
+    silent: u64,
+    inexact: usize,
+    est: &mut Gaussian,
+) -> Result<(), SchemeError> {
+    let Some(dense) = center.dense_memo() else {
+        let fused =
+            center.fused_covariance(p, canonical_silence(&center.class, silent), inexact)?;
+        information_sum(signals, replicas, state, k, est.mean.as_mut_slice());
+        fixed::chol_solve(&fused.chol, &mut est.mean);
+        est.cov.as_mut_slice().copy_from_slice(fused.cov.as_slice());
+        return Ok(());
+    };
+    let set = dense.canonical(center, silent);
+    let base = dense.base(center, p, set)?;
+    match means.get(k, silent).filter(|_| inexact == 0) {
+        Some(mean) => est.mean.copy_from_slice(mean),
+        None => {
+            information_sum(signals, replicas, state, k, est.mean.as_mut_slice());
+            fixed::chol_solve(&base.chol, &mut est.mean);
+            if inexact == 0 {
+                means.put(k, silent, est.mean.as_slice());
+            }
+        }
+    }
+    dense.covariance_into(center, p, set, base, inexact, &mut est.cov)
+}
+
+/// (11): Σ_i of (C̄^e_k)^{-1} x̄^{e,i}_k for a sensor that sent, (C̄^p_k)^{-1} x̄^{p,i}_k for one
+/// that sent at k - 1, (C̄^p_k)^{-1} x̃^{pp,i}_k (Algorithm 2) for one silent longer; from zero,
+/// in sensor order, each `+=` as nalgebra's (element by element) — in fixed size for
+/// dimensions 1..=6.
+fn information_sum(
+    signals: &Signals,
+    replicas: &Replicas,
+    state: &[SensorState],
+    k: usize,
+    out: &mut [f64],
+) {
+    match out.len() {
+        1 => sum_fixed::<1>(signals, replicas, state, k, out),
+        2 => sum_fixed::<2>(signals, replicas, state, k, out),
+        3 => sum_fixed::<3>(signals, replicas, state, k, out),
+        4 => sum_fixed::<4>(signals, replicas, state, k, out),
+        5 => sum_fixed::<5>(signals, replicas, state, k, out),
+        6 => sum_fixed::<6>(signals, replicas, state, k, out),
+        _ => {
+            out.fill(0.0);
+            for (i, st) in state.iter().enumerate() {
+                fixed::add_assign(out, information_term(signals, replicas, st, k, i));
+            }
+        }
+    }
+}
+
+/// Sensor i's term of (11) (see [`information_sum`]).
+#[inline(always)]
+fn information_term<'a>(
+    signals: &'a Signals,
+    replicas: &'a Replicas,
+    st: &SensorState,
+    k: usize,
+    i: usize,
+) -> &'a [f64] {
+    match st.silent_steps {
+        0 => signals.at(&signals.info_sent, k, i),
+        1 => signals.at(&signals.info_omitted, k, i),
+        _ => replicas.info(st.entry),
+    }
+}
+
+#[inline(always)]
+fn sum_fixed<const N: usize>(
+    signals: &Signals,
+    replicas: &Replicas,
+    state: &[SensorState],
+    k: usize,
+    out: &mut [f64],
+) {
+    let mut acc = [0.0; N];
+    for (i, st) in state.iter().enumerate() {
+        let term: &[f64; N] = information_term(signals, replicas, st, k, i)
+            .try_into()
+            .expect("N entries");
+        for j in 0..N {
+            acc[j] += term[j];
+        }
+    }
+    out.copy_from_slice(&acc);
 }

@@ -8,8 +8,10 @@
 //! its own.
 pub mod center;
 mod fast;
+mod fused;
 pub mod params;
 pub mod plan;
+mod replica;
 pub mod sensor;
 
 pub use center::{CovarianceMemo, DkfCenter, Fusion};

@@ -180,7 +180,7 @@ impl SensorNode for DkfSensor {
                     debiased_extrapolation_into(
                         &m.delta_p[i],
                         pd,
-                        &self.held,
+                        self.held.as_slice(),
                         &mut self.tmp2,
                         &mut self.tmp,
                     )?;
@@ -212,15 +212,15 @@ impl SensorNode for DkfSensor {
 
 /// `out = Δ^{p,i}_k (Δ^{pp,i}_k)^{-1} x̄^{pp,i}_k` with the LU factors of Δ^{pp,i} given and
 /// `work` as scratch: [`debiased_extrapolation`] without allocating, same operations (the
-/// fixed-size LU solve is bit for bit nalgebra's).
+/// fixed-size LU solve is bit for bit nalgebra's). `held` is x̄^{pp,i}_k's entries.
 pub fn debiased_extrapolation_into(
     delta_p: &Matrix,
     delta_pp: &PredictedDelta,
-    held: &Vector,
+    held: &[f64],
     work: &mut Vector,
     out: &mut Vector,
 ) -> Result<(), SchemeError> {
-    work.copy_from(held);
+    work.copy_from_slice(held);
     if !delta_pp.lu.solve(work) {
         return Err(SchemeError::Unsupported(
             "debiasing matrix Δ^pp is singular".into(),
