@@ -385,7 +385,6 @@ impl AllData<'_> {
         steps: usize,
         sink: &mut dyn super::StepSink,
     ) -> Option<Result<(), super::FastTrialError>> {
-        use crate::filter::fixed::{chol_solve_array, mat_vec, mat_vec_cols};
         let sys = self.sys;
         if steps == 0 {
             return None;
@@ -396,32 +395,14 @@ impl AllData<'_> {
             .steps
             .read()
             .unwrap_or_else(|e| e.into_inner());
-        // What network::deliver counts when every sensor sends its measurement.
-        let mut traffic = crate::network::Traffic::default();
-        for s in &sys.sensors {
-            let m = Message::Measurement(Vector::zeros(s.meas_dim()));
-            traffic.messages += 1;
-            traffic.bits += m.bits();
-            traffic.frame_bits += m.frame_bits();
-        }
+        let traffic = all_sent_traffic(sys);
         let f = sys.transition.f().as_slice();
+        let linear = self.linear;
         let est = self.est;
         let mut x: [f64; N] = sys.prior.mean.as_slice().try_into().ok()?;
         let mut run = || -> Result<(), super::FastTrialError> {
             for (k, (zs, step)) in (1..=steps).zip(measurements.iter().zip(&sched.steps)) {
-                // from_gaussian: P^{-1} (F x) ...
-                let mut y: [f64; N] = mat_vec(f, &x);
-                chol_solve_array(step.pred_chol.l_dirty().as_slice(), &mut y);
-                // ... plus H_i^T R_i^{-1} z_i of each sensor, in sensor order ...
-                for ((_, ht_rinv), z) in self.linear.iter().zip(zs) {
-                    let t: [f64; N] = mat_vec_cols(ht_rinv.as_slice(), z.as_slice());
-                    for (yi, ti) in y.iter_mut().zip(t) {
-                        *yi = *yi + ti;
-                    }
-                }
-                // ... and back to covariance form.
-                chol_solve_array(step.fused_chol.l_dirty().as_slice(), &mut y);
-                x = y;
+                x = scheduled_mean(f, linear, step, &x, zs);
                 est.mean.as_mut_slice().copy_from_slice(&x);
                 est.cov.as_mut_slice().copy_from_slice(step.cov.as_slice());
                 match &step.nees_factor {
@@ -434,6 +415,82 @@ impl AllData<'_> {
         };
         Some(run())
     }
+
+    /// [`AllData::trial`] of several trials in lockstep: at each step every trial's mean
+    /// (independent recursions, which the processor overlaps), then every trial's report.
+    fn batch<const N: usize>(
+        self,
+        trials: &[&[Vec<Vector>]],
+        steps: usize,
+        sink: &mut dyn super::BatchSink,
+    ) -> Option<Result<(), super::FastTrialError>> {
+        let sys = self.sys;
+        if steps == 0 {
+            return None;
+        }
+        self.schedule.step(sys, steps)?;
+        let sched = self
+            .schedule
+            .steps
+            .read()
+            .unwrap_or_else(|e| e.into_inner());
+        let traffic = all_sent_traffic(sys);
+        let f = sys.transition.f().as_slice();
+        let linear = self.linear;
+        let est = self.est;
+        let x0: [f64; N] = sys.prior.mean.as_slice().try_into().ok()?;
+        let mut xs = vec![x0; trials.len()];
+        for (k, step) in (1..=steps).zip(&sched.steps) {
+            for (x, m) in xs.iter_mut().zip(trials) {
+                *x = scheduled_mean(f, linear, step, x, &m[k - 1]);
+            }
+            est.cov.as_mut_slice().copy_from_slice(step.cov.as_slice());
+            for (j, x) in xs.iter().enumerate() {
+                est.mean.as_mut_slice().copy_from_slice(x);
+                if let Err(source) = sink.step(j, k, est, step.nees_factor.as_deref(), traffic) {
+                    return Some(Err(super::FastTrialError::Sink { k, source }));
+                }
+            }
+        }
+        Some(Ok(()))
+    }
+}
+
+/// What network::deliver counts when every sensor sends its measurement.
+fn all_sent_traffic(sys: &System) -> crate::network::Traffic {
+    let mut traffic = crate::network::Traffic::default();
+    for s in &sys.sensors {
+        let m = Message::Measurement(Vector::zeros(s.meas_dim()));
+        traffic.messages += 1;
+        traffic.bits += m.bits();
+        traffic.frame_bits += m.frame_bits();
+    }
+    traffic
+}
+
+/// One scheduled step's mean ([`CentralizedKf::scheduled_step`]) on arrays: from_gaussian's
+/// P^{-1} (F x) by the predicted covariance's factor, plus H_i^T R_i^{-1} z_i of each sensor
+/// in sensor order (add_measurement), back by the fused factor (to_gaussian).
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+fn scheduled_mean<const N: usize>(
+    f: &[f64],
+    linear: &[(usize, Matrix)],
+    step: &ScheduledStep,
+    x: &[f64; N],
+    zs: &[Vector],
+) -> [f64; N] {
+    use crate::filter::fixed::{chol_solve_array, mat_vec, mat_vec_cols};
+    let mut y: [f64; N] = mat_vec(f, x);
+    chol_solve_array(step.pred_chol.l_dirty().as_slice(), &mut y);
+    for ((_, ht_rinv), z) in linear.iter().zip(zs) {
+        let t: [f64; N] = mat_vec_cols(ht_rinv.as_slice(), z.as_slice());
+        for (yi, ti) in y.iter_mut().zip(t) {
+            *yi = *yi + ti;
+        }
+    }
+    chol_solve_array(step.fused_chol.l_dirty().as_slice(), &mut y);
+    y
 }
 
 fn measurement(i: usize, msg: &Received) -> Result<Option<&Vector>, SchemeError> {
@@ -486,7 +543,73 @@ impl CentralizedScheme {
     }
 }
 
+impl CentralizedScheme {
+    /// Whether the fast trials take `measurements`: linear sensors, a measurement of the
+    /// sensor's dimension per sensor and step, all finite.
+    fn covers(&self, measurements: &[Vec<Vector>], steps: usize) -> bool {
+        let Some(linear) = &self.linear else {
+            return false;
+        };
+        if measurements.len() < steps {
+            return false;
+        }
+        // Plain loops: this runs over every measurement of every trial.
+        for zs in &measurements[..steps] {
+            if zs.len() != linear.len() {
+                return false;
+            }
+            for (z, (m, _)) in zs.iter().zip(linear) {
+                if z.len() != *m {
+                    return false;
+                }
+                for v in z.as_slice() {
+                    if !v.is_finite() {
+                        return false;
+                    }
+                }
+            }
+        }
+        true
+    }
+}
+
 impl Scheme for CentralizedScheme {
+    /// The all-data KF (rate 1, linear sensors) runs several trials in lockstep.
+    fn batches(&self) -> bool {
+        self.schedule.is_some()
+    }
+
+    fn run_batch_fast(
+        &self,
+        trials: &[&[Vec<Vector>]],
+        steps: usize,
+        cache: &mut super::TrialCache,
+        sink: &mut dyn super::BatchSink,
+    ) -> Option<Result<(), super::FastTrialError>> {
+        let schedule = self.schedule.as_ref()?;
+        let linear = self.linear.as_ref()?;
+        if !trials.iter().all(|m| self.covers(m, steps)) {
+            return None;
+        }
+        let sys = &self.system;
+        let est = cache.scratch((Arc::as_ptr(schedule) as usize, 0), || sys.prior.clone());
+        let all = AllData {
+            sys,
+            linear,
+            schedule,
+            est,
+        };
+        match sys.state_dim() {
+            1 => all.batch::<1>(trials, steps, sink),
+            2 => all.batch::<2>(trials, steps, sink),
+            3 => all.batch::<3>(trials, steps, sink),
+            4 => all.batch::<4>(trials, steps, sink),
+            5 => all.batch::<5>(trials, steps, sink),
+            6 => all.batch::<6>(trials, steps, sink),
+            _ => None,
+        }
+    }
+
     /// The generic loop's [`ForwardingSensor`] coins and [`CentralizedKf`] steps without the
     /// messages, boxes and inbox: linear sensors and well-formed data only.
     fn run_trial_fast(
@@ -500,14 +623,7 @@ impl Scheme for CentralizedScheme {
         let sys = &self.system;
         let ns = sys.n_sensors();
         let linear = self.linear.as_ref()?;
-        let covered = measurements.len() >= steps
-            && measurements[..steps].iter().all(|zs| {
-                zs.len() == ns
-                    && zs.iter().zip(linear).all(|(z, (m, _))| {
-                        z.len() == *m && z.as_slice().iter().all(|v| v.is_finite())
-                    })
-            });
-        if !covered {
+        if !self.covers(measurements, steps) {
             return None;
         }
         if let Some(schedule) = &self.schedule {

@@ -199,6 +199,42 @@ pub trait Scheme: Send + Sync + Debug {
         let _ = (measurements, steps, rng, cache, sink);
         None
     }
+    /// Whether [`Scheme::run_batch_fast`] may take several trials at once (the runner then
+    /// draws a block's trials before running them).
+    fn batches(&self) -> bool {
+        false
+    }
+    /// Runs several trials in lockstep (`trials[j][k - 1][i]` = z_k^i of trial j), reporting
+    /// every trial's step k to `sink` in trial order before any trial's step k + 1: the
+    /// numbers of [`Scheme::run_trial_fast`] on each trial, while the dependent chains of
+    /// different trials (divisions, square roots) overlap in the processor. Only for schemes
+    /// whose trial draws no coins. `None`: not for this data (nothing was reported; the
+    /// runner runs the trials one at a time). After an error the runner reruns the trials
+    /// one at a time, so that the run fails with the error the one-at-a-time loop reports.
+    fn run_batch_fast(
+        &self,
+        trials: &[&[Vec<Vector>]],
+        steps: usize,
+        cache: &mut TrialCache,
+        sink: &mut dyn BatchSink,
+    ) -> Option<Result<(), FastTrialError>> {
+        let _ = (trials, steps, cache, sink);
+        None
+    }
+}
+
+/// Receives the steps of a [`Scheme::run_batch_fast`] batch.
+pub trait BatchSink {
+    /// The fused estimate of batch trial `j` after step `k` (1-based), with the Cholesky
+    /// factor of its covariance when the scheme has it (see [`StepSink::step_factored`]).
+    fn step(
+        &mut self,
+        j: usize,
+        k: usize,
+        estimate: &Gaussian,
+        factor: Option<&[f64]>,
+        traffic: crate::network::Traffic,
+    ) -> Result<(), LinalgError>;
 }
 
 /// Receives the steps of a [`Scheme::run_trial_fast`] trial.

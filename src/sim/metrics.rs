@@ -302,9 +302,11 @@ pub struct Sums {
     pub steady_trace: TrialStat,
     pub steady_nees: TrialStat,
     pub steady_messages: TrialStat,
-    /// Per trial, in trial order: steady-state mean squared error, total then per group.
-    /// Kept so that two schemes can be compared by paired differences on the same trials.
-    pub per_trial: Vec<Vec<f64>>,
+    /// Per trial, in trial order: steady-state mean squared error, total then per group
+    /// (`1 + groups` values a trial, one flat vector: no allocation per trial; see
+    /// [`Sums::per_trial_rows`]). Kept so that two schemes can be compared by paired
+    /// differences on the same trials.
+    pub per_trial: Vec<f64>,
     /// Per trial, in trial order: steady-state mean NEES (to see whether a few trials dominate
     /// the mean).
     pub per_trial_nees: Vec<f64>,
@@ -321,6 +323,13 @@ pub struct Sums {
 /// Observer of one trial of one variant: accumulates into a [`Sums`] as the trial runs.
 pub struct TrialObserver<'a> {
     sums: &'a mut Sums,
+    state: TrialState<'a>,
+}
+
+/// What one trial of one variant carries from step to step (divergence run, steady-state
+/// sums, work space), apart from the [`Sums`] it adds into: several trials of a batch can be
+/// in flight on the same sums ([`TrialState::record`] takes them per call).
+pub struct TrialState<'a> {
     groups: &'a [(String, Vec<usize>)],
     steady_from: usize,
     /// chi^2_n 99% quantile.
@@ -394,10 +403,19 @@ impl Sums {
         groups: &'a [(String, Vec<usize>)],
         steady_from: usize,
     ) -> TrialObserver<'a> {
+        let state = self.trial_state(groups, steady_from);
+        TrialObserver { sums: self, state }
+    }
+
+    /// The state of a new trial that will add into these sums (see [`TrialState`]).
+    pub fn trial_state<'a>(
+        &self,
+        groups: &'a [(String, Vec<usize>)],
+        steady_from: usize,
+    ) -> TrialState<'a> {
         let [nees_bound, nees_bound_95, divergence_bound] = nees_bounds(self.state_dim);
         let width = self.layout().width();
-        TrialObserver {
-            sums: self,
+        TrialState {
             groups,
             steady_from,
             nees_bound,
@@ -415,12 +433,9 @@ impl Sums {
         }
     }
 
-    /// [`Sums::merge`] of sums that are no longer needed: the per-trial rows are moved out
-    /// of `o`, not copied (the same result).
-    pub fn merge_taking(&mut self, o: &mut Sums) {
-        let rows = std::mem::take(&mut o.per_trial);
-        self.merge(o);
-        self.per_trial.extend(rows);
+    /// The per-trial rows of [`Sums::per_trial`], in trial order.
+    pub fn per_trial_rows(&self) -> std::slice::ChunksExact<'_, f64> {
+        self.per_trial.chunks_exact(1 + self.layout_groups)
     }
 
     /// Back to [`Sums::new`] of the same shape, keeping the allocations.
@@ -457,7 +472,7 @@ impl Sums {
         self.steady_trace.merge(&o.steady_trace);
         self.steady_nees.merge(&o.steady_nees);
         self.steady_messages.merge(&o.steady_messages);
-        self.per_trial.extend(o.per_trial.iter().cloned());
+        self.per_trial.extend_from_slice(&o.per_trial);
         self.per_trial_nees.extend_from_slice(&o.per_trial_nees);
         self.diverged += o.diverged;
         for (a, b) in self.ess_min.iter_mut().zip(&o.ess_min) {
@@ -483,43 +498,46 @@ impl Sums {
     }
 }
 
-impl TrialObserver<'_> {
+impl TrialState<'_> {
     /// Records step `k` (1-based): truth, fused estimate and the traffic of the step.
     /// NEES needs a positive definite covariance; a scheme whose covariance is not is a
     /// defect that we report rather than hide.
     pub fn record(
         &mut self,
+        sums: &mut Sums,
         k: usize,
         truth: &Vector,
         est: &Gaussian,
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        self.record_inner(k, truth, est, None, traffic)
+        self.record_inner(sums, k, truth, est, None, traffic)
     }
 
-    /// [`TrialObserver::record`] with the Cholesky factor of the estimate's covariance from
+    /// [`TrialState::record`] with the Cholesky factor of the estimate's covariance from
     /// [`crate::filter::fixed::nees_factor`] (the same factor record would compute, so the
     /// same NEES): a covariance shared by all trials is factored once, not once per trial.
     pub fn record_factored(
         &mut self,
+        sums: &mut Sums,
         k: usize,
         truth: &Vector,
         est: &Gaussian,
         factor: &[f64],
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        self.record_inner(k, truth, est, Some(factor), traffic)
+        self.record_inner(sums, k, truth, est, Some(factor), traffic)
     }
 
     fn record_inner(
         &mut self,
+        sums: &mut Sums,
         k: usize,
         truth: &Vector,
         est: &Gaussian,
         factor: Option<&[f64]>,
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        let layout = self.sums.layout();
+        let layout = sums.layout();
         let w = layout.width();
         // err = mean - truth, in the buffer (slices: nalgebra's `-=`, element by element).
         if self.err.len() != est.mean.len() {
@@ -587,10 +605,8 @@ impl TrialObserver<'_> {
         }
         // Every per-(trial, step) value goes into the sum, the sum of squares and this
         // trial's whole-run sum.
-        add_row(&mut self.sums.per_step[(k - 1) * w..k * w], &vals, |v| v);
-        add_row(&mut self.sums.per_step_sq[(k - 1) * w..k * w], &vals, |v| {
-            v * v
-        });
+        add_row(&mut sums.per_step[(k - 1) * w..k * w], &vals, |v| v);
+        add_row(&mut sums.per_step_sq[(k - 1) * w..k * w], &vals, |v| v * v);
         add_row(&mut self.run_acc[..w], &vals, |v| v);
         // Divergence: a run of NEES beyond the 99.9% quantile, or anything not finite.
         if !(total.is_finite() && nees.is_finite()) {
@@ -605,9 +621,7 @@ impl TrialObserver<'_> {
             self.run = 0;
         }
         if steady {
-            self.sums
-                .nees_hist
-                .add(nees / self.sums.state_dim.max(1) as f64);
+            sums.nees_hist.add(nees / sums.state_dim.max(1) as f64);
             self.acc[0] += total;
             self.acc[1] += trace;
             self.acc[2] += nees;
@@ -619,37 +633,72 @@ impl TrialObserver<'_> {
 
     /// Records the fusion center's effective sample size after step `k` (1-based), if it has
     /// one (particle filters; see [`crate::scheme::FusionCenter::ess`]).
-    pub fn record_ess(&mut self, k: usize, ess: Option<f64>) {
+    pub fn record_ess(&mut self, sums: &mut Sums, k: usize, ess: Option<f64>) {
         let Some(ess) = ess else {
             return;
         };
-        let w = self.sums.layout().width();
-        self.sums.per_step[(k - 1) * w + Layout::ESS] += ess;
-        self.sums.per_step_sq[(k - 1) * w + Layout::ESS] += ess * ess;
+        let w = sums.layout().width();
+        sums.per_step[(k - 1) * w + Layout::ESS] += ess;
+        sums.per_step_sq[(k - 1) * w + Layout::ESS] += ess * ess;
         self.run_acc[Layout::ESS] += ess;
-        let m = &mut self.sums.ess_min[k - 1];
+        let m = &mut sums.ess_min[k - 1];
         *m = m.min(ess);
-        self.sums.has_ess = true;
+        sums.has_ess = true;
+    }
+
+    /// Closes the trial.
+    pub fn finish(self, sums: &mut Sums) {
+        let c = self.count.max(1) as f64;
+        sums.trials += 1;
+        sums.steady_mse.add(self.acc[0] / c);
+        sums.steady_trace.add(self.acc[1] / c);
+        sums.steady_nees.add(self.acc[2] / c);
+        sums.per_trial_nees.push(self.acc[2] / c);
+        sums.diverged += usize::from(self.diverged);
+        sums.steady_messages.add(self.acc[3] / c);
+        sums.per_trial.push(self.acc[0] / c);
+        sums.per_trial.extend(self.group_acc.iter().map(|v| v / c));
+        let steps = sums.steps.max(1) as f64;
+        for (stat, v) in sums.whole_run.iter_mut().zip(self.run_acc.iter()) {
+            stat.add(v / steps);
+        }
+    }
+}
+
+impl TrialObserver<'_> {
+    /// Records step `k` (1-based): truth, fused estimate and the traffic of the step
+    /// ([`TrialState::record`]).
+    pub fn record(
+        &mut self,
+        k: usize,
+        truth: &Vector,
+        est: &Gaussian,
+        traffic: Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        self.state.record(self.sums, k, truth, est, traffic)
+    }
+
+    /// [`TrialState::record_factored`].
+    pub fn record_factored(
+        &mut self,
+        k: usize,
+        truth: &Vector,
+        est: &Gaussian,
+        factor: &[f64],
+        traffic: Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        self.state
+            .record_factored(self.sums, k, truth, est, factor, traffic)
+    }
+
+    /// [`TrialState::record_ess`].
+    pub fn record_ess(&mut self, k: usize, ess: Option<f64>) {
+        self.state.record_ess(self.sums, k, ess);
     }
 
     /// Closes the trial.
     pub fn finish(self) {
-        let c = self.count.max(1) as f64;
-        self.sums.trials += 1;
-        self.sums.steady_mse.add(self.acc[0] / c);
-        self.sums.steady_trace.add(self.acc[1] / c);
-        self.sums.steady_nees.add(self.acc[2] / c);
-        self.sums.per_trial_nees.push(self.acc[2] / c);
-        self.sums.diverged += usize::from(self.diverged);
-        self.sums.steady_messages.add(self.acc[3] / c);
-        let mut row = Vec::with_capacity(1 + self.group_acc.len());
-        row.push(self.acc[0] / c);
-        row.extend(self.group_acc.iter().map(|v| v / c));
-        self.sums.per_trial.push(row);
-        let steps = self.sums.steps.max(1) as f64;
-        for (stat, v) in self.sums.whole_run.iter_mut().zip(self.run_acc.iter()) {
-            stat.add(v / steps);
-        }
+        self.state.finish(self.sums);
     }
 }
 
@@ -790,15 +839,15 @@ mod tests {
         assert_eq!(s.at(1, Layout::FRAME_BITS), 400.0);
         assert_eq!(s.at(1, Layout::DOWNLINK_BITS), 64.0);
         assert_eq!(s.steady_mse.sum, 5.0);
-        assert_eq!(s.per_trial, vec![vec![5.0, 1.0, 4.0]]);
+        assert_eq!(s.per_trial, vec![5.0, 1.0, 4.0]);
+        assert_eq!(
+            s.per_trial_rows().collect::<Vec<_>>(),
+            vec![&[5.0, 1.0, 4.0][..]]
+        );
         let mut m = s.clone();
         m.merge(&s);
         assert_eq!(m.trials, 2);
-        // Cleared sums are new sums; merging by taking the rows gives what merging gives.
-        let mut taken = Sums::new(2, 2, 2);
-        taken.merge_taking(&mut s.clone());
-        taken.merge_taking(&mut s.clone());
-        assert_eq!(taken, m);
+        // Cleared sums are new sums.
         let mut cleared = m.clone();
         cleared.clear();
         assert_eq!(cleared, Sums::new(2, 2, 2));

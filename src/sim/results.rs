@@ -304,7 +304,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 },
                 ess,
                 consistency,
-                per_trial: s.per_trial.clone(),
+                per_trial: s.per_trial_rows().map(<[f64]>::to_vec).collect(),
                 steady_state: SteadyState {
                     from_step: exp.steady_from,
                     mse: mse_ss,

@@ -111,8 +111,6 @@ struct Drawer {
     /// Per sensor: its noise draw v and R^{1/2} v.
     v: Vec<Vector>,
     rv: Vec<Vector>,
-    /// The variants' work space, kept from trial to trial.
-    scratch: Scratch,
     /// Per sensor, when it is linear: H and R^{1/2} (column-major), read per step without a
     /// virtual call.
     linear: Vec<Option<LinearDraw>>,
@@ -145,7 +143,6 @@ impl Drawer {
             b: zeros(n),
             v: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
             rv: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
-            scratch: Scratch::new(sys.n_sensors()),
             linear: sys
                 .sensors
                 .iter()
@@ -270,47 +267,165 @@ impl Drawer {
     }
 }
 
-/// A [`Drawer`] borrowed from a pool and returned to it when dropped.
-struct PooledDrawer<'a> {
-    drawer: Option<Drawer>,
-    pool: &'a std::sync::Mutex<Vec<Drawer>>,
+/// What a worker task keeps from block to block: trial buffers (one per trial of a block
+/// when the variants run blocks in lockstep, else one) and the variants' work space.
+struct Worker {
+    drawers: Vec<Drawer>,
+    scratch: Scratch,
 }
 
-impl<'a> PooledDrawer<'a> {
-    fn take(pool: &'a std::sync::Mutex<Vec<Drawer>>, exp: &Experiment) -> Self {
-        let drawer = pool
+impl Worker {
+    fn new(exp: &Experiment) -> Self {
+        Self {
+            drawers: vec![Drawer::new(exp)],
+            scratch: Scratch::new(exp.system.n_sensors()),
+        }
+    }
+}
+
+/// A [`Worker`] borrowed from a pool and returned to it when dropped.
+struct PooledWorker<'a> {
+    worker: Option<Worker>,
+    pool: &'a std::sync::Mutex<Vec<Worker>>,
+}
+
+impl<'a> PooledWorker<'a> {
+    fn take(pool: &'a std::sync::Mutex<Vec<Worker>>, exp: &Experiment) -> Self {
+        let worker = pool
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .pop()
-            .unwrap_or_else(|| Drawer::new(exp));
+            .unwrap_or_else(|| Worker::new(exp));
         Self {
-            drawer: Some(drawer),
+            worker: Some(worker),
             pool,
         }
     }
 
-    fn get(&mut self) -> &mut Drawer {
-        self.drawer.as_mut().expect("present until dropped")
+    fn get(&mut self) -> &mut Worker {
+        self.worker.as_mut().expect("present until dropped")
     }
 }
 
-impl Drop for PooledDrawer<'_> {
+impl Drop for PooledWorker<'_> {
     fn drop(&mut self) {
-        if let Some(d) = self.drawer.take() {
-            self.pool.lock().unwrap_or_else(|e| e.into_inner()).push(d);
+        if let Some(w) = self.worker.take() {
+            self.pool.lock().unwrap_or_else(|e| e.into_inner()).push(w);
         }
     }
 }
 
-/// Runs one trial of every variant on freshly drawn data, adding into `sums` (one per variant).
-fn run_trial(
+/// Runs the trials of one block, adding into `sums` (one per variant): one trial at a time,
+/// every variant on its data (the variants of a trial share work through its cache), or, when
+/// every variant runs batches ([`crate::scheme::Scheme::batches`]), all the block's trials
+/// drawn first and each variant run on them in lockstep. `on_trial` is called after each
+/// trial (after the block, for a batch); `stop` is checked before each trial (before the
+/// block) and ends the block early with `Ok(false)`.
+fn run_block(
     exp: &Experiment,
-    trial: usize,
+    trials: std::ops::Range<usize>,
     sums: &mut [Sums],
-    drawer: &mut Drawer,
-) -> Result<(), RunError> {
-    drawer.draw(exp, trial);
-    run_trial_with(exp, trial, &drawer.data, sums, &mut drawer.scratch)
+    worker: &mut Worker,
+    stop: &dyn Fn() -> bool,
+    on_trial: &dyn Fn(usize),
+) -> Result<bool, RunError> {
+    let batch = trials.len() > 1 && exp.variants.iter().all(|v| v.scheme.batches());
+    if !batch {
+        for trial in trials {
+            if stop() {
+                return Ok(false);
+            }
+            let drawer = &mut worker.drawers[0];
+            drawer.draw(exp, trial);
+            run_trial_with(exp, trial, &drawer.data, sums, &mut worker.scratch)?;
+            on_trial(1);
+        }
+        return Ok(true);
+    }
+    if stop() {
+        return Ok(false);
+    }
+    let n = trials.len();
+    while worker.drawers.len() < n {
+        worker.drawers.push(Drawer::new(exp));
+    }
+    for (d, trial) in worker.drawers.iter_mut().zip(trials.clone()) {
+        d.draw(exp, trial);
+    }
+    let drawn = &worker.drawers[..n];
+    let measurements: Vec<&[Vec<Vector>]> = drawn
+        .iter()
+        .map(|d| d.data.measurements.as_slice())
+        .collect();
+    for (v, s) in sums.iter_mut().enumerate().take(exp.variants.len()) {
+        let scheme = &exp.variants[v].scheme;
+        let mut recorder = BatchRecorder {
+            states: drawn
+                .iter()
+                .map(|_| s.trial_state(&exp.groups, exp.steady_from))
+                .collect(),
+            truths: drawn.iter().map(|d| d.data.truth.as_slice()).collect(),
+            sums: s,
+        };
+        let outcome = scheme.run_batch_fast(
+            &measurements,
+            exp.steps,
+            &mut worker.scratch.cache,
+            &mut recorder,
+        );
+        match outcome {
+            Some(Ok(())) => recorder.finish(),
+            // Not for this data, or failed: one trial at a time from this block's start (the
+            // block's sums of this variant hold this block's trials only), which reports the
+            // error as the one-at-a-time loop does.
+            other => {
+                if other.is_some() {
+                    recorder.sums.clear();
+                }
+                for (d, trial) in drawn.iter().zip(trials.clone()) {
+                    run_variant(exp, trial, v, &d.data, recorder.sums, &mut worker.scratch)?;
+                }
+            }
+        }
+    }
+    on_trial(n);
+    Ok(true)
+}
+
+/// The sink of a batch: one trial state per trial of the block, all adding into the
+/// variant's block sums in trial order at every step.
+struct BatchRecorder<'a> {
+    sums: &'a mut Sums,
+    states: Vec<super::metrics::TrialState<'a>>,
+    truths: Vec<&'a [Vector]>,
+}
+
+impl BatchRecorder<'_> {
+    /// Closes the trials, in trial order.
+    fn finish(self) {
+        for state in self.states {
+            state.finish(self.sums);
+        }
+    }
+}
+
+impl crate::scheme::BatchSink for BatchRecorder<'_> {
+    fn step(
+        &mut self,
+        j: usize,
+        k: usize,
+        estimate: &crate::filter::Gaussian,
+        factor: Option<&[f64]>,
+        traffic: network::Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        let (state, truth) = (&mut self.states[j], &self.truths[j][k - 1]);
+        match factor {
+            Some(f) => state.record_factored(self.sums, k, truth, estimate, f, traffic)?,
+            None => state.record(self.sums, k, truth, estimate, traffic)?,
+        }
+        state.record_ess(self.sums, k, None);
+        Ok(())
+    }
 }
 
 /// Runs one trial of every variant on the given truth and measurements (drawn by
@@ -533,14 +648,6 @@ pub fn fold_block(total: &mut [Sums], block: &[Sums]) {
     }
 }
 
-/// [`fold_block`] of a block that is no longer needed: its per-trial rows are moved, not
-/// copied (the same total).
-pub fn fold_block_taking(total: &mut [Sums], block: &mut [Sums]) {
-    for (t, b) in total.iter_mut().zip(block) {
-        t.merge_taking(b);
-    }
-}
-
 /// How [`run_windows`] ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Completion {
@@ -582,7 +689,7 @@ pub fn run_windows(
         .min(WINDOW_MAX_BLOCKS)
         .max(min_window);
     let mut window = min_window;
-    let drawers = std::sync::Mutex::new(Vec::new());
+    let workers = std::sync::Mutex::new(Vec::new());
     // Block sums left by `on_window`, cleared, for the next blocks.
     let spare: std::sync::Mutex<Vec<Vec<Sums>>> = std::sync::Mutex::new(Vec::new());
     let fresh_sums = || {
@@ -602,18 +709,18 @@ pub fn run_windows(
                 // One drawer (trial buffers) per worker task, not per block, recycled
                 // from window to window.
                 .map_init(
-                    || PooledDrawer::take(&drawers, exp),
-                    |drawer, b| {
-                        let drawer = drawer.get();
+                    || PooledWorker::take(&workers, exp),
+                    |worker, b| {
                         let mut sums = fresh_sums();
-                        for trial in block_trials(b, exp.trials) {
-                            if stopped() {
-                                return Ok(None);
-                            }
-                            run_trial(exp, trial, &mut sums, drawer)?;
-                            progress(done.fetch_add(1, Ordering::Relaxed) + 1);
-                        }
-                        Ok(Some(sums))
+                        let finished = run_block(
+                            exp,
+                            block_trials(b, exp.trials),
+                            &mut sums,
+                            worker.get(),
+                            &stopped,
+                            &|n| progress(done.fetch_add(n, Ordering::Relaxed) + n),
+                        )?;
+                        Ok(finished.then_some(sums))
                     },
                 )
                 .collect()
@@ -651,8 +758,8 @@ pub fn run(
         None,
         progress,
         &mut |_, blocks| {
-            for block in blocks.iter_mut() {
-                fold_block_taking(&mut total, block);
+            for block in blocks.iter() {
+                fold_block(&mut total, block);
             }
             Ok(())
         },

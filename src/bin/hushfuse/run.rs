@@ -293,8 +293,8 @@ pub(crate) fn compute(
             match &mut state.progress {
                 durable::Progress::Prefix { next, total } => {
                     *next = first + blocks.len();
-                    for b in blocks.iter_mut() {
-                        runner::fold_block_taking(total, b);
+                    for b in blocks.iter() {
+                        runner::fold_block(total, b);
                     }
                 }
                 durable::Progress::Blocks(done) => done.append(blocks),
