@@ -508,6 +508,50 @@ mod tests {
         assert!(live.exists());
     }
 
+    /// A producer writing `0..n` as text in many small pieces, as serde_json does.
+    fn numbers(n: usize) -> impl FnMut(&mut dyn Write) -> std::io::Result<()> {
+        move |w| (0..n).try_for_each(|i| write!(w, "{i},"))
+    }
+
+    #[test]
+    fn a_streamed_file_is_written_whole_and_a_failed_one_leaves_the_old_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sub/a.csv");
+        write_file_with(&path, numbers(100_000)).unwrap();
+        let mut expected = Vec::new();
+        numbers(100_000)(&mut expected).unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), expected);
+        let failing = |w: &mut dyn Write| {
+            w.write_all(&[b'x'; 200_000])?;
+            Err(std::io::Error::other("the producer failed"))
+        };
+        let e = write_file_with(&path, failing).unwrap_err();
+        assert!(e.contains("the producer failed"), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), expected, "old file kept");
+        let left: Vec<_> = std::fs::read_dir(dir.path().join("sub")).unwrap().collect();
+        assert_eq!(left.len(), 1, "no temporary left");
+    }
+
+    #[test]
+    fn the_test_hook_lets_half_a_streamed_file_reach_the_disk_then_fails_as_a_full_disk() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("half.csv");
+        let mut whole = Vec::new();
+        numbers(50_000)(&mut whole).unwrap();
+        let e =
+            write_half_then_fail(File::create(&path).unwrap(), &mut numbers(50_000)).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::StorageFull);
+        assert!(e.to_string().contains("no space left on device"), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), whole[..whole.len() / 2]);
+        // An empty file fails too: the hook always fails.
+        let e = write_half_then_fail(
+            File::create(&path).unwrap(),
+            &mut |_: &mut dyn Write| Ok(()),
+        )
+        .unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::StorageFull);
+    }
+
     #[test]
     fn an_uncommitted_output_leaves_the_folder_as_it_was() {
         let dir = tempfile::tempdir().unwrap();
