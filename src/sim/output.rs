@@ -31,6 +31,17 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 /// renamed into place and the folder flushed. Creates missing parent folders. On error the
 /// file at `path` is as before and no temporary file is left.
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    write_file_with(path, |w| w.write_all(bytes))
+}
+
+/// [`write_file`] for a file that is produced as it is written: `produce` streams its bytes
+/// into the (buffered) temporary file, so a large output never exists whole in memory.
+/// `produce` may be called more than once (the test hook measures the file before failing half
+/// way through it) and must write the same bytes each time.
+pub fn write_file_with<F>(path: &Path, produce: F) -> Result<(), String>
+where
+    F: FnMut(&mut dyn Write) -> std::io::Result<()>,
+{
     let name = path
         .file_name()
         .ok_or_else(|| format!("cannot write {}: not a file name", path.display()))?
@@ -43,7 +54,7 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), String> {
     std::fs::create_dir_all(parent)
         .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
     let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
-    let result = write_synced(&tmp, &name, bytes).and_then(|()| {
+    let result = write_synced(&tmp, &name, produce).and_then(|()| {
         std::fs::rename(&tmp, path)
             .map_err(|e| format!("cannot rename {} to {}: {e}", tmp.display(), path.display()))
     });
@@ -55,22 +66,93 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// Creates `path`, writes `bytes` and flushes it to disk. `name` is the name the test hook
-/// matches.
-fn write_synced(path: &Path, name: &str, bytes: &[u8]) -> Result<(), String> {
+/// Buffer of a streamed file: large enough that a writer of many small pieces (serde_json,
+/// CSV rows) costs few system calls, small beside the outputs it spares from memory.
+const WRITE_BUFFER: usize = 64 * 1024;
+
+/// Creates `path`, streams `produce` into it and flushes it to disk. `name` is the name the
+/// test hook matches.
+fn write_synced<F>(path: &Path, name: &str, mut produce: F) -> Result<(), String>
+where
+    F: FnMut(&mut dyn Write) -> std::io::Result<()>,
+{
     let err = |e: std::io::Error| format!("cannot write {}: {e}", path.display());
-    let mut f = File::create(path).map_err(err)?;
+    let file = File::create(path).map_err(err)?;
     if std::env::var_os(FAIL_WRITE_ENV).is_some_and(|v| v == name) {
-        // Half the bytes reach the disk, then the disk is full.
-        let _ = f.write_all(&bytes[..bytes.len() / 2]);
-        let _ = f.sync_all();
-        return Err(err(std::io::Error::new(
-            std::io::ErrorKind::StorageFull,
-            format!("no space left on device (injected by {FAIL_WRITE_ENV})"),
-        )));
+        return write_half_then_fail(file, &mut produce).map_err(err);
     }
-    f.write_all(bytes).map_err(err)?;
-    f.sync_all().map_err(err)
+    let mut w = std::io::BufWriter::with_capacity(WRITE_BUFFER, file);
+    produce(&mut w).map_err(err)?;
+    let file = w.into_inner().map_err(|e| err(e.into_error()))?;
+    file.sync_all().map_err(err)
+}
+
+/// The test hook: half the bytes `produce` writes reach the disk, then the disk is full. The
+/// same streaming path as a real write, so a failure in the middle of a streamed file is what
+/// the durability tests exercise.
+fn write_half_then_fail<F>(file: File, produce: &mut F) -> std::io::Result<()>
+where
+    F: FnMut(&mut dyn Write) -> std::io::Result<()>,
+{
+    let mut size = CountingSink(0);
+    produce(&mut size)?;
+    let mut disk = FullDisk {
+        file,
+        room: size.0 / 2,
+    };
+    let streamed = {
+        let mut w = std::io::BufWriter::with_capacity(WRITE_BUFFER, &mut disk);
+        produce(&mut w).and_then(|()| w.flush())
+    };
+    let _ = disk.file.sync_all();
+    match streamed {
+        // Only an empty file fits on the "full" disk.
+        Ok(()) => Err(disk_full()),
+        Err(e) => Err(e),
+    }
+}
+
+/// The error of a full disk, as injected by [`FAIL_WRITE_ENV`].
+fn disk_full() -> std::io::Error {
+    std::io::Error::new(
+        std::io::ErrorKind::StorageFull,
+        format!("no space left on device (injected by {FAIL_WRITE_ENV})"),
+    )
+}
+
+/// Counts the bytes written to it (the size of a streamed file, for the test hook).
+struct CountingSink(usize);
+
+impl Write for CountingSink {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0 += buf.len();
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// A file on a disk with `room` bytes left: writes beyond it fail with [`disk_full`].
+struct FullDisk {
+    file: File,
+    room: usize,
+}
+
+impl Write for FullDisk {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.room == 0 && !buf.is_empty() {
+            return Err(disk_full());
+        }
+        let n = self.file.write(&buf[..buf.len().min(self.room)])?;
+        self.room -= n;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
 }
 
 /// Removes the temporaries (`.NAME.tmp-PID`) that a process killed while writing left in
@@ -282,8 +364,17 @@ impl OutputDir {
 
     /// Stages file `name` (relative, `/`-separated; subfolders allowed).
     pub fn stage(&mut self, name: &str, bytes: &[u8]) -> Result<(), String> {
+        self.stage_with(name, |w| w.write_all(bytes))
+    }
+
+    /// Stages file `name` streamed by `produce` (see [`write_file_with`]): for outputs too
+    /// large to hold whole in memory beside the results they are made from.
+    pub fn stage_with<F>(&mut self, name: &str, produce: F) -> Result<(), String>
+    where
+        F: FnMut(&mut dyn Write) -> std::io::Result<()>,
+    {
         let path = self.staging()?.join(name);
-        write_file(&path, bytes).map_err(|e| {
+        write_file_with(&path, produce).map_err(|e| {
             e.replace(
                 &self.staging.display().to_string(),
                 &self.dir.display().to_string(),
@@ -415,6 +506,50 @@ mod tests {
         remove_stale_temporaries(dir.path());
         assert!(!dead.exists() || !Path::new("/proc/self").exists());
         assert!(live.exists());
+    }
+
+    /// A producer writing `0..n` as text in many small pieces, as serde_json does.
+    fn numbers(n: usize) -> impl FnMut(&mut dyn Write) -> std::io::Result<()> {
+        move |w| (0..n).try_for_each(|i| write!(w, "{i},"))
+    }
+
+    #[test]
+    fn a_streamed_file_is_written_whole_and_a_failed_one_leaves_the_old_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sub/a.csv");
+        write_file_with(&path, numbers(100_000)).unwrap();
+        let mut expected = Vec::new();
+        numbers(100_000)(&mut expected).unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), expected);
+        let failing = |w: &mut dyn Write| {
+            w.write_all(&[b'x'; 200_000])?;
+            Err(std::io::Error::other("the producer failed"))
+        };
+        let e = write_file_with(&path, failing).unwrap_err();
+        assert!(e.contains("the producer failed"), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), expected, "old file kept");
+        let left: Vec<_> = std::fs::read_dir(dir.path().join("sub")).unwrap().collect();
+        assert_eq!(left.len(), 1, "no temporary left");
+    }
+
+    #[test]
+    fn the_test_hook_lets_half_a_streamed_file_reach_the_disk_then_fails_as_a_full_disk() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("half.csv");
+        let mut whole = Vec::new();
+        numbers(50_000)(&mut whole).unwrap();
+        let e =
+            write_half_then_fail(File::create(&path).unwrap(), &mut numbers(50_000)).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::StorageFull);
+        assert!(e.to_string().contains("no space left on device"), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), whole[..whole.len() / 2]);
+        // An empty file fails too: the hook always fails.
+        let e = write_half_then_fail(
+            File::create(&path).unwrap(),
+            &mut |_: &mut dyn Write| Ok(()),
+        )
+        .unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::StorageFull);
     }
 
     #[test]

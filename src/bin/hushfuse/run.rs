@@ -393,14 +393,23 @@ pub(crate) fn write_run_outputs(
         summary: &summary,
         paper,
     };
-    let json = serde_json::to_string_pretty(&out).map_err(|e| Failure::Run(e.to_string()))?;
-    let mut stage = |name: &str, text: &str| out_dir.stage(name, text.as_bytes());
-    stage("summary.json", &json).map_err(Failure::Run)?;
-    stage("per_step.csv", &results::per_step_csv(&summary)).map_err(Failure::Run)?;
+    // The two large files are streamed into their staged files, never held whole in memory:
+    // together they were most of the peak memory of a large run (issue 12).
+    out_dir
+        .stage_with("summary.json", |w| {
+            serde_json::to_writer_pretty(w, &out).map_err(std::io::Error::from)
+        })
+        .map_err(Failure::Run)?;
+    out_dir
+        .stage_with("per_step.csv", |w| results::write_per_step_csv(&summary, w))
+        .map_err(Failure::Run)?;
     if let (true, Some(p)) = (reproduce, &out.paper) {
         let md = report::render_markdown(&summary.scenario, elapsed, &p.published, &p.claims);
-        stage("reproduction.md", &md).map_err(Failure::Run)?;
+        out_dir
+            .stage("reproduction.md", md.as_bytes())
+            .map_err(Failure::Run)?;
     }
+    drop(out);
     let plots = plot::write_all(exp, &summary, out_dir.staging().map_err(Failure::Run)?)
         .map_err(Failure::Run)?;
     out_dir.record(plots);
