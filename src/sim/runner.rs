@@ -648,6 +648,9 @@ pub fn fold_block(total: &mut [Sums], block: &[Sums]) {
     }
 }
 
+/// Receives each finished window of [`run_windows`]: its first block and the blocks' sums.
+pub type WindowSink<'a> = dyn FnMut(usize, &mut Vec<Vec<Sums>>) -> Result<(), RunError> + 'a;
+
 /// How [`run_windows`] ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Completion {
@@ -671,7 +674,7 @@ pub fn run_windows(
     blocks: std::ops::Range<usize>,
     stop: Option<&std::sync::atomic::AtomicBool>,
     progress: &(dyn Fn(usize) + Sync),
-    on_window: &mut dyn FnMut(usize, &mut Vec<Vec<Sums>>) -> Result<(), RunError>,
+    on_window: &mut WindowSink<'_>,
 ) -> Result<Completion, RunError> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads)
