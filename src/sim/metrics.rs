@@ -122,10 +122,22 @@ pub const DIVERGENCE_TAIL: f64 = 1e-3;
 /// A fixed log-spaced histogram of steady-state NEES / n: exact counts that merge by addition,
 /// from which the median is read by interpolating inside the bin that holds it (50 bins per
 /// decade from 1e-4 to 1e12; a few tenths of a percent for a smooth distribution).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct NeesHistogram {
     /// Bin 0: below 1e-4; bin BINS + 1: at or above 1e12, or not finite.
     pub counts: Vec<u64>,
+    /// Bins lo..hi hold every nonzero count (a block's few hundred values touch a fraction of
+    /// the 802 bins, and merging and clearing visit only these). Not stored: a histogram read
+    /// from a file is taken as touching every bin.
+    #[serde(skip, default = "NeesHistogram::every_bin")]
+    touched: (usize, usize),
+}
+
+/// Equal counts (which bins were touched is bookkeeping).
+impl PartialEq for NeesHistogram {
+    fn eq(&self, other: &Self) -> bool {
+        self.counts == other.counts
+    }
 }
 
 impl NeesHistogram {
@@ -136,11 +148,35 @@ impl NeesHistogram {
     fn new() -> Self {
         Self {
             counts: vec![0; Self::BINS + 2],
+            touched: (0, 0),
         }
     }
 
+    fn every_bin() -> (usize, usize) {
+        (0, Self::BINS + 2)
+    }
+
+    /// Widens the touched range to hold bins lo..hi.
+    fn touch(&mut self, lo: usize, hi: usize) {
+        let (a, b) = self.touched;
+        self.touched = if a == b {
+            (lo, hi)
+        } else {
+            (a.min(lo), b.max(hi))
+        };
+    }
+
     fn add(&mut self, v: f64) {
-        self.counts[Self::bin(v)] += 1;
+        let b = Self::bin(v);
+        self.counts[b] += 1;
+        self.touch(b, b + 1);
+    }
+
+    /// Back to no counts, keeping the allocation.
+    fn clear(&mut self) {
+        let (lo, hi) = self.touched;
+        self.counts[lo..hi].fill(0);
+        self.touched = (0, 0);
     }
 
     /// The bin of `v`: 0 below 1e-4 (and for v <= 0), `BINS + 1` at or above 1e12 (and for
@@ -185,9 +221,15 @@ impl NeesHistogram {
     }
 
     fn merge(&mut self, o: &NeesHistogram) {
-        for (a, b) in self.counts.iter_mut().zip(&o.counts) {
+        let (lo, hi) = o.touched;
+        let hi = hi.min(o.counts.len()).min(self.counts.len());
+        if lo >= hi {
+            return;
+        }
+        for (a, b) in self.counts[lo..hi].iter_mut().zip(&o.counts[lo..hi]) {
             *a += b;
         }
+        self.touch(lo, hi);
     }
 
     /// Number of values added.
@@ -453,7 +495,7 @@ impl Sums {
         self.diverged = 0;
         self.ess_min.fill(f64::INFINITY);
         self.has_ess = false;
-        self.nees_hist.counts.fill(0);
+        self.nees_hist.clear();
     }
 
     /// Adds another block's sums (same shape).
@@ -755,6 +797,34 @@ fn nees_buffered(
 mod tests {
     use super::*;
     use crate::linalg::Matrix;
+
+    #[test]
+    fn histograms_merge_and_clear_only_what_they_touched_with_the_counts_of_a_full_pass() {
+        let fill = |values: &[f64]| {
+            let mut h = NeesHistogram::new();
+            values.iter().for_each(|&v| h.add(v));
+            h
+        };
+        let a = fill(&[1e-3, 0.5, 0.5, 2.0]);
+        let b = fill(&[1e6, 3.0, f64::NAN, 1e-9]);
+        let mut m = NeesHistogram::new();
+        m.merge(&a);
+        m.merge(&b);
+        let full: Vec<u64> = a.counts.iter().zip(&b.counts).map(|(x, y)| x + y).collect();
+        assert_eq!(m.counts, full);
+        assert_eq!(m.total(), 8);
+        // One read back from a file touches every bin.
+        let back: NeesHistogram =
+            serde_json::from_str(&serde_json::to_string(&m).unwrap()).unwrap();
+        assert_eq!(back.touched, NeesHistogram::every_bin());
+        let mut twice = back.clone();
+        twice.merge(&back);
+        assert_eq!(twice.total(), 16);
+        twice.clear();
+        assert_eq!(twice, NeesHistogram::new());
+        m.clear();
+        assert_eq!(m.counts, NeesHistogram::new().counts);
+    }
 
     #[test]
     fn the_fast_histogram_bin_is_the_bin_of_the_library_log10() {
