@@ -828,3 +828,193 @@ mod tests {
         }
     }
 }
+
+// Square N x N kernels on flat column-major slices (`N * N` long, on the caller's stack):
+// the operations of [`gemm`], [`cholesky`], `identity` + [`chol_solve_matrix`] and
+// `linalg::symmetrize` on `Matrix`, for a filter that keeps its whole step in fixed size.
+
+/// Whether [`gemm_square`] covers dimension `n` (as [`gemm`]'s own kernels do: below 6 always,
+/// at 6 when the CPU has matrixmultiply's FMA kernel; nalgebra's path is taken otherwise).
+pub fn gemm_square_covers(n: usize) -> bool {
+    (1..6).contains(&n) || (n == 6 && matrixmultiply_uses_fma())
+}
+
+/// `y = a b` for N x N column-major slices, bit for bit as [`gemm`] on matrices. Panics
+/// unless [`gemm_square_covers`]`(N)`.
+#[inline(always)]
+pub fn gemm_square<const N: usize>(y: &mut [f64], a: &[f64], b: &[f64]) {
+    let (y, a, b) = (&mut y[..N * N], &a[..N * N], &b[..N * N]);
+    if N < 6 {
+        for (col, bj) in y.chunks_exact_mut(N).zip(b.chunks_exact(N)) {
+            gemv_fixed::<N, N>(col, a, bj);
+        }
+    } else {
+        assert!(
+            N == 6 && matrixmultiply_uses_fma(),
+            "gemm_square: not covered"
+        );
+        // SAFETY: the CPU has FMA (asserted just above).
+        unsafe { gemm_fma_6(y, a, b) }
+    }
+}
+
+/// `Cholesky::new` in place on an N x N column-major slice: [`cholesky`]'s factorization
+/// (dirty: the strict upper triangle is left as it was). False when not positive definite.
+#[inline(always)]
+pub fn cholesky_square<const N: usize>(m: &mut [f64]) -> bool {
+    cholesky_fixed::<N>(m)
+}
+
+/// The inverse of P from the dirty column-major factor `l` of P (N x N), into `out`
+/// (column-major): bit for bit what `identity` followed by [`chol_solve_matrix`] computes, the
+/// forward and back substitution of each column e_c, with the columns run side by side.
+///
+/// Exactness of the shortcut: while the forward substitution of e_c is at a row i < c, b_i
+/// and every b_j it updates are +0 or 1; `b_i / d` is then +0 (d > 0), and
+/// `-(+0) * L_ji + b_j` gives b_j back exactly when L_ji is finite. So for a finite factor
+/// (checked) the rows above c are skipped; otherwise every operation is performed.
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+pub fn chol_inverse_square<const N: usize>(l: &[f64], out: &mut [f64]) {
+    let l = &l[..N * N];
+    let finite = (0..N).all(|c| l[c * N + c..(c + 1) * N].iter().all(|v| v.is_finite()));
+    // x[r][c]: row r of the solutions, so the columns of one row are contiguous.
+    let mut x = [[0.0f64; N]; N];
+    for (i, row) in x.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    // Forward substitution with L (`lower_solve_fixed`, never refused: d = sqrt(.) > 0).
+    for i in 0..N {
+        let d = l[i * N + i];
+        let cols = if finite { i + 1 } else { N };
+        for c in 0..cols {
+            x[i][c] = x[i][c] / d;
+        }
+        for j in i + 1..N {
+            let lji = l[i * N + j];
+            let (head, tail) = x.split_at_mut(j);
+            let (xi, xj) = (&head[i], &mut tail[0]);
+            for c in 0..cols {
+                xj[c] = -xi[c] * lji + xj[c];
+            }
+        }
+    }
+    // Back substitution with L^T (`chol_solve_fixed`: the dot from +0 in row order).
+    for i in (0..N).rev() {
+        let mut dot = [0.0f64; N];
+        for j in i + 1..N {
+            let lji = l[i * N + j];
+            for c in 0..N {
+                dot[c] += lji * x[j][c];
+            }
+        }
+        let d = l[i * N + i];
+        for c in 0..N {
+            x[i][c] = (x[i][c] - dot[c]) / d;
+        }
+    }
+    let out = &mut out[..N * N];
+    for (c, col) in out.chunks_exact_mut(N).enumerate() {
+        for (r, v) in col.iter_mut().enumerate() {
+            *v = x[r][c];
+        }
+    }
+}
+
+/// `linalg::symmetrize` on an N x N column-major slice: `0.5 * (a_ij + a_ji)` into both, for
+/// i < j in the same order.
+#[inline(always)]
+pub fn symmetrize_square<const N: usize>(s: &mut [f64]) {
+    let s = &mut s[..N * N];
+    for i in 0..N {
+        for j in (i + 1)..N {
+            let m = 0.5 * (s[j * N + i] + s[i * N + j]);
+            s[j * N + i] = m;
+            s[i * N + j] = m;
+        }
+    }
+}
+
+#[cfg(test)]
+mod square_tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn mbits(m: &[f64]) -> Vec<u64> {
+        m.iter().map(|x| x.to_bits()).collect()
+    }
+
+    fn check<const N: usize>(vals: &[f64], scale: i32, spoil: Option<(usize, f64)>) {
+        let n = N;
+        let a = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j) % 56] * 10f64.powi(scale));
+        let b = Matrix::from_fn(n, n, |i, j| vals[(3 * i + 5 * j + 11) % 56]);
+        if gemm_square_covers(n) {
+            let mut want = Matrix::zeros(n, n);
+            gemm(&mut want, &a, &b);
+            let mut got = [f64::NAN; 36];
+            gemm_square::<N>(&mut got, a.as_slice(), b.as_slice());
+            assert_eq!(mbits(&got[..n * n]), mbits(want.as_slice()), "gemm n={n}");
+        }
+        let g = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j + 3) % 56]);
+        let mut p = (&g * g.transpose() + Matrix::identity(n, n) * vals[0].abs().max(1e-3))
+            * 10f64.powi(scale);
+        if let Some((at, v)) = spoil {
+            // A non-finite or extreme entry (the factor may then hold infinities or NaN).
+            let (r, c) = (at % n, (at / n) % n);
+            p[(r.max(c), r.min(c))] = v;
+        }
+        let want = cholesky(p.clone());
+        let mut got = [0.0; 36];
+        got[..n * n].copy_from_slice(p.as_slice());
+        let ok = cholesky_square::<N>(&mut got);
+        assert_eq!(ok, want.is_some(), "cholesky n={n}");
+        let Some(chol) = want else { return };
+        assert_eq!(mbits(&got[..n * n]), mbits(chol.l_dirty().as_slice()));
+        let mut inv = Matrix::identity(n, n);
+        chol_solve_matrix(&chol, &mut inv);
+        let mut fast = [f64::NAN; 36];
+        chol_inverse_square::<N>(&got, &mut fast);
+        assert_eq!(
+            mbits(&fast[..n * n]),
+            mbits(inv.as_slice()),
+            "inverse n={n}"
+        );
+        crate::linalg::symmetrize(&mut inv);
+        symmetrize_square::<N>(&mut fast);
+        assert_eq!(
+            mbits(&fast[..n * n]),
+            mbits(inv.as_slice()),
+            "symmetrize n={n}"
+        );
+    }
+
+    proptest! {
+        /// The square slice kernels equal [`gemm`], [`cholesky`], identity +
+        /// [`chol_solve_matrix`] and `linalg::symmetrize` bit for bit, on well-scaled and
+        /// extreme positive definite matrices and on ones with an overflowing, tiny, infinite
+        /// or NaN entry (whose factor, when Cholesky accepts it, need not be finite).
+        #[test]
+        fn square_kernels_are_bit_identical(
+            n in 1usize..=6,
+            vals in proptest::collection::vec(-10.0f64..10.0, 56),
+            scale in prop_oneof![4 => -30i32..30, 1 => -300i32..300],
+            spoil in proptest::option::of((0usize..36, prop_oneof![
+                Just(f64::INFINITY),
+                Just(f64::NAN),
+                Just(1e300),
+                Just(-1e300),
+                Just(1e-300),
+                Just(0.0),
+            ])),
+        ) {
+            match n {
+                1 => check::<1>(&vals, scale, spoil),
+                2 => check::<2>(&vals, scale, spoil),
+                3 => check::<3>(&vals, scale, spoil),
+                4 => check::<4>(&vals, scale, spoil),
+                5 => check::<5>(&vals, scale, spoil),
+                _ => check::<6>(&vals, scale, spoil),
+            }
+        }
+    }
+}
