@@ -108,10 +108,12 @@ fn matrix_error(what: &'static str, source: crate::linalg::LinalgError) -> Schem
 }
 
 /// [`cholesky_in`] on an N x N column-major slice in place: the same finiteness check, the
-/// same factorization ([`fixed::cholesky_square`]) and the same errors.
+/// same factorization ([`fixed::cholesky_square`]) and the same errors. Inlined, so that it
+/// is compiled for the caller's target features.
+#[inline(always)]
 fn cholesky_square<const N: usize>(m: &mut [f64], what: &'static str) -> Result<(), SchemeError> {
     use crate::linalg::LinalgError;
-    if m[..N * N].iter().any(|v| !v.is_finite()) {
+    if !fixed::all_finite(&m[..N * N]) {
         return Err(matrix_error(what, LinalgError::NonFinite));
     }
     if !fixed::cholesky_square::<N>(m) {
@@ -188,11 +190,38 @@ impl CentralizedKf {
         }
     }
 
+    /// [`CentralizedKf::direct_linear_fixed_body`], compiled for AVX2 where the CPU has it
+    /// (wider vectors for the same operations: a vector lane rounds as a scalar does, and
+    /// Rust fuses no multiply and add on any target, so every bit is the same).
+    fn direct_linear_fixed<'a, const N: usize>(
+        &mut self,
+        len: usize,
+        arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
+    ) -> Result<(), SchemeError> {
+        #[cfg(target_arch = "x86_64")]
+        if fixed::has_avx2_fma() {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe { self.direct_linear_fixed_avx2::<N>(len, arrived) };
+        }
+        self.direct_linear_fixed_body::<N>(len, arrived)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn direct_linear_fixed_avx2<'a, const N: usize>(
+        &mut self,
+        len: usize,
+        arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
+    ) -> Result<(), SchemeError> {
+        self.direct_linear_fixed_body::<N>(len, arrived)
+    }
+
     /// [`CentralizedKf::direct_linear_dynamic`] for state dimension N, on stack arrays: every
     /// product, sum, factorization and solve of it by the `fixed` kernel that performs the
     /// same operations in the same order, so the numbers are the same bit for bit; the
     /// errors are the same, in the same order, and leave the estimate as it was.
-    fn direct_linear_fixed<'a, const N: usize>(
+    #[inline(always)]
+    fn direct_linear_fixed_body<'a, const N: usize>(
         &mut self,
         len: usize,
         arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
@@ -214,8 +243,7 @@ impl CentralizedKf {
         cholesky_square::<N>(&mut m, "covariance")?;
         fixed::chol_solve_array::<N>(&m, &mut y);
         let mut info = [0.0; 36];
-        fixed::chol_inverse_square::<N>(&m, &mut info);
-        fixed::symmetrize_square::<N>(&mut info);
+        fixed::chol_inverse_sym_square::<N>(&m, &mut info);
         // add_measurement of each arrived measurement, in sensor order.
         for i in 0..len {
             if let Some(z) = arrived(i)? {
@@ -231,9 +259,7 @@ impl CentralizedKf {
         cholesky_square::<N>(&mut info, "information matrix")?;
         fixed::chol_solve_array::<N>(&info, &mut y);
         self.est.mean.copy_from_slice(&y);
-        let cov = self.est.cov.as_mut_slice();
-        fixed::chol_inverse_square::<N>(&info, cov);
-        fixed::symmetrize_square::<N>(cov);
+        fixed::chol_inverse_sym_square::<N>(&info, self.est.cov.as_mut_slice());
         Ok(())
     }
 
