@@ -832,7 +832,7 @@ mod tests {
 // Square N x N kernels on flat column-major slices (`N * N` long, on the caller's stack):
 // the operations of [`gemm`], [`cholesky`], `identity` + [`chol_solve_matrix`] and
 // `linalg::symmetrize` on `Matrix`, for a filter that keeps its whole step in fixed size.
-// They run on whatever the factor holds: every operation of the reference is performed.
+// Every operation of the reference is performed, so no shortcut depends on the values.
 
 /// Whether [`gemm_square`] covers dimension `n` (as [`gemm`]'s own kernels do: below 6 always,
 /// at 6 when the CPU has matrixmultiply's FMA kernel; nalgebra's path is taken otherwise).
@@ -914,7 +914,8 @@ pub fn cholesky_square<const N: usize>(m: &mut [f64]) -> bool {
             }
         }
         let diag = m[j * N + j];
-        // NaN and every value <= 0 fail.
+        // NaN and every value <= 0 fail (the negated comparison is the point: NaN is not > 0).
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(diag > 0.0) {
             return false;
         }
@@ -927,7 +928,8 @@ pub fn cholesky_square<const N: usize>(m: &mut [f64]) -> bool {
     true
 }
 
-/// sym(P^{-1}) from the dirty column-major factor `l` of P (N x N), into `out`
+/// sym(P^{-1}) from the dirty column-major factor `l` of P (N x N, as [`cholesky_square`]
+/// accepts it: a positive diagonal), into `out`
 /// (column-major): bit for bit what `identity`, [`chol_solve_matrix`] and `linalg::symmetrize`
 /// compute — the forward and back substitution of each column e_c (the columns run side by
 /// side, each with its own operations in their order), then `0.5 * (x_ij + x_ji)` for i < j.
@@ -940,11 +942,12 @@ pub fn chol_inverse_sym_square<const N: usize>(l: &[f64], out: &mut [f64]) {
     for (i, row) in x.iter_mut().enumerate() {
         row[i] = 1.0;
     }
-    // Forward substitution with L (`lower_solve_fixed`; a factor's diagonal is never zero).
+    // Forward substitution with L (`lower_solve_fixed`, whose early exit at a zero diagonal
+    // never happens here: an accepted factor's diagonal is a square root of a value > 0).
     for i in 0..N {
         let d = l[i * N + i];
-        for c in 0..N {
-            x[i][c] = x[i][c] / d;
+        for v in x[i].iter_mut() {
+            *v = *v / d;
         }
         for j in i + 1..N {
             let lji = l[i * N + j];
