@@ -828,3 +828,303 @@ mod tests {
         }
     }
 }
+
+// Square N x N kernels on flat column-major slices (`N * N` long, on the caller's stack):
+// the operations of [`gemm`], [`cholesky`], `identity` + [`chol_solve_matrix`] and
+// `linalg::symmetrize` on `Matrix`, for a filter that keeps its whole step in fixed size.
+// Every operation of the reference is performed, so no shortcut depends on the values.
+
+/// Whether [`gemm_square`] covers dimension `n` (as [`gemm`]'s own kernels do: below 6 always,
+/// at 6 when the CPU has matrixmultiply's FMA kernel; nalgebra's path is taken otherwise).
+pub fn gemm_square_covers(n: usize) -> bool {
+    (1..6).contains(&n) || (n == 6 && matrixmultiply_uses_fma())
+}
+
+/// `y = a b` for N x N column-major slices, bit for bit as [`gemm`] on matrices. Panics
+/// unless [`gemm_square_covers`]`(N)`.
+#[inline(always)]
+pub fn gemm_square<const N: usize>(y: &mut [f64], a: &[f64], b: &[f64]) {
+    let (y, a, b) = (&mut y[..N * N], &a[..N * N], &b[..N * N]);
+    if N < 6 {
+        for (col, bj) in y.chunks_exact_mut(N).zip(b.chunks_exact(N)) {
+            gemv_fixed::<N, N>(col, a, bj);
+        }
+    } else {
+        assert!(
+            N == 6 && matrixmultiply_uses_fma(),
+            "gemm_square: not covered"
+        );
+        // SAFETY: the CPU has AVX2 and FMA (asserted just above).
+        unsafe { gemm_fma_6_avx2(y, a, b) }
+    }
+}
+
+/// `gemm_fma_6`'s chain `y_ij = fma(a_i5, b_5j, ... fma(a_i0, b_0j, +0))` with explicit
+/// vectors: rows 0..4 of a column in one 256-bit register, rows 4..6 in one 128-bit register.
+/// A vector FMA rounds each lane once, as `f64::mul_add` does, so the bits are the same.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn gemm_fma_6_avx2(y: &mut [f64], a: &[f64], b: &[f64]) {
+    use std::arch::x86_64::*;
+    const N: usize = 6;
+    let (y, a, b) = (&mut y[..N * N], &a[..N * N], &b[..N * N]);
+    for j in 0..N {
+        let mut lo = _mm256_setzero_pd();
+        let mut hi = _mm_setzero_pd();
+        for k in 0..N {
+            let col = &a[k * N..(k + 1) * N];
+            let bkj = b[j * N + k];
+            // SAFETY: `col` has 6 entries: loads of 0..4 and 4..6 stay inside it.
+            let (al, ah) = unsafe {
+                (
+                    _mm256_loadu_pd(col.as_ptr()),
+                    _mm_loadu_pd(col.as_ptr().add(4)),
+                )
+            };
+            lo = _mm256_fmadd_pd(al, _mm256_set1_pd(bkj), lo);
+            hi = _mm_fmadd_pd(ah, _mm_set1_pd(bkj), hi);
+        }
+        let out = &mut y[j * N..(j + 1) * N];
+        // SAFETY: `out` has 6 entries: stores of 0..4 and 4..6 stay inside it.
+        unsafe {
+            _mm256_storeu_pd(out.as_mut_ptr(), lo);
+            _mm_storeu_pd(out.as_mut_ptr().add(4), hi);
+        }
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+unsafe fn gemm_fma_6_avx2(_: &mut [f64], _: &[f64], _: &[f64]) {
+    unreachable!("only called when matrixmultiply_uses_fma")
+}
+
+/// `Cholesky::new` in place on an N x N column-major slice: [`cholesky`]'s factorization
+/// (dirty: the strict upper triangle is left as it was). False when not positive definite.
+/// The operations of `cholesky_fixed`; its refusal `diag == 0 || !(diag > 0)` (nalgebra's
+/// `is_zero` then `try_sqrt`) is written as the equivalent `!(diag > 0)`.
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+pub fn cholesky_square<const N: usize>(m: &mut [f64]) -> bool {
+    let m = &mut m[..N * N];
+    for j in 0..N {
+        for k in 0..j {
+            let factor = -m[k * N + j];
+            for r in j..N {
+                m[j * N + r] = factor * m[k * N + r] + m[j * N + r];
+            }
+        }
+        let diag = m[j * N + j];
+        // NaN and every value <= 0 fail (the negated comparison is the point: NaN is not > 0).
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        if !(diag > 0.0) {
+            return false;
+        }
+        let denom = diag.sqrt();
+        m[j * N + j] = denom;
+        for r in j + 1..N {
+            m[j * N + r] /= denom;
+        }
+    }
+    true
+}
+
+/// sym(P^{-1}) from the dirty column-major factor `l` of P (N x N, as [`cholesky_square`]
+/// accepts it: a positive diagonal), into `out`
+/// (column-major): bit for bit what `identity`, [`chol_solve_matrix`] and `linalg::symmetrize`
+/// compute — the forward and back substitution of each column e_c (the columns run side by
+/// side, each with its own operations in their order), then `0.5 * (x_ij + x_ji)` for i < j.
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+pub fn chol_inverse_sym_square<const N: usize>(l: &[f64], out: &mut [f64]) {
+    let l = &l[..N * N];
+    // x[r][c]: row r of the solutions, so the columns of one row are contiguous.
+    let mut x = [[0.0f64; N]; N];
+    for (i, row) in x.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    // Forward substitution with L (`lower_solve_fixed`, whose early exit at a zero diagonal
+    // never happens here: an accepted factor's diagonal is a square root of a value > 0).
+    for i in 0..N {
+        let d = l[i * N + i];
+        for v in x[i].iter_mut() {
+            *v = *v / d;
+        }
+        for j in i + 1..N {
+            let lji = l[i * N + j];
+            let (head, tail) = x.split_at_mut(j);
+            let (xi, xj) = (&head[i], &mut tail[0]);
+            for c in 0..N {
+                xj[c] = -xi[c] * lji + xj[c];
+            }
+        }
+    }
+    // Back substitution with L^T (`chol_solve_fixed`: the dot from +0 in row order).
+    for i in (0..N).rev() {
+        let mut dot = [0.0f64; N];
+        for j in i + 1..N {
+            let lji = l[i * N + j];
+            for c in 0..N {
+                dot[c] += lji * x[j][c];
+            }
+        }
+        let d = l[i * N + i];
+        for c in 0..N {
+            x[i][c] = (x[i][c] - dot[c]) / d;
+        }
+    }
+    // `symmetrize` of the column-major X (X_ij = x[i][j]): the diagonal as it is, and
+    // 0.5 * (X_ij + X_ji) on both sides for i < j.
+    let out = &mut out[..N * N];
+    for i in 0..N {
+        out[i * N + i] = x[i][i];
+        for j in (i + 1)..N {
+            let m = 0.5 * (x[i][j] + x[j][i]);
+            out[j * N + i] = m;
+            out[i * N + j] = m;
+        }
+    }
+}
+
+/// `linalg::symmetrize` on an N x N column-major slice: `0.5 * (a_ij + a_ji)` into both, for
+/// i < j in the same order.
+#[inline(always)]
+pub fn symmetrize_square<const N: usize>(s: &mut [f64]) {
+    let s = &mut s[..N * N];
+    for i in 0..N {
+        for j in (i + 1)..N {
+            let m = 0.5 * (s[j * N + i] + s[i * N + j]);
+            s[j * N + i] = m;
+            s[i * N + j] = m;
+        }
+    }
+}
+
+/// Whether every entry is finite, as `s.iter().all(|v| v.is_finite())`, in four lanes that
+/// vector units run side by side: `v * 0` is ±0 for a finite v and NaN for an infinite or
+/// NaN one, so a lane's sum of them is zero exactly when all its entries are finite.
+#[inline(always)]
+pub fn all_finite(s: &[f64]) -> bool {
+    let mut acc = [0.0f64; 4];
+    let chunks = s.chunks_exact(4);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for (a, v) in acc.iter_mut().zip(c) {
+            *a += v * 0.0;
+        }
+    }
+    for (a, v) in acc.iter_mut().zip(rest) {
+        *a += v * 0.0;
+    }
+    acc.iter().all(|&a| a == 0.0)
+}
+
+/// Whether the CPU has AVX2 and FMA: code compiled for them (`target_feature`) computes the
+/// same numbers — Rust fuses no multiply and add — on wider vectors.
+pub fn has_avx2_fma() -> bool {
+    matrixmultiply_uses_fma()
+}
+
+#[cfg(test)]
+mod square_tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn mbits(m: &[f64]) -> Vec<u64> {
+        m.iter().map(|x| x.to_bits()).collect()
+    }
+
+    fn check<const N: usize>(vals: &[f64], scale: i32, spoil: Option<(usize, f64)>) {
+        let n = N;
+        let a = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j) % 56] * 10f64.powi(scale));
+        let b = Matrix::from_fn(n, n, |i, j| vals[(3 * i + 5 * j + 11) % 56]);
+        if gemm_square_covers(n) {
+            let mut want = Matrix::zeros(n, n);
+            gemm(&mut want, &a, &b);
+            let mut got = [f64::NAN; 36];
+            gemm_square::<N>(&mut got, a.as_slice(), b.as_slice());
+            assert_eq!(mbits(&got[..n * n]), mbits(want.as_slice()), "gemm n={n}");
+        }
+        let g = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j + 3) % 56]);
+        let mut p = (&g * g.transpose() + Matrix::identity(n, n) * vals[0].abs().max(1e-3))
+            * 10f64.powi(scale);
+        if let Some((at, v)) = spoil {
+            // A non-finite or extreme entry (the factor may then hold infinities or NaN).
+            let (r, c) = (at % n, (at / n) % n);
+            p[(r.max(c), r.min(c))] = v;
+        }
+        let want = cholesky(p.clone());
+        let mut got = [0.0; 36];
+        got[..n * n].copy_from_slice(p.as_slice());
+        let ok = cholesky_square::<N>(&mut got);
+        assert_eq!(ok, want.is_some(), "cholesky n={n}");
+        let Some(chol) = want else { return };
+        assert_eq!(mbits(&got[..n * n]), mbits(chol.l_dirty().as_slice()));
+        let mut inv = Matrix::identity(n, n);
+        chol_solve_matrix(&chol, &mut inv);
+        let mut sym = [f64::NAN; 36];
+        sym[..n * n].copy_from_slice(inv.as_slice());
+        crate::linalg::symmetrize(&mut inv);
+        symmetrize_square::<N>(&mut sym);
+        assert_eq!(
+            mbits(&sym[..n * n]),
+            mbits(inv.as_slice()),
+            "symmetrize n={n}"
+        );
+        let mut fast = [f64::NAN; 36];
+        chol_inverse_sym_square::<N>(&got, &mut fast);
+        assert_eq!(
+            mbits(&fast[..n * n]),
+            mbits(inv.as_slice()),
+            "inverse n={n}"
+        );
+    }
+
+    proptest! {
+        /// [`all_finite`] answers as `iter().all(is_finite)` for every length up to 40, with
+        /// infinities, NaN, signed zeros and extreme values anywhere.
+        #[test]
+        fn all_finite_is_all_is_finite(
+            vals in proptest::collection::vec(prop_oneof![
+                8 => -1e300f64..1e300,
+                1 => Just(f64::INFINITY),
+                1 => Just(f64::NEG_INFINITY),
+                1 => Just(f64::NAN),
+                1 => Just(-0.0f64),
+                1 => Just(f64::MAX),
+                1 => Just(f64::MIN_POSITIVE),
+            ], 0..40),
+        ) {
+            prop_assert_eq!(all_finite(&vals), vals.iter().all(|v| v.is_finite()));
+        }
+    }
+
+    proptest! {
+        /// The square slice kernels equal [`gemm`], [`cholesky`], `linalg::symmetrize` and
+        /// identity + [`chol_solve_matrix`] + `linalg::symmetrize` bit for bit, on well-scaled and
+        /// extreme positive definite matrices and on ones with an overflowing, tiny, infinite
+        /// or NaN entry (whose factor, when Cholesky accepts it, need not be finite).
+        #[test]
+        fn square_kernels_are_bit_identical(
+            n in 1usize..=6,
+            vals in proptest::collection::vec(-10.0f64..10.0, 56),
+            scale in prop_oneof![4 => -30i32..30, 1 => -300i32..300],
+            spoil in proptest::option::of((0usize..36, prop_oneof![
+                Just(f64::INFINITY),
+                Just(f64::NAN),
+                Just(1e300),
+                Just(-1e300),
+                Just(1e-300),
+                Just(0.0),
+            ])),
+        ) {
+            match n {
+                1 => check::<1>(&vals, scale, spoil),
+                2 => check::<2>(&vals, scale, spoil),
+                3 => check::<3>(&vals, scale, spoil),
+                4 => check::<4>(&vals, scale, spoil),
+                5 => check::<5>(&vals, scale, spoil),
+                _ => check::<6>(&vals, scale, spoil),
+            }
+        }
+    }
+}

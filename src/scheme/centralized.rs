@@ -76,6 +76,22 @@ struct DirectWork {
     chol: Option<Matrix>,
 }
 
+impl DirectWork {
+    /// The work space in `slot`, made for the transition matrix `f` at its first use.
+    fn get<'a>(slot: &'a mut Option<Box<DirectWork>>, f: &Matrix) -> &'a mut DirectWork {
+        let n = f.nrows();
+        slot.get_or_insert_with(|| {
+            Box::new(DirectWork {
+                ft: f.transpose(),
+                fp: Matrix::zeros(n, n),
+                pred_cov: Matrix::zeros(n, n),
+                info: Matrix::zeros(n, n),
+                chol: None,
+            })
+        })
+    }
+}
+
 /// `m.fill_with_identity()` on the slice of a square matrix.
 fn identity(m: &mut Matrix) {
     let n = m.nrows();
@@ -86,13 +102,33 @@ fn identity(m: &mut Matrix) {
     }
 }
 
+/// The error of a failed Cholesky factorization of `what` (as [`cholesky_in`] reports it).
+fn matrix_error(what: &'static str, source: crate::linalg::LinalgError) -> SchemeError {
+    SchemeError::Filter(crate::filter::FilterError::Matrix { what, source })
+}
+
+/// [`cholesky_in`] on an N x N column-major slice in place: the same finiteness check, the
+/// same factorization ([`fixed::cholesky_square`]) and the same errors. Inlined, so that it
+/// is compiled for the caller's target features.
+#[inline(always)]
+fn cholesky_square<const N: usize>(m: &mut [f64], what: &'static str) -> Result<(), SchemeError> {
+    use crate::linalg::LinalgError;
+    if !fixed::all_finite(&m[..N * N]) {
+        return Err(matrix_error(what, LinalgError::NonFinite));
+    }
+    if !fixed::cholesky_square::<N>(m) {
+        return Err(matrix_error(what, LinalgError::NotPositiveDefinite));
+    }
+    Ok(())
+}
+
 /// `cholesky(a)` of [`crate::linalg`] computed in `buf` (same checks, same factorization).
 fn cholesky_in(
     a: &Matrix,
     buf: &mut Option<Matrix>,
     what: &'static str,
 ) -> Result<Cholesky<f64, Dyn>, SchemeError> {
-    let err = |source| SchemeError::Filter(crate::filter::FilterError::Matrix { what, source });
+    let err = |source| matrix_error(what, source);
     if a.as_slice().iter().any(|v| !v.is_finite()) {
         return Err(err(crate::linalg::LinalgError::NonFinite));
     }
@@ -129,27 +165,112 @@ impl CentralizedKf {
         }
     }
 
-    /// The direct step for linear sensors, in buffers: the operations of `kf::predict`,
+    /// The direct step for linear sensors: the operations of `kf::predict`,
     /// `Information::from_gaussian`, `add_measurement` and `to_gaussian` (the same products,
     /// factorizations and solves in the same order, hence the same numbers), without
     /// allocating. Seed 004 Section II: the centralized KF fuses what arrived by a sum of
-    /// H_i^T R_i^{-1} H_i and H_i^T R_i^{-1} z_i (eq. (8)-(9) for a subset).
+    /// H_i^T R_i^{-1} H_i and H_i^T R_i^{-1} z_i (eq. (8)-(9) for a subset). State dimensions
+    /// 1..=6 run on stack arrays (where [`fixed::gemm_square`] has `gemm`'s kernel), others
+    /// on nalgebra matrices.
     fn direct_linear_step<'a>(
         &mut self,
         len: usize,
         arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
     ) -> Result<(), SchemeError> {
-        let t = &self.system.transition;
         let n = self.est.dim();
-        let w = self.work.get_or_insert_with(|| {
-            Box::new(DirectWork {
-                ft: t.f().transpose(),
-                fp: Matrix::zeros(n, n),
-                pred_cov: Matrix::zeros(n, n),
-                info: Matrix::zeros(n, n),
-                chol: None,
-            })
-        });
+        match n {
+            _ if !fixed::gemm_square_covers(n) => self.direct_linear_dynamic(len, arrived),
+            1 => self.direct_linear_fixed::<1>(len, arrived),
+            2 => self.direct_linear_fixed::<2>(len, arrived),
+            3 => self.direct_linear_fixed::<3>(len, arrived),
+            4 => self.direct_linear_fixed::<4>(len, arrived),
+            5 => self.direct_linear_fixed::<5>(len, arrived),
+            6 => self.direct_linear_fixed::<6>(len, arrived),
+            _ => self.direct_linear_dynamic(len, arrived),
+        }
+    }
+
+    /// [`CentralizedKf::direct_linear_fixed_body`], compiled for AVX2 where the CPU has it
+    /// (wider vectors for the same operations: a vector lane rounds as a scalar does, and
+    /// Rust fuses no multiply and add on any target, so every bit is the same).
+    fn direct_linear_fixed<'a, const N: usize>(
+        &mut self,
+        len: usize,
+        arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
+    ) -> Result<(), SchemeError> {
+        #[cfg(target_arch = "x86_64")]
+        if fixed::has_avx2_fma() {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe { self.direct_linear_fixed_avx2::<N>(len, arrived) };
+        }
+        self.direct_linear_fixed_body::<N>(len, arrived)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn direct_linear_fixed_avx2<'a, const N: usize>(
+        &mut self,
+        len: usize,
+        arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
+    ) -> Result<(), SchemeError> {
+        self.direct_linear_fixed_body::<N>(len, arrived)
+    }
+
+    /// [`CentralizedKf::direct_linear_dynamic`] for state dimension N, on stack arrays: every
+    /// product, sum, factorization and solve of it by the `fixed` kernel that performs the
+    /// same operations in the same order, so the numbers are the same bit for bit; the
+    /// errors are the same, in the same order, and leave the estimate as it was.
+    #[inline(always)]
+    fn direct_linear_fixed_body<'a, const N: usize>(
+        &mut self,
+        len: usize,
+        arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
+    ) -> Result<(), SchemeError> {
+        let nn = N * N;
+        let t = &self.system.transition;
+        let ft = DirectWork::get(&mut self.work, t.f()).ft.as_slice();
+        let (f, p) = (t.f().as_slice(), self.est.cov.as_slice());
+        let x: &[f64; N] = self.est.mean.as_slice().try_into().expect("N entries");
+        // kf::predict: F x, and F P F^T + Q symmetrized.
+        let mut y: [f64; N] = fixed::mat_vec::<N, N>(f, x);
+        let mut fp = [0.0; 36];
+        fixed::gemm_square::<N>(&mut fp, f, p);
+        let mut m = [0.0; 36];
+        fixed::gemm_square::<N>(&mut m, &fp, ft);
+        fixed::add_assign(&mut m[..nn], t.q().as_slice());
+        fixed::symmetrize_square::<N>(&mut m);
+        // Information::from_gaussian: y = P^{-1} x, Y = P^{-1} symmetrized.
+        cholesky_square::<N>(&mut m, "covariance")?;
+        fixed::chol_solve_array::<N>(&m, &mut y);
+        let mut info = [0.0; 36];
+        fixed::chol_inverse_sym_square::<N>(&m, &mut info);
+        // add_measurement of each arrived measurement, in sensor order.
+        for i in 0..len {
+            if let Some(z) = arrived(i)? {
+                let sensor = self.system.sensors[i].as_linear().expect("checked linear");
+                kf::check_measurement(sensor, z)?;
+                fixed::add_assign(&mut info[..nn], sensor.information().as_slice());
+                let t: [f64; N] =
+                    fixed::mat_vec_cols::<N>(sensor.ht_rinv().as_slice(), z.as_slice());
+                fixed::add_assign(&mut y, &t);
+            }
+        }
+        // Information::to_gaussian.
+        cholesky_square::<N>(&mut info, "information matrix")?;
+        fixed::chol_solve_array::<N>(&info, &mut y);
+        self.est.mean.copy_from_slice(&y);
+        fixed::chol_inverse_sym_square::<N>(&info, self.est.cov.as_mut_slice());
+        Ok(())
+    }
+
+    /// [`CentralizedKf::direct_linear_step`] on nalgebra matrices, in buffers.
+    fn direct_linear_dynamic<'a>(
+        &mut self,
+        len: usize,
+        arrived: impl Fn(usize) -> Result<Option<&'a Vector>, SchemeError>,
+    ) -> Result<(), SchemeError> {
+        let t = &self.system.transition;
+        let w = DirectWork::get(&mut self.work, t.f());
         // kf::predict: F x, and F P F^T + Q symmetrized.
         crate::filter::fixed::gemv(&mut self.pred_mean, t.f(), &self.est.mean);
         crate::filter::fixed::gemm(&mut w.fp, t.f(), &self.est.cov);

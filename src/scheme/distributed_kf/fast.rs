@@ -311,7 +311,7 @@ fn run_variant(
                 }
             }
         }
-        fuse(
+        let factor = fuse(
             center, signals, replicas, means, &state, k, p, silent, inexact, &mut est,
         )
         .map_err(err(k))?;
@@ -321,17 +321,22 @@ fn run_variant(
             frame_bits: messages * msg_frame_bits,
             downlink_bits: 0,
         };
-        sink.step(k, &est, traffic)
-            .map_err(|source| FastTrialError::Sink { k, source })?;
+        match factor {
+            Some(f) => sink.step_factored(k, &est, f, traffic),
+            None => sink.step(k, &est, traffic),
+        }
+        .map_err(|source| FastTrialError::Sink { k, source })?;
     }
     Ok(())
 }
 
 /// The center's step k (DkfCenter::step): (11)'s information vector in sensor order, solved
-/// with (10)'s Cholesky factor, and the fused covariance, into `est`.
+/// with (10)'s Cholesky factor, and the fused covariance, into `est`. Returns the NEES factor
+/// of `est.cov` (`fixed::nees_factor`) when the covariance is a copy of a memoized one that
+/// keeps it.
 #[allow(clippy::too_many_arguments)]
-fn fuse(
-    center: &DkfCenter,
+fn fuse<'c>(
+    center: &'c DkfCenter,
     signals: &Signals,
     replicas: &Replicas,
     means: &mut Means,
@@ -341,14 +346,14 @@ fn fuse(
     silent: u64,
     inexact: usize,
     est: &mut Gaussian,
-) -> Result<(), SchemeError> {
+) -> Result<Option<&'c [f64]>, SchemeError> {
     let Some(dense) = center.dense_memo() else {
         let fused =
             center.fused_covariance(p, canonical_silence(&center.class, silent), inexact)?;
         information_sum(signals, replicas, state, k, est.mean.as_mut_slice());
         fixed::chol_solve(&fused.chol, &mut est.mean);
         est.cov.as_mut_slice().copy_from_slice(fused.cov.as_slice());
-        return Ok(());
+        return Ok(None);
     };
     let set = dense.canonical(center, silent);
     let base = dense.base(center, p, set)?;

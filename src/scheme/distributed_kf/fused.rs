@@ -33,6 +33,9 @@ pub(super) struct FusedBase {
     raw: Matrix,
     /// sym(C): the fused covariance when no sensor is extrapolated inexactly.
     pub cov: Matrix,
+    /// `fixed::nees_factor(&cov)`: the factor the recorder's NEES would compute from these
+    /// very bits, computed once for every trial that has this covariance.
+    nees: Option<Vec<f64>>,
 }
 
 /// Per plan: the [`FusedBase`] of each (plan step, canonical silence set), filled on demand and
@@ -130,30 +133,38 @@ impl DenseMemo {
             let raw = unsymmetrized_inverse(&chol);
             let mut cov = raw.clone();
             symmetrize(&mut cov);
-            Ok(FusedBase { chol, raw, cov })
+            let nees = crate::filter::fixed::nees_factor(&cov);
+            Ok(FusedBase {
+                chol,
+                raw,
+                cov,
+                nees,
+            })
         })
     }
 
     /// The fused covariance of plan step `p`, canonical set `set` (whose base is `base`) and
     /// `inexact` inexactly extrapolated sensors, into `out`: sym(C) as kept, or Algorithm 2's
-    /// inflation of C by `inexact`^2 times the kept unit inflation.
+    /// inflation of C by `inexact`^2 times the kept unit inflation. Returns
+    /// `fixed::nees_factor(out)` when it is kept (`out` is then a kept covariance's copy).
     #[inline]
-    pub fn covariance_into(
-        &self,
+    pub fn covariance_into<'a>(
+        &'a self,
         center: &DkfCenter,
         p: usize,
         set: u64,
-        base: &FusedBase,
+        base: &'a FusedBase,
         inexact: usize,
         out: &mut Matrix,
-    ) -> Result<(), SchemeError> {
+    ) -> Result<Option<&'a [f64]>, SchemeError> {
         match center.fusion() {
             Fusion::Bounded { b } if inexact > 0 => {
-                self.inflated_into(center, p, set, base, b, inexact, out)
+                self.inflated_into(center, p, set, base, b, inexact, out)?;
+                Ok(None)
             }
             _ => {
                 out.as_mut_slice().copy_from_slice(base.cov.as_slice());
-                Ok(())
+                Ok(base.nees.as_deref())
             }
         }
     }
