@@ -393,6 +393,8 @@ pub struct TrialState<'a> {
     err: Vector,
     white: Vector,
     chol_buf: Option<crate::linalg::Matrix>,
+    /// The last step's traffic and its counts as floats.
+    traffic: (Traffic, [f64; 4]),
 }
 
 impl Sums {
@@ -472,6 +474,7 @@ impl Sums {
             err: Vector::zeros(0),
             white: Vector::zeros(0),
             chol_buf: None,
+            traffic: (Traffic::default(), [0.0; 4]),
         }
     }
 
@@ -621,19 +624,39 @@ impl TrialState<'_> {
             }
             Err(e) => return Err(e),
         };
-        let trace = est.cov.trace();
+        let trace = trace(&est.cov);
         let flag = |b: bool| f64::from(u8::from(b));
         // This step's value of every field, at its layout index. ESS is left at +0, which adds
         // nothing to any of its sums (they start at +0 and only ever add ESS values >= 0); it
         // is recorded by `record_ess`.
-        let mut vals = Row::zeros(w);
+        let mut stack = [0.0; STACK_WIDTH];
+        let mut heap;
+        let vals: &mut [f64] = if w <= STACK_WIDTH {
+            &mut stack[..w]
+        } else {
+            heap = vec![0.0; w];
+            &mut heap
+        };
         vals[Layout::TOTAL_SE] = total;
         vals[Layout::NEES] = nees;
         vals[Layout::TRACE] = trace;
-        vals[Layout::MESSAGES] = traffic.messages as f64;
-        vals[Layout::BITS] = traffic.bits as f64;
-        vals[Layout::FRAME_BITS] = traffic.frame_bits as f64;
-        vals[Layout::DOWNLINK_BITS] = traffic.downlink_bits as f64;
+        // The traffic of a step is usually the last step's: its conversions are kept.
+        if self.traffic.0 != traffic {
+            self.traffic = (
+                traffic,
+                [
+                    traffic.messages as f64,
+                    traffic.bits as f64,
+                    traffic.frame_bits as f64,
+                    traffic.downlink_bits as f64,
+                ],
+            );
+        }
+        let [messages, bits, frame_bits, downlink_bits] = self.traffic.1;
+        vals[Layout::MESSAGES] = messages;
+        vals[Layout::BITS] = bits;
+        vals[Layout::FRAME_BITS] = frame_bits;
+        vals[Layout::DOWNLINK_BITS] = downlink_bits;
         vals[Layout::DEGENERATE] = flag(degenerate);
         vals[Layout::NEES_COVERED] = flag(nees <= self.nees_bound);
         vals[Layout::NEES_COVERED_95] = flag(nees <= self.nees_bound_95);
@@ -647,9 +670,15 @@ impl TrialState<'_> {
         }
         // Every per-(trial, step) value goes into the sum, the sum of squares and this
         // trial's whole-run sum.
-        add_row(&mut sums.per_step[(k - 1) * w..k * w], &vals, |v| v);
-        add_row(&mut sums.per_step_sq[(k - 1) * w..k * w], &vals, |v| v * v);
-        add_row(&mut self.run_acc[..w], &vals, |v| v);
+        let row = &mut sums.per_step[(k - 1) * w..k * w];
+        let row_sq = &mut sums.per_step_sq[(k - 1) * w..k * w];
+        let run = &mut self.run_acc[..w];
+        for f in 0..w {
+            let v = vals[f];
+            row[f] += v;
+            row_sq[f] += v * v;
+            run[f] += v;
+        }
         // Divergence: a run of NEES beyond the 99.9% quantile, or anything not finite.
         if !(total.is_finite() && nees.is_finite()) {
             self.diverged = true;
@@ -667,7 +696,7 @@ impl TrialState<'_> {
             self.acc[0] += total;
             self.acc[1] += trace;
             self.acc[2] += nees;
-            self.acc[3] += traffic.messages as f64;
+            self.acc[3] += messages;
             self.count += 1;
         }
         Ok(())
@@ -744,14 +773,18 @@ impl TrialObserver<'_> {
     }
 }
 
-/// `acc[f] += g(vals[f])` for every field of a row (equal lengths; element-wise, so the
-/// compiler may vectorize it).
-#[inline(always)]
-fn add_row(acc: &mut [f64], vals: &[f64], g: impl Fn(f64) -> f64) {
-    let acc = &mut acc[..vals.len()];
-    for i in 0..vals.len() {
-        acc[i] += g(vals[i]);
+/// `p.trace()` (the diagonal summed from +0 in order) on the slice of a square `p`.
+fn trace(p: &crate::linalg::Matrix) -> f64 {
+    let n = p.nrows();
+    if p.ncols() != n {
+        return p.trace(); // nalgebra's message for a non-square matrix
     }
+    let s = p.as_slice();
+    let mut t = 0.0;
+    for i in 0..n {
+        t += s[i * n + i];
+    }
+    t
 }
 
 /// [`mahalanobis_sq`] with the factorization done in `buf` and the solve in `white`: the same
