@@ -637,6 +637,34 @@ impl PackedLu {
     }
 }
 
+/// `b <- L^{-1} b` with the lower triangle of a (dirty) Cholesky factor `l`, bit for bit as
+/// nalgebra's checked `l.solve_lower_triangular_mut(b)` (and so as `chol.l()
+/// .solve_lower_triangular(&b)`, which reads only the lower triangle): forward substitution,
+/// `b_i /= L_ii`, then `b_j = -b_i L_ji + b_j` below. False at a zero diagonal. Fixed size for
+/// dimensions 1..=6, nalgebra's own solve otherwise.
+pub fn lower_solve(l: &Matrix, b: &mut Vector) -> bool {
+    let n = b.len();
+    assert!(
+        l.nrows() == n && l.ncols() == n,
+        "lower_solve: dimensions mismatch"
+    );
+    macro_rules! fixed {
+        ($nn:literal) => {{
+            let b: &mut [f64; $nn] = b.as_mut_slice().try_into().expect("n rows");
+            lower_solve_fixed::<$nn>(l.as_slice(), b)
+        }};
+    }
+    match n {
+        1 => fixed!(1),
+        2 => fixed!(2),
+        3 => fixed!(3),
+        4 => fixed!(4),
+        5 => fixed!(5),
+        6 => fixed!(6),
+        _ => l.solve_lower_triangular_mut(b),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1124,6 +1152,41 @@ mod square_tests {
                 4 => check::<4>(&vals, scale, spoil),
                 5 => check::<5>(&vals, scale, spoil),
                 _ => check::<6>(&vals, scale, spoil),
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod lower_solve_tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// [`lower_solve`] with a dirty Cholesky factor equals `chol.l().solve_lower_triangular`
+        /// bit for bit (dimension 7 takes nalgebra's path), and refuses a zero diagonal as it.
+        #[test]
+        fn lower_solve_is_bit_identical(
+            n in 1usize..=7,
+            vals in proptest::collection::vec(-10.0f64..10.0, 56),
+            scale in -30i32..30,
+            zero_at in 0usize..10,
+        ) {
+            let g = Matrix::from_fn(n, n, |i, j| vals[(i * 7 + j) % 56]);
+            let p = (&g * g.transpose() + Matrix::identity(n, n)) * 10f64.powi(scale);
+            let b = Vector::from_fn(n, |i, _| vals[(3 * i + 5) % 56]);
+            let chol = nalgebra::Cholesky::new(p).unwrap();
+            let mut fast = b.clone();
+            prop_assert!(lower_solve(chol.l_dirty(), &mut fast));
+            let want = chol.l().solve_lower_triangular(&b).unwrap();
+            let bits = |v: &Vector| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&fast), bits(&want));
+            if zero_at < n {
+                let mut l = chol.l_dirty().clone();
+                l[(zero_at, zero_at)] = 0.0;
+                let mut fast = b.clone();
+                let mut slow = b.clone();
+                prop_assert_eq!(lower_solve(&l, &mut fast), l.solve_lower_triangular_mut(&mut slow));
             }
         }
     }

@@ -2,7 +2,7 @@
 //! a sum (seed 004 Section II, centralized fusion; seed 003 eq. (9), (12)), which is why
 //! fusion centers use this form.
 use super::{FilterError, Gaussian};
-use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
+use crate::linalg::{cholesky, symmetrize, LinalgError, Matrix, Vector};
 use crate::model::LinearSensor;
 
 /// Information matrix and vector of a Gaussian.
@@ -71,6 +71,78 @@ impl Information {
         true
     }
 
+    /// [`add_rank_one_update`](Self::add_rank_one_update) without temporaries: the same
+    /// operations in the same order (`s` and `h x` as nalgebra's gemm/gemv of a row, the outer
+    /// product `h^T h` entry by entry as its gemv per column, `h_j h_i`, then the scaling and the
+    /// sums), hence the same bits. Only a `1 x n` row; other shapes take the matrix products.
+    #[must_use]
+    #[allow(clippy::assign_op_pattern)]
+    pub fn add_rank_one_update_in_place(
+        &mut self,
+        prior: &Gaussian,
+        h: &Matrix,
+        c: f64,
+        b: f64,
+    ) -> bool {
+        let n = self.vector.len();
+        if h.nrows() != 1 || h.ncols() != n || n == 0 {
+            return self.add_rank_one_update(prior, h, c, b);
+        }
+        let s = h_p_ht(h, &prior.cov);
+        let denom = 1.0 - c * s;
+        if denom <= 0.0 {
+            return false;
+        }
+        let mut hx = [0.0];
+        super::fixed::mat_vec_dyn(&mut hx, h.as_slice(), prior.mean.as_slice());
+        let (hs, ks) = (h.as_slice(), c / denom);
+        let m = self.matrix.as_mut_slice();
+        for j in 0..n {
+            for i in 0..n {
+                m[j * n + i] = m[j * n + i] + (hs[j] * hs[i]) * ks;
+            }
+        }
+        let kv = (c * hx[0] + b) / denom;
+        for (v, hi) in self.vector.iter_mut().zip(hs) {
+            *v = *v + hi * kv;
+        }
+        true
+    }
+
+    /// [`from_inverted_covariance`](Self::from_inverted_covariance) into `self` (sized for
+    /// `g`), factoring in the buffer `factor`: the same factorization, solves and product, hence
+    /// the same bits, without allocating.
+    pub fn set_inverted_covariance(
+        &mut self,
+        g: &Gaussian,
+        factor: &mut Matrix,
+    ) -> Result<(), FilterError> {
+        let chol = factor_in(factor, &g.cov, "predicted covariance")?;
+        self.matrix.fill_with_identity();
+        super::fixed::chol_solve_matrix(&chol, &mut self.matrix);
+        *factor = chol.unpack_dirty();
+        symmetrize(&mut self.matrix);
+        super::fixed::gemv(&mut self.vector, &self.matrix, &g.mean);
+        Ok(())
+    }
+
+    /// [`to_gaussian`](Self::to_gaussian) into `out` (sized for `self`), factoring in the
+    /// buffer `factor`: the same bits, without allocating.
+    pub fn to_gaussian_into(
+        &self,
+        out: &mut Gaussian,
+        factor: &mut Matrix,
+    ) -> Result<(), FilterError> {
+        let chol = factor_in(factor, &self.matrix, "information matrix")?;
+        out.mean.copy_from(&self.vector);
+        super::fixed::chol_solve(&chol, &mut out.mean);
+        out.cov.fill_with_identity();
+        super::fixed::chol_solve_matrix(&chol, &mut out.cov);
+        *factor = chol.unpack_dirty();
+        symmetrize(&mut out.cov);
+        Ok(())
+    }
+
     /// Back to covariance form.
     pub fn to_gaussian(&self) -> Result<Gaussian, FilterError> {
         let chol = cholesky(&self.matrix).map_err(|source| FilterError::Matrix {
@@ -95,6 +167,58 @@ impl Information {
         self.vector += sensor.ht_rinv() * z;
         Ok(())
     }
+}
+
+/// [`cholesky`]'s factor of `a`, computed in the storage of `buf` (which it takes; the caller
+/// puts the factor back with `unpack_dirty`): the same checks and the same factorization
+/// (`fixed::cholesky`), without the copy `cholesky` allocates. On failure `buf` is left empty
+/// (the step fails anyway).
+fn factor_in(
+    buf: &mut Matrix,
+    a: &Matrix,
+    what: &'static str,
+) -> Result<nalgebra::Cholesky<f64, nalgebra::Dyn>, FilterError> {
+    let err = |source| FilterError::Matrix { what, source };
+    if a.nrows() != a.ncols() {
+        return Err(err(LinalgError::NotSquare {
+            rows: a.nrows(),
+            cols: a.ncols(),
+        }));
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(err(LinalgError::NonFinite));
+    }
+    let mut m = std::mem::replace(buf, Matrix::zeros(0, 0));
+    if m.shape() != a.shape() {
+        m = Matrix::zeros(a.nrows(), a.ncols());
+    }
+    m.copy_from(a);
+    super::fixed::cholesky(m).ok_or(err(LinalgError::NotPositiveDefinite))
+}
+
+/// `(h * p * h^T)[(0, 0)]` for a 1 x n row h, without the temporaries, in nalgebra's order:
+/// `h p` column by column as gemv (`h_0 p_0j`, then `h_k p_kj + acc`), then `(h p) h^T` the
+/// same way (`(hp)_0 h_0`, then `(hp)_k h_k + acc`). Other shapes take the matrix products.
+#[allow(clippy::assign_op_pattern)]
+pub fn h_p_ht(h: &Matrix, p: &Matrix) -> f64 {
+    let n = h.ncols();
+    if h.nrows() != 1 || n == 0 || p.nrows() != n || p.ncols() != n {
+        return (h * p * h.transpose())[(0, 0)];
+    }
+    let (h, p) = (h.as_slice(), p.as_slice());
+    let hp = |j: usize| {
+        let col = &p[j * n..(j + 1) * n];
+        let mut acc = h[0] * col[0];
+        for (hk, ck) in h.iter().zip(col).skip(1) {
+            acc = hk * ck + acc;
+        }
+        acc
+    };
+    let mut acc = hp(0) * h[0];
+    for (k, hk) in h.iter().enumerate().skip(1) {
+        acc = hp(k) * hk + acc;
+    }
+    acc
 }
 
 /// Information-form update of a prediction with any subset of linear sensors' measurements.

@@ -26,6 +26,42 @@ pub fn predict_cov(model: &LinearTransition, cov: &Matrix) -> Matrix {
     out
 }
 
+/// Buffers for [`predict_into`], sized at construction so a step allocates nothing.
+#[derive(Debug, Clone)]
+pub struct PredictWork {
+    /// `F P`.
+    fp: Matrix,
+    /// `F^T`, copied per step (a transpose is exact).
+    ft: Matrix,
+}
+
+impl PredictWork {
+    /// Buffers for an n-dimensional state.
+    pub fn new(n: usize) -> Self {
+        Self {
+            fp: Matrix::zeros(n, n),
+            ft: Matrix::zeros(n, n),
+        }
+    }
+}
+
+/// [`predict`] into `out` through `work`: the same operations (`F x` as gemv, `F P` and
+/// `(F P) F^T` in the exact fixed-size gemm, `+ Q`, symmetrized) in the same order, hence the
+/// same bits, without a temporary (issue 12).
+pub fn predict_into(
+    model: &LinearTransition,
+    est: &Gaussian,
+    out: &mut Gaussian,
+    work: &mut PredictWork,
+) {
+    super::fixed::gemv(&mut out.mean, model.f(), &est.mean);
+    super::fixed::gemm(&mut work.fp, model.f(), &est.cov);
+    work.ft.tr_copy_from(model.f());
+    super::fixed::gemm(&mut out.cov, &work.fp, &work.ft);
+    super::fixed::add_assign(out.cov.as_mut_slice(), model.q().as_slice());
+    symmetrize(&mut out.cov);
+}
+
 /// Innovation nu = z - h(x), its covariance S = H P H^T + R and the Jacobian H used.
 #[derive(Debug, Clone)]
 pub struct Innovation {

@@ -8,7 +8,7 @@
 //! levels, You's 2^c + 1 levels) and, for reference, with analog measurements (the EKF).
 pub mod params;
 
-use crate::filter::information::Information;
+use crate::filter::information::{h_p_ht, Information};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::link::codec802154::{
@@ -214,14 +214,51 @@ impl SensorNode for QuantizingSensor {
     }
 }
 
-/// What the fusion center told an activated sensor at this step, kept to fuse its answer.
-#[derive(Debug, Clone)]
+/// What the fusion center told an activated sensor at this step, kept to fuse its answer
+/// (its Jacobian row is in the center's `h`, by sensor index).
+#[derive(Debug, Clone, Copy)]
 struct Activated {
     index: usize,
     y_hat: f64,
     delta: f64,
-    /// Jacobian row h at the prediction.
-    h: Matrix,
+}
+
+/// The fusion center's per-step buffers, sized at construction so a step allocates nothing
+/// (issue 12) for linear sensors.
+#[derive(Debug, Clone)]
+struct CenterWork {
+    predict: kf::PredictWork,
+    /// The fused information (eq. (9), (12)).
+    info: Information,
+    /// Storage for the Cholesky factors.
+    factor: Matrix,
+    /// Sensor i's Jacobian row at the prediction.
+    h: Vec<Matrix>,
+    /// (distance, sensor) for the nearest-sensor activation.
+    by_distance: Vec<(f64, usize)>,
+    /// The activated sensors, in activation order.
+    chosen: Vec<usize>,
+}
+
+impl CenterWork {
+    fn new(system: &System) -> Self {
+        let (n, m) = (system.prior.dim(), system.n_sensors());
+        Self {
+            predict: kf::PredictWork::new(n),
+            info: Information {
+                matrix: Matrix::zeros(n, n),
+                vector: Vector::zeros(n),
+            },
+            factor: Matrix::zeros(n, n),
+            h: system
+                .sensors
+                .iter()
+                .map(|s| Matrix::zeros(s.meas_dim(), n))
+                .collect(),
+            by_distance: Vec::with_capacity(m),
+            chosen: Vec::with_capacity(m),
+        }
+    }
 }
 
 /// Fusion center of seed 003's Algorithm 1.
@@ -232,6 +269,7 @@ pub struct QuantizedFusionCenter {
     est: Gaussian,
     prediction: Gaussian,
     active: Vec<Activated>,
+    work: CenterWork,
 }
 
 impl QuantizedFusionCenter {
@@ -243,11 +281,12 @@ impl QuantizedFusionCenter {
         let est = system.prior.clone();
         let mut fc = Self {
             prediction: est.clone(),
+            work: CenterWork::new(&system),
+            active: Vec::with_capacity(system.n_sensors()),
             system,
             link,
             activation,
             est,
-            active: Vec::new(),
         };
         fc.prepare()?;
         Ok(fc)
@@ -256,59 +295,73 @@ impl QuantizedFusionCenter {
     /// Predicts to the next step ((A2)-(A3)), chooses the activated sensors and computes
     /// their y_hat and Delta (eq. (2)), linearizing at the prediction (EKF).
     fn prepare(&mut self) -> Result<(), SchemeError> {
-        self.prediction = kf::predict(&self.system.transition, &self.est);
+        kf::predict_into(
+            &self.system.transition,
+            &self.est,
+            &mut self.prediction,
+            &mut self.work.predict,
+        );
+        self.choose();
+        self.active.clear();
         let x = &self.prediction.mean;
-        let chosen: Vec<usize> = match self.activation {
-            Activation::All => (0..self.system.n_sensors()).collect(),
+        for &i in &self.work.chosen {
+            let s = &self.system.sensors[i];
+            let h = &mut self.work.h[i];
+            let y_hat = match s.as_linear() {
+                // A linear sensor's Jacobian is H and h(x) = H x (gemv), without the copies
+                // `jacobian` and `predict` return.
+                Some(lin) => {
+                    h.copy_from(lin.h());
+                    let mut y = [0.0];
+                    crate::filter::fixed::mat_vec_dyn(&mut y, h.as_slice(), x.as_slice());
+                    y[0]
+                }
+                None => {
+                    *h = s.jacobian(x);
+                    s.predict(x)[0]
+                }
+            };
+            let s2 = h_p_ht(h, &self.prediction.cov) + s.noise_cov()[(0, 0)];
+            self.active.push(Activated {
+                index: i,
+                y_hat,
+                delta: s2.sqrt(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The sensors activated at this step into `work.chosen`, in activation order.
+    fn choose(&mut self) {
+        let x = &self.prediction.mean;
+        let chosen = &mut self.work.chosen;
+        chosen.clear();
+        match self.activation {
+            Activation::All => chosen.extend(0..self.system.n_sensors()),
             Activation::Nearest { count, indices } => {
-                let mut by_distance: Vec<(f64, usize)> = self
-                    .system
-                    .sensors
-                    .iter()
-                    .enumerate()
-                    .map(|(i, s)| {
-                        let p = s.position().unwrap_or([f64::INFINITY; 2]);
-                        ((x[indices[0]] - p[0]).hypot(x[indices[1]] - p[1]), i)
-                    })
-                    .collect();
+                let by_distance = &mut self.work.by_distance;
+                by_distance.clear();
+                by_distance.extend(self.system.sensors.iter().enumerate().map(|(i, s)| {
+                    let p = s.position().unwrap_or([f64::INFINITY; 2]);
+                    ((x[indices[0]] - p[0]).hypot(x[indices[1]] - p[1]), i)
+                }));
                 // The `count` nearest in (distance, index) order: a total order, so selecting
-                // them and sorting only those gives the sort's first `count` exactly.
+                // them and sorting only those gives the sort's first `count` exactly (and an
+                // unstable sort the stable one's order, without its buffer).
                 let order =
                     |a: &(f64, usize), b: &(f64, usize)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
                 if count < by_distance.len() {
                     by_distance.select_nth_unstable_by(count, order);
                     by_distance.truncate(count);
                 }
-                by_distance.sort_by(order);
-                by_distance
-                    .into_iter()
-                    .take(count)
-                    .map(|(_, i)| i)
-                    .collect()
+                by_distance.sort_unstable_by(order);
+                chosen.extend(by_distance.iter().take(count).map(|&(_, i)| i));
             }
-        };
-        self.active.clear();
-        for i in chosen {
-            let s = &self.system.sensors[i];
-            let h = s.jacobian(x);
-            let s2 = h_p_ht(&h, &self.prediction.cov) + s.noise_cov()[(0, 0)];
-            self.active.push(Activated {
-                index: i,
-                y_hat: s.predict(x)[0],
-                delta: s2.sqrt(),
-                h,
-            });
         }
-        Ok(())
     }
 
     /// Decodes what sensor `i` sent into a quantization level; silence is the centre level.
-    fn level_of(
-        &self,
-        link: &QuantizerLink,
-        i: usize,
-        msg: &Received,
-    ) -> Result<Level, SchemeError> {
+    fn level_of(link: &QuantizerLink, i: usize, msg: &Received) -> Result<Level, SchemeError> {
         let err = |message: String| SchemeError::Protocol { sensor: i, message };
         match msg {
             Received::Frame(octets) => {
@@ -341,7 +394,9 @@ impl FusionCenter for QuantizedFusionCenter {
         // P^i = P - c g g^T, g = P h^T, c = eta / Delta^2 (eq. (10)), and x^i = x + sigma g /
         // Delta (eq. (13) with the (A24) denominator), Sherman-Morrison gives both without
         // inverting P^i: Information::add_rank_one_update with b = sigma / Delta.
-        let mut info = Information::from_inverted_covariance(pred)?;
+        let work = &mut self.work;
+        let info = &mut work.info;
+        info.set_inverted_covariance(pred, &mut work.factor)?;
         for a in &self.active {
             let msg = inbox.get(a.index).ok_or_else(|| SchemeError::Protocol {
                 sensor: a.index,
@@ -349,7 +404,7 @@ impl FusionCenter for QuantizedFusionCenter {
             })?;
             let (c, sigma) = match &self.link {
                 Some(link) => {
-                    let level = self.level_of(link, a.index, msg)?;
+                    let level = Self::level_of(link, a.index, msg)?;
                     (
                         link.quantizer.eta(level) / (a.delta * a.delta),
                         link.quantizer.reconstruction(level),
@@ -368,7 +423,7 @@ impl FusionCenter for QuantizedFusionCenter {
                     }
                 },
             };
-            if !info.add_rank_one_update(pred, &a.h, c, sigma / a.delta) {
+            if !info.add_rank_one_update_in_place(pred, &work.h[a.index], c, sigma / a.delta) {
                 return Err(SchemeError::Unsupported(format!(
                     "sensor {}: quantized update would remove more than the prior covariance",
                     a.index
@@ -377,7 +432,7 @@ impl FusionCenter for QuantizedFusionCenter {
         }
         // The fused information matrix (9), back to covariance form.
         symmetrize(&mut info.matrix);
-        self.est = info.to_gaussian()?;
+        info.to_gaussian_into(&mut self.est, &mut work.factor)?;
         self.prepare()
     }
 
@@ -457,31 +512,6 @@ impl Scheme for QuantizedInnovationScheme {
             center: Box::new(center),
         })
     }
-}
-
-/// `(h * p * h^T)[(0, 0)]` for a 1 x n row h, without the temporaries, in nalgebra's order:
-/// `h p` column by column as gemv (`h_0 p_0j`, then `h_k p_kj + acc`), then `(h p) h^T` the
-/// same way (`(hp)_0 h_0`, then `(hp)_k h_k + acc`). Other shapes take the matrix products.
-#[allow(clippy::assign_op_pattern)]
-fn h_p_ht(h: &crate::linalg::Matrix, p: &crate::linalg::Matrix) -> f64 {
-    let n = h.ncols();
-    if h.nrows() != 1 || n == 0 || p.nrows() != n || p.ncols() != n {
-        return (h * p * h.transpose())[(0, 0)];
-    }
-    let (h, p) = (h.as_slice(), p.as_slice());
-    let hp = |j: usize| {
-        let col = &p[j * n..(j + 1) * n];
-        let mut acc = h[0] * col[0];
-        for (hk, ck) in h.iter().zip(col).skip(1) {
-            acc = hk * ck + acc;
-        }
-        acc
-    };
-    let mut acc = hp(0) * h[0];
-    for (k, hk) in h.iter().enumerate().skip(1) {
-        acc = hp(k) * hk + acc;
-    }
-    acc
 }
 
 #[cfg(test)]

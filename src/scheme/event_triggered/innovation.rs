@@ -62,17 +62,103 @@ pub struct InnovationTriggerSensor {
     system: Arc<System>,
     index: usize,
     delta: f64,
+    work: WhitenWork,
+}
+
+/// Buffers of the whitened innovation for a linear sensor, sized at construction so a step
+/// allocates only the message it sends (issue 12).
+#[derive(Debug, Clone)]
+struct WhitenWork {
+    /// H P^- (m x n).
+    hp: Matrix,
+    /// H^T (n x m), copied once (a transpose is exact).
+    ht: Matrix,
+    /// Z = H P^- H^T + R, then (in its storage) its Cholesky factor.
+    z: Matrix,
+    /// ε (m).
+    eps: Vector,
+}
+
+impl WhitenWork {
+    fn new(sensor: &dyn crate::model::MeasurementModel) -> Self {
+        let (m, n) = (sensor.meas_dim(), sensor.state_dim());
+        Self {
+            hp: Matrix::zeros(m, n),
+            ht: sensor
+                .as_linear()
+                .map_or_else(|| Matrix::zeros(n, m), |l| l.h().transpose()),
+            z: Matrix::zeros(m, m),
+            eps: Vector::zeros(m),
+        }
+    }
 }
 
 impl InnovationTriggerSensor {
     /// Sensor `index` of `system` with threshold `delta` >= 0.
     pub fn new(system: Arc<System>, index: usize, delta: f64) -> Result<Self, SchemeError> {
         nonnegative("delta", delta)?;
+        let work = WhitenWork::new(system.sensors[index].as_ref());
         Ok(Self {
             system,
             index,
             delta,
+            work,
         })
+    }
+
+    /// `||ε||_∞` for a linear sensor, the operations of [`whitened_innovation`](Self::whitened_innovation)
+    /// in the same order (ν = z - H x̂^- with H x̂^- as gemv, `(H P^-) H^T` as gemm, `+ R`,
+    /// symmetrized, the Cholesky factor and the forward substitution), in the buffers of
+    /// `work`. `None` for a nonlinear sensor (the caller takes the general path).
+    fn whitened_amax_linear(
+        &mut self,
+        z: &Vector,
+        mean: &Vector,
+        cov: &Matrix,
+    ) -> Option<Result<f64, SchemeError>> {
+        let system = Arc::clone(&self.system);
+        let sensor = system.sensors[self.index].as_linear()?;
+        Some(self.whiten_linear(sensor, z, mean, cov))
+    }
+
+    fn whiten_linear(
+        &mut self,
+        sensor: &crate::model::LinearSensor,
+        z: &Vector,
+        mean: &Vector,
+        cov: &Matrix,
+    ) -> Result<f64, SchemeError> {
+        use crate::filter::fixed;
+        use crate::model::MeasurementModel;
+        kf::check_measurement(sensor, z)?;
+        let w = &mut self.work;
+        fixed::gemv(&mut w.eps, sensor.h(), mean);
+        for (e, zi) in w.eps.iter_mut().zip(z.iter()) {
+            *e = zi - *e;
+        }
+        fixed::gemm(&mut w.hp, sensor.h(), cov);
+        fixed::gemm(&mut w.z, &w.hp, &w.ht);
+        fixed::add_assign(w.z.as_mut_slice(), sensor.noise_cov().as_slice());
+        crate::linalg::symmetrize(&mut w.z);
+        let err = |source| SchemeError::Matrix {
+            what: "innovation covariance Z",
+            source,
+        };
+        if w.z.iter().any(|v| !v.is_finite()) {
+            return Err(err(crate::linalg::LinalgError::NonFinite));
+        }
+        let m = w.z.nrows();
+        let chol = fixed::cholesky(std::mem::replace(&mut w.z, Matrix::zeros(0, 0)))
+            .ok_or(err(crate::linalg::LinalgError::NotPositiveDefinite))?;
+        let solved = fixed::lower_solve(chol.l_dirty(), &mut w.eps);
+        w.z = chol.unpack_dirty();
+        debug_assert_eq!(w.z.nrows(), m);
+        if !solved {
+            return Err(SchemeError::Unsupported(
+                "singular Cholesky factor of Z".into(),
+            ));
+        }
+        Ok(w.eps.amax())
     }
 
     /// The whitened innovation ε = L^{-1} (z - h(x̂^-)), Z = H P^- H^T + R = L L^T.
@@ -105,8 +191,12 @@ impl SensorNode for InnovationTriggerSensor {
         _rng: &mut dyn RngCore,
     ) -> Result<Transmission, SchemeError> {
         let (mean, cov) = prediction_feedback(self.index, feedback, true)?;
-        let eps = self.whitened_innovation(z, mean, cov.expect("checked"))?;
-        if eps.amax() > self.delta {
+        let cov = cov.expect("checked");
+        let amax = match self.whitened_amax_linear(z, mean, cov) {
+            Some(a) => a?,
+            None => self.whitened_innovation(z, mean, cov)?.amax(),
+        };
+        if amax > self.delta {
             Ok(Transmission::Send(Message::Measurement(z.clone())))
         } else {
             Ok(Transmission::Silent)
