@@ -434,6 +434,17 @@ impl AllDataSchedule {
         Self::default()
     }
 
+    /// Steps 1..=k of the schedule of `system` (computed if needed), read-locked while the
+    /// caller runs its trials; `None` for k = 0 or if the recursion fails at or before k.
+    fn through(
+        &self,
+        system: &System,
+        k: usize,
+    ) -> Option<std::sync::RwLockReadGuard<'_, ScheduleSteps>> {
+        self.step(system, k)?;
+        Some(self.steps.read().unwrap_or_else(|e| e.into_inner()))
+    }
+
     /// Step k (k >= 1) of the schedule of `system`, computed up to k if needed; `None` if the
     /// recursion fails at or before k.
     pub fn step(&self, system: &System, k: usize) -> Option<Arc<ScheduledStep>> {
@@ -507,15 +518,7 @@ impl AllData<'_> {
         sink: &mut dyn super::StepSink,
     ) -> Option<Result<(), super::FastTrialError>> {
         let sys = self.sys;
-        if steps == 0 {
-            return None;
-        }
-        self.schedule.step(sys, steps)?;
-        let sched = self
-            .schedule
-            .steps
-            .read()
-            .unwrap_or_else(|e| e.into_inner());
+        let sched = self.schedule.through(sys, steps)?;
         let traffic = all_sent_traffic(sys);
         let f = sys.transition.f().as_slice();
         let linear = self.linear;
@@ -546,15 +549,7 @@ impl AllData<'_> {
         sink: &mut dyn super::BatchSink,
     ) -> Option<Result<(), super::FastTrialError>> {
         let sys = self.sys;
-        if steps == 0 {
-            return None;
-        }
-        self.schedule.step(sys, steps)?;
-        let sched = self
-            .schedule
-            .steps
-            .read()
-            .unwrap_or_else(|e| e.into_inner());
+        let sched = self.schedule.through(sys, steps)?;
         let traffic = all_sent_traffic(sys);
         let f = sys.transition.f().as_slice();
         let linear = self.linear;
