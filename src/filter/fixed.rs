@@ -166,13 +166,6 @@ pub fn chol_solve_array<const N: usize>(l: &[f64], b: &mut [f64; N]) {
     chol_solve_fixed::<N>(l, b);
 }
 
-/// `e^T P^{-1} e` for an N x N column-major `p`: [`mahalanobis_sq_small`]'s operations on an
-/// array (`None` when P is not positive definite).
-#[inline(always)]
-pub fn mahalanobis_array<const N: usize>(e: &[f64; N], p: &[f64]) -> Option<f64> {
-    mahalanobis_fixed::<N>(e, p).expect("fixed dimension")
-}
-
 /// `x <- a x` through the buffer `tmp` (no allocation), bit for bit as `a * &x`.
 pub fn mul_in_place(a: &Matrix, x: &mut Vector, tmp: &mut Vector) {
     gemv(tmp, a, x);

@@ -503,45 +503,14 @@ struct AllData<'a> {
 }
 
 impl AllData<'_> {
-    /// For state dimension N: the scheduled step's operations
-    /// ([`CentralizedKf::scheduled_step`]: F x, the solve with the predicted covariance's
-    /// factor, the sum of H_i^T R_i^{-1} z_i in sensor order, the solve with the fused factor)
-    /// on stack arrays, the covariance copied from the shared schedule. The forwarding coins
-    /// are not drawn: at rate 1 every measurement is sent whatever the coin, and the variant's
-    /// stream serves nothing else. `None` (nothing reported yet) when the schedule does not
-    /// reach `steps`; the caller then runs the general step, which reports the failure at its
-    /// step. Measurements are checked (dimensions, finite) by the caller.
-    fn trial<const N: usize>(
-        self,
-        measurements: &[Vec<Vector>],
-        steps: usize,
-        sink: &mut dyn super::StepSink,
-    ) -> Option<Result<(), super::FastTrialError>> {
-        let sys = self.sys;
-        let sched = self.schedule.through(sys, steps)?;
-        let traffic = all_sent_traffic(sys);
-        let f = sys.transition.f().as_slice();
-        let linear = self.linear;
-        let est = self.est;
-        let mut x: [f64; N] = sys.prior.mean.as_slice().try_into().ok()?;
-        let mut run = || -> Result<(), super::FastTrialError> {
-            for (k, (zs, step)) in (1..=steps).zip(measurements.iter().zip(&sched.steps)) {
-                x = scheduled_mean(f, linear, step, &x, zs);
-                est.mean.as_mut_slice().copy_from_slice(&x);
-                est.cov.as_mut_slice().copy_from_slice(step.cov.as_slice());
-                match &step.nees_factor {
-                    Some(f) => sink.step_factored(k, est, f, traffic),
-                    None => sink.step(k, est, traffic),
-                }
-                .map_err(|source| super::FastTrialError::Sink { k, source })?;
-            }
-            Ok(())
-        };
-        Some(run())
-    }
-
-    /// [`AllData::trial`] of several trials in lockstep: at each step every trial's mean
-    /// (independent recursions, which the processor overlaps), then every trial's report.
+    /// Several trials in lockstep, for state dimension N: at each step every trial's mean by
+    /// the scheduled step's operations ([`scheduled_mean`]; independent recursions, which the
+    /// processor overlaps), the covariance copied from the shared schedule, then every trial's
+    /// report. The forwarding coins are not drawn: at rate 1 every measurement is sent
+    /// whatever the coin, and the variant's stream serves nothing else. `None` (nothing
+    /// reported yet) when the schedule does not reach `steps`; the caller then runs the
+    /// general step, which reports the failure at its step. Measurements are checked
+    /// (dimensions, finite) by the caller.
     fn batch<const N: usize>(
         self,
         trials: &[&[Vec<Vector>]],
@@ -569,6 +538,25 @@ impl AllData<'_> {
             }
         }
         Some(Ok(()))
+    }
+}
+
+/// A [`StepSink`](super::StepSink) as the sink of a batch of one trial.
+struct OneTrial<'a>(&'a mut dyn super::StepSink);
+
+impl super::BatchSink for OneTrial<'_> {
+    fn step(
+        &mut self,
+        _j: usize,
+        k: usize,
+        estimate: &Gaussian,
+        factor: Option<&[f64]>,
+        traffic: crate::network::Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        match factor {
+            Some(f) => self.0.step_factored(k, estimate, f, traffic),
+            None => self.0.step(k, estimate, traffic),
+        }
     }
 }
 
@@ -754,13 +742,15 @@ impl Scheme for CentralizedScheme {
             };
             // State dimensions 1..=6 while the shared covariance schedule holds: the mean
             // recursion on the stack.
+            // One trial is a batch of one.
+            let (trials, sink) = (&[measurements][..], &mut OneTrial(sink));
             let fixed = match n {
-                1 => all.trial::<1>(measurements, steps, sink),
-                2 => all.trial::<2>(measurements, steps, sink),
-                3 => all.trial::<3>(measurements, steps, sink),
-                4 => all.trial::<4>(measurements, steps, sink),
-                5 => all.trial::<5>(measurements, steps, sink),
-                6 => all.trial::<6>(measurements, steps, sink),
+                1 => all.batch::<1>(trials, steps, sink),
+                2 => all.batch::<2>(trials, steps, sink),
+                3 => all.batch::<3>(trials, steps, sink),
+                4 => all.batch::<4>(trials, steps, sink),
+                5 => all.batch::<5>(trials, steps, sink),
+                6 => all.batch::<6>(trials, steps, sink),
                 _ => None,
             };
             if fixed.is_some() {
