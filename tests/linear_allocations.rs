@@ -166,12 +166,23 @@ fn other_linear_schemes_at_the_allowance() {
     for variant in &exp.variants {
         let label = &exp.curves[variant.curve].label;
         let kind = exp.curves[variant.curve].kind.as_str();
+        let steps = per_step_with_feedback(&exp, variant);
+        // The counts of every scheme, asserted or not: `cargo test --release --test
+        // linear_allocations -- --nocapture` prints them (steps 11..=30).
+        let mean = |f: fn(&(usize, usize, usize, usize)) -> usize| {
+            steps[10..].iter().map(f).sum::<usize>() as f64 / steps[10..].len() as f64
+        };
+        println!(
+            "{kind}: per step, sensor allocations {:.1} (messages {:.1}), center {:.1}, feedback {:.1}",
+            mean(|s| s.0),
+            mean(|s| s.1),
+            mean(|s| s.2),
+            mean(|s| s.3)
+        );
         let Some(&(_, center_fixed)) = fixed.iter().find(|f| f.0 == kind) else {
             continue;
         };
-        for (k, &(sensors, sent, center, fed)) in
-            per_step_with_feedback(&exp, variant).iter().enumerate()
-        {
+        for (k, &(sensors, sent, center, fed)) in steps.iter().enumerate() {
             let step = k + 1;
             assert_eq!(sensors, sent, "{label} ({kind}) step {step}: sensor side");
             if center_fixed {
