@@ -269,11 +269,16 @@ fn cholesky_fixed<const N: usize>(m: &mut [f64]) -> bool {
 /// dimensions (the caller takes the dynamic path); `Some(None)` when P is not positive
 /// definite.
 pub fn mahalanobis_sq_small(e: &Vector, p: &Matrix) -> Option<Option<f64>> {
+    mahalanobis_sq_small_slice(e.as_slice(), p)
+}
+
+/// [`mahalanobis_sq_small`] of an error held in a slice.
+pub fn mahalanobis_sq_small_slice(e: &[f64], p: &Matrix) -> Option<Option<f64>> {
     let n = e.len();
     if p.nrows() != n || p.ncols() != n {
         return None;
     }
-    with_dim!(n, mahalanobis_fixed(e.as_slice(), p.as_slice()), None)
+    with_dim!(n, mahalanobis_fixed(e, p.as_slice()), None)
 }
 
 #[inline(always)]

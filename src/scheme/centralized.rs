@@ -530,11 +530,9 @@ impl AllData<'_> {
                 *x = scheduled_mean(f, linear, step, x, &m[k - 1]);
             }
             est.cov.as_mut_slice().copy_from_slice(step.cov.as_slice());
-            for (j, x) in xs.iter().enumerate() {
-                est.mean.as_mut_slice().copy_from_slice(x);
-                if let Err(source) = sink.step(j, k, est, step.nees_factor.as_deref(), traffic) {
-                    return Some(Err(super::FastTrialError::Sink { k, source }));
-                }
+            let factor = step.nees_factor.as_deref();
+            if let Err(source) = sink.step_shared(k, xs.as_flattened(), est, factor, traffic) {
+                return Some(Err(super::FastTrialError::Sink { k, source }));
             }
         }
         Some(Ok(()))

@@ -235,6 +235,26 @@ pub trait BatchSink {
         factor: Option<&[f64]>,
         traffic: crate::network::Traffic,
     ) -> Result<(), LinalgError>;
+
+    /// Step `k` of every trial of the batch at once, when their estimates share one
+    /// covariance: `shared.cov` (with its factor when the scheme has it) and trial j's mean
+    /// `means[j * n..(j + 1) * n]` (`shared.mean` is work space). The default hands the
+    /// trials to [`BatchSink::step`] one by one, in order.
+    fn step_shared(
+        &mut self,
+        k: usize,
+        means: &[f64],
+        shared: &mut Gaussian,
+        factor: Option<&[f64]>,
+        traffic: crate::network::Traffic,
+    ) -> Result<(), LinalgError> {
+        let n = shared.mean.len();
+        for (j, mean) in means.chunks_exact(n).enumerate() {
+            shared.mean.as_mut_slice().copy_from_slice(mean);
+            self.step(j, k, shared, factor, traffic)?;
+        }
+        Ok(())
+    }
 }
 
 /// Receives the steps of a [`Scheme::run_trial_fast`] trial.

@@ -187,15 +187,18 @@ impl NeesHistogram {
     /// values) is the library's log10 called. Either way the bin is the one `exact_bin` gives.
     fn bin(v: f64) -> usize {
         if let Some(t) = approx_t(v) {
-            let (lo, hi) = (t - APPROX_T_ERROR, t + APPROX_T_ERROR);
-            // Truncation is the floor here (lo >= 0), and needs no call into libm.
-            if lo >= 0.0 && hi < Self::BINS as f64 && lo as usize == hi as usize {
-                return 1 + lo as usize;
-            }
-            if hi < 0.0 {
+            if (0.0..Self::BINS as f64).contains(&t) {
+                // t's integer part i by truncation (t >= 0; no call into libm), and its
+                // fraction t - i exactly (Sterbenz). A fraction at least APPROX_T_ERROR from
+                // both edges puts the exact t in [i, i + 1) too: bin 1 + i.
+                let i = t as i32;
+                let frac = t - f64::from(i);
+                if (APPROX_T_ERROR..1.0 - APPROX_T_ERROR).contains(&frac) {
+                    return 1 + i as usize;
+                }
+            } else if t + APPROX_T_ERROR < 0.0 {
                 return 0;
-            }
-            if lo >= Self::BINS as f64 {
+            } else if t - APPROX_T_ERROR >= Self::BINS as f64 {
                 return Self::BINS + 1;
             }
         }
@@ -388,14 +391,24 @@ pub struct TrialState<'a> {
     /// This trial's per-field sums over all steps (for [`Sums::whole_run`]).
     run_acc: Row,
     count: usize,
-    /// Work space, so that a step allocates nothing: the error, its whitened form and the
-    /// matrix the NEES Cholesky factor is computed in.
+    /// Work space, so that a step allocates nothing: the error (when it is too long for the
+    /// stack), its whitened form and the matrix the NEES Cholesky factor is computed in
+    /// (dimensions above 6).
     err: Vector,
     white: Vector,
     chol_buf: Option<crate::linalg::Matrix>,
     /// The last step's traffic and its counts as floats.
     traffic: (Traffic, [f64; 4]),
+    /// Steady-state NEES values not yet in the histogram: binned [`PENDING_NEES`] at a time
+    /// and at [`TrialState::finish`], in a loop of independent iterations, instead of each at
+    /// the end of its step's chain NEES -> NEES / n -> log -> bin (the counts are integers:
+    /// the order they are added in changes nothing).
+    pending_nees: [f64; PENDING_NEES],
+    pending: usize,
 }
+
+/// Capacity of [`TrialState`]'s buffer of NEES values awaiting the histogram.
+const PENDING_NEES: usize = 32;
 
 impl Sums {
     pub fn new(groups: usize, steps: usize, state_dim: usize) -> Self {
@@ -475,6 +488,8 @@ impl Sums {
             white: Vector::zeros(0),
             chol_buf: None,
             traffic: (Traffic::default(), [0.0; 4]),
+            pending_nees: [0.0; PENDING_NEES],
+            pending: 0,
         }
     }
 
@@ -582,49 +597,89 @@ impl TrialState<'_> {
         factor: Option<&[f64]>,
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        let layout = sums.layout();
-        let w = layout.width();
-        // err = mean - truth, in the buffer (slices: nalgebra's `-=`, element by element).
-        if self.err.len() != est.mean.len() {
-            self.err = Vector::zeros(est.mean.len());
-            self.white = Vector::zeros(est.mean.len());
-        }
-        assert_eq!(
-            truth.len(),
-            est.mean.len(),
-            "record: truth and estimate dimensions"
-        );
-        for ((e, m), t) in self
-            .err
-            .as_mut_slice()
+        let n = est.mean.len();
+        assert_eq!(truth.len(), n, "record: truth and estimate dimensions");
+        // err = mean - truth (nalgebra's `-`, element by element): on the stack up to
+        // STACK_WIDTH components (no allocation per trial), else in the trial's buffer.
+        let mut err_stack = [0.0; STACK_WIDTH];
+        let mut err_heap = std::mem::replace(&mut self.err, Vector::zeros(0));
+        let err: &mut [f64] = if n <= STACK_WIDTH {
+            &mut err_stack[..n]
+        } else {
+            if err_heap.len() != n {
+                err_heap = Vector::zeros(n);
+            }
+            err_heap.as_mut_slice()
+        };
+        for ((e, m), t) in err
             .iter_mut()
             .zip(est.mean.as_slice())
             .zip(truth.as_slice())
         {
             *e = m - t;
         }
-        let factored = factor
-            .and_then(|f| crate::filter::fixed::mahalanobis_sq_factored(self.err.as_slice(), f));
+        let err: &[f64] = err;
+        let recorded = self.nees(err, est, factor).map(|(nees, degenerate)| {
+            // The traffic of a step is usually the last step's: its conversions are kept.
+            if self.traffic.0 != traffic {
+                self.traffic = (traffic, traffic_counts(traffic));
+            }
+            let counts = self.traffic.1;
+            self.accumulate(sums, k, err, nees, degenerate, trace(&est.cov), counts);
+        });
+        self.err = err_heap;
+        recorded
+    }
+
+    /// NEES of the error `err` of `est` (by `factor`, the factor of its covariance, when
+    /// given), and whether the covariance was degenerate.
+    fn nees(
+        &mut self,
+        err: &[f64],
+        est: &Gaussian,
+        factor: Option<&[f64]>,
+    ) -> Result<(f64, bool), crate::linalg::LinalgError> {
+        let factored = factor.and_then(|f| crate::filter::fixed::mahalanobis_sq_factored(err, f));
         let nees_direct = match factored {
             Some(v) => Ok(v),
-            None => nees_buffered(&self.err, &est.cov, &mut self.white, &mut self.chol_buf),
+            None => nees_buffered(err, &est.cov, &mut self.white, &mut self.chol_buf),
         };
-        let err = self.err.as_slice();
-        let total: f64 = err.iter().map(|e| e * e).sum();
         // A particle cloud can collapse onto one particle: its covariance is then singular.
         // NEES is computed with a tiny relative jitter (so the claim of certainty shows as a
         // huge NEES) and the step is counted as degenerate; NaN/inf remain errors.
-        let (nees, degenerate) = match nees_direct {
-            Ok(v) => (v, false),
+        match nees_direct {
+            Ok(v) => Ok((v, false)),
             Err(crate::linalg::LinalgError::NotPositiveDefinite) => {
                 let n = est.cov.nrows();
                 let scale = (est.cov.trace().abs() / n as f64).max(1e-12);
                 let jittered = &est.cov + crate::linalg::Matrix::identity(n, n) * (1e-9 * scale);
-                (mahalanobis_sq(&self.err, &jittered)?, true)
+                Ok((
+                    mahalanobis_sq(&Vector::from_column_slice(err), &jittered)?,
+                    true,
+                ))
             }
-            Err(e) => return Err(e),
-        };
-        let trace = trace(&est.cov);
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Adds step `k`'s values into the sums and this trial's running sums: the error `err`,
+    /// its NEES, whether the covariance was degenerate, the covariance's trace and the
+    /// traffic's counts as floats.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn accumulate(
+        &mut self,
+        sums: &mut Sums,
+        k: usize,
+        err: &[f64],
+        nees: f64,
+        degenerate: bool,
+        trace: f64,
+        counts: [f64; 4],
+    ) {
+        let layout = sums.layout();
+        let w = layout.width();
+        let total: f64 = err.iter().map(|e| e * e).sum();
         let flag = |b: bool| f64::from(u8::from(b));
         // This step's value of every field, at its layout index. ESS is left at +0, which adds
         // nothing to any of its sums (they start at +0 and only ever add ESS values >= 0); it
@@ -637,22 +692,10 @@ impl TrialState<'_> {
             heap = vec![0.0; w];
             &mut heap
         };
+        let [messages, bits, frame_bits, downlink_bits] = counts;
         vals[Layout::TOTAL_SE] = total;
         vals[Layout::NEES] = nees;
         vals[Layout::TRACE] = trace;
-        // The traffic of a step is usually the last step's: its conversions are kept.
-        if self.traffic.0 != traffic {
-            self.traffic = (
-                traffic,
-                [
-                    traffic.messages as f64,
-                    traffic.bits as f64,
-                    traffic.frame_bits as f64,
-                    traffic.downlink_bits as f64,
-                ],
-            );
-        }
-        let [messages, bits, frame_bits, downlink_bits] = self.traffic.1;
         vals[Layout::MESSAGES] = messages;
         vals[Layout::BITS] = bits;
         vals[Layout::FRAME_BITS] = frame_bits;
@@ -692,12 +735,61 @@ impl TrialState<'_> {
             self.run = 0;
         }
         if steady {
-            sums.nees_hist.add(nees / sums.state_dim.max(1) as f64);
+            if self.pending == PENDING_NEES {
+                self.flush_nees(sums);
+            }
+            self.pending_nees[self.pending] = nees;
+            self.pending += 1;
             self.acc[0] += total;
             self.acc[1] += trace;
             self.acc[2] += nees;
             self.acc[3] += messages;
             self.count += 1;
+        }
+    }
+
+    /// Records step `k` of the trials of a batch run in lockstep whose estimates share one
+    /// covariance: trial j (state `states[j]`, truth `truths[j][k - 1]`) has the mean
+    /// `means[j * n..(j + 1) * n]`; `shared` holds the covariance (its mean is work space),
+    /// `factor` its Cholesky factor. The same numbers as [`TrialState::record_factored`] of
+    /// each trial in order; what no trial changes (the trace, the traffic's counts) is read
+    /// once per step.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_shared(
+        states: &mut [TrialState],
+        sums: &mut Sums,
+        k: usize,
+        truths: &[&[Vector]],
+        means: &[f64],
+        shared: &mut Gaussian,
+        factor: Option<&[f64]>,
+        traffic: Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        let n = shared.mean.len();
+        let trace = trace(&shared.cov);
+        let counts = traffic_counts(traffic);
+        for ((state, truth), mean) in states.iter_mut().zip(truths).zip(means.chunks_exact(n)) {
+            let truth = &truth[k - 1];
+            assert_eq!(truth.len(), n, "record: truth and estimate dimensions");
+            let mut err = [0.0; STACK_WIDTH];
+            let nees = match factor {
+                Some(f) if n <= STACK_WIDTH => {
+                    let err = &mut err[..n];
+                    for ((e, m), t) in err.iter_mut().zip(mean).zip(truth.as_slice()) {
+                        *e = m - t;
+                    }
+                    crate::filter::fixed::mahalanobis_sq_factored(err, f)
+                }
+                _ => None,
+            };
+            match nees {
+                Some(nees) => state.accumulate(sums, k, &err[..n], nees, false, trace, counts),
+                // Not factored: the general record (which also reports what is wrong).
+                None => {
+                    shared.mean.as_mut_slice().copy_from_slice(mean);
+                    state.record_inner(sums, k, truth, shared, factor, traffic)?;
+                }
+            }
         }
         Ok(())
     }
@@ -717,8 +809,19 @@ impl TrialState<'_> {
         sums.has_ess = true;
     }
 
-    /// Closes the trial.
-    pub fn finish(self, sums: &mut Sums) {
+    /// Adds the pending steady-state NEES / n values to the histogram.
+    fn flush_nees(&mut self, sums: &mut Sums) {
+        let n = sums.state_dim.max(1) as f64;
+        for &nees in &self.pending_nees[..self.pending] {
+            sums.nees_hist.add(nees / n);
+        }
+        self.pending = 0;
+    }
+
+    /// Closes the trial: its steady-state averages, per-trial rows and histogram counts go
+    /// into `sums` (a trial that is not finished adds only its per-step sums).
+    pub fn finish(mut self, sums: &mut Sums) {
+        self.flush_nees(sums);
         let c = self.count.max(1) as f64;
         sums.trials += 1;
         sums.steady_mse.add(self.acc[0] / c);
@@ -773,6 +876,16 @@ impl TrialObserver<'_> {
     }
 }
 
+/// A step's traffic counts as the floats its fields add.
+fn traffic_counts(traffic: Traffic) -> [f64; 4] {
+    [
+        traffic.messages as f64,
+        traffic.bits as f64,
+        traffic.frame_bits as f64,
+        traffic.downlink_bits as f64,
+    ]
+}
+
 /// `p.trace()` (the diagonal summed from +0 in order) on the slice of a square `p`.
 fn trace(p: &crate::linalg::Matrix) -> f64 {
     let n = p.nrows();
@@ -791,7 +904,7 @@ fn trace(p: &crate::linalg::Matrix) -> f64 {
 /// checks (square, finite), the same Cholesky factorization of a copy of `p` and the same
 /// triangular solve, hence the same number, without allocating.
 fn nees_buffered(
-    e: &Vector,
+    e: &[f64],
     p: &crate::linalg::Matrix,
     white: &mut Vector,
     buf: &mut Option<crate::linalg::Matrix>,
@@ -807,7 +920,7 @@ fn nees_buffered(
         return Err(LinalgError::NonFinite);
     }
     // Dimensions 1..=6: the same factorization, solve and sum in fixed-size buffers.
-    if let Some(r) = crate::filter::fixed::mahalanobis_sq_small(e, p) {
+    if let Some(r) = crate::filter::fixed::mahalanobis_sq_small_slice(e, p) {
         return r.ok_or(LinalgError::NotPositiveDefinite);
     }
     let mut m = match buf.take() {
@@ -816,7 +929,10 @@ fn nees_buffered(
     };
     m.copy_from(p);
     let chol = nalgebra::Cholesky::new(m).ok_or(LinalgError::NotPositiveDefinite)?;
-    white.copy_from(e);
+    if white.len() != e.len() {
+        *white = Vector::zeros(e.len());
+    }
+    white.as_mut_slice().copy_from_slice(e);
     // Only the lower triangle is read: the dirty factor solves as `chol.l()` does.
     let solved = chol.l_dirty().solve_lower_triangular_mut(white);
     *buf = Some(chol.unpack_dirty());
@@ -891,6 +1007,14 @@ mod tests {
             for _ in 0..9 {
                 check(v);
                 v = v.next_up();
+            }
+        }
+        // Around the margin: t a few APPROX_T_ERROR from every edge, where the fast path
+        // starts or stops deciding.
+        for b in 0..=NeesHistogram::BINS + 1 {
+            for d in [-3.0, -1.0, -0.5, 0.5, 1.0, 3.0] {
+                let t = b as f64 + d * APPROX_T_ERROR;
+                check(10f64.powf(NeesHistogram::LO + t / NeesHistogram::PER_DECADE));
             }
         }
         for v in [

@@ -329,7 +329,8 @@ fn run_block(
     stop: &dyn Fn() -> bool,
     on_trial: &dyn Fn(usize),
 ) -> Result<bool, RunError> {
-    let batch = trials.len() > 1 && exp.variants.iter().all(|v| v.scheme.batches());
+    let batch =
+        (2..=BLOCK).contains(&trials.len()) && exp.variants.iter().all(|v| v.scheme.batches());
     if !batch {
         for trial in trials {
             if stop() {
@@ -353,22 +354,24 @@ fn run_block(
         d.draw(exp, trial);
     }
     let drawn = &worker.drawers[..n];
-    let measurements: Vec<&[Vec<Vector>]> = drawn
-        .iter()
-        .map(|d| d.data.measurements.as_slice())
-        .collect();
+    // The block's trials in arrays of BLOCK (nothing allocated per block).
+    let mut measurements: [&[Vec<Vector>]; BLOCK] = [&[]; BLOCK];
+    let mut truths: [&[Vector]; BLOCK] = [&[]; BLOCK];
+    for ((m, t), d) in measurements.iter_mut().zip(&mut truths).zip(drawn) {
+        *m = d.data.measurements.as_slice();
+        *t = d.data.truth.as_slice();
+    }
+    let measurements = &measurements[..n];
     for (v, s) in sums.iter_mut().enumerate().take(exp.variants.len()) {
         let scheme = &exp.variants[v].scheme;
         let mut recorder = BatchRecorder {
-            states: drawn
-                .iter()
-                .map(|_| s.trial_state(&exp.groups, exp.steady_from))
-                .collect(),
-            truths: drawn.iter().map(|d| d.data.truth.as_slice()).collect(),
+            states: std::array::from_fn(|_| s.trial_state(&exp.groups, exp.steady_from)),
+            n,
+            truths,
             sums: s,
         };
         let outcome = scheme.run_batch_fast(
-            &measurements,
+            measurements,
             exp.steps,
             &mut worker.scratch.cache,
             &mut recorder,
@@ -396,14 +399,16 @@ fn run_block(
 /// variant's block sums in trial order at every step.
 struct BatchRecorder<'a> {
     sums: &'a mut Sums,
-    states: Vec<super::metrics::TrialState<'a>>,
-    truths: Vec<&'a [Vector]>,
+    /// The states of trials 0..n of the block (the rest unused).
+    states: [super::metrics::TrialState<'a>; BLOCK],
+    n: usize,
+    truths: [&'a [Vector]; BLOCK],
 }
 
 impl BatchRecorder<'_> {
     /// Closes the trials, in trial order.
     fn finish(self) {
-        for state in self.states {
+        for state in self.states.into_iter().take(self.n) {
             state.finish(self.sums);
         }
     }
@@ -425,6 +430,27 @@ impl crate::scheme::BatchSink for BatchRecorder<'_> {
         }
         state.record_ess(self.sums, k, None);
         Ok(())
+    }
+
+    fn step_shared(
+        &mut self,
+        k: usize,
+        means: &[f64],
+        shared: &mut crate::filter::Gaussian,
+        factor: Option<&[f64]>,
+        traffic: network::Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        // No ESS to record (`record_ess` of `None` adds nothing).
+        super::metrics::TrialState::record_shared(
+            &mut self.states[..self.n],
+            self.sums,
+            k,
+            &self.truths[..self.n],
+            means,
+            shared,
+            factor,
+            traffic,
+        )
     }
 }
 
