@@ -238,9 +238,10 @@ struct SilenceWork {
     ht: Matrix,
 }
 
-/// R' = R + (1/β - 1) Z with Z = H P^- H^T + R, into `r`: `(H P^-) H^T` as nalgebra's
-/// products (`fixed::gemm` is their kernel, with `hp` the first), `+ R`, the scaling and the
-/// sum, in the order of the expression `R + (H P^- H^T + R) (1/β - 1)`.
+/// R' = R + (1/β - 1) Z with Z = H P^- H^T + R, into `r` (Theorem 2's silence update as a
+/// pseudo-measurement noise, see the module note): `(H P^-) H^T` as nalgebra's products
+/// (`fixed::gemm` is their kernel; `hp` holds H P^-), `+ R`, the scaling and the sum, in the
+/// order of the expression `R + (H P^- H^T + R) (1/β - 1)`, so the bits are the same.
 fn effective_noise(
     beta: f64,
     h: &Matrix,

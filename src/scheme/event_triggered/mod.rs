@@ -215,10 +215,10 @@ impl Fusion {
         let n = system.prior.dim();
         let linear = system.sensors.iter().all(|s| s.as_linear().is_some());
         let silences = if linear {
-            let linear = |s: &std::sync::Arc<dyn MeasurementModel>| {
+            let parts = |s: &std::sync::Arc<dyn MeasurementModel>| {
                 SilenceParts::new(s.as_linear().expect("checked linear"))
             };
-            system.sensors.iter().map(linear).collect()
+            system.sensors.iter().map(parts).collect()
         } else {
             Vec::new()
         };
