@@ -141,6 +141,43 @@ pub fn relative_difference(a: &Matrix, b: &Matrix) -> f64 {
     (a - b).iter().fold(0.0_f64, |m, v| m.max(v.abs())) / scale
 }
 
+/// [`cholesky`] of `a` computed in the storage of `buf` (taken; made anew only when its shape
+/// is not `a`'s), without the copy `cholesky` allocates: the same checks in the same order and
+/// the same factorization, hence the same factor. The caller puts the storage back with
+/// `Cholesky::unpack_dirty`; on failure `buf` is left empty (0 x 0).
+pub fn cholesky_in(buf: &mut Matrix, a: &Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
+    if a.nrows() != a.ncols() {
+        return Err(LinalgError::NotSquare {
+            rows: a.nrows(),
+            cols: a.ncols(),
+        });
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(LinalgError::NonFinite);
+    }
+    let mut m = std::mem::replace(buf, Matrix::zeros(0, 0));
+    if m.shape() != a.shape() {
+        m = Matrix::zeros(a.nrows(), a.ncols());
+    }
+    m.copy_from(a);
+    crate::filter::fixed::cholesky(m).ok_or(LinalgError::NotPositiveDefinite)
+}
+
+/// [`spd_inverse`] of `a` into `out` (made anew only when its shape is not `a`'s), factoring
+/// in `buf` ([`cholesky_in`]): the same factorization, the identity solved in place and
+/// symmetrized, hence the same bits, without allocating.
+pub fn spd_inverse_into(a: &Matrix, out: &mut Matrix, buf: &mut Matrix) -> Result<(), LinalgError> {
+    let chol = cholesky_in(buf, a)?;
+    if out.shape() != a.shape() {
+        *out = Matrix::zeros(a.nrows(), a.ncols());
+    }
+    out.fill_with_identity();
+    crate::filter::fixed::chol_solve_matrix(&chol, out);
+    *buf = chol.unpack_dirty();
+    symmetrize(out);
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -176,5 +213,31 @@ mod tests {
         let p = Matrix::from_diagonal(&Vector::from_vec(vec![1.0, 4.0]));
         let e = Vector::from_vec(vec![1.0, 1.0]);
         assert!((mahalanobis_sq(&e, &p).unwrap() - 1.25).abs() < 1e-15);
+    }
+
+    #[test]
+    fn in_place_inverse_is_spd_inverse_bit_for_bit() {
+        // Dimensions with the fixed-size kernels (2, 6) and nalgebra's own path (7), in
+        // buffers of the wrong shape and reused; and the same errors.
+        let mut buf = Matrix::zeros(0, 0);
+        let mut out = Matrix::zeros(1, 3);
+        for n in [2usize, 6, 7, 2] {
+            let b = Matrix::from_fn(n, n, |i, j| ((i * 7 + j * 3) % 5) as f64 * 0.37 - 0.6);
+            let a = &b * b.transpose() + Matrix::identity(n, n) * 0.1;
+            spd_inverse_into(&a, &mut out, &mut buf).unwrap();
+            let expected = spd_inverse(&a).unwrap();
+            let bits = |m: &Matrix| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&out), bits(&expected), "n = {n}");
+            assert_eq!(buf.shape(), (n, n), "the factor's storage is kept");
+        }
+        let indefinite = matrix_from_rows(&[vec![1.0, 2.0], vec![2.0, 1.0]]);
+        let nan = matrix_from_rows(&[vec![f64::NAN, 0.0], vec![0.0, 1.0]]);
+        let wide = Matrix::zeros(2, 3);
+        for bad in [indefinite, nan, wide] {
+            assert_eq!(
+                spd_inverse_into(&bad, &mut out, &mut buf),
+                spd_inverse(&bad).map(|_| ())
+            );
+        }
     }
 }

@@ -140,16 +140,14 @@ fn per_step_with_feedback(
 
 /// The other linear-Gaussian schemes of issue 12 on `arena-1d`, each at the allowance: a
 /// sensor step allocates one vector per message sent, a fusion-center step nothing. The
-/// feedback (`FusionCenter::feedback`) returns an owned `Feedback`, whose vector is its one
-/// allocation (seed 003's y_hat and Delta per sensor); it is counted apart.
+/// feedback (`FusionCenter::feedback`) returns an owned `Feedback` and allocates only what it
+/// holds, counted apart: seed 003's y_hat and Delta per sensor (one vector), the innovation
+/// trigger's fused prediction with its covariance (a vector and a matrix), the closed-loop
+/// stochastic trigger's prediction without it (a vector), nothing for the open loop and
+/// send-on-delta (no feedback).
 ///
 /// Not yet at the allowance (per step after warm-up, steps 11..=30 of arena-1d, sensor
 /// allocations with messages sent in parentheses, then the center step with its feedback):
-/// - innovation-trigger-kf: its sensors are (41.4 before, now 1.4 with 1.4 sent, asserted
-///   below); its center 46.9 — `event_triggered::fuse` builds owned `Evidence` and
-///   information matrices per step, and the silence noise R' its products;
-/// - stochastic-trigger-open / -closed: sensors 11.3 (3.4) / 9.3 (1.3), center 22.9 / 36.2;
-/// - send-on-delta: sensors 8.4 (2.2), center 32.0 — the same `fuse`;
 /// - federated-tobit: center 67.0 — local Tobit filters and the federated sum per step;
 /// - ci-fusion / naive-fusion: sensors 112.7 (1.6), center 1029.6 / 132.9 — local KFs and
 ///   the covariance-intersection weight search allocate per step.
@@ -157,10 +155,14 @@ fn per_step_with_feedback(
 fn other_linear_schemes_at_the_allowance() {
     let mut exp = build::load(builtin::get("arena-1d").unwrap(), "arena-1d").unwrap();
     exp.steps = 30;
-    // (kind, whether its fusion-center step is at the allowance too).
+    // (kind, whether its fusion-center step is at the allowance too, the allocations of its
+    // feedback).
     let fixed = [
-        ("quantized-innovation", true),
-        ("innovation-trigger-kf", false),
+        ("quantized-innovation", true, 1),
+        ("innovation-trigger-kf", true, 2),
+        ("stochastic-trigger-open", true, 0),
+        ("stochastic-trigger-closed", true, 1),
+        ("send-on-delta", true, 0),
     ];
     let mut checked = 0;
     for variant in &exp.variants {
@@ -179,7 +181,7 @@ fn other_linear_schemes_at_the_allowance() {
             mean(|s| s.2),
             mean(|s| s.3)
         );
-        let Some(&(_, center_fixed)) = fixed.iter().find(|f| f.0 == kind) else {
+        let Some(&(_, center_fixed, feedback)) = fixed.iter().find(|f| f.0 == kind) else {
             continue;
         };
         for (k, &(sensors, sent, center, fed)) in steps.iter().enumerate() {
@@ -187,9 +189,9 @@ fn other_linear_schemes_at_the_allowance() {
             assert_eq!(sensors, sent, "{label} ({kind}) step {step}: sensor side");
             if center_fixed {
                 assert_eq!(center, 0, "{label} ({kind}) step {step}: fusion center");
-                assert!(
-                    fed <= 1,
-                    "{label} ({kind}) step {step}: feedback made {fed}"
+                assert_eq!(
+                    fed, feedback,
+                    "{label} ({kind}) step {step}: feedback allocations"
                 );
             }
         }

@@ -32,7 +32,9 @@
 //! prediction depends on the others' data, so the center feeds back x̂_k^- and P_k^-
 //! ([`Feedback::Prediction`] with the covariance: n + n(n+1)/2 reals, 32 bits each, broadcast
 //! once per step and counted as downlink). The uplink payload is what the paper counts.
-use super::{check_inbox, fuse, nonnegative, prediction_feedback, received_measurement, Evidence};
+use super::{
+    check_inbox, nonnegative, prediction_feedback, received_measurement, Evidence, Fusion,
+};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{cholesky, Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
@@ -205,58 +207,185 @@ impl SensorNode for InnovationTriggerSensor {
 }
 
 /// Fusion side: the KF with Theorem 2's silence update, fused over sensors.
+///
+/// A step allocates nothing (linear sensors): the prediction of the estimate is kept (made
+/// after each step, it is both the feedback and the next step's prior) and the silences'
+/// pseudo-measurements are formed in per-sensor buffers.
 #[derive(Debug, Clone)]
 pub struct InnovationTriggerCenter {
     system: Arc<System>,
     /// β(δ) = 1 - v(δ): the information fraction of a silence.
     beta: f64,
     est: Gaussian,
+    /// `kf::predict` of `est`: x̂_{k+1}^-, P_{k+1}^-.
+    pred: Gaussian,
+    predict_work: kf::PredictWork,
+    fusion: Fusion,
+    /// The fused estimate of a step, swapped into `est` when the step succeeds.
+    out: Gaussian,
+    silences: Vec<SilenceWork>,
+}
+
+/// A silence's pseudo-measurement C_i x̂_k^- and effective noise R_i', and the buffers they
+/// are computed in.
+#[derive(Debug, Clone)]
+struct SilenceWork {
+    z: Vector,
+    r: Matrix,
+    /// H P^- (m x n).
+    hp: Matrix,
+    /// H^T (n x m), copied once (a transpose is exact); empty for a nonlinear sensor.
+    ht: Matrix,
+}
+
+/// R' = R + (1/β - 1) Z with Z = H P^- H^T + R, into `r` (Theorem 2's silence update as a
+/// pseudo-measurement noise, see the module note): `(H P^-) H^T` as nalgebra's products
+/// (`fixed::gemm` is their kernel; `hp` holds H P^-), `+ R`, the scaling and the sum, in the
+/// order of the expression `R + (H P^- H^T + R) (1/β - 1)`, so the bits are the same.
+fn effective_noise(
+    beta: f64,
+    h: &Matrix,
+    ht: &Matrix,
+    noise: &Matrix,
+    cov: &Matrix,
+    hp: &mut Matrix,
+    r: &mut Matrix,
+) {
+    use crate::filter::fixed;
+    fixed::gemm(hp, h, cov);
+    fixed::gemm(r, hp, ht);
+    fixed::add_assign(r.as_mut_slice(), noise.as_slice());
+    let scale = 1.0 / beta - 1.0;
+    for (v, n) in r.iter_mut().zip(noise.iter()) {
+        *v = n + *v * scale;
+    }
 }
 
 impl InnovationTriggerCenter {
     pub fn new(system: Arc<System>, delta: f64) -> Result<Self, SchemeError> {
         nonnegative("delta", delta)?;
         let est = system.prior.clone();
+        let n = est.dim();
+        let mut predict_work = kf::PredictWork::new(n);
+        let mut pred = est.clone();
+        kf::predict_into(&system.transition, &est, &mut pred, &mut predict_work);
+        let silences = system
+            .sensors
+            .iter()
+            .map(|s| {
+                let m = s.meas_dim();
+                SilenceWork {
+                    z: Vector::zeros(m),
+                    r: Matrix::zeros(m, m),
+                    hp: Matrix::zeros(m, n),
+                    ht: s
+                        .as_linear()
+                        .map_or_else(|| Matrix::zeros(0, 0), |l| l.h().transpose()),
+                }
+            })
+            .collect();
         Ok(Self {
+            fusion: Fusion::new(&system),
+            out: est.clone(),
             system,
             beta: 1.0 - truncated_variance(delta),
             est,
+            pred,
+            predict_work,
+            silences,
         })
+    }
+
+    /// Whether a silence carries information: β does not underflow (δ not so large that a
+    /// silence says nothing).
+    fn silence_informs(&self) -> bool {
+        !(self.beta.is_nan() || self.beta <= 1e-300)
     }
 
     /// The effective noise of a silence of sensor `i` against the prediction:
     /// R' = R + (1/β - 1) Z (module note), or `None` when β underflows (δ so large that a
     /// silence says nothing).
     pub fn silence_noise(&self, i: usize, pred: &Gaussian) -> Option<Matrix> {
-        if self.beta.is_nan() || self.beta <= 1e-300 {
+        if !self.silence_informs() {
             return None;
         }
         let sensor = self.system.sensors[i].as_ref();
         let h = sensor.jacobian(&pred.mean);
-        let z = &h * &pred.cov * h.transpose() + sensor.noise_cov();
-        Some(sensor.noise_cov() + z * (1.0 / self.beta - 1.0))
+        let (m, n) = h.shape();
+        let (mut hp, mut r) = (Matrix::zeros(m, n), Matrix::zeros(m, m));
+        let ht = h.transpose();
+        effective_noise(
+            self.beta,
+            &h,
+            &ht,
+            sensor.noise_cov(),
+            &pred.cov,
+            &mut hp,
+            &mut r,
+        );
+        Some(r)
+    }
+
+    /// The pseudo-measurement C_i x̂_k^- and R_i' of a silence of sensor `i` into its buffers
+    /// (`predict` and [`silence_noise`](Self::silence_noise), in place for a linear sensor).
+    fn form_silence(&mut self, i: usize) {
+        let sensor = self.system.sensors[i].as_ref();
+        match sensor.as_linear() {
+            Some(l) => {
+                let w = &mut self.silences[i];
+                crate::filter::fixed::gemv(&mut w.z, l.h(), &self.pred.mean);
+                let (beta, cov) = (self.beta, &self.pred.cov);
+                effective_noise(
+                    beta,
+                    l.h(),
+                    &w.ht,
+                    sensor.noise_cov(),
+                    cov,
+                    &mut w.hp,
+                    &mut w.r,
+                );
+            }
+            None => {
+                let r = self.silence_noise(i, &self.pred).expect("silences inform");
+                let w = &mut self.silences[i];
+                w.z = sensor.predict(&self.pred.mean);
+                w.r = r;
+            }
+        }
     }
 }
 
 impl FusionCenter for InnovationTriggerCenter {
     fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
         check_inbox(&self.system, inbox)?;
-        let pred = kf::predict(&self.system.transition, &self.est);
-        let mut evidence = Vec::with_capacity(inbox.len());
+        // The inbox first (its errors before the fusion's), and the silences' evidence.
+        let informs = self.silence_informs();
         for (i, msg) in inbox.iter().enumerate() {
-            evidence.push(match (received_measurement(i, msg)?, msg) {
-                (Some(z), _) => Evidence::Measurement(z.clone()),
-                (None, Received::Silent) => match self.silence_noise(i, &pred) {
-                    Some(r) => Evidence::Pseudo {
-                        z: self.system.sensors[i].predict(&pred.mean),
-                        r,
-                    },
-                    None => Evidence::Nothing,
-                },
-                (None, _) => Evidence::Nothing,
-            });
+            received_measurement(i, msg)?;
+            if informs && matches!(msg, Received::Silent) {
+                self.form_silence(i);
+            }
         }
-        self.est = fuse(&self.system, pred, &evidence)?;
+        self.fusion.start(&self.pred)?;
+        for (i, msg) in inbox.iter().enumerate() {
+            let evidence = match (received_measurement(i, msg)?, msg) {
+                (Some(z), _) => Evidence::Measurement(z),
+                (None, Received::Silent) if informs => {
+                    let w = &self.silences[i];
+                    Evidence::Pseudo { z: &w.z, r: &w.r }
+                }
+                (None, _) => Evidence::Nothing,
+            };
+            self.fusion.add(&self.system, i, evidence)?;
+        }
+        self.fusion.finish(&mut self.out)?;
+        std::mem::swap(&mut self.est, &mut self.out);
+        kf::predict_into(
+            &self.system.transition,
+            &self.est,
+            &mut self.pred,
+            &mut self.predict_work,
+        );
         Ok(())
     }
 
@@ -265,10 +394,9 @@ impl FusionCenter for InnovationTriggerCenter {
     }
 
     fn feedback(&self) -> Option<Feedback> {
-        let pred = kf::predict(&self.system.transition, &self.est);
         Some(Feedback::Prediction {
-            mean: pred.mean,
-            cov: Some(pred.cov),
+            mean: self.pred.mean.clone(),
+            cov: Some(self.pred.cov.clone()),
         })
     }
 }

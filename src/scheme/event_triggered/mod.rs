@@ -76,66 +76,236 @@ pub use stochastic::{
 };
 
 use crate::filter::information::Information;
-use crate::filter::{kf, FilterError, Gaussian};
-use crate::linalg::{spd_inverse, symmetrize, Matrix, Vector};
+use crate::filter::{fixed, kf, FilterError, Gaussian};
+use crate::linalg::{cholesky_in, spd_inverse_into, symmetrize, Matrix, Vector};
 use crate::link::Received;
-use crate::model::MeasurementModel;
+use crate::model::{LinearSensor, MeasurementModel};
 use crate::scheme::{Feedback, SchemeError, System};
 
-/// What one sensor contributes to a step's update at the fusion center.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Evidence {
+/// What one sensor contributes to a step's update at the fusion center. Borrowed: the inbox
+/// and the center's buffers hold the vectors, so that building it allocates nothing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Evidence<'a> {
     /// Nothing (silence read as no measurement, or not scheduled).
     Nothing,
     /// A received measurement with the sensor's own noise R.
-    Measurement(Vector),
+    Measurement(&'a Vector),
     /// A silence read as the pseudo-measurement `z` with effective noise `r` (>= R).
-    Pseudo { z: Vector, r: Matrix },
+    Pseudo { z: &'a Vector, r: &'a Matrix },
 }
 
-/// Fuses one step's evidence into the prediction `pred`: in information form (one sum per
-/// step, the same operations as [`crate::scheme::centralized::CentralizedKf`], so all-send
-/// runs agree bit for bit) when every sensor is linear, else by sequential EKF updates
-/// linearized at the running estimate.
+/// Fuses one step's evidence (one entry per sensor, in sensor order) into the prediction
+/// `pred`: [`Fusion`]'s update in a work space of its own (a center keeps one [`Fusion`]
+/// instead, which allocates nothing per step).
 pub fn fuse(
     system: &System,
-    pred: Gaussian,
-    evidence: &[Evidence],
+    pred: &Gaussian,
+    evidence: &[Evidence<'_>],
 ) -> Result<Gaussian, SchemeError> {
-    let all_linear = system.sensors.iter().all(|s| s.as_linear().is_some());
-    if all_linear {
-        let mut info = Information::from_gaussian(&pred)?;
-        for (i, ev) in evidence.iter().enumerate() {
-            let sensor = system.sensors[i].as_linear().expect("checked linear");
-            match ev {
-                Evidence::Nothing => {}
-                Evidence::Measurement(z) => info.add_measurement(sensor, z)?,
-                Evidence::Pseudo { z, r } => {
-                    kf::check_measurement(sensor, z)?;
-                    let r_inv = spd_inverse(r).map_err(|source| SchemeError::Matrix {
-                        what: "effective noise of a silence",
-                        source,
-                    })?;
-                    let ht_rinv = sensor.h().transpose() * r_inv;
-                    let mut add = &ht_rinv * sensor.h();
-                    symmetrize(&mut add);
-                    info.matrix += add;
-                    info.vector += ht_rinv * z;
-                }
-            }
+    let mut fusion = Fusion::new(system);
+    fusion.start(pred)?;
+    for (i, ev) in evidence.iter().enumerate() {
+        fusion.add(system, i, *ev)?;
+    }
+    let mut out = pred.clone();
+    fusion.finish(&mut out)?;
+    Ok(out)
+}
+
+/// The fusion of one step, sensor by sensor, in buffers sized once: in information form (one
+/// sum per step, the same operations as [`crate::scheme::centralized::CentralizedKf`], so
+/// all-send runs agree bit for bit) when every sensor is linear, else by sequential EKF
+/// updates linearized at the running estimate (that path allocates).
+///
+/// The linear path performs the operations of `Information::from_gaussian`, `add_measurement`
+/// per measurement, `Y += sym(H^T R'^{-1} H)` and `y += H^T R'^{-1} z` per silence (R'^{-1}
+/// by `spd_inverse`) and `to_gaussian`, in the same order, hence the same bits. The parts
+/// `H^T R'^{-1}` and `sym(H^T R'^{-1} H)` of a silence are kept per sensor and computed again
+/// only when R' changes (bit for bit): the stochastic triggers' and send-on-delta's R' are
+/// fixed, so theirs are computed once; the innovation trigger's follows P^- every step.
+///
+/// A step is [`start`](Self::start), [`add`](Self::add) per sensor, [`finish`](Self::finish).
+#[derive(Debug, Clone)]
+pub struct Fusion {
+    /// Every sensor linear (the information form).
+    linear: bool,
+    /// Y and y of the step.
+    info: Information,
+    /// The Cholesky factors of P^- and of Y are computed in this storage.
+    factor: Matrix,
+    /// H^T R^{-1} z.
+    tmp: Vector,
+    /// Per linear sensor, the information parts of its last silence.
+    silences: Vec<SilenceParts>,
+    /// The running estimate of the EKF path.
+    running: Option<Gaussian>,
+}
+
+/// `sym(H^T R'^{-1} H)` and `H^T R'^{-1}` of a silence with effective noise R', with the R'
+/// they were computed from.
+#[derive(Debug, Clone)]
+struct SilenceParts {
+    /// R' of the parts below, valid when `computed`.
+    r: Matrix,
+    /// Whether the parts are those of `r` (false before the first silence and after a
+    /// failed inverse).
+    computed: bool,
+    /// R'^{-1}, and the storage its Cholesky factor is computed in.
+    r_inv: Matrix,
+    factor: Matrix,
+    /// H^T, copied once (a transpose is exact).
+    ht: Matrix,
+    /// H^T R'^{-1} (n x m).
+    ht_rinv: Matrix,
+    /// sym(H^T R'^{-1} H) (n x n).
+    info: Matrix,
+}
+
+impl SilenceParts {
+    fn new(sensor: &LinearSensor) -> Self {
+        let (m, n) = (sensor.meas_dim(), sensor.state_dim());
+        Self {
+            r: Matrix::zeros(m, m),
+            computed: false,
+            r_inv: Matrix::zeros(m, m),
+            factor: Matrix::zeros(m, m),
+            ht: sensor.h().transpose(),
+            ht_rinv: Matrix::zeros(n, m),
+            info: Matrix::zeros(n, n),
         }
-        Ok(info.to_gaussian()?)
-    } else {
-        let mut e = pred;
-        for (i, ev) in evidence.iter().enumerate() {
+    }
+
+    /// The parts for `r`: `R'^{-1} = spd_inverse(R')`, then `H^T R'^{-1}` and
+    /// `(H^T R'^{-1}) H` as nalgebra's products (`fixed::gemm` is their kernel), symmetrized.
+    /// Kept when `r` is the R' of the last call, bit for bit (the same operations would give
+    /// the same parts).
+    fn update(&mut self, sensor: &LinearSensor, r: &Matrix) -> Result<(), SchemeError> {
+        let same = self.r.shape() == r.shape()
+            && self
+                .r
+                .iter()
+                .zip(r.iter())
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+        if self.computed && same {
+            return Ok(());
+        }
+        self.computed = false;
+        spd_inverse_into(r, &mut self.r_inv, &mut self.factor).map_err(|source| {
+            SchemeError::Matrix {
+                what: "effective noise of a silence",
+                source,
+            }
+        })?;
+        fixed::gemm(&mut self.ht_rinv, &self.ht, &self.r_inv);
+        fixed::gemm(&mut self.info, &self.ht_rinv, sensor.h());
+        symmetrize(&mut self.info);
+        if self.r.shape() == r.shape() {
+            self.r.copy_from(r);
+        } else {
+            self.r = r.clone();
+        }
+        self.computed = true;
+        Ok(())
+    }
+}
+
+impl Fusion {
+    /// Buffers for `system`'s state and sensors.
+    pub fn new(system: &System) -> Self {
+        let n = system.prior.dim();
+        let linear = system.sensors.iter().all(|s| s.as_linear().is_some());
+        let silences = if linear {
+            let parts = |s: &std::sync::Arc<dyn MeasurementModel>| {
+                SilenceParts::new(s.as_linear().expect("checked linear"))
+            };
+            system.sensors.iter().map(parts).collect()
+        } else {
+            Vec::new()
+        };
+        Self {
+            linear,
+            info: Information {
+                matrix: Matrix::zeros(n, n),
+                vector: Vector::zeros(n),
+            },
+            factor: Matrix::zeros(n, n),
+            tmp: Vector::zeros(n),
+            silences,
+            running: None,
+        }
+    }
+
+    /// Starts a step from the prediction `pred`: `Information::from_gaussian` (y = P^{-1} x by
+    /// the Cholesky solve, Y = P^{-1} symmetrized) in the buffers, or the EKF's running
+    /// estimate.
+    pub fn start(&mut self, pred: &Gaussian) -> Result<(), SchemeError> {
+        if !self.linear {
+            self.running = Some(pred.clone());
+            return Ok(());
+        }
+        let chol =
+            cholesky_in(&mut self.factor, &pred.cov).map_err(|source| FilterError::Matrix {
+                what: "covariance",
+                source,
+            })?;
+        let info = &mut self.info;
+        info.vector.copy_from(&pred.mean);
+        fixed::chol_solve(&chol, &mut info.vector);
+        info.matrix.fill_with_identity();
+        fixed::chol_solve_matrix(&chol, &mut info.matrix);
+        self.factor = chol.unpack_dirty();
+        symmetrize(&mut info.matrix);
+        Ok(())
+    }
+
+    /// Adds the evidence of sensor `i` (sensors in order, after [`start`](Self::start)).
+    pub fn add(
+        &mut self,
+        system: &System,
+        i: usize,
+        evidence: Evidence<'_>,
+    ) -> Result<(), SchemeError> {
+        if !self.linear {
             let sensor = system.sensors[i].as_ref();
-            e = match ev {
+            let e = self.running.take().expect("started");
+            self.running = Some(match evidence {
                 Evidence::Nothing => e,
                 Evidence::Measurement(z) => kf::update(sensor, e, z)?,
                 Evidence::Pseudo { z, r } => update_with_noise(sensor, e, z, r)?,
-            };
+            });
+            return Ok(());
         }
-        Ok(e)
+        let sensor = system.sensors[i].as_linear().expect("checked linear");
+        let (matrix, ht_rinv, z) = match evidence {
+            Evidence::Nothing => return Ok(()),
+            // Information::add_measurement: Y += H^T R^{-1} H, y += H^T R^{-1} z.
+            Evidence::Measurement(z) => {
+                kf::check_measurement(sensor, z)?;
+                (sensor.information(), sensor.ht_rinv(), z)
+            }
+            // Y += sym(H^T R'^{-1} H), y += H^T R'^{-1} z.
+            Evidence::Pseudo { z, r } => {
+                kf::check_measurement(sensor, z)?;
+                let parts = &mut self.silences[i];
+                parts.update(sensor, r)?;
+                (&parts.info, &parts.ht_rinv, z)
+            }
+        };
+        fixed::add_assign(self.info.matrix.as_mut_slice(), matrix.as_slice());
+        fixed::gemv(&mut self.tmp, ht_rinv, z);
+        fixed::add_assign(self.info.vector.as_mut_slice(), self.tmp.as_slice());
+        Ok(())
+    }
+
+    /// Ends the step: the fused estimate into `out` (sized for the state; `to_gaussian` in
+    /// the buffers for the information form).
+    pub fn finish(&mut self, out: &mut Gaussian) -> Result<(), SchemeError> {
+        if !self.linear {
+            *out = self.running.take().expect("started");
+            return Ok(());
+        }
+        self.info.to_gaussian_into(out, &mut self.factor)?;
+        Ok(())
     }
 }
 

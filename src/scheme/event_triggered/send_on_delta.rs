@@ -13,7 +13,7 @@
 //!   and stops the prediction from drifting while a sensor is quiet.
 //!
 //! The knob is δ; δ = 0 sends every (continuous) measurement.
-use super::{check_inbox, fuse, nonnegative, received_measurement, Evidence};
+use super::{check_inbox, nonnegative, received_measurement, Evidence, Fusion};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
@@ -34,19 +34,42 @@ pub enum SilenceModel {
     Uniform,
 }
 
-/// Sensor side: remembers the last measurement it sent.
+/// Sensor side: remembers the last measurement it sent. A step allocates only the message it
+/// sends once its buffers have the measurement's dimension (the scheme makes them so).
 #[derive(Debug, Clone)]
 pub struct SendOnDeltaSensor {
     delta: f64,
-    last_sent: Option<Vector>,
+    /// The last measurement sent, valid when `sent`.
+    last_sent: Vector,
+    sent: bool,
+    /// z_k - z_last.
+    diff: Vector,
 }
 
 impl SendOnDeltaSensor {
     pub fn new(delta: f64) -> Result<Self, SchemeError> {
         Ok(Self {
             delta: nonnegative("delta", delta)?,
-            last_sent: None,
+            last_sent: Vector::zeros(0),
+            sent: false,
+            diff: Vector::zeros(0),
         })
+    }
+
+    /// The buffers made for measurements of dimension `m` now rather than at the first step.
+    fn with_dim(mut self, m: usize) -> Self {
+        self.last_sent = Vector::zeros(m);
+        self.diff = Vector::zeros(m);
+        self
+    }
+}
+
+/// `dst = src`, in `dst`'s storage when it has `src`'s dimension.
+fn assign(dst: &mut Vector, src: &Vector) {
+    if dst.len() == src.len() {
+        dst.copy_from(src);
+    } else {
+        *dst = src.clone();
     }
 }
 
@@ -58,12 +81,15 @@ impl SensorNode for SendOnDeltaSensor {
         _feedback: Option<&Feedback>,
         _rng: &mut dyn RngCore,
     ) -> Result<Transmission, SchemeError> {
-        let send = match &self.last_sent {
-            None => true,
-            Some(last) => (z - last).amax() > self.delta,
+        let send = !self.sent || {
+            // (z - z_last).amax(), the difference in the buffer.
+            assign(&mut self.diff, z);
+            self.diff -= &self.last_sent;
+            self.diff.amax() > self.delta
         };
         if send {
-            self.last_sent = Some(z.clone());
+            assign(&mut self.last_sent, z);
+            self.sent = true;
             Ok(Transmission::Send(Message::Measurement(z.clone())))
         } else {
             Ok(Transmission::Silent)
@@ -71,14 +97,26 @@ impl SensorNode for SendOnDeltaSensor {
     }
 }
 
-/// Fusion side: a KF that remembers every sensor's last received measurement.
+/// Fusion side: a KF that remembers every sensor's last received measurement. A step
+/// allocates nothing (linear sensors): the measurements are remembered and the prediction
+/// formed in buffers, and the uniform silence noise is fixed, so [`Fusion`] inverts it once.
 #[derive(Debug, Clone)]
 pub struct SendOnDeltaCenter {
     system: Arc<System>,
     delta: f64,
     silence: SilenceModel,
-    last_received: Vec<Option<Vector>>,
+    /// Per sensor, the last received measurement, valid when `received`.
+    last_received: Vec<Vector>,
+    received: Vec<bool>,
+    /// Per sensor, [`uniform_noise`](Self::uniform_noise).
+    uniform: Vec<Matrix>,
     est: Gaussian,
+    /// `kf::predict` of the estimate, per step.
+    pred: Gaussian,
+    predict_work: kf::PredictWork,
+    fusion: Fusion,
+    /// The fused estimate of a step, swapped into `est` when the step succeeds.
+    out: Gaussian,
 }
 
 impl SendOnDeltaCenter {
@@ -89,13 +127,28 @@ impl SendOnDeltaCenter {
     ) -> Result<Self, SchemeError> {
         nonnegative("delta", delta)?;
         let est = system.prior.clone();
-        Ok(Self {
-            last_received: vec![None; system.n_sensors()],
+        let n = est.dim();
+        let mut center = Self {
+            last_received: system
+                .sensors
+                .iter()
+                .map(|s| Vector::zeros(s.meas_dim()))
+                .collect(),
+            received: vec![false; system.n_sensors()],
+            uniform: Vec::new(),
+            fusion: Fusion::new(&system),
+            pred: est.clone(),
+            out: est.clone(),
+            predict_work: kf::PredictWork::new(n),
             system,
             delta,
             silence,
             est,
-        })
+        };
+        center.uniform = (0..center.system.n_sensors())
+            .map(|i| center.uniform_noise(i))
+            .collect();
+        Ok(center)
     }
 
     /// R + (δ²/3) I, the noise of the uniform reading of a silence of sensor `i`.
@@ -108,25 +161,34 @@ impl SendOnDeltaCenter {
 impl FusionCenter for SendOnDeltaCenter {
     fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
         check_inbox(&self.system, inbox)?;
-        let pred = kf::predict(&self.system.transition, &self.est);
-        let mut evidence = Vec::with_capacity(inbox.len());
+        let t = &self.system.transition;
+        kf::predict_into(t, &self.est, &mut self.pred, &mut self.predict_work);
+        // The inbox first (its errors before the fusion's; what arrived is remembered even
+        // if the step then fails). A silent sensor's z_last is from an earlier step.
         for (i, msg) in inbox.iter().enumerate() {
-            evidence.push(match (received_measurement(i, msg)?, msg) {
-                (Some(z), _) => {
-                    self.last_received[i] = Some(z.clone());
-                    Evidence::Measurement(z.clone())
-                }
-                (None, Received::Silent) => match (self.silence, &self.last_received[i]) {
-                    (SilenceModel::Uniform, Some(last)) => Evidence::Pseudo {
-                        z: last.clone(),
-                        r: self.uniform_noise(i),
-                    },
-                    _ => Evidence::Nothing,
-                },
-                (None, _) => Evidence::Nothing,
-            });
+            if let Some(z) = received_measurement(i, msg)? {
+                assign(&mut self.last_received[i], z);
+                self.received[i] = true;
+            }
         }
-        self.est = fuse(&self.system, pred, &evidence)?;
+        self.fusion.start(&self.pred)?;
+        for (i, msg) in inbox.iter().enumerate() {
+            let evidence = match (received_measurement(i, msg)?, msg) {
+                (Some(z), _) => Evidence::Measurement(z),
+                (None, Received::Silent)
+                    if self.silence == SilenceModel::Uniform && self.received[i] =>
+                {
+                    Evidence::Pseudo {
+                        z: &self.last_received[i],
+                        r: &self.uniform[i],
+                    }
+                }
+                (None, _) => Evidence::Nothing,
+            };
+            self.fusion.add(&self.system, i, evidence)?;
+        }
+        self.fusion.finish(&mut self.out)?;
+        std::mem::swap(&mut self.est, &mut self.out);
         Ok(())
     }
 
@@ -161,8 +223,14 @@ impl SendOnDeltaScheme {
 
 impl Scheme for SendOnDeltaScheme {
     fn build(&self) -> Result<SchemeInstance, SchemeError> {
-        let sensors = (0..self.system.n_sensors())
-            .map(|_| SendOnDeltaSensor::new(self.delta).map(|s| Box::new(s) as Box<dyn SensorNode>))
+        let sensors = self
+            .system
+            .sensors
+            .iter()
+            .map(|s| {
+                SendOnDeltaSensor::new(self.delta)
+                    .map(|node| Box::new(node.with_dim(s.meas_dim())) as Box<dyn SensorNode>)
+            })
             .collect::<Result<_, _>>()?;
         Ok(SchemeInstance {
             sensors,

@@ -28,7 +28,9 @@
 //!
 //! The coin ζ_k comes from the `rng` given to [`SensorNode::step`] and is drawn at every step,
 //! so the coin stream does not depend on the knob (common random numbers across knob values).
-use super::{check_inbox, fuse, nonnegative, prediction_feedback, received_measurement, Evidence};
+use super::{
+    check_inbox, nonnegative, prediction_feedback, received_measurement, Evidence, Fusion,
+};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{check_spd, spd_inverse, Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
@@ -128,28 +130,45 @@ impl StochasticTrigger {
 
     /// φ = exp(-½ u^T Y_i u): the probability of staying silent given u (0 for Y = ∞).
     pub fn silence_probability(&self, i: usize, u: &Vector) -> f64 {
+        self.silence_probability_in(i, u, &mut Vector::zeros(u.len()))
+    }
+
+    /// [`silence_probability`](Self::silence_probability) with `Y u` formed in `yu` (sized as
+    /// u): the product as nalgebra's (`fixed::gemv` is its kernel), then the dot product.
+    fn silence_probability_in(&self, i: usize, u: &Vector, yu: &mut Vector) -> f64 {
         match self.y(i) {
             None => 0.0,
-            Some(y) => (-0.5 * u.dot(&(y * u))).exp(),
+            Some(y) => {
+                crate::filter::fixed::gemv(yu, y, u);
+                (-0.5 * u.dot(yu)).exp()
+            }
         }
     }
 }
 
 /// Sensor side: one coin per step against φ of the measurement (open loop) or of the
-/// innovation against the fed-back x̂_k^- (closed loop).
+/// innovation against the fed-back x̂_k^- (closed loop). A step allocates only the message it
+/// sends (linear sensors): the innovation and `Y u` are formed in buffers.
 #[derive(Debug, Clone)]
 pub struct StochasticTriggerSensor {
     system: Arc<System>,
     index: usize,
     trigger: StochasticTrigger,
+    /// ν_k (closed loop).
+    nu: Vector,
+    /// Y u.
+    yu: Vector,
 }
 
 impl StochasticTriggerSensor {
     pub fn new(system: Arc<System>, index: usize, trigger: StochasticTrigger) -> Self {
+        let m = system.sensors[index].meas_dim();
         Self {
             system,
             index,
             trigger,
+            nu: Vector::zeros(m),
+            yu: Vector::zeros(m),
         }
     }
 }
@@ -165,13 +184,32 @@ impl SensorNode for StochasticTriggerSensor {
         // ζ in (0, 1]: with Y = ∞ (φ = 0) the sensor always sends.
         let zeta = 1.0 - rng.random::<f64>();
         let u = match self.trigger.kind {
-            TriggerLoop::Open => z.clone(),
+            TriggerLoop::Open => z,
             TriggerLoop::Closed => {
                 let (mean, _) = prediction_feedback(self.index, feedback, false)?;
-                z - self.system.sensors[self.index].predict(mean)
+                let sensor = self.system.sensors[self.index].as_ref();
+                match sensor.as_linear() {
+                    // z - H x̂^- with H x̂^- as nalgebra's gemv.
+                    Some(l) => {
+                        crate::filter::fixed::gemv(&mut self.nu, l.h(), mean);
+                        assert_eq!(z.len(), self.nu.len(), "measurement dimension");
+                        for (v, zi) in self.nu.iter_mut().zip(z.iter()) {
+                            *v = zi - *v;
+                        }
+                    }
+                    None => self.nu = z - sensor.predict(mean),
+                }
+                &self.nu
             }
         };
-        if zeta <= self.trigger.silence_probability(self.index, &u) {
+        if self.yu.len() != u.len() {
+            self.yu = Vector::zeros(u.len());
+        }
+        if zeta
+            <= self
+                .trigger
+                .silence_probability_in(self.index, u, &mut self.yu)
+        {
             Ok(Transmission::Silent)
         } else {
             Ok(Transmission::Send(Message::Measurement(z.clone())))
@@ -179,21 +217,42 @@ impl SensorNode for StochasticTriggerSensor {
     }
 }
 
-/// Fusion side: the exact MMSE estimator of Theorems 1 / 2, fused over sensors.
+/// Fusion side: the exact MMSE estimator of Theorems 1 / 2, fused over sensors. A step
+/// allocates nothing (linear sensors): the prediction and the pseudo-measurements are formed
+/// in buffers, and the silence noise R_i + Y_i^{-1} is fixed, so [`Fusion`] inverts it once.
 #[derive(Debug, Clone)]
 pub struct StochasticTriggerCenter {
     system: Arc<System>,
     trigger: StochasticTrigger,
     est: Gaussian,
+    /// `kf::predict` of the estimate, per step.
+    pred: Gaussian,
+    predict_work: kf::PredictWork,
+    fusion: Fusion,
+    /// The fused estimate of a step, swapped into `est` when the step succeeds.
+    out: Gaussian,
+    /// Per sensor, the pseudo-measurement of a silence: 0 (open loop) or C_i x̂_k^- (closed).
+    pseudo: Vec<Vector>,
 }
 
 impl StochasticTriggerCenter {
     pub fn new(system: Arc<System>, trigger: StochasticTrigger) -> Self {
         let est = system.prior.clone();
+        let n = est.dim();
+        let pseudo = system
+            .sensors
+            .iter()
+            .map(|s| Vector::zeros(s.meas_dim()))
+            .collect();
         Self {
+            fusion: Fusion::new(&system),
+            pred: est.clone(),
+            out: est.clone(),
+            predict_work: kf::PredictWork::new(n),
             system,
             trigger,
             est,
+            pseudo,
         }
     }
 }
@@ -201,30 +260,45 @@ impl StochasticTriggerCenter {
 impl FusionCenter for StochasticTriggerCenter {
     fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
         check_inbox(&self.system, inbox)?;
-        let pred = kf::predict(&self.system.transition, &self.est);
-        let mut evidence = Vec::with_capacity(inbox.len());
+        let t = &self.system.transition;
+        kf::predict_into(t, &self.est, &mut self.pred, &mut self.predict_work);
+        // The inbox first (its errors before the fusion's), and the closed loop's
+        // pseudo-measurements.
         for (i, msg) in inbox.iter().enumerate() {
-            evidence.push(match (received_measurement(i, msg)?, msg) {
-                (Some(z), _) => Evidence::Measurement(z.clone()),
-                (None, Received::Silent) => match self.trigger.silence_noise(i) {
-                    Some(r) => Evidence::Pseudo {
-                        z: match self.trigger.kind {
-                            TriggerLoop::Open => Vector::zeros(r.nrows()),
-                            TriggerLoop::Closed => self.system.sensors[i].predict(&pred.mean),
-                        },
-                        r: r.clone(),
-                    },
-                    None => {
-                        return Err(SchemeError::Protocol {
-                            sensor: i,
-                            message: "silent although Y = infinity (tau = 0) always sends".into(),
-                        })
+            received_measurement(i, msg)?;
+            if !matches!(msg, Received::Silent) {
+                continue;
+            }
+            if self.trigger.silence_noise(i).is_none() {
+                return Err(SchemeError::Protocol {
+                    sensor: i,
+                    message: "silent although Y = infinity (tau = 0) always sends".into(),
+                });
+            }
+            if self.trigger.kind == TriggerLoop::Closed {
+                let sensor = self.system.sensors[i].as_ref();
+                match sensor.as_linear() {
+                    Some(l) => {
+                        crate::filter::fixed::gemv(&mut self.pseudo[i], l.h(), &self.pred.mean)
                     }
+                    None => self.pseudo[i] = sensor.predict(&self.pred.mean),
+                }
+            }
+        }
+        self.fusion.start(&self.pred)?;
+        for (i, msg) in inbox.iter().enumerate() {
+            let evidence = match (received_measurement(i, msg)?, msg) {
+                (Some(z), _) => Evidence::Measurement(z),
+                (None, Received::Silent) => Evidence::Pseudo {
+                    z: &self.pseudo[i],
+                    r: self.trigger.silence_noise(i).expect("checked"),
                 },
                 (None, _) => Evidence::Nothing,
-            });
+            };
+            self.fusion.add(&self.system, i, evidence)?;
         }
-        self.est = fuse(&self.system, pred, &evidence)?;
+        self.fusion.finish(&mut self.out)?;
+        std::mem::swap(&mut self.est, &mut self.out);
         Ok(())
     }
 

@@ -546,3 +546,64 @@ fn constructors_and_params_name_the_field() {
         );
     }
 }
+
+/// The fusion as the information-form expressions write it (nalgebra's products, a fresh
+/// inverse of every R'): what [`Fusion`] must reproduce bit for bit.
+fn fuse_by_expressions(system: &System, pred: &Gaussian, evidence: &[Evidence]) -> Gaussian {
+    use crate::filter::information::Information;
+    use crate::linalg::{spd_inverse, symmetrize};
+    let mut info = Information::from_gaussian(pred).unwrap();
+    for (i, ev) in evidence.iter().enumerate() {
+        let sensor = system.sensors[i].as_linear().unwrap();
+        match ev {
+            Evidence::Nothing => {}
+            Evidence::Measurement(z) => info.add_measurement(sensor, z).unwrap(),
+            Evidence::Pseudo { z, r } => {
+                let ht_rinv = sensor.h().transpose() * spd_inverse(r).unwrap();
+                let mut add = &ht_rinv * sensor.h();
+                symmetrize(&mut add);
+                info.matrix += add;
+                info.vector += ht_rinv * *z;
+            }
+        }
+    }
+    info.to_gaussian().unwrap()
+}
+
+/// [`Fusion`] in its buffers, across steps whose silence noises repeat (its kept parts) and
+/// change, equals the expressions bit for bit.
+#[test]
+fn fusion_in_buffers_equals_the_expressions_bit_for_bit() {
+    let system = cv_system();
+    let mut fusion = Fusion::new(&system);
+    let mut out = system.prior.clone();
+    let bits = |g: &Gaussian| {
+        let m = g.mean.iter().chain(g.cov.iter());
+        m.map(|v| v.to_bits()).collect::<Vec<_>>()
+    };
+    let z = |v: f64| Vector::from_element(1, v);
+    let r = |v: f64| Matrix::from_element(1, 1, v);
+    let (z1, z2, z3) = (z(0.3), z(-1.7), z(2.9));
+    let (r1, r2) = (r(1.9), r(0.7));
+    let mut pred = kf::predict(&system.transition, &system.prior);
+    for (k, noise) in [&r1, &r1, &r2, &r1].into_iter().enumerate() {
+        let evidence = [
+            Evidence::Measurement(&z1),
+            Evidence::Pseudo { z: &z2, r: noise },
+            Evidence::Nothing,
+            Evidence::Pseudo { z: &z3, r: &r2 },
+        ];
+        fusion.start(&pred).unwrap();
+        for (i, ev) in evidence.iter().enumerate() {
+            fusion.add(&system, i, *ev).unwrap();
+        }
+        fusion.finish(&mut out).unwrap();
+        let expected = fuse_by_expressions(&system, &pred, &evidence);
+        assert_eq!(bits(&out), bits(&expected), "step {k}");
+        assert_eq!(
+            bits(&fuse(&system, &pred, &evidence).unwrap()),
+            bits(&expected)
+        );
+        pred = kf::predict(&system.transition, &out);
+    }
+}
