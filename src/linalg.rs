@@ -178,3 +178,82 @@ mod tests {
         assert!((mahalanobis_sq(&e, &p).unwrap() - 1.25).abs() < 1e-15);
     }
 }
+
+/// [`spd_inverse`] of `a` into `out`, factoring in the storage of `factor` (both resized to
+/// `a`'s shape if they differ, so only a first call allocates): the same checks, the same
+/// factorization (`fixed::cholesky`), the same solves of the identity and the same
+/// symmetrization, hence the same bits (issue 12). On failure `factor` may be left empty
+/// (the next call sizes it again).
+pub fn spd_inverse_into(
+    a: &Matrix,
+    out: &mut Matrix,
+    factor: &mut Matrix,
+) -> Result<(), LinalgError> {
+    if a.nrows() != a.ncols() {
+        return Err(LinalgError::NotSquare {
+            rows: a.nrows(),
+            cols: a.ncols(),
+        });
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(LinalgError::NonFinite);
+    }
+    let mut m = std::mem::replace(factor, Matrix::zeros(0, 0));
+    if m.shape() != a.shape() {
+        m = Matrix::zeros(a.nrows(), a.ncols());
+    }
+    m.copy_from(a);
+    let chol = crate::filter::fixed::cholesky(m).ok_or(LinalgError::NotPositiveDefinite)?;
+    if out.shape() != a.shape() {
+        *out = Matrix::zeros(a.nrows(), a.ncols());
+    }
+    out.fill_with_identity();
+    crate::filter::fixed::chol_solve_matrix(&chol, out);
+    *factor = chol.unpack_dirty();
+    symmetrize(out);
+    Ok(())
+}
+
+#[cfg(test)]
+mod in_place_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// `spd_inverse_into` is `spd_inverse` bit for bit on random SPD matrices of dimensions
+    /// 1..=9 (the fixed-size kernels and nalgebra's dynamic path), with reused buffers of a
+    /// different size at first, and refuses what `spd_inverse` refuses.
+    #[test]
+    fn spd_inverse_into_is_spd_inverse_bit_for_bit() {
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(17);
+        let (mut out, mut factor) = (Matrix::zeros(2, 3), Matrix::zeros(0, 0));
+        for trial in 0..400 {
+            let n = 1 + trial % 9;
+            let b = Matrix::from_fn(n, n, |_, _| rng.random_range(-2.0..2.0));
+            let mut a = &b * b.transpose() + Matrix::identity(n, n) * rng.random_range(1e-6..1.0);
+            symmetrize(&mut a);
+            let want = spd_inverse(&a).unwrap();
+            spd_inverse_into(&a, &mut out, &mut factor).unwrap();
+            assert_eq!(
+                want.as_slice()
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>(),
+                out.as_slice()
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>(),
+                "n {n}"
+            );
+        }
+        let indefinite = matrix_from_rows(&[vec![1.0, 2.0], vec![2.0, 1.0]]);
+        assert_eq!(
+            spd_inverse_into(&indefinite, &mut out, &mut factor),
+            Err(LinalgError::NotPositiveDefinite)
+        );
+        let nan = matrix_from_rows(&[vec![f64::NAN, 0.0], vec![0.0, 1.0]]);
+        assert_eq!(
+            spd_inverse_into(&nan, &mut out, &mut factor),
+            Err(LinalgError::NonFinite)
+        );
+    }
+}
