@@ -179,16 +179,12 @@ mod tests {
     }
 }
 
-/// [`spd_inverse`] of `a` into `out`, factoring in the storage of `factor` (both resized to
-/// `a`'s shape if they differ, so only a first call allocates): the same checks, the same
-/// factorization (`fixed::cholesky`), the same solves of the identity and the same
-/// symmetrization, hence the same bits (issue 12). On failure `factor` may be left empty
-/// (the next call sizes it again).
-pub fn spd_inverse_into(
-    a: &Matrix,
-    out: &mut Matrix,
-    factor: &mut Matrix,
-) -> Result<(), LinalgError> {
+/// [`cholesky`] of `a` computed in the storage of `storage` (which it takes; the caller puts
+/// the factor back with `unpack_dirty`, and it is resized to `a`'s shape if it differs, so only
+/// a first call allocates): the same checks and the same factorization (`fixed::cholesky`)
+/// without the copy `cholesky` allocates (issue 12). On failure `storage` is left empty (the
+/// next call sizes it again).
+pub fn cholesky_into(a: &Matrix, storage: &mut Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
     if a.nrows() != a.ncols() {
         return Err(LinalgError::NotSquare {
             rows: a.nrows(),
@@ -198,12 +194,23 @@ pub fn spd_inverse_into(
     if a.iter().any(|v| !v.is_finite()) {
         return Err(LinalgError::NonFinite);
     }
-    let mut m = std::mem::replace(factor, Matrix::zeros(0, 0));
+    let mut m = std::mem::replace(storage, Matrix::zeros(0, 0));
     if m.shape() != a.shape() {
         m = Matrix::zeros(a.nrows(), a.ncols());
     }
     m.copy_from(a);
-    let chol = crate::filter::fixed::cholesky(m).ok_or(LinalgError::NotPositiveDefinite)?;
+    crate::filter::fixed::cholesky(m).ok_or(LinalgError::NotPositiveDefinite)
+}
+
+/// [`spd_inverse`] of `a` into `out` (resized to `a`'s shape if it differs), factoring in the
+/// storage of `factor` ([`cholesky_into`]): the same checks, factorization, solves of the
+/// identity and symmetrization, hence the same bits, without allocating (issue 12).
+pub fn spd_inverse_into(
+    a: &Matrix,
+    out: &mut Matrix,
+    factor: &mut Matrix,
+) -> Result<(), LinalgError> {
+    let chol = cholesky_into(a, factor)?;
     if out.shape() != a.shape() {
         *out = Matrix::zeros(a.nrows(), a.ncols());
     }
@@ -219,8 +226,8 @@ mod in_place_tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    /// `spd_inverse_into` is `spd_inverse` bit for bit on random SPD matrices of dimensions
-    /// 1..=9 (the fixed-size kernels and nalgebra's dynamic path), with reused buffers of a
+    /// `cholesky_into` is `cholesky` and `spd_inverse_into` is `spd_inverse`, bit for bit, on
+    /// random SPD matrices of dimensions 1..=9 (the fixed-size kernels and nalgebra's dynamic path), with reused buffers of a
     /// different size at first, and refuses what `spd_inverse` refuses.
     #[test]
     fn spd_inverse_into_is_spd_inverse_bit_for_bit() {
@@ -232,6 +239,9 @@ mod in_place_tests {
             let mut a = &b * b.transpose() + Matrix::identity(n, n) * rng.random_range(1e-6..1.0);
             symmetrize(&mut a);
             let want = spd_inverse(&a).unwrap();
+            let chol = cholesky_into(&a, &mut factor).unwrap();
+            assert_eq!(chol.l_dirty(), cholesky(&a).unwrap().l_dirty(), "n {n}");
+            factor = chol.unpack_dirty();
             spd_inverse_into(&a, &mut out, &mut factor).unwrap();
             assert_eq!(
                 want.as_slice()
