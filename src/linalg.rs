@@ -141,43 +141,6 @@ pub fn relative_difference(a: &Matrix, b: &Matrix) -> f64 {
     (a - b).iter().fold(0.0_f64, |m, v| m.max(v.abs())) / scale
 }
 
-/// [`cholesky`] of `a` computed in the storage of `buf` (taken; made anew only when its shape
-/// is not `a`'s), without the copy `cholesky` allocates: the same checks in the same order and
-/// the same factorization, hence the same factor. The caller puts the storage back with
-/// `Cholesky::unpack_dirty`; on failure `buf` is left empty (0 x 0).
-pub fn cholesky_in(buf: &mut Matrix, a: &Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
-    if a.nrows() != a.ncols() {
-        return Err(LinalgError::NotSquare {
-            rows: a.nrows(),
-            cols: a.ncols(),
-        });
-    }
-    if a.iter().any(|v| !v.is_finite()) {
-        return Err(LinalgError::NonFinite);
-    }
-    let mut m = std::mem::replace(buf, Matrix::zeros(0, 0));
-    if m.shape() != a.shape() {
-        m = Matrix::zeros(a.nrows(), a.ncols());
-    }
-    m.copy_from(a);
-    crate::filter::fixed::cholesky(m).ok_or(LinalgError::NotPositiveDefinite)
-}
-
-/// [`spd_inverse`] of `a` into `out` (made anew only when its shape is not `a`'s), factoring
-/// in `buf` ([`cholesky_in`]): the same factorization, the identity solved in place and
-/// symmetrized, hence the same bits, without allocating.
-pub fn spd_inverse_into(a: &Matrix, out: &mut Matrix, buf: &mut Matrix) -> Result<(), LinalgError> {
-    let chol = cholesky_in(buf, a)?;
-    if out.shape() != a.shape() {
-        *out = Matrix::zeros(a.nrows(), a.ncols());
-    }
-    out.fill_with_identity();
-    crate::filter::fixed::chol_solve_matrix(&chol, out);
-    *buf = chol.unpack_dirty();
-    symmetrize(out);
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -239,5 +202,94 @@ mod tests {
                 spd_inverse(&bad).map(|_| ())
             );
         }
+    }
+}
+
+/// [`cholesky`] of `a` computed in the storage of `storage` (which it takes; the caller puts
+/// the factor back with `unpack_dirty`, and it is resized to `a`'s shape if it differs, so only
+/// a first call allocates): the same checks and the same factorization (`fixed::cholesky`)
+/// without the copy `cholesky` allocates (issue 12). On failure `storage` is left empty (the
+/// next call sizes it again).
+pub fn cholesky_into(a: &Matrix, storage: &mut Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
+    if a.nrows() != a.ncols() {
+        return Err(LinalgError::NotSquare {
+            rows: a.nrows(),
+            cols: a.ncols(),
+        });
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(LinalgError::NonFinite);
+    }
+    let mut m = std::mem::replace(storage, Matrix::zeros(0, 0));
+    if m.shape() != a.shape() {
+        m = Matrix::zeros(a.nrows(), a.ncols());
+    }
+    m.copy_from(a);
+    crate::filter::fixed::cholesky(m).ok_or(LinalgError::NotPositiveDefinite)
+}
+
+/// [`spd_inverse`] of `a` into `out` (resized to `a`'s shape if it differs), factoring in the
+/// storage of `factor` ([`cholesky_into`]): the same checks, factorization, solves of the
+/// identity and symmetrization, hence the same bits, without allocating (issue 12).
+pub fn spd_inverse_into(
+    a: &Matrix,
+    out: &mut Matrix,
+    factor: &mut Matrix,
+) -> Result<(), LinalgError> {
+    let chol = cholesky_into(a, factor)?;
+    if out.shape() != a.shape() {
+        *out = Matrix::zeros(a.nrows(), a.ncols());
+    }
+    out.fill_with_identity();
+    crate::filter::fixed::chol_solve_matrix(&chol, out);
+    *factor = chol.unpack_dirty();
+    symmetrize(out);
+    Ok(())
+}
+
+#[cfg(test)]
+mod in_place_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// `cholesky_into` is `cholesky` and `spd_inverse_into` is `spd_inverse`, bit for bit, on
+    /// random SPD matrices of dimensions 1..=9 (the fixed-size kernels and nalgebra's dynamic path), with reused buffers of a
+    /// different size at first, and refuses what `spd_inverse` refuses.
+    #[test]
+    fn spd_inverse_into_is_spd_inverse_bit_for_bit() {
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(17);
+        let (mut out, mut factor) = (Matrix::zeros(2, 3), Matrix::zeros(0, 0));
+        for trial in 0..400 {
+            let n = 1 + trial % 9;
+            let b = Matrix::from_fn(n, n, |_, _| rng.random_range(-2.0..2.0));
+            let mut a = &b * b.transpose() + Matrix::identity(n, n) * rng.random_range(1e-6..1.0);
+            symmetrize(&mut a);
+            let want = spd_inverse(&a).unwrap();
+            let chol = cholesky_into(&a, &mut factor).unwrap();
+            assert_eq!(chol.l_dirty(), cholesky(&a).unwrap().l_dirty(), "n {n}");
+            factor = chol.unpack_dirty();
+            spd_inverse_into(&a, &mut out, &mut factor).unwrap();
+            assert_eq!(
+                want.as_slice()
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>(),
+                out.as_slice()
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>(),
+                "n {n}"
+            );
+        }
+        let indefinite = matrix_from_rows(&[vec![1.0, 2.0], vec![2.0, 1.0]]);
+        assert_eq!(
+            spd_inverse_into(&indefinite, &mut out, &mut factor),
+            Err(LinalgError::NotPositiveDefinite)
+        );
+        let nan = matrix_from_rows(&[vec![f64::NAN, 0.0], vec![0.0, 1.0]]);
+        assert_eq!(
+            spd_inverse_into(&nan, &mut out, &mut factor),
+            Err(LinalgError::NonFinite)
+        );
     }
 }

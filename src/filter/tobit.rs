@@ -16,7 +16,7 @@
 //! the step a sensor is scheduled (only one Gamma_{m, h_{k-l}}, l = 0..p-1, is one).
 //! The two printed typos are options ([`TobitOptions`]), the correct reading the default.
 use super::{FilterError, Gaussian};
-use crate::linalg::{symmetrize, Matrix};
+use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::stats::truncated_normal::{censoring_probabilities, truncated_standard};
 
 /// How theta is standardized. The paper's definitions after (11) and after Lemma 1 divide by
@@ -209,6 +209,114 @@ pub fn update(
     Ok((Gaussian { mean, cov }, t))
 }
 
+/// Buffers of [`update_in_place`] for an n-dimensional state, sized at construction so an
+/// update allocates nothing (issue 12).
+#[derive(Debug, Clone)]
+pub struct UpdateWork {
+    /// `h x^-` (1).
+    zeta: Vector,
+    /// `h^T` (n x 1), copied per update (a transpose is exact).
+    ht: Matrix,
+    /// `P^- h^T` (n x 1).
+    ph: Matrix,
+    /// `h P^- h^T` (1 x 1).
+    hph: Matrix,
+    /// The gain K of (22) (n x 1) and its transpose.
+    k: Matrix,
+    kt: Matrix,
+    /// `I - pi K h` and its transpose (n x n).
+    i_kh: Matrix,
+    i_kh_t: Matrix,
+    /// `(I - pi K h) P^-`, then `K K^T` (n x n).
+    prod: Matrix,
+    kk: Matrix,
+}
+
+impl UpdateWork {
+    /// Buffers for an n-dimensional state.
+    pub fn new(n: usize) -> Self {
+        Self {
+            zeta: Vector::zeros(1),
+            ht: Matrix::zeros(n, 1),
+            ph: Matrix::zeros(n, 1),
+            hph: Matrix::zeros(1, 1),
+            k: Matrix::zeros(n, 1),
+            kt: Matrix::zeros(1, n),
+            i_kh: Matrix::zeros(n, n),
+            i_kh_t: Matrix::zeros(n, n),
+            prod: Matrix::zeros(n, n),
+            kk: Matrix::zeros(n, n),
+        }
+    }
+}
+
+/// [`update`] of `est` in place through `work`: the same operations in the same order (each
+/// product by nalgebra's gemm into a buffer, as `a * b` computes it, the n x n ones by
+/// [`fixed::gemm`](super::fixed::gemm), which is that gemm bit for bit; the scalings, sums and
+/// differences entry by entry with the same operands), hence the same bits, without
+/// allocating. On an error `est` is left as it was.
+#[allow(clippy::too_many_arguments, clippy::assign_op_pattern)]
+pub fn update_in_place(
+    est: &mut Gaussian,
+    h: &Matrix,
+    r: f64,
+    y: f64,
+    extra: f64,
+    thr: &Thresholds,
+    opts: &TobitOptions,
+    work: &mut UpdateWork,
+) -> Result<TobitTerms, FilterError> {
+    use super::fixed;
+    if !y.is_finite() {
+        return Err(FilterError::NonFiniteMeasurement(vec![y]));
+    }
+    let w = work;
+    fixed::gemv(&mut w.zeta, h, &est.mean);
+    let t = terms(w.zeta[0], r, thr, opts);
+    w.ht.tr_copy_from(h);
+    w.ph.gemm(1.0, &est.cov, &w.ht, 0.0); // P^- h^T, n x 1
+    w.hph.gemm(1.0, h, &w.ph, 0.0);
+    let hph = w.hph[0];
+    let s = t.pi * t.pi * (hph + extra) + r * t.var_factor; // (25)
+    if !(s > 0.0 && s.is_finite()) {
+        return Err(FilterError::Matrix {
+            what: "Tobit innovation variance P_yy (25)",
+            source: crate::linalg::LinalgError::NotPositiveDefinite,
+        });
+    }
+    // (22) with (24): K = P_xy / P_yy.
+    let c = t.pi / s;
+    for (ki, phi) in w.k.iter_mut().zip(w.ph.iter()) {
+        *ki = phi * c;
+    }
+    // (20): x = x^- + K (y - y^-).
+    let d = y - t.y_hat;
+    for (xi, ki) in est.mean.iter_mut().zip(w.k.iter()) {
+        *xi = *xi + ki * d;
+    }
+    // I - (K h) pi.
+    w.i_kh.gemm(1.0, &w.k, h, 0.0);
+    let n = est.mean.len();
+    for j in 0..n {
+        for i in 0..n {
+            let id = if i == j { 1.0 } else { 0.0 };
+            w.i_kh[(i, j)] = id - w.i_kh[(i, j)] * t.pi;
+        }
+    }
+    let rest = s - t.pi * t.pi * hph;
+    // (21): ((I - pi K h) P^-) (I - pi K h)^T + (K K^T) rest.
+    fixed::gemm(&mut w.prod, &w.i_kh, &est.cov);
+    w.i_kh_t.tr_copy_from(&w.i_kh);
+    fixed::gemm(&mut est.cov, &w.prod, &w.i_kh_t);
+    w.kt.tr_copy_from(&w.k);
+    w.kk.gemm(1.0, &w.k, &w.kt, 0.0);
+    for (p, kk) in est.cov.iter_mut().zip(w.kk.iter()) {
+        *p = *p + kk * rest;
+    }
+    symmetrize(&mut est.cov);
+    Ok(t)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -296,6 +404,65 @@ mod tests {
         assert!((printed_sign.y_hat - d.y_hat).abs() > 1e-3);
         // The printed sign puts the prediction outside the censoring region's mean.
         assert!(printed_sign.y_hat > d.y_hat);
+    }
+
+    /// `update_in_place` is `update` bit for bit: random priors of dimensions 1..=7 (the
+    /// fixed-size kernels, matrixmultiply's 6 x 6 and nalgebra's dynamic path), readings
+    /// inside and at both thresholds, both printed typos, one buffer reused across sizes.
+    #[test]
+    fn update_in_place_is_update_bit_for_bit() {
+        use rand::{Rng, SeedableRng};
+        let bits = |m: &Matrix| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(3);
+        let thr = Thresholds::new(-0.5, 0.7).unwrap();
+        for trial in 0..600 {
+            let n = 1 + trial % 7;
+            let mut work = UpdateWork::new(n);
+            let b = Matrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+            let mut cov = &b * b.transpose() + Matrix::identity(n, n) * 0.1;
+            symmetrize(&mut cov);
+            let pred = Gaussian::new(Vector::from_fn(n, |_, _| rng.random_range(-1.0..1.0)), cov);
+            let h = Matrix::from_fn(1, n, |_, _| rng.random_range(-1.0..1.0));
+            let r = rng.random_range(0.01..1.0);
+            let y = thr.censor(rng.random_range(-1.5..1.5));
+            let opts = TobitOptions {
+                theta_denominator: if trial % 3 == 0 {
+                    ThetaDenominator::R
+                } else {
+                    ThetaDenominator::SqrtR
+                },
+                lambda_sign: if trial % 5 == 0 {
+                    LambdaSign::Plus
+                } else {
+                    LambdaSign::Minus
+                },
+            };
+            let extra = if trial % 2 == 0 { 0.0 } else { 0.3 };
+            let (want, wt) = update(pred.clone(), &h, r, y, extra, &thr, &opts).unwrap();
+            let mut got = pred.clone();
+            let gt = update_in_place(&mut got, &h, r, y, extra, &thr, &opts, &mut work).unwrap();
+            assert_eq!(wt, gt);
+            assert_eq!(bits(&want.cov), bits(&got.cov), "n {n}");
+            assert_eq!(
+                want.mean.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                got.mean.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+            );
+        }
+        let mut e = pred();
+        let h = matrix_from_rows(&[vec![1.0, 0.0, 0.0]]);
+        let opts = TobitOptions::default();
+        let err = update_in_place(
+            &mut e,
+            &h,
+            0.6,
+            f64::NAN,
+            0.0,
+            &thr,
+            &opts,
+            &mut UpdateWork::new(3),
+        );
+        assert!(err.is_err());
+        assert_eq!(e, pred());
     }
 
     #[test]

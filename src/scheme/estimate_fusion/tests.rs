@@ -342,3 +342,210 @@ fn params_and_validation() {
         );
     }
 }
+
+/// The allocating forms the in-place ones replaced (issue 12), kept as the reference they must
+/// reproduce bit for bit.
+mod reference {
+    use crate::filter::information::Information;
+    use crate::filter::{FilterError, Gaussian};
+    use crate::linalg::{cholesky, Matrix, Vector};
+
+    fn weighted(infos: &[Information], w: &[f64]) -> Information {
+        let n = infos[0].vector.len();
+        let mut matrix = Matrix::zeros(n, n);
+        let mut vector = Vector::zeros(n);
+        for (info, &wi) in infos.iter().zip(w) {
+            if wi > 0.0 {
+                matrix += &info.matrix * wi;
+                vector += &info.vector * wi;
+            }
+        }
+        Information { matrix, vector }
+    }
+
+    fn trace_of(infos: &[Information], w: &[f64]) -> f64 {
+        match cholesky(&weighted(infos, w).matrix) {
+            Ok(c) => c.inverse().trace(),
+            Err(_) => f64::INFINITY,
+        }
+    }
+
+    fn ci_weights_of(infos: &[Information]) -> Vec<f64> {
+        let m = infos.len();
+        match m {
+            0 => vec![],
+            1 => vec![1.0],
+            2 => {
+                let f = |a: f64| trace_of(infos, &[a, 1.0 - a]);
+                let g = 0.5 * (5f64.sqrt() - 1.0);
+                let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
+                let mut c = hi - g * (hi - lo);
+                let mut d = lo + g * (hi - lo);
+                let (mut fc, mut fd) = (f(c), f(d));
+                for _ in 0..60 {
+                    if fc < fd {
+                        hi = d;
+                        d = c;
+                        fd = fc;
+                        c = hi - g * (hi - lo);
+                        fc = f(c);
+                    } else {
+                        lo = c;
+                        c = d;
+                        fc = fd;
+                        d = lo + g * (hi - lo);
+                        fd = f(d);
+                    }
+                }
+                let mid = 0.5 * (lo + hi);
+                let best = [(f(mid), mid), (f(0.0), 0.0), (f(1.0), 1.0)]
+                    .into_iter()
+                    .fold((f64::INFINITY, mid), |a, b| if b.0 < a.0 { b } else { a })
+                    .1;
+                vec![best, 1.0 - best]
+            }
+            _ => {
+                let mut w = vec![1.0 / m as f64; m];
+                let mut value = trace_of(infos, &w);
+                let mut eta = 1.0;
+                for _ in 0..100 {
+                    let Ok(c) = cholesky(&weighted(infos, &w).matrix) else {
+                        break;
+                    };
+                    let p = c.inverse();
+                    let grad: Vec<f64> = infos
+                        .iter()
+                        .map(|info| -(&p * &info.matrix * &p).trace())
+                        .collect();
+                    let scale = grad.iter().fold(0.0_f64, |a, g| a.max(g.abs()));
+                    if scale.is_nan() || scale <= 0.0 {
+                        break;
+                    }
+                    let mut improved = false;
+                    while eta > 1e-8 {
+                        let mut trial: Vec<f64> = w
+                            .iter()
+                            .zip(&grad)
+                            .map(|(wi, gi)| wi * (-eta * gi / scale).exp())
+                            .collect();
+                        let sum: f64 = trial.iter().sum();
+                        trial.iter_mut().for_each(|t| *t /= sum);
+                        let v = trace_of(infos, &trial);
+                        if v < value {
+                            let gain = value - v;
+                            w = trial;
+                            value = v;
+                            improved = gain > 1e-13 * value;
+                            eta = (eta * 2.0).min(8.0);
+                            break;
+                        }
+                        eta *= 0.5;
+                    }
+                    if !improved {
+                        break;
+                    }
+                }
+                w
+            }
+        }
+    }
+
+    pub fn covariance_intersection(
+        estimates: &[Gaussian],
+    ) -> Result<(Gaussian, Vec<f64>), FilterError> {
+        let infos: Vec<Information> = estimates
+            .iter()
+            .map(Information::from_gaussian)
+            .collect::<Result<_, _>>()?;
+        let w = ci_weights_of(&infos);
+        Ok((weighted(&infos, &w).to_gaussian()?, w))
+    }
+
+    pub fn naive_sum(estimates: &[Gaussian]) -> Result<Gaussian, FilterError> {
+        let infos: Vec<Information> = estimates
+            .iter()
+            .map(Information::from_gaussian)
+            .collect::<Result<_, _>>()?;
+        weighted(&infos, &vec![1.0; infos.len()]).to_gaussian()
+    }
+}
+
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+fn random_spd(rng: &mut Xoshiro256PlusPlus, n: usize, ridge: f64) -> Matrix {
+    use rand::Rng;
+    let b = Matrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+    let mut a = &b * b.transpose() + Matrix::identity(n, n) * ridge;
+    crate::linalg::symmetrize(&mut a);
+    a
+}
+
+/// The in-place fusion rules (one `FusionWork` reused throughout) reproduce the allocating
+/// forms bit for bit: weights, mean and covariance, for 1..=5 estimates of dimensions 1..=7
+/// (the golden section at two, the exponentiated gradient above), some nearly singular.
+#[test]
+fn in_place_fusion_is_the_allocating_fusion_bit_for_bit() {
+    use rand::Rng;
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(21);
+    for trial in 0..300 {
+        let (m, n) = (1 + trial % 5, 1 + (trial / 5) % 7);
+        let est: Vec<Gaussian> = (0..m)
+            .map(|_| {
+                let ridge = if rng.random_bool(0.2) { 1e-9 } else { 0.05 };
+                Gaussian::new(
+                    Vector::from_fn(n, |_, _| rng.random_range(-3.0..3.0)),
+                    random_spd(&mut rng, n, ridge),
+                )
+            })
+            .collect();
+        let mut work = ci::FusionWork::new(m, n);
+        let mut out = Gaussian::new(Vector::zeros(n), Matrix::zeros(n, n));
+        for _ in 0..2 {
+            let (want, w) = reference::covariance_intersection(&est).unwrap();
+            ci::covariance_intersection_into(&est, &mut out, &mut work).unwrap();
+            assert_eq!(bits(&w), bits(work.weights()), "m {m} n {n}");
+            assert_eq!(bits(want.mean.as_slice()), bits(out.mean.as_slice()));
+            assert_eq!(bits(want.cov.as_slice()), bits(out.cov.as_slice()));
+            let want = reference::naive_sum(&est).unwrap();
+            ci::naive_sum_into(&est, &mut out, &mut work).unwrap();
+            assert_eq!(bits(want.mean.as_slice()), bits(out.mean.as_slice()));
+            assert_eq!(bits(want.cov.as_slice()), bits(out.cov.as_slice()));
+        }
+    }
+}
+
+/// `update_linear` is `kf::update` bit for bit (mean and covariance) on random priors and
+/// linear sensors of 1..=3 readings on states of dimensions 1..=7, with reused buffers.
+#[test]
+fn update_linear_is_the_kf_update_bit_for_bit() {
+    use rand::Rng;
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(8);
+    for trial in 0..300 {
+        let (m, n) = (1 + trial % 3, 1 + (trial / 3) % 7);
+        let h = Matrix::from_fn(m, n, |_, _| rng.random_range(-1.0..1.0));
+        let sensor = LinearSensor::new(h, random_spd(&mut rng, m, 0.1)).unwrap();
+        let mut work = LinearUpdateWork::new(&sensor);
+        for _ in 0..2 {
+            let prior = Gaussian::new(
+                Vector::from_fn(n, |_, _| rng.random_range(-3.0..3.0)),
+                random_spd(&mut rng, n, 0.05),
+            );
+            let z = Vector::from_fn(m, |_, _| rng.random_range(-3.0..3.0));
+            let want = kf::update(&sensor, prior.clone(), &z).unwrap();
+            let mut got = prior;
+            update_linear(&sensor, &mut got, &z, &mut work).unwrap();
+            assert_eq!(
+                bits(want.mean.as_slice()),
+                bits(got.mean.as_slice()),
+                "m {m} n {n}"
+            );
+            assert_eq!(
+                bits(want.cov.as_slice()),
+                bits(got.cov.as_slice()),
+                "m {m} n {n}"
+            );
+        }
+    }
+}

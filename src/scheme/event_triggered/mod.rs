@@ -77,7 +77,7 @@ pub use stochastic::{
 
 use crate::filter::information::Information;
 use crate::filter::{fixed, kf, FilterError, Gaussian};
-use crate::linalg::{cholesky_in, spd_inverse_into, symmetrize, Matrix, Vector};
+use crate::linalg::{cholesky_into, spd_inverse_into, symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::model::{LinearSensor, MeasurementModel};
 use crate::scheme::{Feedback, SchemeError, System};
@@ -244,7 +244,7 @@ impl Fusion {
             return Ok(());
         }
         let chol =
-            cholesky_in(&mut self.factor, &pred.cov).map_err(|source| FilterError::Matrix {
+            cholesky_into(&pred.cov, &mut self.factor).map_err(|source| FilterError::Matrix {
                 what: "covariance",
                 source,
             })?;

@@ -1,12 +1,13 @@
 //! The fusion center of seed 002: the p remote local Tobit KFs (Theorem 1, eq. (18)-(25)), the
 //! federated fusion (Theorem 2, eq. (26)) and the reset (27), with the zero-order hold and the
 //! detection device (6) at its input.
+use crate::filter::fixed;
 use crate::filter::tobit::{self, Thresholds, TobitOptions};
 use crate::filter::{kf, Gaussian};
-use crate::linalg::{spd_inverse, symmetrize, Matrix, Vector};
+use crate::linalg::{spd_inverse_into, symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::model::LinearTransition;
-use crate::network::{Schedule, ZeroOrderHold};
+use crate::network::Schedule;
 use crate::scheme::{FusionCenter, SchemeError, System};
 use std::sync::Arc;
 
@@ -196,21 +197,51 @@ pub struct LocalRecord {
     pub pred_cov: Matrix,
 }
 
-/// Per-trial state of the fusion center.
+/// Per-trial state of the fusion center, with the buffers every step works in (allocated
+/// once, so a step allocates nothing; issue 12).
 #[derive(Debug, Clone)]
 pub struct FtkfCenter {
     model: Arc<FtkfModel>,
-    hold: ZeroOrderHold,
+    /// Per sensor: the fresh reading of this step if the sensor was scheduled (the zero-order
+    /// hold's value counts as fresh only on the step it arrived; a held value carries no new
+    /// information and enters only through `last_post`).
+    fresh: Vec<Option<f64>>,
     /// The fused estimate (Federated / LocalInLoop) or the lone local's (Local).
     fused: Gaussian,
-    /// Per local filter: its filtered mean at the step its held value was measured.
-    last_post: Vec<Option<Vector>>,
+    /// The common prediction (18)-(19) of the fused estimate.
+    pred: Gaussian,
+    /// The local filters of the federated loop, each reset (27) and updated in place.
+    locals: Vec<Gaussian>,
+    /// Per local filter: its filtered mean at the step its held value was measured (`None`
+    /// before its first reading), in a buffer allocated once.
+    last_post: Vec<LastPost>,
     bias: Option<Gaussian>,
+    /// The bias's next prediction (swapped with `bias`).
+    bias_next: Option<Gaussian>,
     out: Gaussian,
+    work: CenterWork,
     /// `Some` when recording: per step, per local filter.
     pub records: Option<Vec<Vec<LocalRecord>>>,
     /// When recording: the fused prediction covariance per step.
     pub fused_pred: Vec<Matrix>,
+}
+
+/// A local filter's filtered mean at its last reading, if it has had one.
+#[derive(Debug, Clone)]
+struct LastPost {
+    seen: bool,
+    mean: Vector,
+}
+
+/// Scratch buffers of [`FtkfCenter`]'s step.
+#[derive(Debug, Clone)]
+struct CenterWork {
+    predict: kf::PredictWork,
+    bias_predict: Option<kf::PredictWork>,
+    update: tobit::UpdateWork,
+    fusion: FusionWork,
+    /// `C_m xi` (1) of a held reading.
+    zeta: Vector,
 }
 
 impl FtkfCenter {
@@ -218,112 +249,202 @@ impl FtkfCenter {
     pub fn new(model: Arc<FtkfModel>, record: bool) -> Self {
         let p = model.n_sensors();
         let fused = model.prior.clone();
+        let n = fused.dim();
         let bias = model.bias_blind.as_ref().map(|b| b.b_prior.clone());
-        let mut c = Self {
-            hold: ZeroOrderHold::new(p),
-            last_post: vec![None; p],
-            out: fused.clone(),
+        let work = CenterWork {
+            predict: kf::PredictWork::new(n),
+            bias_predict: bias.as_ref().map(|b| kf::PredictWork::new(b.dim())),
+            update: tobit::UpdateWork::new(n),
+            fusion: FusionWork::new(n),
+            zeta: Vector::zeros(1),
+        };
+        let mut out = Gaussian::new(
+            Vector::zeros(model.full_dim),
+            Matrix::zeros(model.full_dim, model.full_dim),
+        );
+        full_output_into(&model, bias.as_ref(), &fused, &mut out);
+        let locals = match model.fusion {
+            Fusion::Local(_) => Vec::new(),
+            Fusion::Federated | Fusion::LocalInLoop(_) => vec![fused.clone(); p],
+        };
+        Self {
+            fresh: vec![None; p],
+            pred: fused.clone(),
+            locals,
             fused,
+            last_post: vec![
+                LastPost {
+                    seen: false,
+                    mean: Vector::zeros(n)
+                };
+                p
+            ],
+            bias_next: bias.clone(),
             bias,
+            out,
+            work,
             records: record.then(Vec::new),
             fused_pred: Vec::new(),
             model,
-        };
-        c.out = c.full_output(&c.fused);
-        c
-    }
-
-    /// The estimate on the full state (the bias-blind filter's x with the bias's open-loop
-    /// prior beside it).
-    fn full_output(&self, est: &Gaussian) -> Gaussian {
-        match (&self.model.bias_blind, &self.bias) {
-            (Some(bb), Some(b)) => {
-                let n = self.model.full_dim;
-                let mut mean = Vector::zeros(n);
-                let mut cov = Matrix::zeros(n, n);
-                for (i, &xi) in bb.x_idx.iter().enumerate() {
-                    mean[xi] = est.mean[i];
-                    for (j, &xj) in bb.x_idx.iter().enumerate() {
-                        cov[(xi, xj)] = est.cov[(i, j)];
-                    }
-                }
-                for (i, &bi) in bb.b_idx.iter().enumerate() {
-                    mean[bi] = b.mean[i];
-                    for (j, &bj) in bb.b_idx.iter().enumerate() {
-                        cov[(bi, bj)] = b.cov[(i, j)];
-                    }
-                }
-                Gaussian::new(mean, cov)
-            }
-            _ => est.clone(),
         }
     }
+}
 
-    /// Local filter `m` from its prediction: the Tobit update (20)-(25) if its sensor was
-    /// scheduled and its reading arrived, else the prediction itself (K = 0 by (24)).
-    fn local_step(
-        &mut self,
-        m: usize,
-        pred: Gaussian,
-        fresh: Option<f64>,
-    ) -> Result<Gaussian, SchemeError> {
-        let (h, r, thr) = &self.model.sensors[m];
-        let opts = self.model.opts;
-        let (post, alpha, beta, theta_l) = match fresh {
-            Some(ybar) => {
-                let y = thr.censor(ybar); // detection device (6)
-                let (post, t) = tobit::update(pred.clone(), h, *r, y, 0.0, thr, &opts)?;
-                self.last_post[m] = Some(post.mean.clone());
-                (post, t.alpha, t.beta, t.theta_l)
+/// The estimate on the full state into `out` (the bias-blind filter's x with the bias's
+/// open-loop prior beside it; zero cross-covariance).
+fn full_output_into(
+    model: &FtkfModel,
+    bias: Option<&Gaussian>,
+    est: &Gaussian,
+    out: &mut Gaussian,
+) {
+    match (&model.bias_blind, bias) {
+        (Some(bb), Some(b)) => {
+            out.mean.fill(0.0);
+            out.cov.fill(0.0);
+            for (i, &xi) in bb.x_idx.iter().enumerate() {
+                out.mean[xi] = est.mean[i];
+                for (j, &xj) in bb.x_idx.iter().enumerate() {
+                    out.cov[(xi, xj)] = est.cov[(i, j)];
+                }
             }
-            None => {
-                let (a, b, tl) = match &self.last_post[m] {
-                    Some(x) => {
-                        let t = tobit::terms((h * x)[0], *r, thr, &opts);
-                        (t.alpha, t.beta, t.theta_l)
-                    }
-                    None => (0.0, 0.0, f64::NEG_INFINITY),
-                };
-                (pred.clone(), a, b, tl)
+            for (i, &bi) in bb.b_idx.iter().enumerate() {
+                out.mean[bi] = b.mean[i];
+                for (j, &bj) in bb.b_idx.iter().enumerate() {
+                    out.cov[(bi, bj)] = b.cov[(i, j)];
+                }
             }
-        };
-        if let Some(rec) = self.records.as_mut().and_then(|r| r.last_mut()) {
-            rec.push(LocalRecord {
-                scheduled: fresh.is_some(),
-                alpha,
-                beta,
-                theta_l,
-                pred_cov: pred.cov,
-            });
         }
-        Ok(post)
+        _ => {
+            out.mean.copy_from(&est.mean);
+            out.cov.copy_from(&est.cov);
+        }
+    }
+}
+
+/// Local filter `m` from its prediction `est`, in place: the Tobit update (20)-(25) if its
+/// sensor was scheduled and its reading arrived, else the prediction itself (K = 0 by (24)).
+#[allow(clippy::too_many_arguments)]
+fn local_step(
+    model: &FtkfModel,
+    m: usize,
+    est: &mut Gaussian,
+    fresh: Option<f64>,
+    last_post: &mut [LastPost],
+    records: Option<&mut Vec<Vec<LocalRecord>>>,
+    update: &mut tobit::UpdateWork,
+    zeta: &mut Vector,
+) -> Result<(), SchemeError> {
+    let (h, r, thr) = &model.sensors[m];
+    let opts = model.opts;
+    // The record keeps the prediction, which the update overwrites (only when recording).
+    let pred_cov = records.is_some().then(|| est.cov.clone());
+    let (alpha, beta, theta_l) = match fresh {
+        Some(ybar) => {
+            let y = thr.censor(ybar); // detection device (6)
+            let t = tobit::update_in_place(est, h, *r, y, 0.0, thr, &opts, update)?;
+            last_post[m].seen = true;
+            last_post[m].mean.copy_from(&est.mean);
+            (t.alpha, t.beta, t.theta_l)
+        }
+        None => match &last_post[m] {
+            LastPost { seen: true, mean } => {
+                fixed::gemv(zeta, h, mean);
+                let t = tobit::terms(zeta[0], *r, thr, &opts);
+                (t.alpha, t.beta, t.theta_l)
+            }
+            LastPost { seen: false, .. } => (0.0, 0.0, f64::NEG_INFINITY),
+        },
+    };
+    if let Some(rec) = records.and_then(|r| r.last_mut()) {
+        rec.push(LocalRecord {
+            scheduled: fresh.is_some(),
+            alpha,
+            beta,
+            theta_l,
+            pred_cov: pred_cov.expect("recording"),
+        });
+    }
+    Ok(())
+}
+
+/// Buffers of [`federated_fusion_into`] for an n-dimensional state.
+#[derive(Debug, Clone)]
+pub struct FusionWork {
+    /// `sum P_m^{-1}` and `sum P_m^{-1} xi_m`.
+    info: Matrix,
+    vec: Vector,
+    /// One `P_m^{-1}`, its Cholesky factor's storage, and `P_m^{-1} xi_m`.
+    inv: Matrix,
+    factor: Matrix,
+    tmp: Vector,
+}
+
+impl FusionWork {
+    /// Buffers for an n-dimensional state.
+    pub fn new(n: usize) -> Self {
+        Self {
+            info: Matrix::zeros(n, n),
+            vec: Vector::zeros(n),
+            inv: Matrix::zeros(n, n),
+            factor: Matrix::zeros(n, n),
+            tmp: Vector::zeros(n),
+        }
     }
 }
 
 /// Federated fusion (26): `P = (sum P_m^{-1})^{-1}`, `xi = P sum P_m^{-1} xi_m`.
 pub fn federated_fusion(locals: &[Gaussian]) -> Result<Gaussian, SchemeError> {
     let n = locals[0].dim();
-    let mut info = Matrix::zeros(n, n);
-    let mut vec = Vector::zeros(n);
+    let mut out = Gaussian::new(Vector::zeros(n), Matrix::zeros(n, n));
+    federated_fusion_into(locals, &mut out, &mut FusionWork::new(n))?;
+    Ok(out)
+}
+
+/// [`federated_fusion`] into `out` through `work`: the sums from zero, the inverses by
+/// [`crate::linalg::spd_inverse_into`] (the factorization and solves of `spd_inverse`) and
+/// the products by [`fixed::gemv`] (nalgebra's), without allocating.
+pub fn federated_fusion_into(
+    locals: &[Gaussian],
+    out: &mut Gaussian,
+    work: &mut FusionWork,
+) -> Result<(), SchemeError> {
+    let w = work;
+    w.info.fill(0.0);
+    w.vec.fill(0.0);
     for l in locals {
-        let inv = spd_inverse(&l.cov).map_err(|source| SchemeError::Matrix {
-            what: "local covariance in the federated fusion (26)",
-            source,
+        spd_inverse_into(&l.cov, &mut w.inv, &mut w.factor).map_err(|source| {
+            SchemeError::Matrix {
+                what: "local covariance in the federated fusion (26)",
+                source,
+            }
         })?;
-        vec += &inv * &l.mean;
-        info += inv;
+        fixed::gemv(&mut w.tmp, &w.inv, &l.mean);
+        fixed::add_assign(w.vec.as_mut_slice(), w.tmp.as_slice());
+        fixed::add_assign(w.info.as_mut_slice(), w.inv.as_slice());
     }
-    let mut cov = spd_inverse(&info).map_err(|source| SchemeError::Matrix {
-        what: "fused information matrix (26)",
-        source,
+    spd_inverse_into(&w.info, &mut out.cov, &mut w.factor).map_err(|source| {
+        SchemeError::Matrix {
+            what: "fused information matrix (26)",
+            source,
+        }
     })?;
-    symmetrize(&mut cov);
-    Ok(Gaussian::new(&cov * vec, cov))
+    symmetrize(&mut out.cov);
+    fixed::gemv(&mut out.mean, &out.cov, &w.vec);
+    Ok(())
 }
 
 /// The reset (27) of a local filter from the fused estimate: `xi_m = xi`, `P_m = P / epsilon_m`.
 pub fn reset(fused: &Gaussian, epsilon: f64) -> Gaussian {
     Gaussian::new(fused.mean.clone(), &fused.cov / epsilon)
+}
+
+/// [`reset`] into `out` (the same divisions, entry by entry).
+pub fn reset_into(fused: &Gaussian, epsilon: f64, out: &mut Gaussian) {
+    out.mean.copy_from(&fused.mean);
+    for (o, p) in out.cov.iter_mut().zip(fused.cov.iter()) {
+        *o = p / epsilon;
+    }
 }
 
 impl FusionCenter for FtkfCenter {
@@ -335,46 +456,77 @@ impl FusionCenter for FtkfCenter {
                 inbox.len()
             )));
         }
-        let held = self.hold.step(k, inbox);
-        let fresh: Vec<Option<f64>> = held
-            .iter()
-            .enumerate()
-            .map(|(i, h)| {
-                (h.is_fresh() && Schedule::RoundRobin.allows(k, i, p))
-                    .then(|| h.value().map(|v| v[0]))
-                    .flatten()
-            })
-            .collect();
-        let model = self.model.clone();
+        // The zero-order hold (4): a reading is fresh on the step it arrived; only a fresh,
+        // scheduled reading updates a local filter.
+        for (i, (f, r)) in self.fresh.iter_mut().zip(inbox).enumerate() {
+            *f = match r {
+                Received::Measurement(z) if Schedule::RoundRobin.allows(k, i, p) => Some(z[0]),
+                _ => None,
+            };
+        }
+        let model = &*self.model;
+        let w = &mut self.work;
         // Common prediction of the fused estimate: P^- = F P F^T + Q; the locals' (19) after the
         // reset (27) are (F xi, P^- / epsilon_m) since Q_m = Q / epsilon_m.
-        let pred = kf::predict(&model.transition, &self.fused);
+        kf::predict_into(
+            &model.transition,
+            &self.fused,
+            &mut self.pred,
+            &mut w.predict,
+        );
         if let Some(r) = self.records.as_mut() {
             r.push(Vec::with_capacity(p));
-            self.fused_pred.push(pred.cov.clone());
+            self.fused_pred.push(self.pred.cov.clone());
         }
         let report = match model.fusion {
             Fusion::Local(m) => {
-                self.fused = self.local_step(m, pred, fresh[m])?;
+                local_step(
+                    model,
+                    m,
+                    &mut self.pred,
+                    self.fresh[m],
+                    &mut self.last_post,
+                    self.records.as_mut(),
+                    &mut w.update,
+                    &mut w.zeta,
+                )?;
+                std::mem::swap(&mut self.fused, &mut self.pred);
                 None
             }
             Fusion::Federated | Fusion::LocalInLoop(_) => {
-                let mut locals = Vec::with_capacity(p);
-                for (m, (&eps, &y)) in model.sharing.iter().zip(&fresh).enumerate() {
-                    locals.push(self.local_step(m, reset(&pred, eps), y)?);
+                for (m, (&eps, &y)) in model.sharing.iter().zip(&self.fresh).enumerate() {
+                    let local = &mut self.locals[m];
+                    reset_into(&self.pred, eps, local);
+                    local_step(
+                        model,
+                        m,
+                        local,
+                        y,
+                        &mut self.last_post,
+                        self.records.as_mut(),
+                        &mut w.update,
+                        &mut w.zeta,
+                    )?;
                 }
-                self.fused = federated_fusion(&locals)?;
+                federated_fusion_into(&self.locals, &mut self.fused, &mut w.fusion)?;
                 // LocalInLoop reports local m; the loop continues from the fused estimate.
                 match model.fusion {
-                    Fusion::LocalInLoop(m) => Some(locals.swap_remove(m)),
+                    Fusion::LocalInLoop(m) => Some(m),
                     _ => None,
                 }
             }
         };
-        if let (Some(bb), Some(b)) = (&model.bias_blind, &self.bias) {
-            self.bias = Some(kf::predict(&bb.b_transition, b));
+        if let (Some(bb), Some(b), Some(next), Some(pw)) = (
+            &model.bias_blind,
+            &mut self.bias,
+            &mut self.bias_next,
+            &mut w.bias_predict,
+        ) {
+            kf::predict_into(&bb.b_transition, b, next, pw);
+            std::mem::swap(b, next);
         }
-        self.out = self.full_output(report.as_ref().unwrap_or(&self.fused));
+        let est = report.map_or(&self.fused, |m| &self.locals[m]);
+        full_output_into(model, self.bias.as_ref(), est, &mut self.out);
         Ok(())
     }
 

@@ -13,7 +13,10 @@
 //! * **Remote estimators, hold and detection device at the fusion center**: the p local Tobit
 //!   filters sit next to the fusion center (the paper's Remark after (5): the
 //!   estimator-to-center channel is short and perfect), so the center applies the zero-order
-//!   hold ([`crate::network::ZeroOrderHold`]) and the two-sided censoring (6) itself. The
+//!   hold (the rule of [`crate::network::ZeroOrderHold`]: a reading is fresh on the step it
+//!   arrives, held after; the center keeps only which readings are fresh, since a held value
+//!   enters the filters only through the local filtered mean kept for it) and the two-sided
+//!   censoring (6) itself. The
 //!   estimator -> center traffic (local estimates and their covariances) is co-located and
 //!   **not counted**; in the federated loop the reset (27) also flows back for free.
 //! * **What a local filter does when its sensor is not scheduled**: by (24) the cross
