@@ -179,8 +179,15 @@ impl Drawer {
         let normal = |rng: &mut Xoshiro256PlusPlus| -> f64 {
             rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
         };
-        let normals =
-            |rng: &mut Xoshiro256PlusPlus| -> [f64; N] { std::array::from_fn(|_| normal(rng)) };
+        // A loop rather than `array::from_fn`, whose closure the compiler kept out of line
+        // (a call per draw).
+        let normals = |rng: &mut Xoshiro256PlusPlus| -> [f64; N] {
+            let mut a = [0.0; N];
+            for v in &mut a {
+                *v = normal(rng);
+            }
+            a
+        };
         let arr = |v: &Vector| -> [f64; N] { v.as_slice().try_into().expect("state dimension") };
         // x_0 = mean + S n_0.
         let a: [f64; N] = mat_vec(self.x0_sqrt.as_slice(), &normals(&mut rng));
