@@ -524,7 +524,16 @@ impl AllData<'_> {
         let linear = self.linear;
         let est = self.est;
         let x0: [f64; N] = sys.prior.mean.as_slice().try_into().ok()?;
-        let mut xs = vec![x0; trials.len()];
+        // The trials' means: on the stack for a runner block (4 trials), else on the heap.
+        const STACK_TRIALS: usize = 8;
+        let mut stack = [x0; STACK_TRIALS];
+        let mut heap;
+        let xs: &mut [[f64; N]] = if trials.len() <= STACK_TRIALS {
+            &mut stack[..trials.len()]
+        } else {
+            heap = vec![x0; trials.len()];
+            &mut heap
+        };
         for (k, step) in (1..=steps).zip(&sched.steps) {
             for (x, m) in xs.iter_mut().zip(trials) {
                 *x = scheduled_mean(f, linear, step, x, &m[k - 1]);

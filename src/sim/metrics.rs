@@ -821,6 +821,34 @@ impl TrialState<'_> {
     /// Closes the trial: its steady-state averages, per-trial rows and histogram counts go
     /// into `sums` (a trial that is not finished adds only its per-step sums).
     pub fn finish(mut self, sums: &mut Sums) {
+        self.close(sums);
+    }
+
+    /// Back to the state of a new trial of `sums` (as [`Sums::trial_state`] makes it, for
+    /// the same groups and steady-state start), keeping this one's storage: a batch's trial
+    /// states are reused from block to block instead of made (and moved) anew.
+    pub fn restart(&mut self, sums: &Sums) {
+        let [nees_bound, nees_bound_95, divergence_bound] = nees_bounds(sums.state_dim);
+        self.nees_bound = nees_bound;
+        self.nees_bound_95 = nees_bound_95;
+        self.divergence_bound = divergence_bound;
+        self.run = 0;
+        self.diverged = false;
+        self.acc = [0.0; 4];
+        self.group_acc.fill(0.0);
+        let width = sums.layout().width();
+        if self.run_acc.len() == width {
+            self.run_acc.fill(0.0);
+        } else {
+            self.run_acc = Row::zeros(width);
+        }
+        self.count = 0;
+        self.pending = 0;
+    }
+
+    /// [`TrialState::finish`] in place (the state is then spent until
+    /// [`TrialState::restart`]).
+    pub fn close(&mut self, sums: &mut Sums) {
         self.flush_nees(sums);
         let c = self.count.max(1) as f64;
         sums.trials += 1;

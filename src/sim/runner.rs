@@ -30,7 +30,7 @@ const WINDOW_MIN_SECONDS: f64 = 0.025;
 
 /// Bytes of in-flight block sums the window may grow to (it never shrinks below
 /// [`WINDOW_PER_THREAD`] blocks per thread), so memory stays flat in the number of trials.
-pub const WINDOW_MAX_BYTES: usize = 4 << 20;
+pub const WINDOW_MAX_BYTES: usize = 1 << 20;
 
 /// Blocks per window at most, whatever the size of a block's sums: a window is also what a
 /// Ctrl-C drops, so it stays short in time too (it only grows while it is under
@@ -176,9 +176,7 @@ impl Drawer {
         use crate::filter::fixed::{mat_vec, mat_vec_dyn, mat_vec_rows};
         let sys = &exp.system;
         let mut rng = trial_rng(exp.seed, trial as u64, 0);
-        let normal = |rng: &mut Xoshiro256PlusPlus| -> f64 {
-            rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
-        };
+        let normal = standard_normal;
         // A loop rather than `array::from_fn`, whose closure the compiler kept out of line
         // (a call per draw).
         let normals = |rng: &mut Xoshiro256PlusPlus| -> [f64; N] {
@@ -274,30 +272,40 @@ impl Drawer {
     }
 }
 
-/// What a worker task keeps from block to block: trial buffers (one per trial of a block
-/// when the variants run blocks in lockstep, else one) and the variants' work space.
-struct Worker {
-    drawers: Vec<Drawer>,
-    scratch: Scratch,
+/// One standard normal draw, inlined into the drawer's loops (as a closure it stayed out of
+/// line: a call per draw).
+#[inline(always)]
+fn standard_normal(rng: &mut Xoshiro256PlusPlus) -> f64 {
+    rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
 }
 
-impl Worker {
+/// What a worker task keeps from block to block: trial buffers (one per trial of a block
+/// when the variants run blocks in lockstep, else one) and the variants' work space.
+struct Worker<'e> {
+    drawers: Vec<Drawer>,
+    scratch: Scratch,
+    /// The trial states of a lockstep batch, restarted for each variant of each block.
+    states: Vec<super::metrics::TrialState<'e>>,
+}
+
+impl<'e> Worker<'e> {
     fn new(exp: &Experiment) -> Self {
         Self {
             drawers: vec![Drawer::new(exp)],
             scratch: Scratch::new(exp.system.n_sensors()),
+            states: Vec::new(),
         }
     }
 }
 
 /// A [`Worker`] borrowed from a pool and returned to it when dropped.
-struct PooledWorker<'a> {
-    worker: Option<Worker>,
-    pool: &'a std::sync::Mutex<Vec<Worker>>,
+struct PooledWorker<'a, 'e> {
+    worker: Option<Worker<'e>>,
+    pool: &'a std::sync::Mutex<Vec<Worker<'e>>>,
 }
 
-impl<'a> PooledWorker<'a> {
-    fn take(pool: &'a std::sync::Mutex<Vec<Worker>>, exp: &Experiment) -> Self {
+impl<'a, 'e> PooledWorker<'a, 'e> {
+    fn take(pool: &'a std::sync::Mutex<Vec<Worker<'e>>>, exp: &Experiment) -> Self {
         let worker = pool
             .lock()
             .unwrap_or_else(|e| e.into_inner())
@@ -309,12 +317,12 @@ impl<'a> PooledWorker<'a> {
         }
     }
 
-    fn get(&mut self) -> &mut Worker {
+    fn get(&mut self) -> &mut Worker<'e> {
         self.worker.as_mut().expect("present until dropped")
     }
 }
 
-impl Drop for PooledWorker<'_> {
+impl Drop for PooledWorker<'_, '_> {
     fn drop(&mut self) {
         if let Some(w) = self.worker.take() {
             self.pool.lock().unwrap_or_else(|e| e.into_inner()).push(w);
@@ -328,11 +336,11 @@ impl Drop for PooledWorker<'_> {
 /// drawn first and each variant run on them in lockstep. `on_trial` is called after each
 /// trial (after the block, for a batch); `stop` is checked before each trial (before the
 /// block) and ends the block early with `Ok(false)`.
-fn run_block(
-    exp: &Experiment,
+fn run_block<'e>(
+    exp: &'e Experiment,
     trials: std::ops::Range<usize>,
     sums: &mut [Sums],
-    worker: &mut Worker,
+    worker: &mut Worker<'e>,
     stop: &dyn Fn() -> bool,
     on_trial: &dyn Fn(usize),
 ) -> Result<bool, RunError> {
@@ -371,10 +379,16 @@ fn run_block(
     let measurements = &measurements[..n];
     for (v, s) in sums.iter_mut().enumerate().take(exp.variants.len()) {
         let scheme = &exp.variants[v].scheme;
+        while worker.states.len() < n {
+            worker
+                .states
+                .push(s.trial_state(&exp.groups, exp.steady_from));
+        }
+        let states = &mut worker.states[..n];
+        states.iter_mut().for_each(|state| state.restart(s));
         let mut recorder = BatchRecorder {
-            states: std::array::from_fn(|_| s.trial_state(&exp.groups, exp.steady_from)),
-            n,
-            truths,
+            states,
+            truths: &truths[..n],
             sums: s,
         };
         let outcome = scheme.run_batch_fast(
@@ -404,24 +418,22 @@ fn run_block(
 
 /// The sink of a batch: one trial state per trial of the block, all adding into the
 /// variant's block sums in trial order at every step.
-struct BatchRecorder<'a> {
+struct BatchRecorder<'a, 'e> {
     sums: &'a mut Sums,
-    /// The states of trials 0..n of the block (the rest unused).
-    states: [super::metrics::TrialState<'a>; BLOCK],
-    n: usize,
-    truths: [&'a [Vector]; BLOCK],
+    states: &'a mut [super::metrics::TrialState<'e>],
+    truths: &'a [&'a [Vector]],
 }
 
-impl BatchRecorder<'_> {
+impl BatchRecorder<'_, '_> {
     /// Closes the trials, in trial order.
     fn finish(self) {
-        for state in self.states.into_iter().take(self.n) {
-            state.finish(self.sums);
+        for state in self.states.iter_mut() {
+            state.close(self.sums);
         }
     }
 }
 
-impl crate::scheme::BatchSink for BatchRecorder<'_> {
+impl crate::scheme::BatchSink for BatchRecorder<'_, '_> {
     fn step(
         &mut self,
         j: usize,
@@ -449,10 +461,10 @@ impl crate::scheme::BatchSink for BatchRecorder<'_> {
     ) -> Result<(), crate::linalg::LinalgError> {
         // No ESS to record (`record_ess` of `None` adds nothing).
         super::metrics::TrialState::record_shared(
-            &mut self.states[..self.n],
+            self.states,
             self.sums,
             k,
-            &self.truths[..self.n],
+            self.truths,
             means,
             shared,
             factor,
