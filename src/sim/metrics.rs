@@ -765,29 +765,43 @@ impl TrialState<'_> {
         factor: Option<&[f64]>,
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
+        /// Trials whose errors and NEES are computed before any is accumulated: their
+        /// Cholesky solves (two dependent divisions each) then overlap.
+        const GROUP: usize = 4;
         let n = shared.mean.len();
         let trace = trace(&shared.cov);
         let counts = traffic_counts(traffic);
-        for ((state, truth), mean) in states.iter_mut().zip(truths).zip(means.chunks_exact(n)) {
-            let truth = &truth[k - 1];
-            assert_eq!(truth.len(), n, "record: truth and estimate dimensions");
-            let mut err = [0.0; STACK_WIDTH];
-            let nees = match factor {
-                Some(f) if n <= STACK_WIDTH => {
+        let trials = states.iter_mut().zip(truths).zip(means.chunks_exact(n));
+        let mut trials = trials.peekable();
+        while trials.peek().is_some() {
+            let group: [_; GROUP] = std::array::from_fn(|_| trials.next());
+            let mut errs = [[0.0; STACK_WIDTH]; GROUP];
+            let mut nees = [None; GROUP];
+            for ((trial, err), nees) in group.iter().zip(&mut errs).zip(&mut nees) {
+                let Some(((_, truth), mean)) = trial else {
+                    break;
+                };
+                let truth = &truth[k - 1];
+                assert_eq!(truth.len(), n, "record: truth and estimate dimensions");
+                if let Some(f) = factor.filter(|_| n <= STACK_WIDTH) {
                     let err = &mut err[..n];
-                    for ((e, m), t) in err.iter_mut().zip(mean).zip(truth.as_slice()) {
+                    for ((e, m), t) in err.iter_mut().zip(*mean).zip(truth.as_slice()) {
                         *e = m - t;
                     }
-                    crate::filter::fixed::mahalanobis_sq_factored(err, f)
+                    *nees = crate::filter::fixed::mahalanobis_sq_factored(err, f);
                 }
-                _ => None,
-            };
-            match nees {
-                Some(nees) => state.accumulate(sums, k, &err[..n], nees, false, trace, counts),
-                // Not factored: the general record (which also reports what is wrong).
-                None => {
-                    shared.mean.as_mut_slice().copy_from_slice(mean);
-                    state.record_inner(sums, k, truth, shared, factor, traffic)?;
+            }
+            for ((trial, err), nees) in group.into_iter().zip(&errs).zip(nees) {
+                let Some(((state, truth), mean)) = trial else {
+                    break;
+                };
+                match nees {
+                    Some(nees) => state.accumulate(sums, k, &err[..n], nees, false, trace, counts),
+                    // Not factored: the general record (which also reports what is wrong).
+                    None => {
+                        shared.mean.as_mut_slice().copy_from_slice(mean);
+                        state.record_inner(sums, k, &truth[k - 1], shared, factor, traffic)?;
+                    }
                 }
             }
         }

@@ -721,16 +721,26 @@ pub fn run_windows(
     progress: &(dyn Fn(usize) + Sync),
     on_window: &mut WindowSink<'_>,
 ) -> Result<Completion, RunError> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads)
-        .build()
-        .map_err(|e| RunError::Pool(e.to_string()))?;
+    // One thread: the blocks run on the caller's thread, without a pool to hand every
+    // window to and back (a thread wake-up each way); the same blocks in the same order.
+    let pool = if opts.threads == 1 {
+        None
+    } else {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(opts.threads)
+            .build()
+            .map_err(|e| RunError::Pool(e.to_string()))?;
+        Some(pool)
+    };
+    let threads = pool
+        .as_ref()
+        .map_or(1, rayon::ThreadPool::current_num_threads);
     let done = AtomicUsize::new(0);
     let stopped = || stop.is_some_and(|s| s.load(Ordering::Relaxed));
     // Blocks run in parallel a window at a time and are handed over in block order as each
     // window finishes: memory stays flat in the number of trials (at most `window` blocks'
     // sums are alive), and the summation order is the one of a sequential run.
-    let min_window = WINDOW_PER_THREAD * pool.current_num_threads().max(1);
+    let min_window = WINDOW_PER_THREAD * threads.max(1);
     let block_bytes = empty_sums(exp).iter().map(Sums::heap_bytes).sum::<usize>()
         + BLOCK * exp.variants.len() * Sums::per_trial_bytes(exp.groups.len());
     let max_window = (WINDOW_MAX_BYTES / block_bytes.max(1))
@@ -751,28 +761,35 @@ pub fn run_windows(
             return Ok(Completion::Stopped);
         }
         let end = (start + window).min(blocks.end);
-        let window_sums: Result<Vec<Option<Vec<Sums>>>, RunError> = pool.install(|| {
-            (start..end)
-                .into_par_iter()
-                // One drawer (trial buffers) per worker task, not per block, recycled
-                // from window to window.
-                .map_init(
-                    || PooledWorker::take(&workers, exp),
-                    |worker, b| {
-                        let mut sums = fresh_sums();
-                        let finished = run_block(
-                            exp,
-                            block_trials(b, exp.trials),
-                            &mut sums,
-                            worker.get(),
-                            &stopped,
-                            &|n| progress(done.fetch_add(n, Ordering::Relaxed) + n),
-                        )?;
-                        Ok(finished.then_some(sums))
-                    },
-                )
-                .collect()
+        let block = block_runner(|worker, b: usize| {
+            let mut sums = fresh_sums();
+            let finished = run_block(
+                exp,
+                block_trials(b, exp.trials),
+                &mut sums,
+                worker,
+                &stopped,
+                &|n| progress(done.fetch_add(n, Ordering::Relaxed) + n),
+            )?;
+            Ok(finished.then_some(sums))
         });
+        let window_sums: Result<Vec<Option<Vec<Sums>>>, RunError> = match &pool {
+            Some(pool) => pool.install(|| {
+                (start..end)
+                    .into_par_iter()
+                    // One drawer (trial buffers) per worker task, not per block, recycled
+                    // from window to window.
+                    .map_init(
+                        || PooledWorker::take(&workers, exp),
+                        |worker, b| block(worker.get(), b),
+                    )
+                    .collect()
+            }),
+            None => {
+                let mut worker = PooledWorker::take(&workers, exp);
+                (start..end).map(|b| block(worker.get(), b)).collect()
+            }
+        };
         let Some(mut window_sums) = window_sums?.into_iter().collect::<Option<Vec<_>>>() else {
             return Ok(Completion::Stopped);
         };
@@ -789,6 +806,15 @@ pub fn run_windows(
         }
     }
     Ok(Completion::Done)
+}
+
+/// Gives a closure that runs block `b` with a worker the signature that takes a worker of
+/// any borrow (for the pool's tasks and the caller's own thread alike).
+fn block_runner<'e, F>(f: F) -> F
+where
+    F: Fn(&mut Worker<'e>, usize) -> Result<Option<Vec<Sums>>, RunError>,
+{
+    f
 }
 
 /// Runs every trial of every variant and returns the merged sums, one per variant.
