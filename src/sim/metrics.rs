@@ -166,10 +166,27 @@ impl NeesHistogram {
         };
     }
 
+    #[cfg(test)]
     fn add(&mut self, v: f64) {
         let b = Self::bin(v);
         self.counts[b] += 1;
         self.touch(b, b + 1);
+    }
+
+    /// Adds `v / divisor` for every `v` of `values` (the table looked up and the touched
+    /// range widened once for all).
+    fn add_divided(&mut self, values: &[f64], divisor: f64) {
+        let table = log_table();
+        let (mut lo, mut hi) = (usize::MAX, 0);
+        for &v in values {
+            let b = Self::bin_in(table, v / divisor);
+            self.counts[b] += 1;
+            lo = lo.min(b);
+            hi = hi.max(b + 1);
+        }
+        if lo < hi {
+            self.touch(lo, hi);
+        }
     }
 
     /// Back to no counts, keeping the allocation.
@@ -185,8 +202,15 @@ impl NeesHistogram {
     /// read from a cheap approximation of t = (log10 v - LO) * PER_DECADE that is within
     /// [`APPROX_T_ERROR`] of it; only when t is that close to a bin edge (a few in a million
     /// values) is the library's log10 called. Either way the bin is the one `exact_bin` gives.
+    #[cfg(test)]
     fn bin(v: f64) -> usize {
-        if let Some(t) = approx_t(v) {
+        Self::bin_in(log_table(), v)
+    }
+
+    /// [`NeesHistogram::bin`] with the table of [`approx_t`] at hand.
+    #[inline(always)]
+    fn bin_in(table: &LogTable, v: f64) -> usize {
+        if let Some(t) = approx_t_in(table, v) {
             if (0.0..Self::BINS as f64).contains(&t) {
                 // t's integer part i by truncation (t >= 0; no call into libm), and its
                 // fraction t - i exactly (Sterbenz). A fraction at least APPROX_T_ERROR from
@@ -293,11 +317,14 @@ const APPROX_T_ERROR: f64 = 1e-6;
 /// Entries of the table of log10 over the leading mantissa bits.
 const LOG_TABLE_BITS: u32 = 8;
 
+/// Per leading-mantissa cell: 1/c and log10(c) of its centre c (see [`log_table`]).
+type LogTable = [[f64; 2]; 1 << LOG_TABLE_BITS];
+
 /// Per leading-mantissa cell i (mantissa m in [1 + i/256, 1 + (i+1)/256)): the cell's centre
 /// c, 1/c and log10(c).
-fn log_table() -> &'static [[f64; 2]; 1 << LOG_TABLE_BITS] {
+fn log_table() -> &'static LogTable {
     use std::sync::OnceLock;
-    static TABLE: OnceLock<[[f64; 2]; 1 << LOG_TABLE_BITS]> = OnceLock::new();
+    static TABLE: OnceLock<LogTable> = OnceLock::new();
     TABLE.get_or_init(|| {
         let cells = (1u32 << LOG_TABLE_BITS) as f64;
         std::array::from_fn(|i| {
@@ -312,7 +339,14 @@ fn log_table() -> &'static [[f64; 2]; 1 << LOG_TABLE_BITS] {
 /// of m's table cell, the last term by three terms of the series of ln(1 + d) / ln 10 with
 /// |d| < 1/512 (the first omitted term is below 1e-11, times 50 per decade below 1e-9; the
 /// rounding of a dozen operations on numbers below 1000 adds about 1e-13).
+#[cfg(test)]
 fn approx_t(v: f64) -> Option<f64> {
+    approx_t_in(log_table(), v)
+}
+
+/// [`approx_t`] with its table at hand.
+#[inline(always)]
+fn approx_t_in(table: &LogTable, v: f64) -> Option<f64> {
     if !(v.is_normal() && v > 0.0) {
         return None;
     }
@@ -320,7 +354,7 @@ fn approx_t(v: f64) -> Option<f64> {
     let e = ((bits >> 52) & 0x7ff) as i64 - 1023;
     let cell = ((bits >> (52 - LOG_TABLE_BITS)) & ((1 << LOG_TABLE_BITS) - 1)) as usize;
     let m = f64::from_bits((bits & ((1u64 << 52) - 1)) | (1023u64 << 52));
-    let [inv_c, log_c] = log_table()[cell];
+    let [inv_c, log_c] = table[cell];
     let d = m * inv_c - 1.0;
     let ln1p = d * (1.0 - d * (0.5 - d * (1.0 / 3.0)));
     let log10 = e as f64 * std::f64::consts::LOG10_2 + log_c + ln1p * std::f64::consts::LOG10_E;
@@ -826,9 +860,7 @@ impl TrialState<'_> {
     /// Adds the pending steady-state NEES / n values to the histogram.
     fn flush_nees(&mut self, sums: &mut Sums) {
         let n = sums.state_dim.max(1) as f64;
-        for &nees in &self.pending_nees[..self.pending] {
-            sums.nees_hist.add(nees / n);
-        }
+        sums.nees_hist.add_divided(&self.pending_nees[..self.pending], n);
         self.pending = 0;
     }
 
@@ -998,6 +1030,12 @@ mod tests {
         };
         let a = fill(&[1e-3, 0.5, 0.5, 2.0]);
         let b = fill(&[1e6, 3.0, f64::NAN, 1e-9]);
+        // Values added divided, all at once: the counts and the touched range of one by one.
+        let mut d = NeesHistogram::new();
+        d.add_divided(&[2e-3, 1.0, 1.0, 4.0], 2.0);
+        assert_eq!((&d.counts, d.touched), (&a.counts, a.touched));
+        d.add_divided(&[], 2.0);
+        assert_eq!(d.touched, a.touched);
         let mut m = NeesHistogram::new();
         m.merge(&a);
         m.merge(&b);
