@@ -860,7 +860,8 @@ impl TrialState<'_> {
     /// Adds the pending steady-state NEES / n values to the histogram.
     fn flush_nees(&mut self, sums: &mut Sums) {
         let n = sums.state_dim.max(1) as f64;
-        sums.nees_hist.add_divided(&self.pending_nees[..self.pending], n);
+        sums.nees_hist
+            .add_divided(&self.pending_nees[..self.pending], n);
         self.pending = 0;
     }
 
