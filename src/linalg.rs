@@ -51,18 +51,10 @@ pub fn symmetrize(a: &mut Matrix) {
 }
 
 /// Cholesky factor of a symmetric positive definite matrix, or an error saying why not.
+/// Dimensions 1..=6 factor in fixed size (the same operations, bit for bit).
 pub fn cholesky(a: &Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
-    if a.nrows() != a.ncols() {
-        return Err(LinalgError::NotSquare {
-            rows: a.nrows(),
-            cols: a.ncols(),
-        });
-    }
-    if a.iter().any(|v| !v.is_finite()) {
-        return Err(LinalgError::NonFinite);
-    }
-    // Dimensions 1..=6 factor in fixed size (the same operations, bit for bit).
-    crate::filter::fixed::cholesky(a.clone()).ok_or(LinalgError::NotPositiveDefinite)
+    // In storage of its own: the copy of `a` is the one allocation.
+    cholesky_into(a, &mut Matrix::zeros(0, 0))
 }
 
 /// Inverse of a symmetric positive definite matrix through its Cholesky factor, symmetrized.

@@ -317,6 +317,7 @@ pub fn nees_factor(p: &Matrix) -> Option<Vec<f64>> {
 /// `e^T P^{-1} e` from the factor of [`nees_factor`]: the forward substitution and the sum of
 /// squares of [`mahalanobis_sq_small`], hence its number. `None` for dimensions it does not
 /// cover (the factor of a positive definite P has no zero diagonal).
+#[inline]
 pub fn mahalanobis_sq_factored(e: &[f64], factor: &[f64]) -> Option<f64> {
     let n = e.len();
     if factor.len() != n * n {

@@ -5,6 +5,7 @@ use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, Syste
 use crate::filter::{fixed, kf, Gaussian};
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
+use multiversion::multiversion;
 use nalgebra::{Cholesky, Dyn};
 use rand::{Rng, RngCore};
 use std::sync::Arc;
@@ -535,9 +536,7 @@ impl AllData<'_> {
             &mut heap
         };
         for (k, step) in (1..=steps).zip(&sched.steps) {
-            for (x, m) in xs.iter_mut().zip(trials) {
-                *x = scheduled_mean(f, linear, step, x, &m[k - 1]);
-            }
+            advance_means(f, linear, step, xs, trials, k);
             est.cov.as_mut_slice().copy_from_slice(step.cov.as_slice());
             let factor = step.nees_factor.as_deref();
             if let Err(source) = sink.step_shared(k, xs.as_flattened(), est, factor, traffic) {
@@ -577,6 +576,23 @@ fn all_sent_traffic(sys: &System) -> crate::network::Traffic {
         traffic.frame_bits += m.frame_bits();
     }
     traffic
+}
+
+/// Step `k` of the means `xs` of the batch's `trials` ([`scheduled_mean`] of each). Compiled
+/// also for AVX2 and picked at run time: the same IEEE operations (no FMA contraction), so
+/// the same bits on every x86-64 machine.
+#[multiversion(targets("x86_64+avx2"))]
+fn advance_means<const N: usize>(
+    f: &[f64],
+    linear: &[(usize, Matrix)],
+    step: &ScheduledStep,
+    xs: &mut [[f64; N]],
+    trials: &[&[Vec<Vector>]],
+    k: usize,
+) {
+    for (x, m) in xs.iter_mut().zip(trials) {
+        *x = scheduled_mean(f, linear, step, x, &m[k - 1]);
+    }
 }
 
 /// One scheduled step's mean ([`CentralizedKf::scheduled_step`]) on arrays: from_gaussian's

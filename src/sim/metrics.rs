@@ -3,6 +3,7 @@
 use crate::filter::Gaussian;
 use crate::linalg::{mahalanobis_sq, Vector};
 use crate::network::Traffic;
+use multiversion::multiversion;
 
 /// Layout of one step's row of sums: one squared error per state group, then the fixed fields.
 #[derive(Debug, Clone, Copy)]
@@ -176,14 +177,7 @@ impl NeesHistogram {
     /// Adds `v / divisor` for every `v` of `values` (the table looked up and the touched
     /// range widened once for all).
     fn add_divided(&mut self, values: &[f64], divisor: f64) {
-        let table = log_table();
-        let (mut lo, mut hi) = (usize::MAX, 0);
-        for &v in values {
-            let b = Self::bin_in(table, v / divisor);
-            self.counts[b] += 1;
-            lo = lo.min(b);
-            hi = hi.max(b + 1);
-        }
+        let (lo, hi) = count_divided(&mut self.counts, log_table(), values, divisor);
         if lo < hi {
             self.touch(lo, hi);
         }
@@ -289,6 +283,26 @@ impl NeesHistogram {
         }
         None
     }
+}
+
+/// [`NeesHistogram::add_divided`]'s counting: the bin of every `v / divisor` counted, and the
+/// range of bins counted in (empty: `lo >= hi`). Compiled also for AVX2 and picked at run
+/// time: the same IEEE operations (no FMA contraction), hence the same bins.
+#[multiversion(targets("x86_64+avx2"))]
+fn count_divided(
+    counts: &mut [u64],
+    table: &LogTable,
+    values: &[f64],
+    divisor: f64,
+) -> (usize, usize) {
+    let (mut lo, mut hi) = (usize::MAX, 0);
+    for &v in values {
+        let b = NeesHistogram::bin_in(table, v / divisor);
+        counts[b] += 1;
+        lo = lo.min(b);
+        hi = hi.max(b + 1);
+    }
+    (lo, hi)
 }
 
 /// The chi-square(n) 99%, 95% and 99.9% quantiles that NEES is compared with: computed once
@@ -700,7 +714,7 @@ impl TrialState<'_> {
     /// its NEES, whether the covariance was degenerate, the covariance's trace and the
     /// traffic's counts as floats.
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    #[inline(always)]
     fn accumulate(
         &mut self,
         sums: &mut Sums,
@@ -799,47 +813,7 @@ impl TrialState<'_> {
         factor: Option<&[f64]>,
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        /// Trials whose errors and NEES are computed before any is accumulated: their
-        /// Cholesky solves (two dependent divisions each) then overlap.
-        const GROUP: usize = 4;
-        let n = shared.mean.len();
-        let trace = trace(&shared.cov);
-        let counts = traffic_counts(traffic);
-        let trials = states.iter_mut().zip(truths).zip(means.chunks_exact(n));
-        let mut trials = trials.peekable();
-        while trials.peek().is_some() {
-            let group: [_; GROUP] = std::array::from_fn(|_| trials.next());
-            let mut errs = [[0.0; STACK_WIDTH]; GROUP];
-            let mut nees = [None; GROUP];
-            for ((trial, err), nees) in group.iter().zip(&mut errs).zip(&mut nees) {
-                let Some(((_, truth), mean)) = trial else {
-                    break;
-                };
-                let truth = &truth[k - 1];
-                assert_eq!(truth.len(), n, "record: truth and estimate dimensions");
-                if let Some(f) = factor.filter(|_| n <= STACK_WIDTH) {
-                    let err = &mut err[..n];
-                    for ((e, m), t) in err.iter_mut().zip(*mean).zip(truth.as_slice()) {
-                        *e = m - t;
-                    }
-                    *nees = crate::filter::fixed::mahalanobis_sq_factored(err, f);
-                }
-            }
-            for ((trial, err), nees) in group.into_iter().zip(&errs).zip(nees) {
-                let Some(((state, truth), mean)) = trial else {
-                    break;
-                };
-                match nees {
-                    Some(nees) => state.accumulate(sums, k, &err[..n], nees, false, trace, counts),
-                    // Not factored: the general record (which also reports what is wrong).
-                    None => {
-                        shared.mean.as_mut_slice().copy_from_slice(mean);
-                        state.record_inner(sums, k, &truth[k - 1], shared, factor, traffic)?;
-                    }
-                }
-            }
-        }
-        Ok(())
+        record_shared(states, sums, k, truths, means, shared, factor, traffic)
     }
 
     /// Records the fusion center's effective sample size after step `k` (1-based), if it has
@@ -949,6 +923,63 @@ impl TrialObserver<'_> {
     pub fn finish(self) {
         self.state.finish(self.sums);
     }
+}
+
+/// [`TrialState::record_shared`]. Compiled also for AVX2 and picked at run time: the same
+/// IEEE operations (no FMA contraction), so the same sums on every x86-64 machine.
+#[allow(clippy::too_many_arguments)]
+#[multiversion(targets("x86_64+avx2"))]
+fn record_shared(
+    states: &mut [TrialState],
+    sums: &mut Sums,
+    k: usize,
+    truths: &[&[Vector]],
+    means: &[f64],
+    shared: &mut Gaussian,
+    factor: Option<&[f64]>,
+    traffic: Traffic,
+) -> Result<(), crate::linalg::LinalgError> {
+    /// Trials whose errors and NEES are computed before any is accumulated: their
+    /// Cholesky solves (two dependent divisions each) then overlap.
+    const GROUP: usize = 4;
+    let n = shared.mean.len();
+    let trace = trace(&shared.cov);
+    let counts = traffic_counts(traffic);
+    let trials = states.iter_mut().zip(truths).zip(means.chunks_exact(n));
+    let mut trials = trials.peekable();
+    while trials.peek().is_some() {
+        let group: [_; GROUP] = std::array::from_fn(|_| trials.next());
+        let mut errs = [[0.0; STACK_WIDTH]; GROUP];
+        let mut nees = [None; GROUP];
+        for ((trial, err), nees) in group.iter().zip(&mut errs).zip(&mut nees) {
+            let Some(((_, truth), mean)) = trial else {
+                break;
+            };
+            let truth = &truth[k - 1];
+            assert_eq!(truth.len(), n, "record: truth and estimate dimensions");
+            if let Some(f) = factor.filter(|_| n <= STACK_WIDTH) {
+                let err = &mut err[..n];
+                for ((e, m), t) in err.iter_mut().zip(*mean).zip(truth.as_slice()) {
+                    *e = m - t;
+                }
+                *nees = crate::filter::fixed::mahalanobis_sq_factored(err, f);
+            }
+        }
+        for ((trial, err), nees) in group.into_iter().zip(&errs).zip(nees) {
+            let Some(((state, truth), mean)) = trial else {
+                break;
+            };
+            match nees {
+                Some(nees) => state.accumulate(sums, k, &err[..n], nees, false, trace, counts),
+                // Not factored: the general record (which also reports what is wrong).
+                None => {
+                    shared.mean.as_mut_slice().copy_from_slice(mean);
+                    state.record_inner(sums, k, &truth[k - 1], shared, factor, traffic)?;
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A step's traffic counts as the floats its fields add.

@@ -8,6 +8,7 @@ use super::metrics::Sums;
 use crate::linalg::Vector;
 use crate::network;
 use crate::scheme::SchemeError;
+use multiversion::multiversion;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
@@ -161,74 +162,13 @@ impl Drawer {
     fn draw(&mut self, exp: &Experiment, trial: usize) {
         // State dimensions 1..=6: the same operations on stack arrays.
         match exp.system.state_dim() {
-            1 => self.draw_fixed::<1>(exp, trial),
-            2 => self.draw_fixed::<2>(exp, trial),
-            3 => self.draw_fixed::<3>(exp, trial),
-            4 => self.draw_fixed::<4>(exp, trial),
-            5 => self.draw_fixed::<5>(exp, trial),
-            6 => self.draw_fixed::<6>(exp, trial),
+            1 => draw_fixed::<1>(self, exp, trial),
+            2 => draw_fixed::<2>(self, exp, trial),
+            3 => draw_fixed::<3>(self, exp, trial),
+            4 => draw_fixed::<4>(self, exp, trial),
+            5 => draw_fixed::<5>(self, exp, trial),
+            6 => draw_fixed::<6>(self, exp, trial),
             _ => self.draw_dynamic(exp, trial),
-        }
-    }
-
-    /// [`Drawer::draw_dynamic`] for state dimension N: the same normal draws in the same order
-    /// and the same products (`fixed`'s kernels repeat nalgebra's gemv), with the state on the
-    /// stack.
-    fn draw_fixed<const N: usize>(&mut self, exp: &Experiment, trial: usize) {
-        use crate::filter::fixed::{mat_vec, mat_vec_dyn, mat_vec_rows};
-        let sys = &exp.system;
-        let mut rng = trial_rng(exp.seed, trial as u64, 0);
-        let normal = standard_normal;
-        // A loop rather than `array::from_fn`, whose closure the compiler kept out of line
-        // (a call per draw).
-        let normals = |rng: &mut Xoshiro256PlusPlus| -> [f64; N] {
-            let mut a = [0.0; N];
-            for v in &mut a {
-                *v = normal(rng);
-            }
-            a
-        };
-        let arr = |v: &Vector| -> [f64; N] { v.as_slice().try_into().expect("state dimension") };
-        // x_0 = mean + S n_0.
-        let a: [f64; N] = mat_vec(self.x0_sqrt.as_slice(), &normals(&mut rng));
-        let mean = arr(&exp.initial_truth.mean);
-        let mut x: [f64; N] = std::array::from_fn(|i| mean[i] + a[i]);
-        let t = &sys.transition;
-        let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
-        let any_nonlinear = self.linear.iter().any(Option::is_none);
-        for k in 0..exp.steps {
-            // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
-            let w = normals(&mut rng);
-            let a: [f64; N] = mat_vec(f, &x);
-            let b: [f64; N] = mat_vec(q_sqrt, &w);
-            x = std::array::from_fn(|i| a[i] + b[i]);
-            if any_nonlinear {
-                self.x.as_mut_slice().copy_from_slice(&x);
-            }
-            let zs = &mut self.data.measurements[k];
-            for (i, (plan, zv)) in self.linear.iter().zip(zs.iter_mut()).enumerate() {
-                let z = zv.as_mut_slice();
-                match plan {
-                    // z = H x + R^{1/2} v (MeasurementModel::sample); a scalar measurement
-                    // without the loops (the same products and sum).
-                    Some(LinearDraw { h, r_sqrt }) if z.len() == 1 => {
-                        let v = normal(&mut rng);
-                        let hx: [f64; 1] = mat_vec(h, &x);
-                        z[0] = hx[0] + r_sqrt[0] * v;
-                    }
-                    Some(LinearDraw { h, r_sqrt }) => {
-                        let (v, rv) = (self.v[i].as_mut_slice(), self.rv[i].as_mut_slice());
-                        v.iter_mut().for_each(|e| *e = normal(&mut rng));
-                        mat_vec_rows::<N>(z, h, &x);
-                        mat_vec_dyn(rv, r_sqrt, v);
-                        for (z, r) in z.iter_mut().zip(rv.iter()) {
-                            *z += r;
-                        }
-                    }
-                    None => *zv = sys.sensors[i].sample(&self.x, &mut rng),
-                }
-            }
-            self.data.truth[k].as_mut_slice().copy_from_slice(&x);
         }
     }
 
@@ -271,6 +211,69 @@ impl Drawer {
             }
             self.data.truth[k].copy_from(&self.x);
         }
+    }
+}
+
+/// [`Drawer::draw_dynamic`] for state dimension N: the same normal draws in the same order
+/// and the same products (`fixed`'s kernels repeat nalgebra's gemv), with the state on the
+/// stack. Compiled also for AVX2 and picked at run time: the same IEEE operations (no FMA
+/// contraction), so the same draws on every x86-64 machine.
+#[multiversion(targets("x86_64+avx2"))]
+fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
+    use crate::filter::fixed::{mat_vec, mat_vec_dyn, mat_vec_rows};
+    let sys = &exp.system;
+    let mut rng = trial_rng(exp.seed, trial as u64, 0);
+    let normal = standard_normal;
+    // A loop rather than `array::from_fn`, whose closure the compiler kept out of line
+    // (a call per draw).
+    let normals = |rng: &mut Xoshiro256PlusPlus| -> [f64; N] {
+        let mut a = [0.0; N];
+        for v in &mut a {
+            *v = normal(rng);
+        }
+        a
+    };
+    let arr = |v: &Vector| -> [f64; N] { v.as_slice().try_into().expect("state dimension") };
+    // x_0 = mean + S n_0.
+    let a: [f64; N] = mat_vec(d.x0_sqrt.as_slice(), &normals(&mut rng));
+    let mean = arr(&exp.initial_truth.mean);
+    let mut x: [f64; N] = std::array::from_fn(|i| mean[i] + a[i]);
+    let t = &sys.transition;
+    let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
+    let any_nonlinear = d.linear.iter().any(Option::is_none);
+    for k in 0..exp.steps {
+        // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
+        let w = normals(&mut rng);
+        let a: [f64; N] = mat_vec(f, &x);
+        let b: [f64; N] = mat_vec(q_sqrt, &w);
+        x = std::array::from_fn(|i| a[i] + b[i]);
+        if any_nonlinear {
+            d.x.as_mut_slice().copy_from_slice(&x);
+        }
+        let zs = &mut d.data.measurements[k];
+        for (i, (plan, zv)) in d.linear.iter().zip(zs.iter_mut()).enumerate() {
+            let z = zv.as_mut_slice();
+            match plan {
+                // z = H x + R^{1/2} v (MeasurementModel::sample); a scalar measurement
+                // without the loops (the same products and sum).
+                Some(LinearDraw { h, r_sqrt }) if z.len() == 1 => {
+                    let v = normal(&mut rng);
+                    let hx: [f64; 1] = mat_vec(h, &x);
+                    z[0] = hx[0] + r_sqrt[0] * v;
+                }
+                Some(LinearDraw { h, r_sqrt }) => {
+                    let (v, rv) = (d.v[i].as_mut_slice(), d.rv[i].as_mut_slice());
+                    v.iter_mut().for_each(|e| *e = normal(&mut rng));
+                    mat_vec_rows::<N>(z, h, &x);
+                    mat_vec_dyn(rv, r_sqrt, v);
+                    for (z, r) in z.iter_mut().zip(rv.iter()) {
+                        *z += r;
+                    }
+                }
+                None => *zv = sys.sensors[i].sample(&d.x, &mut rng),
+            }
+        }
+        d.data.truth[k].as_mut_slice().copy_from_slice(&x);
     }
 }
 
