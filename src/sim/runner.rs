@@ -224,15 +224,7 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
     let sys = &exp.system;
     let mut rng = trial_rng(exp.seed, trial as u64, 0);
     let normal = standard_normal;
-    // A loop rather than `array::from_fn`, whose closure the compiler kept out of line
-    // (a call per draw).
-    let normals = |rng: &mut Xoshiro256PlusPlus| -> [f64; N] {
-        let mut a = [0.0; N];
-        for v in &mut a {
-            *v = normal(rng);
-        }
-        a
-    };
+    let normals = standard_normals::<N>;
     let arr = |v: &Vector| -> [f64; N] { v.as_slice().try_into().expect("state dimension") };
     // x_0 = mean + S n_0.
     let a: [f64; N] = mat_vec(d.x0_sqrt.as_slice(), &normals(&mut rng));
@@ -275,6 +267,18 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
         }
         d.data.truth[k].as_mut_slice().copy_from_slice(&x);
     }
+}
+
+/// N standard normal draws in order: a function, not a closure, so that it is inlined into
+/// the drawer's AVX2 version too (a closure there stayed out of line, a call per step), and a
+/// loop rather than `array::from_fn` (whose closure stayed out of line, a call per draw).
+#[inline(always)]
+fn standard_normals<const N: usize>(rng: &mut Xoshiro256PlusPlus) -> [f64; N] {
+    let mut a = [0.0; N];
+    for v in &mut a {
+        *v = standard_normal(rng);
+    }
+    a
 }
 
 /// One standard normal draw, inlined into the drawer's loops (as a closure it stayed out of
