@@ -67,8 +67,9 @@ pub fn spd_inverse(a: &Matrix) -> Result<Matrix, LinalgError> {
     Ok(inv)
 }
 
-/// Check that `a` is square, finite and symmetric to a relative tolerance of 1e-9.
-pub fn check_symmetric(a: &Matrix) -> Result<(), LinalgError> {
+/// Check that `a` is square and finite (the first checks of [`cholesky`] and
+/// [`check_symmetric`]).
+fn check_square_finite(a: &Matrix) -> Result<(), LinalgError> {
     if a.nrows() != a.ncols() {
         return Err(LinalgError::NotSquare {
             rows: a.nrows(),
@@ -78,6 +79,12 @@ pub fn check_symmetric(a: &Matrix) -> Result<(), LinalgError> {
     if a.iter().any(|v| !v.is_finite()) {
         return Err(LinalgError::NonFinite);
     }
+    Ok(())
+}
+
+/// Check that `a` is square, finite and symmetric to a relative tolerance of 1e-9.
+pub fn check_symmetric(a: &Matrix) -> Result<(), LinalgError> {
+    check_square_finite(a)?;
     let scale = a
         .iter()
         .fold(0.0_f64, |m, v| m.max(v.abs()))
@@ -203,15 +210,7 @@ mod tests {
 /// without the copy `cholesky` allocates (issue 12). On failure `storage` is left empty (the
 /// next call sizes it again).
 pub fn cholesky_into(a: &Matrix, storage: &mut Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
-    if a.nrows() != a.ncols() {
-        return Err(LinalgError::NotSquare {
-            rows: a.nrows(),
-            cols: a.ncols(),
-        });
-    }
-    if a.iter().any(|v| !v.is_finite()) {
-        return Err(LinalgError::NonFinite);
-    }
+    check_square_finite(a)?;
     let mut m = std::mem::replace(storage, Matrix::zeros(0, 0));
     if m.shape() != a.shape() {
         m = Matrix::zeros(a.nrows(), a.ncols());

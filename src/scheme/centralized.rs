@@ -504,7 +504,7 @@ struct AllData<'a> {
 }
 
 impl AllData<'_> {
-    /// Several trials in lockstep, for state dimension N: at each step every trial's mean by
+    /// Several trials in lockstep (state dimensions 1..=6, else `None`): at each step every trial's mean by
     /// the scheduled step's operations ([`scheduled_mean`]; independent recursions, which the
     /// processor overlaps), the covariance copied from the shared schedule, then every trial's
     /// report. The forwarding coins are not drawn: at rate 1 every measurement is sent
@@ -512,6 +512,24 @@ impl AllData<'_> {
     /// reported yet) when the schedule does not reach `steps`; the caller then runs the
     /// general step, which reports the failure at its step. Measurements are checked
     /// (dimensions, finite) by the caller.
+    fn batch_any(
+        self,
+        trials: &[&[Vec<Vector>]],
+        steps: usize,
+        sink: &mut dyn super::BatchSink,
+    ) -> Option<Result<(), super::FastTrialError>> {
+        match self.sys.state_dim() {
+            1 => self.batch::<1>(trials, steps, sink),
+            2 => self.batch::<2>(trials, steps, sink),
+            3 => self.batch::<3>(trials, steps, sink),
+            4 => self.batch::<4>(trials, steps, sink),
+            5 => self.batch::<5>(trials, steps, sink),
+            6 => self.batch::<6>(trials, steps, sink),
+            _ => None,
+        }
+    }
+
+    /// [`AllData::batch_any`] for state dimension N.
     fn batch<const N: usize>(
         self,
         trials: &[&[Vec<Vector>]],
@@ -726,15 +744,7 @@ impl Scheme for CentralizedScheme {
             schedule,
             est,
         };
-        match sys.state_dim() {
-            1 => all.batch::<1>(trials, steps, sink),
-            2 => all.batch::<2>(trials, steps, sink),
-            3 => all.batch::<3>(trials, steps, sink),
-            4 => all.batch::<4>(trials, steps, sink),
-            5 => all.batch::<5>(trials, steps, sink),
-            6 => all.batch::<6>(trials, steps, sink),
-            _ => None,
-        }
+        all.batch_any(trials, steps, sink)
     }
 
     /// The generic loop's [`ForwardingSensor`] coins and [`CentralizedKf`] steps without the
@@ -754,7 +764,6 @@ impl Scheme for CentralizedScheme {
             return None;
         }
         if let Some(schedule) = &self.schedule {
-            let n = sys.state_dim();
             // The estimate handed to the sink, kept from trial to trial.
             let est = cache.scratch((Arc::as_ptr(schedule) as usize, 0), || sys.prior.clone());
             let all = AllData {
@@ -767,15 +776,7 @@ impl Scheme for CentralizedScheme {
             // recursion on the stack.
             // One trial is a batch of one.
             let (trials, sink) = (&[measurements][..], &mut OneTrial(sink));
-            let fixed = match n {
-                1 => all.batch::<1>(trials, steps, sink),
-                2 => all.batch::<2>(trials, steps, sink),
-                3 => all.batch::<3>(trials, steps, sink),
-                4 => all.batch::<4>(trials, steps, sink),
-                5 => all.batch::<5>(trials, steps, sink),
-                6 => all.batch::<6>(trials, steps, sink),
-                _ => None,
-            };
+            let fixed = all.batch_any(trials, steps, sink);
             if fixed.is_some() {
                 return fixed;
             }

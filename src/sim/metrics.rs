@@ -650,10 +650,12 @@ impl TrialState<'_> {
         // err = mean - truth (nalgebra's `-`, element by element): on the stack up to
         // STACK_WIDTH components (no allocation per trial), else in the trial's buffer.
         let mut err_stack = [0.0; STACK_WIDTH];
-        let mut err_heap = std::mem::replace(&mut self.err, Vector::zeros(0));
+        // The trial's buffer is taken (and put back below) only when the stack is too small.
+        let mut err_heap = Vector::zeros(0);
         let err: &mut [f64] = if n <= STACK_WIDTH {
             &mut err_stack[..n]
         } else {
+            err_heap = std::mem::replace(&mut self.err, err_heap);
             if err_heap.len() != n {
                 err_heap = Vector::zeros(n);
             }
@@ -675,7 +677,9 @@ impl TrialState<'_> {
             let counts = self.traffic.1;
             self.accumulate(sums, k, err, nees, degenerate, trace(&est.cov), counts);
         });
-        self.err = err_heap;
+        if n > STACK_WIDTH {
+            self.err = err_heap;
+        }
         recorded
     }
 
@@ -796,26 +800,6 @@ impl TrialState<'_> {
         }
     }
 
-    /// Records step `k` of the trials of a batch run in lockstep whose estimates share one
-    /// covariance: trial j (state `states[j]`, truth `truths[j][k - 1]`) has the mean
-    /// `means[j * n..(j + 1) * n]`; `shared` holds the covariance (its mean is work space),
-    /// `factor` its Cholesky factor. The same numbers as [`TrialState::record_factored`] of
-    /// each trial in order; what no trial changes (the trace, the traffic's counts) is read
-    /// once per step.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_shared(
-        states: &mut [TrialState],
-        sums: &mut Sums,
-        k: usize,
-        truths: &[&[Vector]],
-        means: &[f64],
-        shared: &mut Gaussian,
-        factor: Option<&[f64]>,
-        traffic: Traffic,
-    ) -> Result<(), crate::linalg::LinalgError> {
-        record_shared(states, sums, k, truths, means, shared, factor, traffic)
-    }
-
     /// Records the fusion center's effective sample size after step `k` (1-based), if it has
     /// one (particle filters; see [`crate::scheme::FusionCenter::ess`]).
     pub fn record_ess(&mut self, sums: &mut Sums, k: usize, ess: Option<f64>) {
@@ -925,11 +909,17 @@ impl TrialObserver<'_> {
     }
 }
 
-/// [`TrialState::record_shared`]. Compiled also for AVX2 and picked at run time: the same
-/// IEEE operations (no FMA contraction), so the same sums on every x86-64 machine.
+/// Records step `k` of the trials of a batch run in lockstep whose estimates share one
+/// covariance: trial j (state `states[j]`, truth `truths[j][k - 1]`) has the mean
+/// `means[j * n..(j + 1) * n]`; `shared` holds the covariance (its mean is work space),
+/// `factor` its Cholesky factor. The same numbers as [`TrialState::record_factored`] of
+/// each trial in order; what no trial changes (the trace, the traffic's counts) is read
+/// once per step.
+/// Compiled also for AVX2 and picked at run time: the same IEEE operations (no FMA
+/// contraction), so the same sums on every x86-64 machine.
 #[allow(clippy::too_many_arguments)]
 #[multiversion(targets("x86_64+avx2"))]
-fn record_shared(
+pub fn record_shared(
     states: &mut [TrialState],
     sums: &mut Sums,
     k: usize,

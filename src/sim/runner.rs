@@ -469,7 +469,7 @@ impl crate::scheme::BatchSink for BatchRecorder<'_, '_> {
         traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
         // No ESS to record (`record_ess` of `None` adds nothing).
-        super::metrics::TrialState::record_shared(
+        super::metrics::record_shared(
             self.states,
             self.sums,
             k,
