@@ -37,13 +37,18 @@ fn refused(out: &Output) -> String {
     err
 }
 
-/// Every file under `dir` (relative path → bytes).
+/// Every file under `dir` (relative path → bytes), but the lock files (which hold the pid of
+/// the last process that wrote the folder).
 fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     fn walk(root: &Path, d: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
         for e in std::fs::read_dir(d).unwrap() {
             let p = e.unwrap().path();
             if p.is_dir() {
                 walk(root, &p, out);
+            } else if p
+                .file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with(".hushfuse-lock"))
+            {
             } else {
                 let rel = p.strip_prefix(root).unwrap().to_string_lossy().into_owned();
                 out.insert(rel, std::fs::read(&p).unwrap());
@@ -248,6 +253,7 @@ fn any_split_into_1_to_7_shards_merges_to_the_bytes_of_the_unsharded_run() {
         let mut list: Vec<PathBuf> = std::fs::read_dir(dir.path().join(&shards))
             .unwrap()
             .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "hfshard"))
             .collect();
         list.sort();
         list.reverse();

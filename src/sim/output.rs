@@ -14,6 +14,11 @@ use std::path::{Path, PathBuf};
 pub const MANIFEST: &str = "hushfuse-manifest.json";
 /// Folder (inside the output folder) where a run's files are staged before they move in.
 const STAGING: &str = ".hushfuse-staging";
+/// Marker that hushfuse writes first into a staging folder it creates: a staging folder
+/// without it is not hushfuse's, and nothing in it is ever deleted.
+const STAGING_OWNER: &str = ".hushfuse-owner";
+/// Lock file of an output folder: held (advisory `flock`) by the one run writing the folder.
+pub const LOCK: &str = ".hushfuse-lock";
 /// Environment variable used only by tests: a write to a file of this name (its last path
 /// component) fails half-way with "no space left on device", as on a full disk.
 pub const FAIL_WRITE_ENV: &str = "HUSHFUSE_TEST_FAIL_WRITE";
@@ -226,6 +231,8 @@ impl Manifest {
 fn is_own_file(rel: &str) -> bool {
     let name = rel.rsplit('/').next().unwrap_or(rel);
     rel == MANIFEST
+        || rel == LOCK
+        || (name.starts_with(".hushfuse-lock-shard-") && !rel.contains('/'))
         || rel.starts_with(&format!("{STAGING}/"))
         || (name.starts_with("hushfuse-checkpoint") && name.ends_with(".bin"))
         || name.ends_with(".hfshard")
@@ -265,19 +272,237 @@ fn list_files(dir: &Path) -> Result<Vec<String>, String> {
     Ok(out)
 }
 
-/// Reads the manifest of `dir`, if it has one.
+/// Reads the manifest of `dir`, if it has one. Every file it lists must be a normalized
+/// relative path inside the folder (no `..`, no absolute path, nothing of hushfuse's own):
+/// the list decides what a later run removes, so a manifest that reaches outside is refused.
 pub fn read_manifest(dir: &Path) -> Result<Option<Manifest>, String> {
     let path = dir.join(MANIFEST);
-    match std::fs::read_to_string(&path) {
-        Ok(text) => serde_json::from_str(&text).map(Some).map_err(|e| {
+    let manifest: Manifest = match std::fs::read_to_string(&path) {
+        Ok(text) => serde_json::from_str(&text).map_err(|e| {
             format!(
                 "{}: not a hushfuse manifest ({e}); remove it or choose another output folder",
                 path.display()
             )
-        }),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(format!("cannot read {}: {e}", path.display())),
+        })?,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("cannot read {}: {e}", path.display())),
+    };
+    for f in &manifest.files {
+        check_entry(f).map_err(|why| {
+            format!(
+                "{}: lists {f:?}, which {why}; a manifest may only name files inside its folder (remove it or choose another output folder)",
+                path.display()
+            )
+        })?;
     }
+    Ok(Some(manifest))
+}
+
+/// Whether `rel` is a name a manifest may list: relative, `/`-separated, normalized, and not
+/// one of hushfuse's own files.
+fn check_entry(rel: &str) -> Result<(), String> {
+    if rel.is_empty() {
+        return Err("is empty".into());
+    }
+    if rel.starts_with('/') || rel.contains('\\') || rel.contains('\0') || rel.contains(':') {
+        return Err("is not a relative path".into());
+    }
+    for part in rel.split('/') {
+        if part.is_empty() || part == "." || part == ".." {
+            return Err("is not a normalized path inside the folder".into());
+        }
+    }
+    if is_own_file(rel) {
+        return Err("is one of hushfuse's own files".into());
+    }
+    Ok(())
+}
+
+/// Refuses a path `rel` inside `dir` that passes through a symbolic link (a folder of the
+/// output that leads elsewhere): writing or removing through it would touch files outside.
+fn check_no_link(dir: &Path, rel: &str) -> Result<(), String> {
+    let parts: Vec<&str> = rel.split('/').collect();
+    let mut p = dir.to_path_buf();
+    for part in &parts[..parts.len().saturating_sub(1)] {
+        p.push(part);
+        match std::fs::symlink_metadata(&p) {
+            Ok(m) if m.file_type().is_symlink() => {
+                return Err(format!(
+                    "{} is a symbolic link: hushfuse writes and removes files only inside the output folder; remove the link or choose another --out",
+                    p.display()
+                ))
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// An advisory lock (`flock`) on a lock file of an output folder, held until dropped. The
+/// operating system releases it when its process dies, so a lock of a dead run never stands.
+#[derive(Debug)]
+pub struct FolderLock {
+    _file: File,
+}
+
+/// Takes the lock `name` (e.g. [`LOCK`]) of folder `dir`, creating it; refuses, naming the
+/// other process, while another run holds it. Also checks that the folder can take new files,
+/// so that a read-only `--out` is found before any trial runs.
+pub fn lock_folder(dir: &Path, name: &str) -> Result<FolderLock, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let path = dir.join(name);
+    let mut file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(|e| {
+            format!(
+                "cannot write to output folder {}: {e}; choose a writable --out",
+                dir.display()
+            )
+        })?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let mut text = String::new();
+            let _ = std::io::Read::read_to_string(&mut file, &mut text);
+            let who = match text.trim().parse::<u32>() {
+                Ok(pid) => format!("another hushfuse run (process {pid})"),
+                Err(_) => "another hushfuse run".to_string(),
+            };
+            return Err(format!(
+                "output folder {} is being written by {who}; wait for it to finish or choose another --out",
+                dir.display()
+            ));
+        }
+        Err(std::fs::TryLockError::Error(e)) => {
+            return Err(format!("cannot lock {}: {e}", path.display()));
+        }
+    }
+    // Who holds it, for the message of a run refused meanwhile.
+    let _ = file.set_len(0);
+    let _ = write!(file, "{}", std::process::id());
+    let _ = file.sync_all();
+    probe_writable(dir)?;
+    Ok(FolderLock { _file: file })
+}
+
+/// Creates, flushes and removes a small file in `dir`: a folder that cannot take new files is
+/// refused before any work (the name is a temporary's, removed if this process dies).
+fn probe_writable(dir: &Path) -> Result<(), String> {
+    let probe = dir.join(format!(".write-probe.tmp-{}", std::process::id()));
+    let result =
+        File::create(&probe).and_then(|mut f| f.write_all(b"hushfuse").and_then(|()| f.sync_all()));
+    let _ = std::fs::remove_file(&probe);
+    result.map_err(|e| {
+        format!(
+            "cannot write to output folder {}: {e}; choose a writable --out",
+            dir.display()
+        )
+    })
+}
+
+/// Moves staged file `name` from `staging` into place in `dir`.
+fn move_in(dir: &Path, staging: &Path, name: &str) -> Result<(), String> {
+    check_no_link(dir, name)?;
+    let from = staging.join(name);
+    let to = dir.join(name);
+    if let Some(parent) = to.parent() {
+        std::fs::create_dir_all(parent)
+            .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
+    }
+    std::fs::rename(&from, &to)
+        .map_err(|e| format!("cannot move {} into place: {e}", to.display()))?;
+    if let Some(parent) = to.parent() {
+        sync_dir(parent);
+    }
+    Ok(())
+}
+
+/// Removes the files of an earlier run (manifest entries, so inside `dir`) and the folders
+/// (budget-*/) that their removal emptied.
+fn remove_stale(dir: &Path, stale: &[String]) -> Result<(), String> {
+    for stale in stale {
+        check_no_link(dir, stale)?;
+        let path = dir.join(stale);
+        match std::fs::remove_file(&path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(format!("cannot remove stale {}: {e}", path.display())),
+        }
+        let mut parent = path.parent();
+        while let Some(p) = parent.filter(|p| *p != dir) {
+            if std::fs::remove_dir(p).is_err() {
+                break;
+            }
+            parent = p.parent();
+        }
+    }
+    Ok(())
+}
+
+/// Deals with a staging folder left in `dir` by an earlier process. One that hushfuse made
+/// (it holds [`STAGING_OWNER`]) and that holds a staged manifest was killed while moving its
+/// files into place: the move is finished (every file it computed is kept, the earlier run's
+/// stale files go, the manifest last), and `old` becomes the new manifest. One without a
+/// staged manifest died while staging: its files are its own, and are removed. A staging
+/// folder that hushfuse did not make is refused, and nothing in it is touched.
+fn recover_staging(dir: &Path, old: &mut Option<Manifest>) -> Result<(), String> {
+    let staging = dir.join(STAGING);
+    let meta = match std::fs::symlink_metadata(&staging) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(format!("cannot read {}: {e}", staging.display())),
+    };
+    let foreign = |what: String| {
+        format!(
+            "{} {what}, which hushfuse did not stage; move them elsewhere or choose another --out",
+            staging.display()
+        )
+    };
+    if !meta.is_dir() {
+        return Err(foreign("is not a folder".into()));
+    }
+    if !staging.join(STAGING_OWNER).is_file() {
+        let files = list_files(&staging)?;
+        if !files.is_empty() {
+            return Err(foreign(format!("holds {}", files.join(", "))));
+        }
+        let _ = std::fs::remove_dir_all(&staging);
+        return Ok(());
+    }
+    if let Some(new) = read_manifest(&staging)? {
+        for name in &new.files {
+            if staging.join(name).exists() {
+                move_in(dir, &staging, name)?;
+            }
+        }
+        let stale: Vec<String> = old
+            .as_ref()
+            .map(|m| {
+                m.files
+                    .iter()
+                    .filter(|f| !new.files.contains(f))
+                    .cloned()
+                    .collect()
+            })
+            .unwrap_or_default();
+        remove_stale(dir, &stale)?;
+        std::fs::rename(staging.join(MANIFEST), dir.join(MANIFEST))
+            .map_err(|e| format!("cannot move {MANIFEST} into place: {e}"))?;
+        eprintln!(
+            "note: {}: finished moving the outputs of an interrupted run into place ({} files)",
+            dir.display(),
+            new.files.len()
+        );
+        *old = Some(new);
+    }
+    std::fs::remove_dir_all(&staging)
+        .map_err(|e| format!("cannot remove {}: {e}", staging.display()))?;
+    sync_dir(dir);
+    Ok(())
 }
 
 /// An output folder being written: files are staged, then moved in together by
@@ -289,6 +514,8 @@ pub struct OutputDir {
     old: Option<Manifest>,
     staged: Vec<String>,
     committed: bool,
+    /// Held for the whole life of the output: one run per folder.
+    _lock: FolderLock,
 }
 
 impl OutputDir {
@@ -296,10 +523,10 @@ impl OutputDir {
     /// it holds files that neither its manifest nor hushfuse's own naming accounts for: they
     /// would otherwise sit beside the new results with nothing to tell them apart.
     pub fn open(dir: &Path) -> Result<Self, String> {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        let lock = lock_folder(dir, LOCK)?;
         remove_stale_temporaries(dir);
-        let old = read_manifest(dir)?;
+        let mut old = read_manifest(dir)?;
+        recover_staging(dir, &mut old)?;
         let listed: Vec<&str> = old
             .as_ref()
             .map(|m| m.files.iter().map(String::as_str).collect())
@@ -326,26 +553,26 @@ impl OutputDir {
                 }
             ));
         }
-        Ok(Self::at(dir, old))
+        Ok(Self::at(dir, old, lock))
     }
 
     /// Opens an existing run's folder to add files to it (`hushfuse report`): the files its
     /// manifest lists stay, and the new ones join the list.
     pub fn open_existing(dir: &Path) -> Result<Self, String> {
-        let old = read_manifest(dir)?;
-        Ok(Self::at(dir, old))
+        let lock = lock_folder(dir, LOCK)?;
+        let mut old = read_manifest(dir)?;
+        recover_staging(dir, &mut old)?;
+        Ok(Self::at(dir, old, lock))
     }
 
-    fn at(dir: &Path, old: Option<Manifest>) -> Self {
-        let staging = dir.join(STAGING);
-        // Leftovers of a run that died while staging.
-        let _ = std::fs::remove_dir_all(&staging);
+    fn at(dir: &Path, old: Option<Manifest>, lock: FolderLock) -> Self {
         Self {
             dir: dir.to_path_buf(),
-            staging,
+            staging: dir.join(STAGING),
             old,
             staged: Vec::new(),
             committed: false,
+            _lock: lock,
         }
     }
 
@@ -357,8 +584,13 @@ impl OutputDir {
     /// The folder where writers that take a folder (plots) put their files; name them with
     /// [`OutputDir::record`].
     pub fn staging(&mut self) -> Result<&Path, String> {
-        std::fs::create_dir_all(&self.staging)
-            .map_err(|e| format!("cannot create {}: {e}", self.staging.display()))?;
+        let owner = self.staging.join(STAGING_OWNER);
+        if !owner.is_file() {
+            std::fs::create_dir_all(&self.staging)
+                .map_err(|e| format!("cannot create {}: {e}", self.staging.display()))?;
+            // First into the folder: what follows is hushfuse's (see `recover_staging`).
+            write_file(&owner, std::process::id().to_string().as_bytes())?;
+        }
         Ok(&self.staging)
     }
 
@@ -411,35 +643,10 @@ impl OutputDir {
         let json = serde_json::to_string_pretty(&manifest).map_err(|e| e.to_string())?;
         write_file(&self.staging()?.join(MANIFEST), json.as_bytes())?;
         for name in &self.staged {
-            let from = self.staging.join(name);
-            let to = self.dir.join(name);
-            if let Some(parent) = to.parent() {
-                std::fs::create_dir_all(parent)
-                    .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
-            }
-            std::fs::rename(&from, &to)
-                .map_err(|e| format!("cannot move {} into place: {e}", to.display()))?;
-            if let Some(parent) = to.parent() {
-                sync_dir(parent);
-            }
+            move_in(&self.dir, &self.staging, name)?;
         }
         if !keep_old {
-            for stale in &stale {
-                let path = self.dir.join(stale);
-                match std::fs::remove_file(&path) {
-                    Ok(()) => {}
-                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-                    Err(e) => return Err(format!("cannot remove stale {}: {e}", path.display())),
-                }
-                // Folders (budget-*/) that the removal emptied.
-                let mut parent = path.parent();
-                while let Some(p) = parent.filter(|p| *p != self.dir) {
-                    if std::fs::remove_dir(p).is_err() {
-                        break;
-                    }
-                    parent = p.parent();
-                }
-            }
+            remove_stale(&self.dir, &stale)?;
         }
         std::fs::rename(self.staging.join(MANIFEST), self.dir.join(MANIFEST))
             .map_err(|e| format!("cannot move {} into place: {e}", MANIFEST))?;
@@ -450,9 +657,18 @@ impl OutputDir {
     }
 }
 
+#[cfg(test)]
+impl OutputDir {
+    /// As a process killed now: the staging folder stays, the lock goes with the process.
+    fn abandon(mut self) {
+        self.committed = true;
+    }
+}
+
 impl Drop for OutputDir {
     fn drop(&mut self) {
-        if !self.committed {
+        // Only a staging folder of this output's own making (see `recover_staging`).
+        if !self.committed && self.staging.join(STAGING_OWNER).is_file() {
             let _ = std::fs::remove_dir_all(&self.staging);
         }
     }
@@ -558,6 +774,134 @@ mod tests {
         let mut out = OutputDir::open(dir.path()).unwrap();
         out.stage("a.txt", b"1").unwrap();
         drop(out);
-        assert_eq!(list_files(dir.path()).unwrap(), Vec::<String>::new());
+        // Only the (released) lock file stays.
+        assert_eq!(list_files(dir.path()).unwrap(), vec![LOCK.to_string()]);
+    }
+
+    #[test]
+    fn a_manifest_naming_files_outside_its_folder_is_refused_and_nothing_is_removed() {
+        let root = tempfile::tempdir().unwrap();
+        let dir = root.path().join("o");
+        std::fs::write(root.path().join("victim.txt"), "keep").unwrap();
+        let victim = root.path().join("victim.txt").display().to_string();
+        for bad in [
+            "../victim.txt",
+            victim.as_str(),
+            "a/../../victim.txt",
+            "./a",
+            "",
+            "a//b",
+            ".hushfuse-staging/x",
+            "hushfuse-manifest.json",
+        ] {
+            std::fs::create_dir_all(&dir).unwrap();
+            let mut m = Manifest::new("run", "s", "h");
+            m.files = vec![bad.to_string()];
+            std::fs::write(dir.join(MANIFEST), serde_json::to_string(&m).unwrap()).unwrap();
+            let e = OutputDir::open(&dir).err().expect(bad);
+            assert!(
+                e.contains("hushfuse-manifest.json") && e.contains("lists"),
+                "{bad}: {e}"
+            );
+            assert_eq!(
+                std::fs::read_to_string(root.path().join("victim.txt")).unwrap(),
+                "keep"
+            );
+        }
+    }
+
+    #[test]
+    fn a_folder_reached_through_a_symbolic_link_is_neither_written_nor_cleaned() {
+        let root = tempfile::tempdir().unwrap();
+        let dir = root.path().join("o");
+        let outside = root.path().join("outside");
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::create_dir_all(&outside).unwrap();
+        std::fs::write(outside.join("x.txt"), "keep").unwrap();
+        std::os::unix::fs::symlink(&outside, dir.join("sub")).unwrap();
+        let mut m = Manifest::new("run", "s", "h");
+        m.files = vec!["sub/x.txt".into(), "sub".into()];
+        std::fs::write(dir.join(MANIFEST), serde_json::to_string(&m).unwrap()).unwrap();
+        let out = OutputDir::open(&dir).unwrap();
+        let e = out
+            .commit(Manifest::new("run", "s", "h"), false)
+            .unwrap_err();
+        assert!(e.contains("symbolic link"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(outside.join("x.txt")).unwrap(),
+            "keep"
+        );
+    }
+
+    #[test]
+    fn a_staging_folder_hushfuse_did_not_make_is_refused_and_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let staging = dir.path().join(STAGING);
+        std::fs::create_dir_all(&staging).unwrap();
+        std::fs::write(staging.join("user.txt"), "mine").unwrap();
+        let e = OutputDir::open(dir.path()).err().unwrap();
+        assert!(e.contains("user.txt") && e.contains("did not stage"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(staging.join("user.txt")).unwrap(),
+            "mine"
+        );
+        // An empty one is removed, as is hushfuse's own from a run that died while staging.
+        std::fs::remove_file(staging.join("user.txt")).unwrap();
+        drop(OutputDir::open(dir.path()).unwrap());
+        assert!(!staging.exists());
+        let mut out = OutputDir::open(dir.path()).unwrap();
+        out.stage("half.txt", b"1").unwrap();
+        out.abandon(); // killed: no clean-up, no commit
+        drop(OutputDir::open(dir.path()).unwrap());
+        assert!(!staging.exists());
+    }
+
+    #[test]
+    fn a_commit_killed_between_the_moves_and_the_manifest_is_finished_by_the_next_open() {
+        let dir = tempfile::tempdir().unwrap();
+        // An earlier run wrote old.txt and a.txt.
+        let mut out = OutputDir::open(dir.path()).unwrap();
+        out.stage("old.txt", b"old").unwrap();
+        out.stage("a.txt", b"old a").unwrap();
+        out.commit(Manifest::new("run", "s", "h1"), false).unwrap();
+        // The next one staged a.txt and b/c.txt and its manifest, moved a.txt, then died.
+        let mut out = OutputDir::open(dir.path()).unwrap();
+        out.stage("a.txt", b"new a").unwrap();
+        out.stage("b/c.txt", b"new c").unwrap();
+        let mut m = Manifest::new("run", "s", "h2");
+        m.files = vec!["a.txt".into(), "b/c.txt".into()];
+        let staging = dir.path().join(STAGING);
+        write_file(
+            &staging.join(MANIFEST),
+            serde_json::to_string(&m).unwrap().as_bytes(),
+        )
+        .unwrap();
+        std::fs::rename(staging.join("a.txt"), dir.path().join("a.txt")).unwrap();
+        out.abandon();
+        let out = OutputDir::open(dir.path()).unwrap();
+        assert_eq!(std::fs::read(dir.path().join("a.txt")).unwrap(), b"new a");
+        assert_eq!(std::fs::read(dir.path().join("b/c.txt")).unwrap(), b"new c");
+        assert!(
+            !dir.path().join("old.txt").exists(),
+            "the earlier run's stale file"
+        );
+        assert_eq!(read_manifest(dir.path()).unwrap().unwrap(), m);
+        assert!(!staging.exists());
+        drop(out);
+    }
+
+    #[test]
+    fn one_output_per_folder_at_a_time() {
+        let dir = tempfile::tempdir().unwrap();
+        let first = OutputDir::open(dir.path()).unwrap();
+        let e = OutputDir::open(dir.path()).err().unwrap();
+        assert!(
+            e.contains("being written by another hushfuse run")
+                && e.contains(&std::process::id().to_string()),
+            "{e}"
+        );
+        assert!(OutputDir::open_existing(dir.path()).is_err());
+        drop(first);
+        drop(OutputDir::open(dir.path()).unwrap());
     }
 }

@@ -722,6 +722,13 @@ pub enum Completion {
 /// checked before every trial: once raised, the window in flight is dropped and the run
 /// returns [`Completion::Stopped`]. `progress` is called with the number of trials finished
 /// in this call.
+/// Most worker threads a run starts: eight per core. More only cost the time of creating them
+/// (minutes for 10^5, during which the process does not see Ctrl-C); results do not depend
+/// on the count.
+pub fn max_threads() -> usize {
+    8 * std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+}
+
 pub fn run_windows(
     exp: &Experiment,
     opts: RunOptions,
@@ -736,7 +743,7 @@ pub fn run_windows(
         None
     } else {
         let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(opts.threads)
+            .num_threads(opts.threads.min(max_threads()))
             .build()
             .map_err(|e| RunError::Pool(e.to_string()))?;
         Some(pool)

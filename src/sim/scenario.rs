@@ -73,7 +73,9 @@ pub struct ScenarioFile {
     pub trials: usize,
     /// Time steps per trial (k = 1..=steps).
     pub steps: usize,
-    /// Seed of every random stream of the run.
+    /// Seed of every random stream of the run: an integer, or (above 2^63 - 1, which TOML
+    /// integers cannot hold) a decimal string.
+    #[serde(with = "seed_u64")]
     pub seed: u64,
     /// First step of the steady-state averages (default: steps / 2 + 1).
     #[serde(default)]
@@ -387,4 +389,41 @@ pub enum ClaimSpec {
 
 fn ours() -> String {
     "ours".to_string()
+}
+
+/// A u64 in TOML: an integer where it fits in TOML's signed 64 bits, a decimal string
+/// otherwise (`seed = "18446744073709551615"`), so every seed round-trips through a file.
+mod seed_u64 {
+    use serde::{de, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &u64, s: S) -> Result<S::Ok, S::Error> {
+        match i64::try_from(*v) {
+            Ok(i) => s.serialize_i64(i),
+            Err(_) => s.serialize_str(&v.to_string()),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+        struct V;
+        impl de::Visitor<'_> for V {
+            type Value = u64;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a seed: an integer from 0 to 18446744073709551615 (as a string above 9223372036854775807)")
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<u64, E> {
+                u64::try_from(v).map_err(|_| E::custom(format!("a seed must be >= 0, got {v}")))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<u64, E> {
+                Ok(v)
+            }
+            fn visit_str<E: de::Error>(self, v: &str) -> Result<u64, E> {
+                v.trim().parse().map_err(|_| {
+                    E::custom(format!(
+                        "expected a seed from 0 to 18446744073709551615, got {v:?}"
+                    ))
+                })
+            }
+        }
+        d.deserialize_any(V)
+    }
 }

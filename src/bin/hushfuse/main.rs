@@ -172,8 +172,20 @@ enum Failure {
     Interrupted(String),
 }
 
+/// Warns that `--threads` above [`runner::max_threads`] is capped there (results do not depend
+/// on the count).
+fn warn_threads(threads: usize) {
+    let max = runner::max_threads();
+    if threads > max {
+        eprintln!("note: --threads {threads} capped at {max} (eight per core); results do not depend on it");
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(Command::Run { args, .. } | Command::Reproduce { args, .. }) = &cli.command {
+        warn_threads(args.threads);
+    }
     let result = match cli.command {
         None => quick_arena(),
         Some(Command::Run { scenario, args }) => {

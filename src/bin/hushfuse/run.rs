@@ -134,11 +134,16 @@ pub(crate) fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(),
     // A folder that cannot take the outputs is refused before any trial runs.
     let out_dir = match shard {
         None => Some(OutputDir::open(&dir).map_err(Failure::Input)?),
-        Some(_) => {
-            std::fs::create_dir_all(&dir)
-                .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
-            None
-        }
+        Some(_) => None,
+    };
+    // Shards of one run share a folder and run at once; each shard (and its checkpoint) is
+    // written by one process at a time.
+    let _shard_lock = match shard {
+        Some((i, n)) => Some(
+            output::lock_folder(&dir, &format!(".hushfuse-lock-shard-{i:04}-of-{n:04}"))
+                .map_err(Failure::Input)?,
+        ),
+        None => None,
     };
     let start = Instant::now();
     let bar = ProgressBar::with_draw_target(Some(exp.trials as u64), ProgressDrawTarget::hidden());
@@ -274,7 +279,9 @@ pub(crate) fn compute(
             },
         }
     };
-    let every = std::time::Duration::from_secs_f64(args.checkpoint_every);
+    // Any number of seconds too large for a Duration means "never" (checked >= 0 and finite).
+    let every = std::time::Duration::try_from_secs_f64(args.checkpoint_every)
+        .unwrap_or(std::time::Duration::MAX);
     let mut last_save = Instant::now();
     let mut save_warned = false;
     let (mut saves, mut save_time) = (0usize, 0.0f64);
@@ -471,10 +478,16 @@ pub(crate) fn as_run_text(text: &str, args: &RunArgs) -> String {
         return text.to_string();
     };
     if let Some(n) = args.trials {
-        t.insert("trials".into(), toml::Value::Integer(n as i64));
+        let value = i64::try_from(n)
+            .map_or_else(|_| toml::Value::String(n.to_string()), toml::Value::Integer);
+        t.insert("trials".into(), value);
     }
     if let Some(s) = args.seed {
-        t.insert("seed".into(), toml::Value::Integer(s as i64));
+        // TOML integers are 64-bit signed: a seed above 2^63 - 1 is written as a decimal string,
+        // which scenario files accept as well.
+        let value = i64::try_from(s)
+            .map_or_else(|_| toml::Value::String(s.to_string()), toml::Value::Integer);
+        t.insert("seed".into(), value);
     }
     toml::to_string(&t).unwrap_or_else(|_| text.to_string())
 }
