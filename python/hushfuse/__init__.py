@@ -169,6 +169,17 @@ def _frame_csv(frame: Any) -> str:
     return out.getvalue()
 
 
+def _real(a: Any, name: str) -> np.ndarray:
+    """``a`` as a float array; booleans, complex numbers, strings and objects are refused
+    (numpy would turn True into 1.0 and drop an imaginary part without a word)."""
+    arr = np.asarray(a)
+    if arr.dtype.kind not in "fiu":
+        raise TypeError(
+            f"{name}: expected real numbers (a float array), got an array of dtype {arr.dtype}"
+        )
+    return arr.astype(float, copy=False)
+
+
 def _measurement_arrays(measurements: Any) -> List[np.ndarray]:
     """A 3-D array (T, N, m) or a sequence of N 2-D arrays (T, m_i) -> list of 2-D arrays."""
     if isinstance(measurements, np.ndarray):
@@ -177,11 +188,12 @@ def _measurement_arrays(measurements: Any) -> List[np.ndarray]:
                 "measurements: expected a 3-D array (steps, sensors, components), a list of "
                 f"2-D arrays (steps, components) per sensor, or a DataFrame; got an array of shape {measurements.shape}"
             )
-        return [np.asarray(measurements[:, i, :], dtype=float) for i in range(measurements.shape[1])]
+        arr = _real(measurements, "measurements")
+        return [arr[:, i, :] for i in range(arr.shape[1])]
     if isinstance(measurements, (list, tuple)):
         out = []
         for i, a in enumerate(measurements):
-            a = np.asarray(a, dtype=float)
+            a = _real(a, f"measurements[{i}]")
             if a.ndim == 1:
                 a = a[:, None]
             if a.ndim != 2:
@@ -236,7 +248,7 @@ def _measurements_csv(arrays: Sequence[np.ndarray]) -> str:
 def _truth_csv(truth: Any) -> str:
     if _is_frame(truth):
         return _frame_csv(truth)
-    t = np.asarray(truth, dtype=float)
+    t = _real(truth, "truth")
     if t.ndim == 1:
         t = t[:, None]
     if t.ndim != 2:
@@ -296,15 +308,19 @@ def replay(
         RunError: a scheme failed on the data.
     """
     scenario = _check_scenario(scenario)
+    n_arrays = None
     if _is_frame(measurements):
         meas_csv, meas_name = _frame_csv(measurements), "measurements (DataFrame)"
     else:
-        meas_csv, meas_name = _measurements_csv(_measurement_arrays(measurements)), "measurements"
+        arrays = _measurement_arrays(measurements)
+        meas_csv, meas_name, n_arrays = _measurements_csv(arrays), "measurements", len(arrays)
     truth_csv = None
     truth_name = "truth (DataFrame)" if _is_frame(truth) else "truth"
     if truth is not None:
         truth_csv = _truth_csv(truth)
-    r = _hushfuse.replay_csv(scenario, meas_csv, meas_name, truth_csv, truth_name, seed, trial)
+    r = _hushfuse.replay_csv(
+        scenario, meas_csv, meas_name, truth_csv, truth_name, seed, trial, n_arrays
+    )
     for s in r["schemes"]:
         s["params"] = json.loads(s["params"])
         s["links"] = np.array(s["links"], dtype=str).reshape(r["available"].shape)

@@ -86,6 +86,13 @@ fn run_json(
         .allow_threads(|| runner::run(&exp, runner::RunOptions { threads }, &|_| {}))
         .map_err(|e| RunError::new_err(e.to_string()))?;
     let summary = results::summarize(&exp, &sums);
+    let bad = results::non_finite(&summary);
+    if !bad.is_empty() {
+        return Err(RunError::new_err(format!(
+            "the run produced numbers that are not finite, so its results cannot be trusted:\n  {}\nrescale the scenario's units or check its noise levels",
+            bad.join("\n  ")
+        )));
+    }
     serde_json::to_string(&summary).map_err(|e| RunError::new_err(e.to_string()))
 }
 
@@ -146,7 +153,7 @@ fn simulate<'py>(
 /// params, mean (T, n), cov (T, n, n), links (T x N names), bits (T, N)) and `summary_json`
 /// (None without truth).
 #[pyfunction]
-#[pyo3(signature = (scenario, measurements_csv, measurements_name, truth_csv=None, truth_name="truth", seed=None, trial=0))]
+#[pyo3(signature = (scenario, measurements_csv, measurements_name, truth_csv=None, truth_name="truth", seed=None, trial=0, n_arrays=None))]
 #[allow(clippy::too_many_arguments)]
 fn replay_csv<'py>(
     py: Python<'py>,
@@ -157,8 +164,18 @@ fn replay_csv<'py>(
     truth_name: &str,
     seed: Option<u64>,
     trial: usize,
+    n_arrays: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (text, source) = resolve(scenario)?;
+    if let Some(given) = n_arrays {
+        let exp = load(scenario, None, seed, 1)?;
+        let ns = exp.system.n_sensors();
+        if given != ns {
+            return Err(DataError::new_err(format!(
+                "measurements: {given} sensor arrays given, but {source} has {ns} sensors: give one array per sensor, in sensor order (an all-NaN row where a sensor has no reading)"
+            )));
+        }
+    }
     let opts = replay::ReplayOptions {
         seed,
         trial,
@@ -184,6 +201,7 @@ fn replay_csv<'py>(
     let exp = &r.exp;
     let n = exp.system.state_dim();
     let ns = exp.system.n_sensors();
+    check_estimates(exp, &r.replayed.variants)?;
     let d = PyDict::new(py);
     d.set_item("steps", exp.steps)?;
     d.set_item("seed", exp.seed)?;
@@ -239,7 +257,34 @@ fn replay_csv<'py>(
         None => None,
     };
     d.set_item("summary_json", summary)?;
+    if let Some(sums) = &r.replayed.sums {
+        let bad = replay::non_finite(&results::summarize(exp, sums));
+        if !bad.is_empty() {
+            return Err(RunError::new_err(format!(
+                "the replay produced numbers that are not finite:\n  {}",
+                bad.join("\n  ")
+            )));
+        }
+    }
     Ok(d)
+}
+
+/// A replay whose estimates are not all finite (readings that overflow a filter) fails,
+/// naming the scheme, its variant and the first such step, as the command line does.
+fn check_estimates(exp: &build::Experiment, variants: &[replay::VariantReplay]) -> PyResult<()> {
+    for (v, vr) in variants.iter().enumerate() {
+        let first = vr.estimates.iter().position(|e| {
+            e.mean.iter().any(|x| !x.is_finite()) || e.cov.diagonal().iter().any(|x| !x.is_finite())
+        });
+        if let Some(k) = first {
+            return Err(RunError::new_err(format!(
+                "the replay produced estimates that are not finite: {} (variant {v}) from step {} on; rescale the data's units or check the scenario's noise levels",
+                exp.curves[exp.variants[v].curve].label,
+                k + 1
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// What one sensor put on the network at one step.
@@ -336,6 +381,8 @@ impl Feedback {
 /// The sensor side of a scheme: one node, one step per call.
 #[pyclass(module = "hushfuse._hushfuse", frozen)]
 struct SensorNode {
+    /// The last step taken (0: none yet): steps must increase.
+    last: Mutex<usize>,
     node: Mutex<Box<dyn scheme::SensorNode>>,
     rng: Arc<Mutex<Xoshiro256PlusPlus>>,
     index: usize,
@@ -375,12 +422,20 @@ impl SensorNode {
                 self.index
             )));
         }
+        let mut last = lock(&self.last);
+        if k <= *last {
+            return Err(PyValueError::new_err(format!(
+                "sensor {}: step k = {k} after step {}: a sensor's steps must increase (it may skip steps it is not scheduled at)",
+                self.index, *last
+            )));
+        }
         let z = Vector::from_iterator(self.dim, z.iter().copied());
         let fb = feedback.as_ref().map(|f| &f.inner);
         let mut rng = lock(&self.rng);
         let t = lock(&self.node)
             .step(k, &z, fb, &mut *rng)
             .map_err(|e| RunError::new_err(format!("sensor {}, step {k}: {e}", self.index)))?;
+        *last = k;
         Ok(Transmission { inner: t })
     }
     /// Index of the sensor in the scenario.
@@ -398,6 +453,8 @@ impl SensorNode {
 /// The fusion side of a scheme: fuses what arrived and what the silences say.
 #[pyclass(module = "hushfuse._hushfuse", frozen)]
 struct FusionCenter {
+    /// The last step fused (0: none yet): the center takes k = 1, 2, 3, ... in order.
+    last: Mutex<usize>,
     center: Mutex<Box<dyn scheme::FusionCenter>>,
     n_sensors: usize,
 }
@@ -418,6 +475,14 @@ impl FusionCenter {
         if k == 0 {
             return Err(PyValueError::new_err("steps count from k = 1"));
         }
+        let mut last = lock(&self.last);
+        if k != *last + 1 {
+            return Err(PyValueError::new_err(format!(
+                "fusion center: step k = {k} after step {}: the center takes every step in order (k = {} next); pass None for a sensor that did not report",
+                *last,
+                *last + 1
+            )));
+        }
         let inbox: Vec<link::Received> = inbox
             .iter()
             .map(|t| match t {
@@ -427,7 +492,9 @@ impl FusionCenter {
             .collect();
         lock(&self.center)
             .step(k, &inbox)
-            .map_err(|e| RunError::new_err(format!("fusion center, step {k}: {e}")))
+            .map_err(|e| RunError::new_err(format!("fusion center, step {k}: {e}")))?;
+        *last = k;
+        Ok(())
     }
     /// The fused estimate after the last step (the prior before the first): (mean (n,),
     /// covariance (n, n)).
@@ -527,6 +594,7 @@ impl Scheme {
                 Py::new(
                     py,
                     SensorNode {
+                        last: Mutex::new(0),
                         node: Mutex::new(node),
                         rng: rng.clone(),
                         index: i,
@@ -538,6 +606,7 @@ impl Scheme {
         let center = Py::new(
             py,
             FusionCenter {
+                last: Mutex::new(0),
                 center: Mutex::new(inst.center),
                 n_sensors: exp.system.n_sensors(),
             },

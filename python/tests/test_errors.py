@@ -34,8 +34,8 @@ def test_wrong_array_shapes_raise():
     # A sensor array of the wrong width: the replay's own error, naming column and row.
     with pytest.raises(hushfuse.DataError, match=r"column 4 \(z1\): sensor 0 measures 1 component, this row has 2"):
         hushfuse.replay(SCEN, [np.zeros((40, 2)), np.zeros((40, 1)), np.zeros((40, 2)), np.zeros((40, 2))])
-    # Too few sensors is no error by itself (the others have no readings); too many is.
-    with pytest.raises(hushfuse.DataError, match="the scenario has no sensor 4"):
+    # One array per sensor: too many or too few is an error naming the counts.
+    with pytest.raises(hushfuse.DataError, match="5 sensor arrays given, but .* has 4 sensors"):
         hushfuse.replay(SCEN, [np.zeros((40, 1))] * 2 + [np.zeros((40, 2))] * 2 + [np.zeros((40, 1))])
     with pytest.raises(ValueError, match="some components are NaN"):
         hushfuse.replay(SCEN, [np.zeros((40, 1)), np.zeros((40, 1)), np.array([[np.nan, 1.0]] * 40), np.zeros((40, 2))])
@@ -43,9 +43,36 @@ def test_wrong_array_shapes_raise():
         hushfuse.replay(SCEN, [np.full((40, 1), np.inf)])
     # Truth of the wrong dimension.
     with pytest.raises(hushfuse.DataError, match=r"truth: line 2 \(data row 1\), column 3 \(beyond the header\): the state has 2 components, this row has 1"):
-        hushfuse.replay(SCEN, [np.zeros((40, 1))], np.zeros((40, 1)))
+        hushfuse.replay(SCEN, FOUR, np.zeros((40, 1)))
     with pytest.raises(ValueError, match="2-D array"):
-        hushfuse.replay(SCEN, [np.zeros((40, 1))], np.zeros((40, 2, 1)))
+        hushfuse.replay(SCEN, FOUR, np.zeros((40, 2, 1)))
+
+
+# One array per sensor of the example scenario: two scalar sensors, two 2-D ones.
+FOUR = [np.zeros((40, 1))] * 2 + [np.zeros((40, 2))] * 2
+
+
+def test_python_inputs_are_strict():
+    with pytest.raises(hushfuse.DataError, match="3 sensor arrays given, but .* has 4 sensors"):
+        hushfuse.replay(SCEN, FOUR[:3])
+    for bad in (FOUR[:3] + [np.zeros((40, 2), dtype=complex)], FOUR[:3] + [np.zeros((40, 2), dtype=bool)]):
+        with pytest.raises(TypeError, match=r"measurements\[3\]: expected real numbers"):
+            hushfuse.replay(SCEN, bad)
+    with pytest.raises(TypeError, match="truth: expected real numbers"):
+        hushfuse.replay(SCEN, FOUR, np.zeros((40, 2), dtype=complex))
+    # The fusion center takes k = 1, 2, 3, ... in order; a sensor's steps increase.
+    s = hushfuse.Scheme(SCEN, variant=0)
+    s.center.step(1, [None] * 4)
+    for k in (1, 3):
+        with pytest.raises(ValueError, match="the center takes every step in order"):
+            s.center.step(k, [None] * 4)
+    s.center.step(2, [None] * 4)
+    s.sensors[0].step(2, np.array([0.5]))
+    with pytest.raises(ValueError, match="a sensor's steps must increase"):
+        s.sensors[0].step(2, np.array([0.5]))
+    s.sensors[0].step(5, np.array([0.5]))
+    # Far more threads than cores: capped, the same numbers.
+    assert hushfuse.run(SCEN, threads=100000)["schemes"][0]["mse"].tolist() == hushfuse.run(SCEN, threads=1)["schemes"][0]["mse"].tolist()
 
 
 def test_dataframe_errors_carry_the_cli_message(tmp_path):
