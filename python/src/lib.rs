@@ -11,7 +11,7 @@ use hushfuse::sim::{build, builtin, replay, results, runner};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyReadonlyArray1};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -42,6 +42,27 @@ create_exception!(
     "A run that failed: a scheme could not take a step (the message names the scheme and the step)."
 );
 
+/// The library's message in the words of the Python API: its options are arguments, and it
+/// has no `--allow-large`.
+fn python_words(message: &str) -> String {
+    message
+        .replace("(or --trials)", "(or trials=)")
+        .replace(", or pass --allow-large", "")
+        .replace(" or pass --allow-large", "")
+        .replace("--allow-large", "a smaller request")
+}
+
+/// A scenario error as a Python exception: a request larger than the machine can hold is a
+/// `MemoryError` (raised before anything is allocated), anything else a [`ScenarioError`].
+fn scenario_err(e: impl std::fmt::Display) -> PyErr {
+    let message = python_words(&e.to_string());
+    if message.contains("in memory, more than the limit") {
+        PyMemoryError::new_err(message)
+    } else {
+        ScenarioError::new_err(message)
+    }
+}
+
 /// A scenario's text and source from a built-in name, a path or TOML text.
 fn resolve(scenario: &str) -> PyResult<(String, String)> {
     builtin::resolve(scenario, true).map_err(ScenarioError::new_err)
@@ -54,8 +75,7 @@ fn load(
     threads: usize,
 ) -> PyResult<build::Experiment> {
     let (text, source) = resolve(scenario)?;
-    let kind =
-        build::file_kind(&text, &source).map_err(|e| ScenarioError::new_err(e.to_string()))?;
+    let kind = build::file_kind(&text, &source).map_err(scenario_err)?;
     if kind == build::FileKind::TableReport {
         return Err(ScenarioError::new_err(format!(
             "{source}: a table report, not a scenario (run it with `hushfuse reproduce`)"
@@ -67,7 +87,7 @@ fn load(
         threads,
         limits: None,
     };
-    build::load_with(&text, &source, &opts).map_err(|e| ScenarioError::new_err(e.to_string()))
+    build::load_with(&text, &source, &opts).map_err(scenario_err)
 }
 
 /// Runs a scenario (Monte Carlo) and returns its summary as JSON text: the summary.json of
@@ -193,9 +213,12 @@ fn replay_csv<'py>(
         })
         .map_err(|e| match e {
             replay::ReplayError::Input(m) if m.starts_with(&format!("{source}:")) => {
-                ScenarioError::new_err(m)
+                scenario_err(m)
             }
-            replay::ReplayError::Input(m) => DataError::new_err(m),
+            replay::ReplayError::Input(m) if m.contains("in memory, more than the limit") => {
+                PyMemoryError::new_err(python_words(&m))
+            }
+            replay::ReplayError::Input(m) => DataError::new_err(python_words(&m)),
             replay::ReplayError::Run(m) => RunError::new_err(m),
         })?;
     let exp = &r.exp;
@@ -571,7 +594,7 @@ impl Scheme {
                 },
             ),
         }
-        .map_err(|e| ScenarioError::new_err(e.to_string()))?;
+        .map_err(scenario_err)?;
         let Some(v) = exp.variants.get(variant) else {
             return Err(PyValueError::new_err(format!(
                 "{source}: variant {variant} does not exist (the scenario has {} variants: 0 to {})",

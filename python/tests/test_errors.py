@@ -110,3 +110,10 @@ def test_step_level_errors_raise():
     s.center.step(1, [t, None, None, None])
     mean, cov = s.center.estimate()
     assert mean.shape == (2,) and cov.shape == (2, 2)
+
+
+def test_a_request_larger_than_the_machine_is_a_memory_error_before_any_allocation():
+    # Seed-free, machine-free: the estimate (tens of GiB) is above the 16 GiB ceiling anywhere.
+    with pytest.raises(MemoryError, match="in memory, more than the limit") as e:
+        hushfuse.Scheme("dormann-fig1", variant=1, steps=2_000_000)
+    assert "--allow-large" not in str(e.value) and "--trials" not in str(e.value)

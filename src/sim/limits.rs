@@ -25,13 +25,58 @@ const STEP_OVERHEAD_SECONDS: f64 = 1e-6;
 const FLOPS_PER_SECOND: f64 = 5e8;
 
 impl Default for Limits {
+    /// 16 GiB, or less where the machine has less to give: half the process's address-space
+    /// limit (`ulimit -v`; threads reserve address space beyond what they touch), 90% of a
+    /// cgroup's memory limit, 90% of the memory available now. A run refused here fails with a
+    /// message; one allowed past what the machine has would abort in the allocator.
     fn default() -> Self {
         Self {
-            max_memory_bytes: DEFAULT_MAX_MEMORY,
+            max_memory_bytes: machine_memory_bytes()
+                .map_or(DEFAULT_MAX_MEMORY, |m| m.min(DEFAULT_MAX_MEMORY)),
             max_seconds: DEFAULT_MAX_SECONDS,
         }
     }
 }
+
+/// What the machine can give this process (see [`Limits::default`]); None where it cannot be
+/// read (no /proc).
+pub fn machine_memory_bytes() -> Option<f64> {
+    let mut best: Option<f64> = None;
+    let mut take = |v: f64| best = Some(best.map_or(v, |b: f64| b.min(v)));
+    if let Ok(text) = std::fs::read_to_string("/proc/meminfo") {
+        if let Some(kb) = text
+            .lines()
+            .find_map(|l| l.strip_prefix("MemAvailable:"))
+            .and_then(|r| r.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        {
+            take(0.9 * kb * 1024.0);
+        }
+    }
+    if let Ok(text) = std::fs::read_to_string("/sys/fs/cgroup/memory.max") {
+        if let Ok(bytes) = text.trim().parse::<f64>() {
+            take(0.9 * bytes);
+        }
+    }
+    if let Ok(text) = std::fs::read_to_string("/proc/self/limits") {
+        // "Max address space   <soft>   <hard>   bytes"
+        if let Some(soft) = text
+            .lines()
+            .find_map(|l| l.strip_prefix("Max address space"))
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|v| v.parse::<f64>().ok())
+        {
+            take(0.5 * soft);
+        }
+    }
+    best
+}
+
+/// Bytes per step, variant and n^2 that the linear schemes' shared per-step plans keep (the
+/// covariance recursion computed once for all trials: predicted and updated covariances,
+/// gains, debiasing matrices and their factors, each an n x n matrix on the heap).
+const PLAN_BYTES_PER_STEP_N2: f64 = 16.0 * 8.0;
+/// Heap overhead of one such matrix, per step and variant (allocation header and rounding).
+const PLAN_BYTES_PER_STEP: f64 = 16.0 * 48.0;
 
 impl Limits {
     /// No limits (`--allow-large`).
@@ -87,8 +132,9 @@ pub fn baseline(
     // A Kalman step: prediction n^3 plus an update per measured component.
     let kf_flops = 2.0 * n * n * n + 4.0 * n * n * m.max(1.0);
     let per_step = STEP_OVERHEAD_SECONDS + kf_flops / FLOPS_PER_SECOND;
+    let plans = variants * steps * (PLAN_BYTES_PER_STEP_N2 * n * n + PLAN_BYTES_PER_STEP);
     Estimate {
-        memory_bytes: trial_data + sums + per_trial,
+        memory_bytes: trial_data + sums + per_trial + plans,
         seconds: trials * steps * (variants * per_step + m * 1e-7) / workers,
         threads: workers,
     }
