@@ -28,8 +28,16 @@ fn cluster_up() -> Result<(), String> {
 }
 
 fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    // The folder's lock file is not an output (it names whichever process held it).
     std::fs::read_dir(dir)
         .unwrap()
+        .filter(|e| {
+            !e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .starts_with(".hushfuse-lock")
+        })
         .map(|e| {
             let p = e.unwrap().path();
             (

@@ -342,7 +342,15 @@ fn check_no_link(dir: &Path, rel: &str) -> Result<(), String> {
 /// operating system releases it when its process dies, so a lock of a dead run never stands.
 #[derive(Debug)]
 pub struct FolderLock {
-    _file: File,
+    file: File,
+}
+
+impl Drop for FolderLock {
+    /// Empties the lock file before the lock goes, so that a finished folder holds no process
+    /// number (two finished runs of one experiment leave the same bytes everywhere).
+    fn drop(&mut self) {
+        let _ = self.file.set_len(0);
+    }
 }
 
 /// Takes the lock `name` (e.g. [`LOCK`]) of folder `dir`, creating it; refuses, naming the
@@ -386,7 +394,7 @@ pub fn lock_folder(dir: &Path, name: &str) -> Result<FolderLock, String> {
     let _ = write!(file, "{}", std::process::id());
     let _ = file.sync_all();
     probe_writable(dir)?;
-    Ok(FolderLock { _file: file })
+    Ok(FolderLock { file })
 }
 
 /// Creates, flushes and removes a small file in `dir`: a folder that cannot take new files is
@@ -903,5 +911,7 @@ mod tests {
         assert!(OutputDir::open_existing(dir.path()).is_err());
         drop(first);
         drop(OutputDir::open(dir.path()).unwrap());
+        // A released lock names no process: finished folders of one experiment are identical.
+        assert_eq!(std::fs::read(dir.path().join(LOCK)).unwrap(), b"");
     }
 }
