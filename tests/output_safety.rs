@@ -248,3 +248,22 @@ fn an_output_folder_that_cannot_be_written_is_refused_before_any_trial() {
         assert!(o.stdout.is_empty(), "no table: no trial ran");
     }
 }
+
+#[test]
+fn the_free_space_estimate_bounds_what_a_run_writes_without_refusing_ordinary_runs() {
+    let d = tempfile::tempdir().unwrap();
+    let o = hushfuse(
+        &["run", "default", "--trials", "40", "--out", "o"],
+        d.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let written: usize = snapshot(&d.path().join("o")).values().map(Vec::len).sum();
+    let text = std::fs::read_to_string(d.path().join("o/scenario_as_run.toml")).unwrap();
+    let exp = hushfuse::sim::build::load(&text, "scenario_as_run.toml").unwrap();
+    let estimate =
+        hushfuse::sim::limits::output_bytes(exp.groups.len(), exp.variants.len(), exp.steps, 40);
+    assert!(
+        estimate >= written as f64 && estimate <= 10.0 * written as f64,
+        "estimate {estimate} bytes for {written} written"
+    );
+}

@@ -158,6 +158,15 @@ pub fn with_schemes<'a>(
     e
 }
 
+/// Bytes a run writes into its output folder, from above: the per-step table, the summary and
+/// the plots carry every accumulator column of every variant at every step (about 70 bytes a
+/// cell in the built-ins; 200 leaves room for longer names and numbers), the checkpoint
+/// carries the per-trial values, and a megabyte covers the rest (scenario copy, manifest).
+pub fn output_bytes(groups: usize, variants: usize, steps: usize, trials: usize) -> f64 {
+    let cells = columns(groups) * variants as f64;
+    cells * (steps as f64 * 200.0 + trials as f64 * 32.0) + 1024.0 * 1024.0
+}
+
 fn gib(b: f64) -> String {
     format!("{:.1} GiB", b / (1024.0 * 1024.0 * 1024.0))
 }

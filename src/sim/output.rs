@@ -397,6 +397,24 @@ pub fn lock_folder(dir: &Path, name: &str) -> Result<FolderLock, String> {
     Ok(FolderLock { file })
 }
 
+/// Refuses a folder whose file system has less room than `needed` bytes (a run's estimated
+/// output), before any trial runs. A file system that cannot say is not refused.
+pub fn check_free_space(dir: &Path, needed: f64) -> Result<(), String> {
+    let Ok(free) = fs4::available_space(dir) else {
+        return Ok(());
+    };
+    if needed.is_nan() || needed > free as f64 {
+        let mib = |b: f64| b / (1024.0 * 1024.0);
+        return Err(format!(
+            "output folder {} has {:.1} MiB free, and this run will write up to about {:.1} MiB; free some space, choose another --out, or lower `steps` or the number of variants",
+            dir.display(),
+            mib(free as f64),
+            mib(needed)
+        ));
+    }
+    Ok(())
+}
+
 /// Creates, flushes and removes a small file in `dir`: a folder that cannot take new files is
 /// refused before any work (the name is a temporary's, removed if this process dies).
 fn probe_writable(dir: &Path) -> Result<(), String> {
@@ -913,5 +931,17 @@ mod tests {
         drop(OutputDir::open(dir.path()).unwrap());
         // A released lock names no process: finished folders of one experiment are identical.
         assert_eq!(std::fs::read(dir.path().join(LOCK)).unwrap(), b"");
+    }
+
+    #[test]
+    fn a_folder_without_room_for_the_output_is_refused_naming_both_sizes() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(check_free_space(dir.path(), 1.0).is_ok());
+        let e = check_free_space(dir.path(), 1e30).unwrap_err();
+        assert!(
+            e.contains(&dir.path().display().to_string()) && e.contains("MiB free"),
+            "{e}"
+        );
+        assert!(check_free_space(dir.path(), f64::NAN).is_err());
     }
 }

@@ -145,6 +145,13 @@ pub(crate) fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(),
         ),
         None => None,
     };
+    let needed = hushfuse::sim::limits::output_bytes(
+        exp.groups.len(),
+        exp.variants.len(),
+        exp.steps,
+        exp.trials,
+    );
+    output::check_free_space(&dir, needed).map_err(Failure::Input)?;
     let start = Instant::now();
     let bar = ProgressBar::with_draw_target(Some(exp.trials as u64), ProgressDrawTarget::hidden());
     bar.set_style(
