@@ -944,4 +944,62 @@ mod tests {
         );
         assert!(check_free_space(dir.path(), f64::NAN).is_err());
     }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
+        /// Whatever a manifest lists, a run into its folder touches nothing outside it: entries
+        /// that are not normalized names inside the folder are refused before anything moves.
+        #[test]
+        fn no_manifest_makes_a_run_touch_files_outside_its_folder(
+            entries in proptest::collection::vec(
+                proptest::collection::vec(
+                    proptest::sample::select(vec![
+                        "..", ".", "", "a", "b", "victim.txt", "o", ".hushfuse-staging",
+                        "hushfuse-manifest.json", ".hushfuse-lock", "c:", "d\\e",
+                        "../victim.txt", "../o/../victim.txt", "b/a",
+                    ]),
+                    1..4,
+                ),
+                0..4,
+            ),
+            absolute in proptest::bool::ANY,
+        ) {
+            let root = tempfile::tempdir().unwrap();
+            let dir = root.path().join("o");
+            std::fs::create_dir_all(dir.join("b")).unwrap();
+            std::fs::write(root.path().join("victim.txt"), "keep").unwrap();
+            std::fs::write(dir.join("b/a"), "old").unwrap();
+            // The folder's one file is listed, so a folder is refused only for its entries.
+            let mut files: Vec<String> = entries.iter().map(|parts| parts.join("/")).collect();
+            files.push("b/a".to_string());
+            if absolute {
+                files.push(root.path().join("victim.txt").display().to_string());
+            }
+            let mut m = Manifest::new("run", "s", "h");
+            m.files = files.clone();
+            std::fs::write(dir.join(MANIFEST), serde_json::to_string(&m).unwrap()).unwrap();
+            let valid = files.iter().all(|f| check_entry(f).is_ok());
+            match OutputDir::open(&dir) {
+                Ok(mut out) => {
+                    proptest::prop_assert!(valid, "{files:?} was accepted");
+                    out.stage("a", b"new").unwrap();
+                    // A listed name that is a folder, or an unlisted file, may refuse the
+                    // commit; neither may touch anything outside.
+                    let _ = out.commit(Manifest::new("run", "s", "h2"), false);
+                }
+                // A bad entry is refused by name; a valid manifest may still be refused for
+                // another reason (a listed name that is a folder), never for its entries.
+                Err(e) => proptest::prop_assert_eq!(!valid, e.contains(" lists "), "{}", e),
+            }
+            proptest::prop_assert_eq!(
+                std::fs::read_to_string(root.path().join("victim.txt")).unwrap(),
+                "keep"
+            );
+            let outside: Vec<_> = std::fs::read_dir(root.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            proptest::prop_assert_eq!(outside.len(), 2, "{:?}", outside);
+        }
+    }
 }
