@@ -209,12 +209,27 @@ impl State {
         Ok(state)
     }
 
-    /// Internal consistency (a well-formed file of a buggy writer, or one edited by hand).
+    /// Internal consistency (a well-formed file of a buggy writer, or one edited by hand): the
+    /// block count is the one of the trial count, the range lies inside it, and a shard's range
+    /// is the one of its `I/N`. Checked before anything is sized from the file.
     fn check(&self) -> Result<(), String> {
         let nb = self.key.n_blocks;
-        if self.start > self.end || self.end > nb || self.next_block() > self.end {
+        let expected = runner::n_blocks(self.key.trials);
+        if nb != expected {
             return Err(format!(
-                "inconsistent (blocks {}..{} of {nb}, next {})",
+                "inconsistent (field `n_blocks` is {nb}, but {} trials make {expected} blocks)",
+                self.key.trials
+            ));
+        }
+        let prefix_before_start =
+            matches!(&self.progress, Progress::Prefix { next, .. } if *next < self.start);
+        if self.start > self.end
+            || self.end > nb
+            || prefix_before_start
+            || self.next_block() > self.end
+        {
+            return Err(format!(
+                "inconsistent (field `start`/`end`: blocks {}..{} of {nb}, next {})",
                 self.start,
                 self.end,
                 self.next_block()
@@ -222,7 +237,10 @@ impl State {
         }
         if let Some((i, n)) = self.shard {
             if i == 0 || i > n || shard_blocks(i, n, nb) != (self.start..self.end) {
-                return Err(format!("inconsistent (shard {i}/{n} of {nb} blocks)"));
+                return Err(format!(
+                    "inconsistent (field `shard`: shard {i}/{n} of {nb} blocks is not blocks {}..{})",
+                    self.start, self.end
+                ));
             }
         }
         Ok(())
@@ -257,8 +275,18 @@ pub fn parse_shard(text: &str) -> Result<(usize, usize), String> {
 
 /// Blocks of shard `i` of `n` (1-based) of a run of `n_blocks` blocks: contiguous, in order,
 /// covering every block once across i = 1..n; empty when there are more shards than blocks.
+/// Computed in 128 bits: no overflow for any `i <= n` and `n_blocks` (the ends are at most
+/// `n_blocks`, so they fit). `i = 0` or `n = 0` give an empty range (never a panic);
+/// [`parse_shard`] refuses them.
 pub fn shard_blocks(i: usize, n: usize, n_blocks: usize) -> Range<usize> {
-    (i - 1) * n_blocks / n..i * n_blocks / n
+    if i == 0 || n == 0 || i > n {
+        return 0..0;
+    }
+    let at = |j: usize| {
+        let b = j as u128 * n_blocks as u128 / n as u128;
+        usize::try_from(b).expect("at most n_blocks")
+    };
+    at(i - 1)..at(i)
 }
 
 /// File name of shard `i` of `n`.
@@ -301,19 +329,26 @@ pub fn shard_paths(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
 
 /// Checks that `shards` (file, content) are complete shards of one run that together cover
 /// every block exactly once, and returns the run's key and every block's sums in block order.
-/// Errors name the offending file.
+/// Errors name the offending file. Nothing is sized from a file's block count: the ranges are
+/// sorted and checked for overlaps and gaps (memory: the files' own blocks).
 pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Sums>>), String> {
     let (first_path, first) = shards.first().ok_or("no shard files given")?;
     let key = first.key.clone();
     let first_path = first_path.clone();
     let nb = key.n_blocks;
-    // owner[b]: the file that holds block b.
-    let mut owner: Vec<Option<usize>> = vec![None; nb];
     for (f, (path, s)) in shards.iter().enumerate() {
         if let Some(m) = key.mismatch(&s.key) {
             return Err(format!(
                 "{} {m} (as {} is); it is a shard of another run",
                 path.display(),
+                first_path.display()
+            ));
+        }
+        if s.key.n_blocks != nb {
+            return Err(format!(
+                "{}: field `n_blocks` is {}, not {nb} (as {} says)",
+                path.display(),
+                s.key.n_blocks,
                 first_path.display()
             ));
         }
@@ -347,17 +382,36 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
             ));
         };
         if blocks.len() != s.end - s.start {
-            return Err(format!("{}: inconsistent block count", path.display()));
+            return Err(format!(
+                "{}: inconsistent block count (field `progress` holds {} blocks for blocks {}..{})",
+                path.display(),
+                blocks.len(),
+                s.start,
+                s.end
+            ));
         }
-        for (b, slot) in (s.start..).zip(&mut owner[s.start..s.end]) {
-            if let Some(o) = *slot {
-                return Err(format!(
-                    "block {b} is in two shards: {} and {} (shards of different splits?)",
-                    shards[o].0.display(),
-                    path.display()
-                ));
-            }
-            *slot = Some(f);
+    }
+    // The non-empty ranges in block order: each must start at or after the end of those before.
+    let mut order: Vec<usize> = (0..shards.len())
+        .filter(|&f| shards[f].1.start < shards[f].1.end)
+        .collect();
+    order.sort_by_key(|&f| (shards[f].1.start, shards[f].1.end));
+    for w in order.windows(2) {
+        let (a, b) = (&shards[w[0]], &shards[w[1]]);
+        if b.1.start < a.1.end {
+            // Among the files given before, the one that holds b's first block.
+            let (o, _) = order
+                .iter()
+                .map(|&f| &shards[f])
+                .find(|(_, s)| s.start <= b.1.start && b.1.start < s.end)
+                .expect("a holds it");
+            let (x, y) = if w[0] < w[1] { (o, &b.0) } else { (&b.0, o) };
+            return Err(format!(
+                "block {} is in two shards: {} and {} (shards of different splits?)",
+                b.1.start,
+                x.display(),
+                y.display()
+            ));
         }
     }
     // One split (every file says the same N): every shard of it must be there, empty ones too.
@@ -367,42 +421,78 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
         .collect();
     if splits.iter().all(|&n| n == splits[0]) {
         let n = splits[0];
-        let absent: Vec<String> = (1..=n)
-            .filter(|&i| !shards.iter().any(|(_, s)| s.shard == Some((i, n))))
-            .map(|i| format!("{i}/{n} ({})", shard_file_name(i, n)))
+        // The missing ones counted from the sorted given ones (n may be huge: nothing is
+        // sized from it), the first few named.
+        const NAMED: usize = 20;
+        let mut given: Vec<usize> = shards
+            .iter()
+            .filter_map(|(_, s)| s.shard.map(|x| x.0))
             .collect();
+        given.sort_unstable();
+        let (mut absent, mut count) = (Vec::new(), 0u128);
+        let mut next = 1u128;
+        for end in given
+            .into_iter()
+            .map(|i| i as u128)
+            .chain(std::iter::once(n as u128 + 1))
+        {
+            count += end - next;
+            let mut j = next;
+            while j < end && absent.len() < NAMED {
+                let j_ = j as usize;
+                absent.push(format!("{j_}/{n} ({})", shard_file_name(j_, n)));
+                j += 1;
+            }
+            next = end + 1;
+        }
         if !absent.is_empty() {
+            let more = if count > absent.len() as u128 {
+                ", ...".to_string()
+            } else {
+                String::new()
+            };
             return Err(format!(
-                "missing shard{} {} of the {n} shards of {:?}",
-                if absent.len() == 1 { "" } else { "s" },
+                "missing shard{} {}{more} of the {n} shards of {:?}",
+                if count == 1 { "" } else { "s" },
                 absent.join(", "),
                 key.scenario
             ));
         }
     }
-    let missing: Vec<usize> = (0..nb).filter(|&b| owner[b].is_none()).collect();
-    if let (Some(&lo), Some(&hi)) = (missing.first(), missing.last()) {
+    // Gaps: blocks before the first range, between ranges, after the last.
+    let mut missing: Vec<Range<usize>> = Vec::new();
+    let mut covered = 0usize;
+    for &f in &order {
+        let s = &shards[f].1;
+        if s.start > covered {
+            missing.push(covered..s.start);
+        }
+        covered = covered.max(s.end);
+    }
+    if covered < nb {
+        missing.push(covered..nb);
+    }
+    if let (Some(lo), Some(hi)) = (missing.first(), missing.last()) {
+        let total: usize = missing.iter().map(|r| r.len()).sum();
         return Err(format!(
-            "blocks {lo}..={hi} of {nb} are in none of the shards given ({} blocks missing)",
-            missing.len()
+            "blocks {}..={} of {nb} are in none of the shards given ({total} blocks missing)",
+            lo.start,
+            hi.end - 1
         ));
     }
-    // Every block is owned by exactly one shard: move the sums out in block order.
-    let mut by_block: Vec<Option<Vec<Sums>>> = vec![None; nb];
-    for (_, s) in shards {
-        if let Progress::Blocks(blocks) = s.progress {
-            for (b, sums) in (s.start..s.end).zip(blocks) {
-                by_block[b] = Some(sums);
-            }
+    // Every block is in exactly one shard: move the sums out in block order.
+    let mut shards: Vec<Option<State>> = shards.into_iter().map(|(_, s)| Some(s)).collect();
+    let mut by_block = Vec::new();
+    for f in order {
+        if let Some(State {
+            progress: Progress::Blocks(blocks),
+            ..
+        }) = shards[f].take()
+        {
+            by_block.extend(blocks);
         }
     }
-    Ok((
-        key,
-        by_block
-            .into_iter()
-            .map(|b| b.expect("every block owned"))
-            .collect(),
-    ))
+    Ok((key, by_block))
 }
 
 /// Folds every block's sums in block order from empty sums: the result of one run.
@@ -414,36 +504,160 @@ pub fn fold(exp: &Experiment, blocks: &[Vec<Sums>]) -> Vec<Sums> {
     total
 }
 
-/// Whether one block's (or a fold's) sums have the shape of `exp`'s: one per variant, of its
-/// steps and groups.
-pub fn check_block_shape(exp: &Experiment, sums: &[Sums]) -> Result<(), String> {
-    let shape = runner::empty_sums(exp);
-    let ok = sums.len() == shape.len()
-        && sums.iter().zip(&shape).all(|(s, e)| {
-            s.steps == e.steps
-                && s.layout_groups == e.layout_groups
-                && s.state_dim == e.state_dim
-                && s.per_step.len() == e.per_step.len()
-                && s.ess_min.len() == e.ess_min.len()
-                && s.nees_hist.counts.len() == e.nees_hist.counts.len()
-        });
-    if ok {
-        Ok(())
-    } else {
-        Err(format!(
-            "sums of another shape than scenario {:?}'s ({} variants x {} steps)",
+/// Checks one block's (or a fold's) sums against `exp` and the `trials` they hold: one per
+/// variant, of its steps, groups and state dimension, every vector of its length (the per-step
+/// rows `steps x width`, the per-trial rows `trials x (1 + groups)`, one steady NEES a trial),
+/// `trials` trials of which at most all diverged, and a NEES histogram that counts every
+/// steady-state step of every trial exactly once (`trials x (steps - steady_from + 1)`: each
+/// trial records every step, or the run fails). `at` says where (for the message).
+pub fn validate_sums(
+    exp: &Experiment,
+    sums: &[Sums],
+    trials: usize,
+    at: &str,
+) -> Result<(), String> {
+    if sums.len() != exp.variants.len() {
+        return Err(format!(
+            "{at}: holds the sums of {} variants; scenario {:?} has {}",
+            sums.len(),
             exp.name,
-            exp.variants.len(),
-            exp.steps
-        ))
+            exp.variants.len()
+        ));
     }
+    let shape = runner::empty_sums(exp);
+    let steady_steps = (exp.steps + 1).saturating_sub(exp.steady_from) as u128;
+    for (v, (s, e)) in sums.iter().zip(&shape).enumerate() {
+        let bad = |field: &str, got: String, expected: String| {
+            Err(format!(
+                "{at}, variant {v} ({}): field `{field}` is {got}, expected {expected}",
+                exp.variants[v].kind
+            ))
+        };
+        let dims = [
+            ("steps", s.steps, e.steps),
+            ("layout_groups", s.layout_groups, e.layout_groups),
+            ("state_dim", s.state_dim, e.state_dim),
+        ];
+        for (field, got, expected) in dims {
+            if got != expected {
+                return bad(field, got.to_string(), expected.to_string());
+            }
+        }
+        let width = e.layout().width();
+        let groups = e.layout_groups;
+        let per_trial = trials as u128 * (1 + groups) as u128;
+        let lengths = [
+            (
+                "per_step",
+                s.per_step.len() as u128,
+                e.per_step.len() as u128,
+                format!("{} steps x {width} fields", e.steps),
+            ),
+            (
+                "per_step_sq",
+                s.per_step_sq.len() as u128,
+                e.per_step_sq.len() as u128,
+                format!("{} steps x {width} fields", e.steps),
+            ),
+            (
+                "whole_run",
+                s.whole_run.len() as u128,
+                e.whole_run.len() as u128,
+                format!("{width} fields"),
+            ),
+            (
+                "ess_min",
+                s.ess_min.len() as u128,
+                e.ess_min.len() as u128,
+                format!("{} steps", e.steps),
+            ),
+            (
+                "nees_hist.counts",
+                s.nees_hist.counts.len() as u128,
+                e.nees_hist.counts.len() as u128,
+                "bins".to_string(),
+            ),
+            (
+                "per_trial",
+                s.per_trial.len() as u128,
+                per_trial,
+                format!("{trials} trials x (1 + {groups} groups)"),
+            ),
+            (
+                "per_trial_nees",
+                s.per_trial_nees.len() as u128,
+                trials as u128,
+                format!("one per trial, {trials} trials"),
+            ),
+        ];
+        for (field, got, expected, what) in lengths {
+            if got != expected {
+                return bad(
+                    field,
+                    format!("{got} values long"),
+                    format!("{expected} ({what})"),
+                );
+            }
+        }
+        if s.trials != trials {
+            return bad(
+                "trials",
+                s.trials.to_string(),
+                format!("{trials} (the trials of its blocks)"),
+            );
+        }
+        if s.diverged > trials {
+            return bad(
+                "diverged",
+                s.diverged.to_string(),
+                format!("at most {trials} (its trials)"),
+            );
+        }
+        let total: u128 = s.nees_hist.counts.iter().map(|&c| c as u128).sum();
+        let expected = trials as u128 * steady_steps;
+        if total != expected {
+            return bad(
+                "nees_hist",
+                format!("a histogram of {total} values"),
+                format!("{expected} ({trials} trials x {steady_steps} steady-state steps)"),
+            );
+        }
+    }
+    Ok(())
 }
 
-/// [`check_block_shape`] for every part of a checkpoint or shard.
-pub fn check_shape(exp: &Experiment, state: &State) -> Result<(), String> {
+/// Checks every part of a checkpoint or shard against `exp` (see [`validate_sums`]): each
+/// block's sums hold that block's trials, a running total those of the blocks it folds. The
+/// message names the field; the caller adds the file.
+pub fn validate(exp: &Experiment, state: &State) -> Result<(), String> {
+    let t = exp.trials;
+    if state.key.trials != t || state.key.n_blocks != runner::n_blocks(t) {
+        return Err(format!(
+            "field `trials`/`n_blocks`: {} trials in {} blocks, but the run has {t} trials in {} blocks",
+            state.key.trials,
+            state.key.n_blocks,
+            runner::n_blocks(t)
+        ));
+    }
     match &state.progress {
-        Progress::Prefix { total, .. } => check_block_shape(exp, total),
-        Progress::Blocks(blocks) => blocks.iter().try_for_each(|b| check_block_shape(exp, b)),
+        Progress::Prefix { next, total } => {
+            let trials =
+                runner::block_trials(*next, t).start - runner::block_trials(state.start, t).start;
+            validate_sums(
+                exp,
+                total,
+                trials,
+                &format!("the running total of blocks {}..{next}", state.start),
+            )
+        }
+        Progress::Blocks(blocks) => (state.start..).zip(blocks).try_for_each(|(b, sums)| {
+            validate_sums(
+                exp,
+                sums,
+                runner::block_trials(b, t).len(),
+                &format!("block {b}"),
+            )
+        }),
     }
 }
 

@@ -683,8 +683,10 @@ pub fn n_blocks(trials: usize) -> usize {
 }
 
 /// Trials of block `b` (the last block may be short).
+/// (Saturating: a block number past the run, even near `usize::MAX`, gives an empty range at
+/// the end, never an overflow.)
 pub fn block_trials(b: usize, trials: usize) -> std::ops::Range<usize> {
-    (b * BLOCK).min(trials)..((b + 1) * BLOCK).min(trials)
+    b.saturating_mul(BLOCK).min(trials)..b.saturating_add(1).saturating_mul(BLOCK).min(trials)
 }
 
 /// Per-variant sums with nothing added: where every fold of blocks starts.

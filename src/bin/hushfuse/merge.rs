@@ -83,7 +83,7 @@ pub(crate) fn merge(inputs: &[PathBuf], out: &Path, report: bool) -> Result<(), 
                 path.display()
             )));
         }
-        durable::check_shape(&exp, &s)
+        durable::validate(&exp, &s)
             .map_err(|e| Failure::Input(format!("{}: {e}", path.display())))?;
         if let durable::Progress::Blocks(blocks) = &s.progress {
             for b in blocks {

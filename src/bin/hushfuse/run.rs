@@ -256,7 +256,7 @@ pub(crate) fn compute(
         if s.shard != shard || s.start != range.start || s.end != range.end {
             return Err(refuse("is of another shard".into()));
         }
-        durable::check_shape(exp, &s).map_err(refuse)?;
+        durable::validate(exp, &s).map_err(refuse)?;
         eprintln!(
             "resuming from {}: {} of {} trials already done",
             checkpoint.display(),
