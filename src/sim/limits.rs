@@ -158,7 +158,8 @@ pub fn with_schemes<'a>(
     e
 }
 
-fn gib(b: f64) -> String {
+/// Bytes as GiB with one decimal.
+pub fn gib(b: f64) -> String {
     format!("{:.1} GiB", b / (1024.0 * 1024.0 * 1024.0))
 }
 
