@@ -16,6 +16,9 @@ pub struct Limits {
 
 /// 16 GiB: two thirds of the 24 GiB machines this project runs on.
 pub const DEFAULT_MAX_MEMORY: f64 = 16.0 * 1024.0 * 1024.0 * 1024.0;
+/// Environment variable that lowers the default memory ceiling to its value in bytes (never
+/// raises it; for tests and shared machines).
+pub const MAX_MEMORY_ENV: &str = "HUSHFUSE_MAX_MEMORY_BYTES";
 /// 24 hours.
 pub const DEFAULT_MAX_SECONDS: f64 = 24.0 * 3600.0;
 /// Cost of one scheme step beyond its arithmetic (dispatch, small allocations, metrics),
@@ -29,10 +32,17 @@ impl Default for Limits {
     /// limit (`ulimit -v`; threads reserve address space beyond what they touch), 90% of a
     /// cgroup's memory limit, 90% of the memory available now. A run refused here fails with a
     /// message; one allowed past what the machine has would abort in the allocator.
+    /// [`MAX_MEMORY_ENV`], when set to a number of bytes, lowers the ceiling further.
     fn default() -> Self {
+        let lowered = std::env::var(MAX_MEMORY_ENV)
+            .ok()
+            .and_then(|v| v.trim().parse::<f64>().ok())
+            .filter(|v| *v >= 0.0)
+            .unwrap_or(f64::INFINITY);
         Self {
             max_memory_bytes: machine_memory_bytes()
-                .map_or(DEFAULT_MAX_MEMORY, |m| m.min(DEFAULT_MAX_MEMORY)),
+                .map_or(DEFAULT_MAX_MEMORY, |m| m.min(DEFAULT_MAX_MEMORY))
+                .min(lowered),
             max_seconds: DEFAULT_MAX_SECONDS,
         }
     }
@@ -167,7 +177,8 @@ pub fn output_bytes(groups: usize, variants: usize, steps: usize, trials: usize)
     cells * (steps as f64 * 200.0 + trials as f64 * 32.0) + 1024.0 * 1024.0
 }
 
-fn gib(b: f64) -> String {
+/// Bytes as GiB with one decimal.
+pub fn gib(b: f64) -> String {
     format!("{:.1} GiB", b / (1024.0 * 1024.0 * 1024.0))
 }
 

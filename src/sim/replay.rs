@@ -312,6 +312,18 @@ pub fn parse_truth(text: &str, file: &str) -> Result<TruthTable, DataError> {
         let col0 = || Some(col_name(&header, 0));
         let step = parse_index(rec.get(0).unwrap_or(""), 1, "a step")
             .map_err(|m| err_at(file, Some(at), col0(), m))?;
+        if r >= build::MAX_STEPS {
+            return Err(err_at(
+                file,
+                Some(at),
+                col0(),
+                format!(
+                    "more than {} rows: a replay has at most {} steps",
+                    build::MAX_STEPS,
+                    build::MAX_STEPS
+                ),
+            ));
+        }
         if step != r + 1 {
             let what = if step <= r {
                 "out of order or duplicated"
@@ -344,6 +356,21 @@ pub fn parse_truth(text: &str, file: &str) -> Result<TruthTable, DataError> {
 /// otherwise the last step of the measurements.
 pub fn steps_of(meas: &MeasTable, truth: Option<&TruthTable>) -> Result<usize, DataError> {
     let last = meas.rows.last().map_or(0, |r| r.step);
+    if let Some(r) = meas.rows.iter().find(|r| r.step > build::MAX_STEPS) {
+        return Err(err_at(
+            &meas.file,
+            Some(At {
+                line: r.line,
+                row: r.row,
+            }),
+            Some(col_name(&meas.header, 0)),
+            format!(
+                "step {} is beyond the most steps a replay can have ({}): the step column counts the time steps 1, 2, 3, ... of the recording (an index, not a time or a Unix timestamp); number the rows' steps from 1",
+                r.step,
+                build::MAX_STEPS
+            ),
+        ));
+    }
     match truth {
         Some(t) => {
             if let Some(r) = meas.rows.iter().find(|r| r.step > t.steps()) {
@@ -804,14 +831,37 @@ pub fn replay_csv(
     opts: &ReplayOptions,
 ) -> Result<CsvReplay, ReplayError> {
     let input = |e: &dyn fmt::Display| ReplayError::Input(e.to_string());
+    let limits = opts.load.limits.unwrap_or_default();
+    for (text, file) in std::iter::once(measurements).chain(truth) {
+        check_read(file, parse_bytes(text), text.len() as u64, &limits).map_err(|e| input(&e))?;
+    }
     let meas = parse_measurements(measurements.0, measurements.1).map_err(|e| input(&e))?;
     let truth = truth
         .map(|(text, file)| parse_truth(text, file))
         .transpose()
         .map_err(|e| input(&e))?;
     let steps = steps_of(&meas, truth.as_ref()).map_err(|e| input(&e))?;
-    let (exp, notes) = load_experiment(scenario_text, source, steps, opts.seed, &opts.load)
-        .map_err(|e| input(&e))?;
+    check_replay_memory(
+        scenario_text,
+        source,
+        &meas,
+        steps,
+        truth.is_some(),
+        opts,
+        &limits,
+    )
+    .map_err(|e| input(&e))?;
+    // One trial, replayed on this thread.
+    let load = LoadOptions {
+        threads: if opts.load.threads == 0 {
+            1
+        } else {
+            opts.load.threads
+        },
+        ..opts.load
+    };
+    let (exp, notes) =
+        load_experiment(scenario_text, source, steps, opts.seed, &load).map_err(|e| input(&e))?;
     let recorded = recorded(&exp, &meas, truth.as_ref()).map_err(|e| input(&e))?;
     let replayed = replay(&exp, &recorded, opts.trial).map_err(ReplayError::Run)?;
     Ok(CsvReplay {
@@ -820,6 +870,178 @@ pub fn replay_csv(
         replayed,
         notes,
     })
+}
+
+/// Heap overhead of one allocation (header and rounding), as [`super::limits`] counts it.
+const ALLOC_BYTES: f64 = 16.0;
+/// A `Vec`'s own header (pointer, capacity, length).
+const VEC_BYTES: f64 = 24.0;
+/// A hash map entry of the duplicate check, with its share of the table's spare room.
+const SEEN_BYTES: f64 = 64.0;
+
+/// Bytes that reading a data file's text holds at once: the text itself and, per line, the
+/// parsed row (kept in a vector that grows by doubling), its components and the duplicate
+/// check's entry.
+pub fn parse_bytes(text: &str) -> f64 {
+    let lines = text.bytes().filter(|&b| b == b'\n').count() as f64 + 1.0;
+    let columns = text.lines().next().map_or(1, |h| h.split(',').count()) as f64;
+    let row = 2.0 * std::mem::size_of::<MeasRow>() as f64 + ALLOC_BYTES + 8.0 * columns;
+    text.len() as f64 + lines * (row + SEEN_BYTES)
+}
+
+/// Refuses to read a data file needing `bytes` (see [`parse_bytes`]; the file's size before
+/// it is read) above the memory limit.
+pub fn check_read(
+    file: &str,
+    bytes: f64,
+    size: u64,
+    limits: &super::limits::Limits,
+) -> Result<(), DataError> {
+    if bytes.is_nan() || bytes > limits.max_memory_bytes {
+        return Err(err_at(
+            file,
+            None,
+            None,
+            format!(
+                "reading this file ({}) would hold about {} in memory, more than the limit of {}; replay a shorter recording, or pass --allow-large",
+                super::limits::gib(size as f64),
+                super::limits::gib(bytes),
+                super::limits::gib(limits.max_memory_bytes)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Bytes a replay of `steps` steps and `rows` readings holds beyond what the experiment's own
+/// estimate counts ([`super::limits::baseline`] of one trial on one thread): the per-step
+/// grid of readings and their flags, the truth, every variant's estimates (mean and
+/// covariance on the heap), links and bits, and `estimates.csv` as a growing string (plus
+/// `summary.json` and `per_step.csv` with truth).
+pub fn replay_bytes(exp: &Experiment, steps: usize, rows: usize, truth: bool) -> f64 {
+    use std::mem::size_of;
+    let f = |x: usize| x as f64;
+    let sys = &exp.system;
+    let (n, ns) = (f(sys.state_dim()), f(sys.n_sensors()));
+    let m: f64 = sys.sensors.iter().map(|s| f(s.meas_dim())).sum();
+    let m_max = sys.sensors.iter().map(|s| s.meas_dim()).max().unwrap_or(1) as f64;
+    let vector = f(size_of::<Vector>()) + ALLOC_BYTES;
+    let t = f(steps);
+    let readings = t * (VEC_BYTES + ns * f(size_of::<Option<Vector>>()))
+        + f(rows) * (ALLOC_BYTES + 8.0 * m_max);
+    let recorded = t * (2.0 * (VEC_BYTES + ALLOC_BYTES) + ns * (vector + 1.0) + 8.0 * m);
+    let truth_bytes = if truth {
+        2.0 * t * (vector + 8.0 * n)
+    } else {
+        0.0
+    };
+    let per_step = f(size_of::<Gaussian>())
+        + 2.0 * ALLOC_BYTES
+        + 8.0 * (n + n * n)
+        + 2.0 * (VEC_BYTES + ALLOC_BYTES)
+        + ns * (f(size_of::<Link>()) + 8.0);
+    // A number is written in at most 24 characters, a link and its bits in about 20.
+    let csv_row = |v: &super::build::Variant| {
+        f(exp.curves[v.curve].label.len())
+            + f(super::results::params_text(&v.params).len())
+            + 24.0
+            + 2.0 * n * 25.0
+            + ns * 20.0
+    };
+    let csv: f64 = 2.0 * t * exp.variants.iter().map(csv_row).sum::<f64>();
+    let metrics = if truth {
+        t * f(exp.variants.len()) * (f(exp.groups.len()) + 12.0) * 80.0
+    } else {
+        0.0
+    };
+    readings + recorded + truth_bytes + t * f(exp.variants.len()) * per_step + csv + metrics
+}
+
+/// Refuses a replay whose data would not fit: the experiment (one trial, one thread) and
+/// [`replay_bytes`], from a build of the scenario for one step (dimensions and variants do not
+/// depend on the steps). A scenario that does not build for one step is left to the real load.
+fn check_replay_memory(
+    scenario_text: &str,
+    source: &str,
+    meas: &MeasTable,
+    steps: usize,
+    truth: bool,
+    opts: &ReplayOptions,
+    limits: &super::limits::Limits,
+) -> Result<(), DataError> {
+    use super::limits;
+    if limits.max_memory_bytes.is_infinite() {
+        return Ok(());
+    }
+    let probe_opts = LoadOptions {
+        limits: Some(limits::Limits::none()),
+        threads: 1,
+        ..opts.load
+    };
+    let Ok((probe, _)) = load_experiment(scenario_text, source, 1, opts.seed, &probe_opts) else {
+        return Ok(());
+    };
+    let schemes = probe.variants.iter().map(|v| v.scheme.as_ref());
+    let base = limits::with_schemes(
+        limits::baseline(
+            &probe.system,
+            probe.groups.len(),
+            probe.variants.len(),
+            1,
+            steps,
+            1,
+        ),
+        schemes,
+        1,
+        steps,
+        1,
+    );
+    let bytes = base.memory_bytes + replay_bytes(&probe, steps, meas.rows.len(), truth);
+    if bytes.is_nan() || bytes > limits.max_memory_bytes {
+        let last = meas.rows.last().map_or(0, |r| r.step);
+        return Err(err_at(
+            &meas.file,
+            None,
+            None,
+            format!(
+                "a replay of its {steps} steps ({} readings of {} sensors, state dimension {}, {} scheme variants; the last step in the file is {last}) would hold about {} in memory, more than the limit of {}; replay a shorter recording (the step column counts the steps 1, 2, 3, ...), or pass --allow-large",
+                meas.rows.len(),
+                probe.system.n_sensors(),
+                probe.system.state_dim(),
+                probe.variants.len(),
+                limits::gib(bytes),
+                limits::gib(limits.max_memory_bytes)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Every variant whose estimates are not all finite (readings that overflow a filter), with
+/// the first such step: `label (params), variant v: ... from step k on`.
+pub fn non_finite_estimates(exp: &Experiment, rep: &Replayed) -> Vec<String> {
+    let mut bad = Vec::new();
+    for (v, vr) in rep.variants.iter().enumerate() {
+        let first = vr.estimates.iter().position(|e| {
+            e.mean.iter().any(|x| !x.is_finite()) || e.cov.iter().any(|x| !x.is_finite())
+        });
+        if let Some(k) = first {
+            let variant = &exp.variants[v];
+            let e = &vr.estimates[k];
+            let what = if e.mean.iter().any(|x| !x.is_finite()) {
+                "mean"
+            } else {
+                "covariance"
+            };
+            bad.push(format!(
+                "{} ({}), variant {v}: estimate ({what}) not finite from step {} on",
+                exp.curves[variant.curve].label,
+                super::results::params_text(&variant.params),
+                k + 1
+            ));
+        }
+    }
+    bad
 }
 
 /// [`super::results::non_finite`] for a replay: one trial has no standard errors (they are

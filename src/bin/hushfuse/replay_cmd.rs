@@ -14,9 +14,19 @@ pub(crate) struct ReplayArgs<'a> {
 /// `hushfuse replay`: every scheme of the scenario on recorded measurements.
 pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
     let (text, source) = scenario_text(a.scenario)?;
+    let limits = if a.allow_large {
+        hushfuse::sim::limits::Limits::none()
+    } else {
+        hushfuse::sim::limits::Limits::default()
+    };
+    // A file larger than the memory limit is refused before it is read.
     let read = |p: &Path| {
-        std::fs::read_to_string(p)
-            .map_err(|e| Failure::Input(format!("{}: cannot read: {e}", p.display())))
+        let cannot =
+            |e: std::io::Error| Failure::Input(format!("{}: cannot read: {e}", p.display()));
+        let size = std::fs::metadata(p).map_err(cannot)?.len();
+        replay::check_read(&p.display().to_string(), size as f64, size, &limits)
+            .map_err(|e| Failure::Input(e.to_string()))?;
+        std::fs::read_to_string(p).map_err(cannot)
     };
     let meas_name = a.measurements.display().to_string();
     let meas = read(a.measurements)?;
@@ -26,7 +36,7 @@ pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
         seed: a.seed,
         trial: a.trial,
         load: build::LoadOptions {
-            limits: a.allow_large.then(hushfuse::sim::limits::Limits::none),
+            limits: Some(limits),
             ..Default::default()
         },
     };
@@ -75,7 +85,7 @@ pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
         msg.push_str(&format!("note: {n}\n"));
     }
     let mut files = vec!["estimates.csv".to_string()];
-    let mut bad = Vec::new();
+    let mut bad = replay::non_finite_estimates(&r.exp, &r.replayed);
     if let Some(sums) = &r.replayed.sums {
         let summary = results::summarize(&r.exp, sums);
         msg.push('\n');
@@ -85,7 +95,7 @@ pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
         staged.push(("summary.json", json));
         staged.push(("per_step.csv", results::per_step_csv(&summary)));
         files.extend(["summary.json".to_string(), "per_step.csv".to_string()]);
-        bad = replay::non_finite(&summary);
+        bad.extend(replay::non_finite(&summary));
     } else {
         msg.push_str("(no --truth: estimates only, no error metrics)\n");
     }
@@ -108,7 +118,7 @@ pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
     print_out(&msg);
     if !bad.is_empty() {
         return Err(Failure::Run(format!(
-            "the replay produced numbers that are not finite (written as null in summary.json):\n  {}",
+            "the replay produced numbers that are not finite (written as they are in estimates.csv, as null in summary.json), so its results cannot be trusted:\n  {}\nrescale the data's units or check the scenario's noise levels",
             bad.join("\n  ")
         )));
     }
