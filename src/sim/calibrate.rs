@@ -552,6 +552,22 @@ pub fn short(v: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
+/// A name for budget `v` that no other f64 shares: [`short`] where it reads back as `v` (24,
+/// 12.5), the shortest round-tripping decimal otherwise, and an exponent form (`1e300`,
+/// `2e-300`) for very large or small magnitudes.
+pub fn dir_label(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-4..1e15).contains(&a) {
+        return format!("{v:e}");
+    }
+    let s = short(v);
+    if s.parse::<f64>() == Ok(v) {
+        s
+    } else {
+        format!("{v}")
+    }
+}
+
 /// Left-aligned first column, right-aligned others, a rule under the header.
 pub fn render(rows: &[Vec<String>]) -> String {
     super::results::text_table(rows, 1)
