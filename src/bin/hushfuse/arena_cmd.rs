@@ -37,13 +37,25 @@ pub(crate) fn budgets_of(args: &RunArgs) -> Result<Vec<f64>, Failure> {
     Ok(out)
 }
 
+/// The `--budget-axis` given, or `payload` (the default, also in the output hash).
+pub(crate) fn budget_axis(args: &RunArgs) -> &str {
+    args.budget_axis.as_deref().unwrap_or("payload")
+}
+
 /// Refuses the budget options that mean nothing without `--budget`/`--budgets` (for plain runs).
-#[allow(dead_code)] // called from main.rs for plain runs (pending)
 pub(crate) fn check_budget_options(args: &RunArgs) -> Result<(), Failure> {
-    if args.budget.is_none() && args.budgets.is_none() && args.pilot_trials.is_some() {
-        return Err(Failure::Input(
-            "--pilot-trials applies only with --budget or --budgets".into(),
-        ));
+    if args.budget.is_some() || args.budgets.is_some() {
+        return Ok(());
+    }
+    for (given, name) in [
+        (args.budget_axis.is_some(), "--budget-axis"),
+        (args.pilot_trials.is_some(), "--pilot-trials"),
+    ] {
+        if given {
+            return Err(Failure::Input(format!(
+                "{name} applies only with --budget or --budgets"
+            )));
+        }
     }
     Ok(())
 }
@@ -69,7 +81,7 @@ pub(crate) fn arena_run(
         .map(OutputDir::open)
         .transpose()
         .map_err(Failure::Input)?;
-    let axis = calibrate::Axis::parse(&args.budget_axis).map_err(Failure::Input)?;
+    let axis = calibrate::Axis::parse(budget_axis(args)).map_err(Failure::Input)?;
     let opts = calibrate::Options {
         axis,
         pilot_trials: args.pilot_trials,
@@ -205,7 +217,11 @@ pub(crate) fn arena_run(
     let hash = output::sha256_hex(
         format!(
             "{source}\0{text}\0{:?}\0{:?}\0{:?}\0{}\0{:?}",
-            args.trials, args.seed, budgets, args.budget_axis, args.pilot_trials
+            args.trials,
+            args.seed,
+            budgets,
+            budget_axis(args),
+            args.pilot_trials
         )
         .as_bytes(),
     );
