@@ -336,15 +336,14 @@ pub fn calibrate(
             per_scheme.push(rows);
             continue;
         };
-        // Pilot evaluations, cached by knob value.
-        let mut cache: BTreeMap<u64, Option<SchemeSummary>> = BTreeMap::new();
-        let mut eval = |ev: &mut Evaluator, x: f64| -> Option<SchemeSummary> {
+        // Pilot evaluations, cached by knob value; a failure keeps its cause.
+        let mut cache: BTreeMap<u64, Result<SchemeSummary, String>> = BTreeMap::new();
+        let mut eval = |ev: &mut Evaluator, x: f64| -> Result<SchemeSummary, String> {
             let x = if range.integer { x.round() } else { x };
             cache
                 .entry(x.to_bits())
                 .or_insert_with(|| {
                     ev.run(&with_knob(entry, knob, x, range.integer), pilot)
-                        .ok()
                         .map(|s| s.schemes[0].clone())
                 })
                 .clone()
@@ -353,17 +352,23 @@ pub fn calibrate(
         let mut chosen: Vec<(f64, SchemeSummary, Status)> = Vec::new();
         if range.integer {
             let mut points = Vec::new();
+            let mut first_err: Option<(f64, String)> = None;
             let mut x = range.lo;
             while x <= range.hi.unwrap_or(range.lo) + 0.5 {
                 match eval(&mut ev, x) {
-                    Some(s) => points.push((x, s)),
-                    None if points.is_empty() => {}
-                    None => break,
+                    Ok(s) => points.push((x, s)),
+                    Err(e) if points.is_empty() => {
+                        first_err.get_or_insert((x, e));
+                    }
+                    Err(_) => break,
                 }
                 x += 1.0;
             }
             if points.is_empty() {
-                return Err(format!("{label}: no value of `{knob}` builds"));
+                let cause = first_err
+                    .map(|(x, e)| format!(" (`{knob}` = {x}: {e})"))
+                    .unwrap_or_default();
+                return Err(format!("{label}: no value of `{knob}` builds{cause}"));
             }
             for &b in budgets {
                 let (x, s) = points
@@ -383,12 +388,11 @@ pub fn calibrate(
             }
         } else {
             let lo = range.lo;
-            let Some(f_lo) = eval(&mut ev, lo) else {
-                return Err(format!("{label}: `{knob}` = {lo} does not build"));
-            };
+            let f_lo = eval(&mut ev, lo)
+                .map_err(|e| format!("{label}: `{knob}` = {lo} does not build: {e}"))?;
             let mut hi = range.hi.unwrap_or(1.0);
-            let mut f_hi =
-                eval(&mut ev, hi).ok_or(format!("{label}: `{knob}` = {hi} does not build"))?;
+            let mut f_hi = eval(&mut ev, hi)
+                .map_err(|e| format!("{label}: `{knob}` = {hi} does not build: {e}"))?;
             if range.hi.is_none() {
                 let mut n = 0;
                 // Quadruple until below the smallest target; stop where the rate no longer
@@ -396,7 +400,7 @@ pub fn calibrate(
                 // the first value of the floor.
                 while axis.of(&f_hi) > min_target && n < 12 {
                     match eval(&mut ev, hi * 4.0) {
-                        Some(s) if axis.of(&s) < axis.of(&f_hi) => {
+                        Ok(s) if axis.of(&s) < axis.of(&f_hi) => {
                             hi *= 4.0;
                             f_hi = s;
                         }
@@ -431,7 +435,7 @@ pub fn calibrate(
                         break;
                     }
                     let mid = 0.5 * (a + c);
-                    let Some(s) = eval(&mut ev, mid) else { break };
+                    let Ok(s) = eval(&mut ev, mid) else { break };
                     let f = axis.of(&s);
                     if (f - b).abs() < (axis.of(&best.1) - b).abs() {
                         best = (mid, s.clone());
@@ -550,6 +554,22 @@ pub fn table(outcome: &Outcome, b: usize, group: &str) -> String {
 pub fn short(v: f64) -> String {
     let s = format!("{v:.4}");
     s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// A name for budget `v` that no other f64 shares: [`short`] where it reads back as `v` (24,
+/// 12.5), the shortest round-tripping decimal otherwise, and an exponent form (`1e300`,
+/// `2e-300`) for very large or small magnitudes.
+pub fn dir_label(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-4..1e15).contains(&a) {
+        return format!("{v:e}");
+    }
+    let s = short(v);
+    if s.parse::<f64>() == Ok(v) {
+        s
+    } else {
+        format!("{v}")
+    }
 }
 
 /// Left-aligned first column, right-aligned others, a rule under the header.

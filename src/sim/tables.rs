@@ -106,9 +106,27 @@ pub fn computed(report: &str) -> Result<Vec<(String, String, f64)>, String> {
     Ok(v)
 }
 
-/// Compares the paper's printed values with ours, rounded to the printed decimals.
+/// Compares the paper's printed values with ours, rounded to the printed decimals. A printed
+/// value naming a (table, row) we do not compute is refused, with the valid rows listed.
 pub fn compare(file: &TableReportFile) -> Result<Vec<TableComparison>, String> {
     let ours = computed(&file.report)?;
+    for (i, p) in file.published.iter().enumerate() {
+        if !ours.iter().any(|(t, r, _)| *t == p.table && *r == p.row) {
+            let valid: String = ours
+                .iter()
+                .map(|(t, r, _)| format!("\n  table = {t:?}, row = {r:?}"))
+                .collect();
+            let what = if ours.iter().any(|(t, _, _)| *t == p.table) {
+                format!("no row {:?} in table {:?}", p.row, p.table)
+            } else {
+                format!("no table {:?} (row {:?})", p.table, p.row)
+            };
+            return Err(format!(
+                "field `published[{i}]`: {what}; report {:?} has these rows:{valid}",
+                file.report
+            ));
+        }
+    }
     Ok(file
         .published
         .iter()

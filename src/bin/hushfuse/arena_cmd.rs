@@ -2,25 +2,62 @@
 //! arena of `hushfuse` without arguments.
 use super::*;
 
-/// Budgets from `--budget` or `--budgets`.
+/// Budgets from `--budget` or `--budgets`: positive finite numbers, no two equal.
 pub(crate) fn budgets_of(args: &RunArgs) -> Result<Vec<f64>, Failure> {
     if let Some(b) = args.budget {
+        if !(b.is_finite() && b > 0.0) {
+            return Err(Failure::Input(format!(
+                "--budget: expected a positive finite number of bits per step, got {b}"
+            )));
+        }
         return Ok(vec![b]);
     }
     let text = args.budgets.as_deref().unwrap_or_default();
-    text.split(',')
-        .map(|t| {
-            t.trim()
-                .parse::<f64>()
-                .ok()
-                .filter(|b| b.is_finite() && *b > 0.0)
-                .ok_or_else(|| {
-                    Failure::Input(format!(
-                        "--budgets: expected positive numbers separated by commas, got {t:?}"
-                    ))
-                })
-        })
-        .collect()
+    let mut out: Vec<f64> = Vec::new();
+    for t in text.split(',') {
+        let b = t
+            .trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|b| b.is_finite() && *b > 0.0)
+            .ok_or_else(|| {
+                Failure::Input(format!(
+                    "--budgets: expected positive finite numbers separated by commas, got {:?}",
+                    t.trim()
+                ))
+            })?;
+        if out.contains(&b) {
+            return Err(Failure::Input(format!(
+                "--budgets: the budget {:?} is given twice (as numbers they are equal); give each budget once",
+                t.trim()
+            )));
+        }
+        out.push(b);
+    }
+    Ok(out)
+}
+
+/// The `--budget-axis` given, or `payload` (the default, also in the output hash).
+pub(crate) fn budget_axis(args: &RunArgs) -> &str {
+    args.budget_axis.as_deref().unwrap_or("payload")
+}
+
+/// Refuses the budget options that mean nothing without `--budget`/`--budgets` (for plain runs).
+pub(crate) fn check_budget_options(args: &RunArgs) -> Result<(), Failure> {
+    if args.budget.is_some() || args.budgets.is_some() {
+        return Ok(());
+    }
+    for (given, name) in [
+        (args.budget_axis.is_some(), "--budget-axis"),
+        (args.pilot_trials.is_some(), "--pilot-trials"),
+    ] {
+        if given {
+            return Err(Failure::Input(format!(
+                "{name} applies only with --budget or --budgets"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// `run --budget` / `--budgets`: calibrate every scheme to each budget, print and write the
@@ -44,7 +81,7 @@ pub(crate) fn arena_run(
         .map(OutputDir::open)
         .transpose()
         .map_err(Failure::Input)?;
-    let axis = calibrate::Axis::parse(&args.budget_axis).map_err(Failure::Input)?;
+    let axis = calibrate::Axis::parse(budget_axis(args)).map_err(Failure::Input)?;
     let opts = calibrate::Options {
         axis,
         pilot_trials: args.pilot_trials,
@@ -66,6 +103,17 @@ pub(crate) fn arena_run(
         }
     })?;
     let elapsed = start.elapsed().as_secs_f64();
+    let bad: Vec<String> = out
+        .summaries
+        .iter()
+        .zip(&budgets)
+        .flat_map(|(s, b)| {
+            results::non_finite(s)
+                .into_iter()
+                .map(move |m| format!("budget {}: {m}", calibrate::dir_label(*b)))
+        })
+        .collect();
+    check_finite(bad)?;
     let first = &out.summaries[0];
     let group = first.group_order[0].clone();
     let mut msg = format!(
@@ -131,7 +179,7 @@ pub(crate) fn arena_run(
         "best_per_budget.md".to_string(),
     ];
     for (b, s) in out.summaries.iter().enumerate() {
-        let sub = format!("budget-{}", calibrate::short(budgets[b]));
+        let sub = format!("budget-{}", calibrate::dir_label(budgets[b]));
         write(&format!("{sub}/scenario.toml"), &out.texts[b])?;
         write(
             &format!("{sub}/summary.json"),
@@ -169,7 +217,11 @@ pub(crate) fn arena_run(
     let hash = output::sha256_hex(
         format!(
             "{source}\0{text}\0{:?}\0{:?}\0{:?}\0{}\0{:?}",
-            args.trials, args.seed, budgets, args.budget_axis, args.pilot_trials
+            args.trials,
+            args.seed,
+            budgets,
+            budget_axis(args),
+            args.pilot_trials
         )
         .as_bytes(),
     );

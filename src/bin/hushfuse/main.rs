@@ -64,9 +64,9 @@ struct RunArgs {
     #[arg(long, value_name = "B1,B2,...")]
     budgets: Option<String>,
     /// What the budget counts: uplink payload bits, whole 802.15.4 frames, or frames plus the
-    /// downlink feedback.
-    #[arg(long, default_value = "payload", value_name = "payload|frame|total")]
-    budget_axis: String,
+    /// downlink feedback (default: payload).
+    #[arg(long, value_name = "payload|frame|total")]
+    budget_axis: Option<String>,
     /// Trials of the calibration's pilot runs (default: the scenario's; fewer is faster, and the
     /// calibrated knobs are then rerun at the full count).
     #[arg(long)]
@@ -199,7 +199,7 @@ fn main() -> ExitCode {
                     arena_run(&scenario, &args).map(|_| ())
                 }
             } else {
-                run(&scenario, &args, false)
+                check_budget_options(&args).and_then(|()| run(&scenario, &args, false))
             }
         }
         Some(Command::Reproduce { id, args }) => {
