@@ -171,10 +171,10 @@ pub fn with_schemes<'a>(
 /// Bytes a run writes into its output folder, from above: the per-step table, the summary and
 /// the plots carry every accumulator column of every variant at every step (about 70 bytes a
 /// cell in the built-ins; 200 leaves room for longer names and numbers), the checkpoint
-/// carries the per-trial values, and a megabyte covers the rest (scenario copy, manifest).
+/// carries the per-trial values, and 64 KiB cover the rest (scenario copy, manifest).
 pub fn output_bytes(groups: usize, variants: usize, steps: usize, trials: usize) -> f64 {
     let cells = columns(groups) * variants as f64;
-    cells * (steps as f64 * 200.0 + trials as f64 * 32.0) + 1024.0 * 1024.0
+    cells * (steps as f64 * 200.0 + trials as f64 * 32.0) + 64.0 * 1024.0
 }
 
 /// Bytes as GiB with one decimal.
