@@ -522,9 +522,16 @@ fn a_full_tmpfs_leaves_the_old_complete_output() {
     let size: u64 = files(&d.join("old")).values().map(|b| b.len() as u64).sum();
     let mnt = d.join("mnt");
     std::fs::create_dir(&mnt).unwrap();
-    // Room for one output and a half (plus tmpfs' own blocks), not for two.
-    // plus 256 KiB for the free-space estimate's margin of the first run.
-    let kib = size * 3 / 2 / 1024 + 16 + 256;
+    // Room for one output and a half, and for the free-space estimate of one run (which the
+    // first run must pass), plus tmpfs' own blocks; not for two outputs.
+    let exp = hushfuse::sim::build::load(&small_text(), "small.toml").unwrap();
+    let estimate = hushfuse::sim::limits::output_bytes(
+        exp.groups.len(),
+        exp.variants.len(),
+        exp.steps,
+        exp.trials,
+    );
+    let kib = (size * 3 / 2).max(estimate as u64 + 16 * 1024) / 1024 + 16;
     let mounted = Command::new("mount")
         .args(["-t", "tmpfs", "-o", &format!("size={kib}k"), "tmpfs"])
         .arg(&mnt)
