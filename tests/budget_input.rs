@@ -131,6 +131,11 @@ fn a_huge_budget_gets_a_short_folder_name_or_is_refused_cleanly() {
                 .filter(|n| n.starts_with("budget-"))
                 .collect();
             assert_eq!(names, ["budget-1e300"]);
+            // The tables print the budget short, not as 301 digits.
+            let out = String::from_utf8_lossy(&o.stdout);
+            assert!(out.contains("1e300"), "{out}");
+            let widest = out.lines().map(|l| l.chars().count()).max().unwrap_or(0);
+            assert!(widest < 200, "a line of {widest} characters:\n{out}");
         }
         Some(2) => assert!(stderr(&o).contains("--budget"), "{}", stderr(&o)),
         c => panic!("exit {c:?}: {}", stderr(&o)),
@@ -140,12 +145,21 @@ fn a_huge_budget_gets_a_short_folder_name_or_is_refused_cleanly() {
 #[test]
 fn budget_options_without_a_budget_are_refused() {
     let d = dir_with_tiny();
-    for (args, name) in [
-        (&["--budget-axis", "frame"][..], "--budget-axis"),
-        (&["--budget-axis", "payload"][..], "--budget-axis"),
-        (&["--pilot-trials", "2"][..], "--pilot-trials"),
+    for (command, args, name) in [
+        ("run", &["--budget-axis", "frame"][..], "--budget-axis"),
+        ("run", &["--budget-axis", "payload"][..], "--budget-axis"),
+        ("run", &["--pilot-trials", "2"][..], "--pilot-trials"),
+        (
+            "reproduce",
+            &["--budget-axis", "frame"][..],
+            "--budget-axis",
+        ),
+        ("reproduce", &["--pilot-trials", "2"][..], "--pilot-trials"),
+        // `reproduce` runs the file as written: a budget there would be silently ignored.
+        ("reproduce", &["--budget", "24"][..], "--budget"),
+        ("reproduce", &["--budgets", "24,48"][..], "--budget"),
     ] {
-        let mut all = vec!["run", "tiny.toml", "--out", "o"];
+        let mut all = vec![command, "tiny.toml", "--out", "o"];
         all.extend_from_slice(args);
         let o = hushfuse(&all, d.path());
         assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));

@@ -563,6 +563,90 @@ fn a_full_tmpfs_leaves_the_old_complete_output() {
     assert_same_files(&d.join("old"), &mnt.join("o"));
 }
 
+/// A tmpfs of `kib` KiB on `mnt`, unmounted on drop; `None` where mounting is not allowed.
+fn small_disk(mnt: &Path, kib: u64) -> Option<impl Drop> {
+    struct Unmount(PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(&self.0).status();
+        }
+    }
+    std::fs::create_dir_all(mnt).unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", &format!("size={kib}k"), "tmpfs"])
+        .arg(mnt)
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    mounted.then(|| Unmount(mnt.to_path_buf()))
+}
+
+/// The arena and replay check free space too: on a disk with room for almost nothing they are
+/// refused (exit 2, naming the free and needed sizes) and leave no file behind.
+#[test]
+fn arena_and_replay_are_refused_on_a_disk_without_room() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scenario = small(d);
+    let mnt = d.join("mnt");
+    let Some(_guard) = small_disk(&mnt, 64) else {
+        eprintln!("SKIPPED: cannot mount a tmpfs here (needs root)");
+        return;
+    };
+    let out = mnt.join("arena").display().to_string();
+    let arena = Command::new(env!("CARGO_BIN_EXE_hushfuse"))
+        .args([
+            "run",
+            &scenario,
+            "--budgets",
+            "8,16",
+            "--trials",
+            "4",
+            "--out",
+            &out,
+        ])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    let e = refused(&arena);
+    assert!(e.contains("MiB free") && e.contains("will write"), "{e}");
+    // Recorded measurements long enough that the estimates do not fit in 64 KiB.
+    let long = small_text().replacen("steps = 30", "steps = 3000", 1);
+    std::fs::write(d.join("long.toml"), &long).unwrap();
+    let exp = hushfuse::sim::build::load(&long, "long.toml").unwrap();
+    let data = hushfuse::sim::runner::draw_trial(&exp, 0);
+    std::fs::write(
+        d.join("meas.csv"),
+        hushfuse::sim::replay::measurements_csv(&exp, &data),
+    )
+    .unwrap();
+    let out = mnt.join("replay").display().to_string();
+    let replay = Command::new(env!("CARGO_BIN_EXE_hushfuse"))
+        .args([
+            "replay",
+            "long.toml",
+            "--measurements",
+            "meas.csv",
+            "--out",
+            &out,
+        ])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    let e = refused(&replay);
+    assert!(e.contains("MiB free") && e.contains("will write"), "{e}");
+    for sub in ["arena", "replay"] {
+        let left: Vec<_> = std::fs::read_dir(mnt.join(sub))
+            .map(|r| r.filter_map(|e| e.ok()).map(|e| e.file_name()).collect())
+            .unwrap_or_default();
+        assert!(
+            left.iter()
+                .all(|n| n.to_string_lossy().starts_with(".hushfuse-lock")),
+            "{sub}: {left:?}"
+        );
+    }
+}
+
 /// A shard stopped by SIGINT resumes too, and its merge is still the unsharded run's bytes.
 #[test]
 fn an_interrupted_shard_resumes_and_merges_to_the_bytes_of_the_unsharded_run() {

@@ -224,7 +224,7 @@ fn replay_csv<'py>(
     let exp = &r.exp;
     let n = exp.system.state_dim();
     let ns = exp.system.n_sensors();
-    check_estimates(exp, &r.replayed.variants)?;
+    check_estimates(exp, &r.replayed)?;
     let d = PyDict::new(py);
     d.set_item("steps", exp.steps)?;
     d.set_item("seed", exp.seed)?;
@@ -293,21 +293,16 @@ fn replay_csv<'py>(
 }
 
 /// A replay whose estimates are not all finite (readings that overflow a filter) fails,
-/// naming the scheme, its variant and the first such step, as the command line does.
-fn check_estimates(exp: &build::Experiment, variants: &[replay::VariantReplay]) -> PyResult<()> {
-    for (v, vr) in variants.iter().enumerate() {
-        let first = vr.estimates.iter().position(|e| {
-            e.mean.iter().any(|x| !x.is_finite()) || e.cov.diagonal().iter().any(|x| !x.is_finite())
-        });
-        if let Some(k) = first {
-            return Err(RunError::new_err(format!(
-                "the replay produced estimates that are not finite: {} (variant {v}) from step {} on; rescale the data's units or check the scenario's noise levels",
-                exp.curves[exp.variants[v].curve].label,
-                k + 1
-            )));
-        }
+/// naming every such scheme, its variant and first step, with the command line's words.
+fn check_estimates(exp: &build::Experiment, replayed: &replay::Replayed) -> PyResult<()> {
+    let bad = replay::non_finite_estimates(exp, replayed);
+    if bad.is_empty() {
+        return Ok(());
     }
-    Ok(())
+    Err(RunError::new_err(format!(
+        "the replay produced estimates that are not finite: {}; rescale the data's units or check the scenario's noise levels",
+        bad.join("; ")
+    )))
 }
 
 /// What one sensor put on the network at one step.

@@ -117,3 +117,29 @@ def test_a_request_larger_than_the_machine_is_a_memory_error_before_any_allocati
     with pytest.raises(MemoryError, match="in memory, more than the limit") as e:
         hushfuse.Scheme("dormann-fig1", variant=1, steps=2_000_000)
     assert "--allow-large" not in str(e.value) and "--trials" not in str(e.value)
+
+
+def test_a_replay_larger_than_the_memory_limit_is_a_memory_error(monkeypatch):
+    data = hushfuse.simulate(SCEN)
+    monkeypatch.setenv("HUSHFUSE_MAX_MEMORY_BYTES", "1000")
+    with pytest.raises(MemoryError, match="in memory, more than the limit") as e:
+        hushfuse.replay(SCEN, data["measurements"], data["truth"])
+    assert "--allow-large" not in str(e.value)
+
+
+def test_readings_that_overflow_the_filters_are_a_run_error_naming_the_scheme():
+    # The example's model with the centralized KF only (a filter that takes any finite reading).
+    text = (EXAMPLE / "scenario.toml").read_text()
+    kf = text.split("[[schemes]]")[0] + '[[schemes]]\nkind = "centralized-kf"\n'
+    data = hushfuse.simulate(kf)
+    # Readings near the largest double, alternating in sign: the filter's sums overflow.
+    def huge_like(m):
+        m = np.asarray(m, dtype=float)
+        sign = np.where(np.arange(m.shape[0]) % 2 == 0, 1.0, -1.0).reshape(-1, *[1] * (m.ndim - 1))
+        return np.ones_like(m) * sign * 1.7e308
+
+    huge = [huge_like(m) for m in data["measurements"]]
+    with pytest.raises(hushfuse.RunError, match="not finite") as e:
+        hushfuse.replay(kf, huge)
+    assert "Centralized KF" in str(e.value) and "variant 0" in str(e.value), str(e.value)
+    assert "from step 1 on" in str(e.value), str(e.value)

@@ -63,7 +63,7 @@ pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
                 c.label.clone(),
                 knob(c),
                 format!("{:.4}", c.result.mean_rmse[group]),
-                format!("{:.1}", c.achieved),
+                super::calibrate::bits_cell(c.achieved),
             ]),
             None => r.extend([
                 "(none within budget)".into(),

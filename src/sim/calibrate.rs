@@ -537,8 +537,8 @@ pub fn table(outcome: &Outcome, b: usize, group: &str) -> String {
                 (Some(k), Some(v)) => format!("{k} = {}", short(v)),
                 _ => "—".to_string(),
             },
-            format!("{:.1}", c.target),
-            format!("{:.1}", c.achieved),
+            bits_cell(c.target),
+            bits_cell(c.achieved),
             c.status.text().to_string(),
             c.result
                 .mean_rmse
@@ -552,8 +552,24 @@ pub fn table(outcome: &Outcome, b: usize, group: &str) -> String {
 
 /// A number with at most 4 significant decimals.
 pub fn short(v: f64) -> String {
+    // Beyond a billion bits the digits say nothing and would widen a table past any screen.
+    if v.abs() >= 1e9 {
+        let s = format!("{v:.4e}");
+        let (mantissa, exponent) = s.split_once('e').expect("exponent form");
+        let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
+        return format!("{mantissa}e{exponent}");
+    }
     let s = format!("{v:.4}");
     s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// A bits-per-step cell of a table: one decimal, or [`short`]'s exponent form when huge.
+pub fn bits_cell(v: f64) -> String {
+    if v.abs() >= 1e9 {
+        short(v)
+    } else {
+        format!("{v:.1}")
+    }
 }
 
 /// A name for budget `v` that no other f64 shares: [`short`] where it reads back as `v` (24,
@@ -575,4 +591,40 @@ pub fn dir_label(v: f64) -> String {
 /// Left-aligned first column, right-aligned others, a rule under the header.
 pub fn render(rows: &[Vec<String>]) -> String {
     super::results::text_table(rows, 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn short_drops_trailing_zeros_and_writes_huge_values_with_an_exponent() {
+        assert_eq!(short(24.0), "24");
+        assert_eq!(short(12.5), "12.5");
+        assert_eq!(short(0.123456), "0.1235");
+        assert_eq!(short(999_999_999.0), "999999999");
+        assert_eq!(short(1e9), "1e9");
+        assert_eq!(short(1e300), "1e300");
+        assert_eq!(short(1.23456789e12), "1.2346e12");
+        assert_eq!(bits_cell(384.0), "384.0");
+        assert_eq!(bits_cell(1e300), "1e300");
+    }
+
+    #[test]
+    fn directory_labels_read_back_as_their_budget() {
+        for v in [
+            24.0,
+            12.5,
+            24.00001,
+            24.00004,
+            1e9,
+            5e9,
+            1.23456789e12,
+            1e300,
+            2e-300,
+        ] {
+            let label = dir_label(v);
+            assert_eq!(label.parse::<f64>(), Ok(v), "{v}: {label}");
+        }
+    }
 }

@@ -356,39 +356,38 @@ pub fn parse_truth(text: &str, file: &str) -> Result<TruthTable, DataError> {
 /// otherwise the last step of the measurements.
 pub fn steps_of(meas: &MeasTable, truth: Option<&TruthTable>) -> Result<usize, DataError> {
     let last = meas.rows.last().map_or(0, |r| r.step);
-    if let Some(r) = meas.rows.iter().find(|r| r.step > build::MAX_STEPS) {
-        return Err(err_at(
+    // The first measurement row whose step exceeds `limit`, reported at its step cell.
+    let beyond = |limit: usize, why: &dyn Fn(usize) -> String| match meas
+        .rows
+        .iter()
+        .find(|r| r.step > limit)
+    {
+        Some(r) => Err(err_at(
             &meas.file,
             Some(At {
                 line: r.line,
                 row: r.row,
             }),
             Some(col_name(&meas.header, 0)),
-            format!(
-                "step {} is beyond the most steps a replay can have ({}): the step column counts the time steps 1, 2, 3, ... of the recording (an index, not a time or a Unix timestamp); number the rows' steps from 1",
-                r.step,
-                build::MAX_STEPS
-            ),
-        ));
-    }
+            why(r.step),
+        )),
+        None => Ok(()),
+    };
+    beyond(build::MAX_STEPS, &|step| {
+        format!(
+            "step {step} is beyond the most steps a replay can have ({}): the step column counts the time steps 1, 2, 3, ... of the recording (an index, not a time or a Unix timestamp); number the rows' steps from 1",
+            build::MAX_STEPS
+        )
+    })?;
     match truth {
         Some(t) => {
-            if let Some(r) = meas.rows.iter().find(|r| r.step > t.steps()) {
-                return Err(err_at(
-                    &meas.file,
-                    Some(At {
-                        line: r.line,
-                        row: r.row,
-                    }),
-                    Some(col_name(&meas.header, 0)),
-                    format!(
-                        "step {} is beyond the last step of the truth ({}, {} steps)",
-                        r.step,
-                        t.file,
-                        t.steps()
-                    ),
-                ));
-            }
+            beyond(t.steps(), &|step| {
+                format!(
+                    "step {step} is beyond the last step of the truth ({}, {} steps)",
+                    t.file,
+                    t.steps()
+                )
+            })?;
             Ok(t.steps())
         }
         None if last == 0 => Err(err_at(

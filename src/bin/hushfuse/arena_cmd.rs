@@ -82,16 +82,29 @@ pub(crate) fn arena_run(
         .transpose()
         .map_err(Failure::Input)?;
     let axis = calibrate::Axis::parse(budget_axis(args)).map_err(Failure::Input)?;
+    let load = build::LoadOptions {
+        trials: args.trials,
+        seed: args.seed,
+        threads: args.threads,
+        limits: args.allow_large.then(hushfuse::sim::limits::Limits::none),
+    };
+    // Room for one run's output per budget, checked before the first pilot run (a scenario
+    // that does not load is reported by the calibration with its full message).
+    if let (Some(d), Ok(exp)) = (&early_dir, build::load_with(&text, &source, &load)) {
+        let per_budget = hushfuse::sim::limits::output_bytes(
+            exp.groups.len(),
+            exp.variants.len(),
+            exp.steps,
+            exp.trials,
+        );
+        output::check_free_space(d.dir(), per_budget * budgets.len() as f64)
+            .map_err(Failure::Input)?;
+    }
     let opts = calibrate::Options {
         axis,
         pilot_trials: args.pilot_trials,
         threads: args.threads,
-        load: build::LoadOptions {
-            trials: args.trials,
-            seed: args.seed,
-            threads: args.threads,
-            limits: args.allow_large.then(hushfuse::sim::limits::Limits::none),
-        },
+        load,
         ..Default::default()
     };
     let start = Instant::now();

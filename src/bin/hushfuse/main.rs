@@ -203,7 +203,13 @@ fn main() -> ExitCode {
             }
         }
         Some(Command::Reproduce { id, args }) => {
-            if builtin::get(&id).is_none() && !Path::new(&id).exists() {
+            if args.budget.is_some() || args.budgets.is_some() {
+                Err(Failure::Input(format!(
+                    "--budget/--budgets apply to `hushfuse run`, not to `reproduce` (try `hushfuse run {id} --budgets ...`)"
+                )))
+            } else if let Err(e) = check_budget_options(&args) {
+                Err(e)
+            } else if builtin::get(&id).is_none() && !Path::new(&id).exists() {
                 Err(Failure::Input(format!(
                     "unknown built-in scenario {id:?}; `hushfuse list` shows them"
                 )))

@@ -102,6 +102,9 @@ pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
     // The results first: a failed write below loses nothing from sight.
     print_out(&msg);
     msg.clear();
+    // The files are in memory: their exact size (and the manifest's room) must fit.
+    let needed: usize = staged.iter().map(|(_, t)| t.len()).sum();
+    output::check_free_space(&dir, needed as f64 + 64.0 * 1024.0).map_err(Failure::Input)?;
     for (name, text) in &staged {
         out_dir.stage(name, text.as_bytes()).map_err(Failure::Run)?;
     }
