@@ -10,7 +10,8 @@ use hushfuse::model::{presets, LinearSensor, MeasurementModel};
 use hushfuse::scheme::centralized::CentralizedScheme;
 use hushfuse::scheme::distributed_kf::{DistributedKfScheme, Trigger};
 use hushfuse::scheme::{Scheme, System};
-use hushfuse::sim::{build, runner};
+use hushfuse::scenario::build;
+use hushfuse::engine::runner;
 use rand::SeedableRng;
 use std::sync::Arc;
 

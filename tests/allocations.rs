@@ -4,7 +4,8 @@
 //! calls made on the current thread.
 use hushfuse::linalg::Vector;
 use hushfuse::link::Received;
-use hushfuse::sim::{build, builtin};
+use hushfuse::scenario::build;
+use hushfuse::scenario::builtin;
 #[path = "common/counting_alloc.rs"]
 mod counting_alloc;
 use counting_alloc::allocations;

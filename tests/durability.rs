@@ -524,8 +524,8 @@ fn a_full_tmpfs_leaves_the_old_complete_output() {
     std::fs::create_dir(&mnt).unwrap();
     // Room for one output and a half, and for the free-space estimate of one run (which the
     // first run must pass), plus tmpfs' own blocks; not for two outputs.
-    let exp = hushfuse::sim::build::load(&small_text(), "small.toml").unwrap();
-    let estimate = hushfuse::sim::limits::output_bytes(
+    let exp = hushfuse::scenario::build::load(&small_text(), "small.toml").unwrap();
+    let estimate = hushfuse::scenario::limits::output_bytes(
         exp.groups.len(),
         exp.variants.len(),
         exp.steps,
@@ -613,11 +613,11 @@ fn arena_and_replay_are_refused_on_a_disk_without_room() {
     // Recorded measurements long enough that the estimates do not fit in 64 KiB.
     let long = small_text().replacen("steps = 30", "steps = 3000", 1);
     std::fs::write(d.join("long.toml"), &long).unwrap();
-    let exp = hushfuse::sim::build::load(&long, "long.toml").unwrap();
-    let data = hushfuse::sim::runner::draw_trial(&exp, 0);
+    let exp = hushfuse::scenario::build::load(&long, "long.toml").unwrap();
+    let data = hushfuse::engine::runner::draw_trial(&exp, 0);
     std::fs::write(
         d.join("meas.csv"),
-        hushfuse::sim::replay::measurements_csv(&exp, &data),
+        hushfuse::engine::replay::measurements_csv(&exp, &data),
     )
     .unwrap();
     let out = mnt.join("replay").display().to_string();

@@ -5,7 +5,7 @@
 mod common;
 
 use common::{hushfuse, TINY};
-use hushfuse::sim::durable::{self, Progress, State};
+use hushfuse::engine::durable::{self, Progress, State};
 use proptest::prelude::*;
 use std::path::Path;
 
@@ -45,7 +45,7 @@ fn edit_shard(d: &Path, i: usize, f: impl FnOnce(&mut State)) {
     std::fs::write(&p, s.encode()).unwrap();
 }
 
-fn first_sums(s: &mut State) -> &mut hushfuse::sim::metrics::Sums {
+fn first_sums(s: &mut State) -> &mut hushfuse::metrics::Sums {
     match &mut s.progress {
         Progress::Blocks(b) => &mut b[0][0],
         Progress::Prefix { total, .. } => &mut total[0],

@@ -8,7 +8,9 @@ use hushfuse::filter::Gaussian;
 use hushfuse::linalg::LinalgError;
 use hushfuse::network::{self, Traffic};
 use hushfuse::scheme::{StepSink, TrialCache};
-use hushfuse::sim::{build, builtin, runner};
+use hushfuse::scenario::build;
+use hushfuse::scenario::builtin;
+use hushfuse::engine::runner;
 
 type Steps = Vec<(Vec<u64>, Vec<u64>, Traffic)>;
 

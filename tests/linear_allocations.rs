@@ -10,7 +10,9 @@
 //! products: a constant per step. Counted by a global allocator that counts the calls made on
 //! the current thread.
 use hushfuse::link::{Received, Transmission};
-use hushfuse::sim::{build, builtin, runner};
+use hushfuse::scenario::build;
+use hushfuse::scenario::builtin;
+use hushfuse::engine::runner;
 use rand::SeedableRng;
 #[path = "common/counting_alloc.rs"]
 mod counting_alloc;

@@ -4,9 +4,9 @@
 #[path = "common/cli.rs"]
 mod common;
 use common::hushfuse;
-use hushfuse::sim::build;
-use hushfuse::sim::replay::{self, DataError, ReplayError, ReplayOptions};
-use hushfuse::sim::runner;
+use hushfuse::scenario::build;
+use hushfuse::engine::replay::{self, DataError, ReplayError, ReplayOptions};
+use hushfuse::engine::runner;
 use std::path::Path;
 use std::process::Output;
 

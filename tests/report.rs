@@ -1,6 +1,6 @@
 //! `report.html` references nothing outside itself, and (when Chromium is installed) a headless
 //! browser renders it.
-use hushfuse::sim::html::external_references;
+use hushfuse::output::html::external_references;
 use std::process::Command;
 
 fn hushfuse(args: &[&str]) -> std::process::Output {

@@ -1,6 +1,9 @@
 //! Statistical properties with fixed seeds; tolerances come from the sampling distribution,
 //! not from trial and error.
-use hushfuse::sim::{build, builtin, results, runner};
+use hushfuse::scenario::build;
+use hushfuse::scenario::builtin;
+use hushfuse::metrics::results;
+use hushfuse::engine::runner;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 fn experiment(schemes: &str, trials: usize, seed: u64) -> build::Experiment {
@@ -45,7 +48,7 @@ fn anees_test_detects_an_overconfident_filter() {
     let trials = 300;
     let base = builtin::get("dormann-fig1").unwrap();
     let head = base.split("[[schemes]]").next().unwrap();
-    let truth = hushfuse::sim::build::load(
+    let truth = hushfuse::scenario::build::load(
         &format!(
             "{}[[schemes]]\nkind = \"centralized-kf\"\n",
             head.replace("trials = 500", "trials = 300")
@@ -58,7 +61,7 @@ fn anees_test_detects_an_overconfident_filter() {
         head.replace("trials = 500", "trials = 300")
             .replace("R_diag = [1.0, 1.0]", "R_diag = [0.25, 0.25]")
     );
-    let believed = hushfuse::sim::build::load(&filter_text, "believed").unwrap();
+    let believed = hushfuse::scenario::build::load(&filter_text, "believed").unwrap();
     // Run the believed filter on the true system's data by swapping the scheme in.
     let mut exp = truth;
     exp.variants = believed.variants;

@@ -86,12 +86,12 @@ pub(crate) fn arena_run(
         trials: args.trials,
         seed: args.seed,
         threads: args.threads,
-        limits: args.allow_large.then(hushfuse::sim::limits::Limits::none),
+        limits: args.allow_large.then(hushfuse::scenario::limits::Limits::none),
     };
     // Room for one run's output per budget, checked before the first pilot run (a scenario
     // that does not load is reported by the calibration with its full message).
     if let (Some(d), Ok(exp)) = (&early_dir, build::load_with(&text, &source, &load)) {
-        let per_budget = hushfuse::sim::limits::output_bytes(
+        let per_budget = hushfuse::scenario::limits::output_bytes(
             exp.groups.len(),
             exp.variants.len(),
             exp.steps,

@@ -10,11 +10,19 @@ mod run;
 
 use arena_cmd::*;
 use clap::{Parser, Subcommand};
-use hushfuse::sim::durable::{self, State};
-use hushfuse::sim::output::{self, OutputDir};
-use hushfuse::sim::{
-    arena, build, builtin, calibrate, html, plot, replay, report, results, runner, tables,
-};
+use hushfuse::engine::durable::{self, State};
+use hushfuse::output::{self, OutputDir};
+use hushfuse::output::arena;
+use hushfuse::scenario::build;
+use hushfuse::scenario::builtin;
+use hushfuse::engine::calibrate;
+use hushfuse::output::html;
+use hushfuse::output::plot;
+use hushfuse::engine::replay;
+use hushfuse::output::report;
+use hushfuse::metrics::results;
+use hushfuse::engine::runner;
+use hushfuse::output::tables;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use merge::*;
 use replay_cmd::*;

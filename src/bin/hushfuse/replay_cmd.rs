@@ -15,9 +15,9 @@ pub(crate) struct ReplayArgs<'a> {
 pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
     let (text, source) = scenario_text(a.scenario)?;
     let limits = if a.allow_large {
-        hushfuse::sim::limits::Limits::none()
+        hushfuse::scenario::limits::Limits::none()
     } else {
-        hushfuse::sim::limits::Limits::default()
+        hushfuse::scenario::limits::Limits::default()
     };
     // A file larger than the memory limit is refused before it is read.
     let read = |p: &Path| {

@@ -114,7 +114,7 @@ pub(crate) fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(),
         trials: args.trials,
         seed: args.seed,
         threads: args.threads,
-        limits: args.allow_large.then(hushfuse::sim::limits::Limits::none),
+        limits: args.allow_large.then(hushfuse::scenario::limits::Limits::none),
     };
     let exp =
         build::load_with(&text, &source, &options).map_err(|e| Failure::Input(e.to_string()))?;
@@ -145,7 +145,7 @@ pub(crate) fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(),
         ),
         None => None,
     };
-    let needed = hushfuse::sim::limits::output_bytes(
+    let needed = hushfuse::scenario::limits::output_bytes(
         exp.groups.len(),
         exp.variants.len(),
         exp.steps,
@@ -362,7 +362,7 @@ pub(crate) fn compute(
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn write_run_outputs(
     exp: &build::Experiment,
-    sums: &[hushfuse::sim::metrics::Sums],
+    sums: &[hushfuse::metrics::Sums],
     text_in: &str,
     args: &RunArgs,
     reproduce: bool,

@@ -7,7 +7,10 @@ use crate::filter::{kf, Gaussian};
 use crate::link::Received;
 use crate::model::presets;
 use crate::scheme::FusionCenter;
-use crate::sim::{build, builtin, results, runner};
+use crate::scenario::build;
+use crate::scenario::builtin;
+use crate::metrics::results;
+use crate::engine::runner;
 
 fn oscillator_system(with_bias: bool) -> Arc<System> {
     let exp = build::load(builtin::get("geng-oscillator").unwrap(), "geng-oscillator").unwrap();

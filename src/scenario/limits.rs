@@ -2,7 +2,7 @@
 //! it is refused (`--allow-large` lifts them). The estimate is coarse on purpose: it exists to
 //! turn `steps = 9223372036854775807` or `particles = 10^9` into a clear error instead of an
 //! allocator abort or a run that never ends, not to predict run time to the second.
-use super::build::ScenarioError;
+use crate::scenario::build::ScenarioError;
 use crate::scheme::{Scheme, System};
 
 /// Limits of a run.
@@ -134,10 +134,10 @@ pub fn baseline(
     let workers = threads.max(1) as f64;
     let blocks = (trials / 4.0)
         .ceil()
-        .min(crate::sim::runner::WINDOW_PER_THREAD as f64 * workers);
+        .min(crate::engine::runner::WINDOW_PER_THREAD as f64 * workers);
     let trial_data = steps * (8.0 * (n + m) + 64.0 * vectors) * workers;
     let block = steps * columns(groups) * variants * 16.0;
-    let sums = block + (block * blocks).max(crate::sim::runner::WINDOW_MAX_BYTES as f64);
+    let sums = block + (block * blocks).max(crate::engine::runner::WINDOW_MAX_BYTES as f64);
     let per_trial = trials * variants * (columns(groups) * 8.0 + 24.0);
     // A Kalman step: prediction n^3 plus an update per measured component.
     let kf_flops = 2.0 * n * n * n + 4.0 * n * n * m.max(1.0);

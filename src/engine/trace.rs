@@ -1,11 +1,11 @@
 //! One trial in detail, and per-step errors with their standard errors, for `report.html`; and
-//! the loop that replays recorded measurements ([`super::replay`]).
-//! The same loop as [`super::runner`] (the same truths, measurements and coins: a variant's
+//! the loop that replays recorded measurements ([`crate::engine::replay`]).
+//! The same loop as [`crate::engine::runner`] (the same truths, measurements and coins: a variant's
 //! coins come from stream 1 + its index, or stream 1 for every variant when each scheme ran
-//! alone, as calibrated arenas do); [`super::runner::run`] itself is untouched.
-use super::build::Experiment;
-use super::metrics::Sums;
-use super::runner::{draw_trial, trial_rng};
+//! alone, as calibrated arenas do); [`crate::engine::runner::run`] itself is untouched.
+use crate::scenario::build::Experiment;
+use crate::metrics::Sums;
+use crate::engine::runner::{draw_trial, trial_rng};
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
 use crate::link::{Received, Transmission};
@@ -87,7 +87,7 @@ pub fn run_variant_with(
     let stream = 1 + if opts.alone { 0 } else { v as u64 };
     let trial = opts.trial as u64;
     let mut rng = trial_rng(exp.seed, trial, stream);
-    let center_seed = super::runner::center_seed(exp.seed, trial, stream);
+    let center_seed = crate::engine::runner::center_seed(exp.seed, trial, stream);
     let variant = &exp.variants[v];
     let label = &exp.curves[variant.curve].label;
     let err = |k: usize, e: &dyn std::fmt::Display| format!("scheme {label}, step {k}: {e}");
@@ -183,7 +183,7 @@ pub fn run_variant_into(
 /// Runs variant `v` over `trial`, calling `f(k, truth, estimate, links)` after every step.
 fn run_variant(
     exp: &Experiment,
-    data: &super::runner::TrialData,
+    data: &crate::engine::runner::TrialData,
     v: usize,
     trial: usize,
     alone: bool,

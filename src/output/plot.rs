@@ -1,7 +1,7 @@
 //! SVG figures: RMSE per step per scheme, and steady-state MSE (solid) and trace (dashed)
 //! against the communication rate, the layout of seed 004's Fig. 1.
-use super::build::Experiment;
-use super::results::{curve_points, Summary};
+use crate::scenario::build::Experiment;
+use crate::metrics::results::{curve_points, Summary};
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -102,7 +102,7 @@ pub fn lines(
     data: &[Line],
 ) -> Result<(), String> {
     let svg = lines_svg(title, x_label, y_label, data)?;
-    super::output::write_file(path, svg.as_bytes()).map_err(|e| format!("plot: {e}"))
+    crate::output::write_file(path, svg.as_bytes()).map_err(|e| format!("plot: {e}"))
 }
 
 /// [`lines`] into a string (for inline SVG in `report.html`).
@@ -326,9 +326,9 @@ fn per_step(
     // together and each swept scheme on a figure of its own (one line per sweep point).
     let few = summary.schemes.len() <= 12;
     // Label plus the swept parameters only (the fixed ones are the same for every line).
-    let name = |s: &super::results::SchemeSummary| {
+    let name = |s: &crate::metrics::results::SchemeSummary| {
         let swept = &exp.curves[s.curve].swept;
-        let shown: super::scenario::Params = s
+        let shown: crate::scenario::Params = s
             .params
             .iter()
             .filter(|(k, _)| swept.contains(k))
@@ -337,7 +337,7 @@ fn per_step(
         if shown.is_empty() {
             s.name.clone()
         } else {
-            format!("{} [{}]", s.name, super::results::params_text(&shown))
+            format!("{} [{}]", s.name, crate::metrics::results::params_text(&shown))
         }
     };
     let single: Vec<Line> = summary
@@ -380,7 +380,7 @@ fn per_step(
             .filter(|s| s.curve == ci)
             .enumerate()
             .map(|(j, s)| Line {
-                name: super::results::params_text(&s.params),
+                name: crate::metrics::results::params_text(&s.params),
                 points: s.rmse[group]
                     .iter()
                     .enumerate()

@@ -1,12 +1,12 @@
 //! `report.html` (issue 11 item 5): one self-contained file — inline SVG figures, the tables,
 //! the scenario as run, the version and seeds; no scripts, fonts, styles or images from
 //! anywhere else, so it reads offline and can be mailed as it is.
-use super::arena;
-use super::build::Experiment;
-use super::calibrate::{short, Outcome};
-use super::plot;
-use super::results::{params_text, Summary};
-use super::trace::{self, Link};
+use crate::output::arena;
+use crate::scenario::build::Experiment;
+use crate::engine::calibrate::{short, Outcome};
+use crate::output::plot;
+use crate::metrics::results::{params_text, Summary};
+use crate::engine::trace::{self, Link};
 use plotters::prelude::*;
 use std::fmt::Write as _;
 
@@ -52,7 +52,7 @@ fn html_table(rows: &[Vec<String>]) -> String {
 
 /// The report's scheme colours: the first ten of the plots' palette (its black and light
 /// orange are kept for fronts and bounds there).
-const PALETTE: &[RGBColor] = super::plot::COLORS.split_at(10).0;
+const PALETTE: &[RGBColor] = crate::output::plot::COLORS.split_at(10).0;
 
 fn pe(e: impl std::fmt::Display) -> String {
     format!("plot: {e}")
@@ -640,7 +640,7 @@ pub fn render(input: &Input) -> Result<String, String> {
     let within = |i: usize| {
         input.arena.is_none_or(|o| {
             let c = &o.rows[0][i];
-            c.status == super::calibrate::Status::Calibrated
+            c.status == crate::engine::calibrate::Status::Calibrated
                 || c.achieved <= c.target * (1.0 + o.tolerance)
         })
     };

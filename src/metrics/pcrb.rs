@@ -15,8 +15,8 @@
 //! all-data Kalman filter's covariance. For nonlinear sensors the expectation is taken over the
 //! run's own true trajectories (the same (seed, trial) draws as the runner), so it carries a
 //! Monte Carlo error of its own, small next to the schemes' for the same trials.
-use super::build::Experiment;
-use super::runner::draw_trial;
+use crate::scenario::build::Experiment;
+use crate::engine::runner::draw_trial;
 use crate::linalg::{spd_inverse, symmetrize, Matrix};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -148,12 +148,12 @@ mod tests {
     use std::sync::Arc;
 
     fn arena_1d(trials: usize) -> Experiment {
-        let text = crate::sim::builtin::get("arena-1d").unwrap();
-        let opts = crate::sim::build::LoadOptions {
+        let text = crate::scenario::builtin::get("arena-1d").unwrap();
+        let opts = crate::scenario::build::LoadOptions {
             trials: Some(trials),
             ..Default::default()
         };
-        crate::sim::build::load_with(text, "arena-1d", &opts).unwrap()
+        crate::scenario::build::load_with(text, "arena-1d", &opts).unwrap()
     }
 
     /// Linear-Gaussian model: the bound is the all-data Kalman filter's covariance, whose trace
@@ -163,8 +163,8 @@ mod tests {
         let exp = arena_1d(2);
         let bound = compute(&exp).unwrap();
         assert_eq!(bound.trajectories, 0);
-        let sums = crate::sim::runner::run(&exp, Default::default(), &|_| {}).unwrap();
-        let summary = crate::sim::results::summarize(&exp, &sums);
+        let sums = crate::engine::runner::run(&exp, Default::default(), &|_| {}).unwrap();
+        let summary = crate::metrics::results::summarize(&exp, &sums);
         let kf = summary
             .schemes
             .iter()

@@ -3,8 +3,8 @@
 //! processes the same data with coin flips from a stream of its own (common random numbers).
 //! Trials run in parallel in fixed blocks whose sums are merged in block order, so results are
 //! bit-identical for any number of threads.
-use super::build::Experiment;
-use super::metrics::Sums;
+use crate::scenario::build::Experiment;
+use crate::metrics::Sums;
 use crate::linalg::Vector;
 use crate::network;
 use crate::scheme::SchemeError;
@@ -294,7 +294,7 @@ struct Worker<'e> {
     drawers: Vec<Drawer>,
     scratch: Scratch,
     /// The trial states of a lockstep batch, restarted for each variant of each block.
-    states: Vec<super::metrics::TrialState<'e>>,
+    states: Vec<crate::metrics::TrialState<'e>>,
 }
 
 impl<'e> Worker<'e> {
@@ -429,7 +429,7 @@ fn run_block<'e>(
 /// variant's block sums in trial order at every step.
 struct BatchRecorder<'a, 'e> {
     sums: &'a mut Sums,
-    states: &'a mut [super::metrics::TrialState<'e>],
+    states: &'a mut [crate::metrics::TrialState<'e>],
     truths: &'a [&'a [Vector]],
 }
 
@@ -469,7 +469,7 @@ impl crate::scheme::BatchSink for BatchRecorder<'_, '_> {
         traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
         // No ESS to record (`record_ess` of `None` adds nothing).
-        super::metrics::record_shared(
+        crate::metrics::record_shared(
             self.states,
             self.sums,
             k,
@@ -571,7 +571,7 @@ fn run_variant(
     let mut obs = sums.trial(&exp.groups, exp.steady_from);
     {
         struct Sink<'a, 'b> {
-            obs: &'b mut super::metrics::TrialObserver<'a>,
+            obs: &'b mut crate::metrics::TrialObserver<'a>,
             truth: &'b [Vector],
         }
         impl crate::scheme::StepSink for Sink<'_, '_> {

@@ -1,8 +1,8 @@
 //! `hushfuse reproduce`: our numbers beside the paper's published ones, and each of the paper's
 //! claims checked on our numbers.
-use super::build::Experiment;
-use super::results::{curve_points, params_text, CurvePoint, Summary};
-use super::scenario::ClaimSpec;
+use crate::scenario::build::Experiment;
+use crate::metrics::results::{curve_points, params_text, CurvePoint, Summary};
+use crate::scenario::ClaimSpec;
 use serde::Serialize;
 use std::fmt::Write as _;
 
@@ -308,7 +308,7 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                 r
             }
             ClaimSpec::CloserToTarget { text, a, b, param, metric } => {
-                let value = |s: &super::results::SchemeSummary| -> Option<f64> {
+                let value = |s: &crate::metrics::results::SchemeSummary| -> Option<f64> {
                     match metric.as_str() {
                         "transmissions_per_step" => Some(s.transmissions_per_step),
                         "rate" => Some(s.rate),
@@ -319,7 +319,7 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                 let mut need: Option<usize> = None;
                 let mut evidence = Vec::new();
                 // Standard error of the metric (both are rates of transmissions).
-                let se_of = |s: &super::results::SchemeSummary| -> f64 {
+                let se_of = |s: &crate::metrics::results::SchemeSummary| -> f64 {
                     if metric == "rate" {
                         s.steady_state.rate_se
                     } else {
@@ -327,11 +327,11 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                     }
                 };
                 for sa in summary.schemes.iter().filter(|s| &s.name == a) {
-                    let Some(super::scenario::ParamValue::Number(target)) = sa.params.get(param) else {
+                    let Some(crate::scenario::ParamValue::Number(target)) = sa.params.get(param) else {
                         continue;
                     };
                     let Some(sb) = summary.schemes.iter().find(|s| {
-                        &s.name == b && s.params.get(param).is_some_and(|v| v.matches(&super::scenario::ParamValue::Number(*target)))
+                        &s.name == b && s.params.get(param).is_some_and(|v| v.matches(&crate::scenario::ParamValue::Number(*target)))
                     }) else {
                         continue;
                     };
@@ -418,8 +418,8 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
 fn variant<'a>(
     summary: &'a Summary,
     label: &str,
-    params: &super::scenario::Params,
-) -> Result<&'a super::results::SchemeSummary, String> {
+    params: &crate::scenario::Params,
+) -> Result<&'a crate::metrics::results::SchemeSummary, String> {
     let found: Vec<_> = summary
         .schemes
         .iter()
@@ -467,8 +467,8 @@ fn paired(a: &[Vec<f64>], b: &[Vec<f64>], col: usize) -> (f64, f64, f64, f64) {
 fn pairwise(
     summary: &Summary,
     text: &str,
-    (a, ap): (&str, &super::scenario::Params),
-    (b, bp): (&str, &super::scenario::Params),
+    (a, ap): (&str, &crate::scenario::Params),
+    (b, bp): (&str, &crate::scenario::Params),
     metric: &str,
     verdict: impl Fn(f64, f64, f64, f64) -> (Verdict, Option<usize>, String),
 ) -> ClaimResult {
@@ -729,7 +729,9 @@ fn verdict_text(c: &ClaimResult) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::{build, results, runner};
+    use crate::scenario::build;
+use crate::metrics::results;
+use crate::engine::runner;
 
     /// A summary with two schemes "A" and "B" whose per-trial MSEs are given.
     fn two(a: Vec<f64>, b: Vec<f64>) -> Summary {
@@ -737,7 +739,7 @@ mod tests {
             trials: Some(2),
             ..Default::default()
         };
-        let text = crate::sim::builtin::get("default").unwrap();
+        let text = crate::scenario::builtin::get("default").unwrap();
         let exp = build::load_with(text, "default", &opts).unwrap();
         let sums = runner::run(&exp, runner::RunOptions::default(), &|_| {}).unwrap();
         let mut s = results::summarize(&exp, &sums);
@@ -753,7 +755,7 @@ mod tests {
     }
 
     fn better(s: &Summary) -> ClaimResult {
-        let none = crate::sim::scenario::Params::default();
+        let none = crate::scenario::Params::default();
         pairwise(
             s,
             "A beats B",
@@ -791,7 +793,7 @@ mod tests {
         assert!(!r.holds);
         assert_ne!(r.verdict, Verdict::Holds);
         // ...and in the other direction either.
-        let none = crate::sim::scenario::Params::default();
+        let none = crate::scenario::Params::default();
         let r2 = pairwise(
             &s,
             "B beats A",

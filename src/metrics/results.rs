@@ -1,7 +1,7 @@
 //! From merged sums to the numbers people read: `summary.json`, `per_step.csv` and the table.
-use super::build::Experiment;
-use super::metrics::{Layout, Sums};
-use super::scenario::Params;
+use crate::scenario::build::Experiment;
+use crate::metrics::{Layout, Sums};
+use crate::scenario::Params;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -103,7 +103,7 @@ pub struct SchemeSummary {
     pub nees_coverage_95_se: f64,
     /// Fraction of trials that diverged: NEES above the chi-square(n) 99.9% quantile for 10
     /// consecutive steps, or a squared error or NEES that is not finite
-    /// ([`super::metrics::DIVERGENCE_RUN`]).
+    /// ([`crate::metrics::DIVERGENCE_RUN`]).
     pub diverged_fraction: f64,
     /// Binomial standard error sqrt(p (1 - p) / trials).
     pub diverged_fraction_se: f64,
@@ -173,16 +173,16 @@ pub struct Summary {
     pub group_order: Vec<String>,
     pub schemes: Vec<SchemeSummary>,
     /// The posterior Cramér–Rao bound of the model with every sensor at every step, where it
-    /// is defined (see [`super::pcrb`]); absent where it was not computed.
+    /// is defined (see [`crate::metrics::pcrb`]); absent where it was not computed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub pcrb: Option<super::pcrb::Pcrb>,
+    pub pcrb: Option<crate::metrics::pcrb::Pcrb>,
 }
 
 /// Turns sums into per-scheme results, with the model's posterior Cramér–Rao bound where it is
 /// defined.
 pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
     let mut s = summarize_schemes(exp, sums);
-    s.pcrb = super::pcrb::compute(exp).ok();
+    s.pcrb = crate::metrics::pcrb::compute(exp).ok();
     s
 }
 
@@ -455,7 +455,7 @@ fn write_csv_rows(
     for p in params {
         // Numbers in full (shortest round-trip form), not the table's six decimals.
         let v = match s.params.get(*p) {
-            Some(super::scenario::ParamValue::Number(x)) => format!("{x}"),
+            Some(crate::scenario::ParamValue::Number(x)) => format!("{x}"),
             Some(v) => v.to_string(),
             None => String::new(),
         };
@@ -602,7 +602,7 @@ pub fn table(summary: &Summary) -> String {
         );
     }
     if let Some(b) = &summary.pcrb {
-        let _ = writeln!(out, "{}.", super::pcrb::line(b, &summary.group_order));
+        let _ = writeln!(out, "{}.", crate::metrics::pcrb::line(b, &summary.group_order));
     }
     let w = warnings(summary);
     if !w.is_empty() {
@@ -635,7 +635,7 @@ pub fn warnings(summary: &Summary) -> Vec<String> {
             out.push(format!(
                 "{who}: {:.1}% of trials diverged (NEES above the chi-square 99.9% quantile for {} consecutive steps, or not finite){}",
                 100.0 * s.diverged_fraction,
-                super::metrics::DIVERGENCE_RUN,
+                crate::metrics::DIVERGENCE_RUN,
                 ess.clone().unwrap_or_else(|| ": check its noise parameters and thresholds; its error bars claim more certainty than it has".to_string())
             ));
         }
@@ -697,8 +697,8 @@ pub fn curve_points(exp: &Experiment, summary: &Summary, curve: usize) -> Vec<Cu
         for p in pts {
             let bin = (p.rate / f.bin_width).floor() as i64;
             let key = |q: &CurvePoint| match f.metric {
-                super::scenario::FrontierMetric::Mse => q.mse,
-                super::scenario::FrontierMetric::Trace => q.trace,
+                crate::scenario::FrontierMetric::Mse => q.mse,
+                crate::scenario::FrontierMetric::Trace => q.trace,
             };
             match best.get(&bin) {
                 Some(b) if key(b) <= key(&p) => {}
@@ -864,7 +864,7 @@ mod tests {
 
     #[test]
     fn an_overflowed_sum_of_squares_gives_no_standard_error() {
-        let mut t = crate::sim::metrics::TrialStat::default();
+        let mut t = crate::metrics::TrialStat::default();
         for v in [1e300, 2e300, 3e300] {
             t.sum += v;
             t.sum_sq += v * v;

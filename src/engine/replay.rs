@@ -1,7 +1,7 @@
 //! Replaying recorded measurements through every scheme of a scenario (`hushfuse replay`).
 //!
 //! Each sensor node sees its recorded z_k and decides what to send exactly as in a simulation
-//! (the same loop, coins and bit counting as the runner: [`super::trace::run_variant_with`]).
+//! (the same loop, coins and bit counting as the runner: [`crate::engine::trace::run_variant_with`]).
 //! A sensor without a reading at a step is not asked and reaches the fusion center as not
 //! scheduled. With recorded truth, the usual metrics of one trial follow.
 //!
@@ -29,10 +29,10 @@
 //! Truth (optional), one row per step 1, 2, ..., T in order: `step,x0,x1,...` with as many
 //! components as the state. With truth, the run has T steps; without, as many as the last step
 //! of the measurements.
-use super::build::{self, Experiment, LoadOptions, ScenarioError};
-use super::metrics::Sums;
-use super::runner::TrialData;
-use super::trace::{self, Link, LoopOptions};
+use crate::scenario::build::{self, Experiment, LoadOptions, ScenarioError};
+use crate::metrics::Sums;
+use crate::engine::runner::TrialData;
+use crate::engine::trace::{self, Link, LoopOptions};
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
 use std::collections::HashMap;
@@ -713,7 +713,7 @@ pub fn estimates_csv(exp: &Experiment, rec: &Recorded, rep: &Replayed) -> String
     for (v, vr) in rep.variants.iter().enumerate() {
         let variant = &exp.variants[v];
         let label = quoted(&exp.curves[variant.curve].label);
-        let params = quoted(&super::results::params_text(&variant.params));
+        let params = quoted(&crate::metrics::results::params_text(&variant.params));
         for (k, est) in vr.estimates.iter().enumerate() {
             let _ = write!(out, "{label},{params},{v},{}", k + 1);
             est.mean.iter().for_each(|m| {
@@ -871,7 +871,7 @@ pub fn replay_csv(
     })
 }
 
-/// Heap overhead of one allocation (header and rounding), as [`super::limits`] counts it.
+/// Heap overhead of one allocation (header and rounding), as [`crate::scenario::limits`] counts it.
 const ALLOC_BYTES: f64 = 16.0;
 /// A `Vec`'s own header (pointer, capacity, length).
 const VEC_BYTES: f64 = 24.0;
@@ -894,7 +894,7 @@ pub fn check_read(
     file: &str,
     bytes: f64,
     size: u64,
-    limits: &super::limits::Limits,
+    limits: &crate::scenario::limits::Limits,
 ) -> Result<(), DataError> {
     if bytes.is_nan() || bytes > limits.max_memory_bytes {
         return Err(err_at(
@@ -903,9 +903,9 @@ pub fn check_read(
             None,
             format!(
                 "reading this file ({}) would hold about {} in memory, more than the limit of {}; replay a shorter recording, or pass --allow-large",
-                super::limits::gib(size as f64),
-                super::limits::gib(bytes),
-                super::limits::gib(limits.max_memory_bytes)
+                crate::scenario::limits::gib(size as f64),
+                crate::scenario::limits::gib(bytes),
+                crate::scenario::limits::gib(limits.max_memory_bytes)
             ),
         ));
     }
@@ -913,7 +913,7 @@ pub fn check_read(
 }
 
 /// Bytes a replay of `steps` steps and `rows` readings holds beyond what the experiment's own
-/// estimate counts ([`super::limits::baseline`] of one trial on one thread): the per-step
+/// estimate counts ([`crate::scenario::limits::baseline`] of one trial on one thread): the per-step
 /// grid of readings and their flags, the truth, every variant's estimates (mean and
 /// covariance on the heap), links and bits, and `estimates.csv` as a growing string (plus
 /// `summary.json` and `per_step.csv` with truth).
@@ -940,9 +940,9 @@ pub fn replay_bytes(exp: &Experiment, steps: usize, rows: usize, truth: bool) ->
         + 2.0 * (VEC_BYTES + ALLOC_BYTES)
         + ns * (f(size_of::<Link>()) + 8.0);
     // A number is written in at most 24 characters, a link and its bits in about 20.
-    let csv_row = |v: &super::build::Variant| {
+    let csv_row = |v: &crate::scenario::build::Variant| {
         f(exp.curves[v.curve].label.len())
-            + f(super::results::params_text(&v.params).len())
+            + f(crate::metrics::results::params_text(&v.params).len())
             + 24.0
             + 2.0 * n * 25.0
             + ns * 20.0
@@ -966,9 +966,9 @@ fn check_replay_memory(
     steps: usize,
     truth: bool,
     opts: &ReplayOptions,
-    limits: &super::limits::Limits,
+    limits: &crate::scenario::limits::Limits,
 ) -> Result<(), DataError> {
-    use super::limits;
+    use crate::scenario::limits;
     if limits.max_memory_bytes.is_infinite() {
         return Ok(());
     }
@@ -1035,7 +1035,7 @@ pub fn non_finite_estimates(exp: &Experiment, rep: &Replayed) -> Vec<String> {
             bad.push(format!(
                 "{} ({}), variant {v}: estimate ({what}) not finite from step {} on",
                 exp.curves[variant.curve].label,
-                super::results::params_text(&variant.params),
+                crate::metrics::results::params_text(&variant.params),
                 k + 1
             ));
         }
@@ -1043,13 +1043,13 @@ pub fn non_finite_estimates(exp: &Experiment, rep: &Replayed) -> Vec<String> {
     bad
 }
 
-/// [`super::results::non_finite`] for a replay: one trial has no standard errors (they are
+/// [`crate::metrics::results::non_finite`] for a replay: one trial has no standard errors (they are
 /// NaN, written as null), which is not a failure; anything else not finite is.
-pub fn non_finite(summary: &super::results::Summary) -> Vec<String> {
+pub fn non_finite(summary: &crate::metrics::results::Summary) -> Vec<String> {
     let mut check = summary.clone();
     for s in &mut check.schemes {
         let ss = &mut s.steady_state;
         (ss.mse_se, ss.trace_se, ss.rate_se) = (0.0, 0.0, 0.0);
     }
-    super::results::non_finite(&check)
+    crate::metrics::results::non_finite(&check)
 }

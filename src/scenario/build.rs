@@ -1,10 +1,10 @@
 //! Scenario file -> validated experiment. Every check names the file, the field and what was
 //! expected, so a user can fix a file without reading Rust. The pieces live in their own files:
-//! [`super::system`] (model, prior, sensors, groups), [`super::sweep`] (sweep expansion),
-//! [`super::schemes`] (schemes through the registry), [`super::paper_check`] (the `[paper]`
-//! section) and [`super::limits`] (what the run would ask of the machine).
-use super::limits::{self, Limits};
-use super::scenario::{FrontierSpec, PaperSpec, Params, ScenarioFile};
+//! [`crate::scenario::system`] (model, prior, sensors, groups), [`crate::scenario::sweep`] (sweep expansion),
+//! [`crate::scenario::schemes`] (schemes through the registry), [`crate::scenario::paper_check`] (the `[paper]`
+//! section) and [`crate::scenario::limits`] (what the run would ask of the machine).
+use crate::scenario::limits::{self, Limits};
+use crate::scenario::{FrontierSpec, PaperSpec, Params, ScenarioFile};
 use crate::filter::Gaussian;
 use crate::scheme::{Scheme, System};
 use std::fmt;
@@ -278,7 +278,7 @@ pub fn build_with(
             ),
         ));
     }
-    let parts = super::system::build_system(&ctx, &file_spec)?;
+    let parts = crate::scenario::system::build_system(&ctx, &file_spec)?;
     let system = Arc::new(parts.system);
 
     // What the run needs before any scheme precomputes anything for `steps`.
@@ -295,7 +295,7 @@ pub fn build_with(
     limits::check(&before, &limits, file)?;
 
     let (curves, variants) =
-        super::schemes::build_schemes(&ctx, &file_spec.schemes, &system, file_spec.steps)?;
+        crate::scenario::schemes::build_schemes(&ctx, &file_spec.schemes, &system, file_spec.steps)?;
     let estimate = limits::with_schemes(
         limits::baseline(
             &system,
@@ -312,7 +312,7 @@ pub fn build_with(
     );
     limits::check(&estimate, &limits, file)?;
     if let Some(paper) = &file_spec.paper {
-        super::paper_check::check(&ctx, paper, &curves, &variants, &parts.groups)?;
+        crate::scenario::paper_check::check(&ctx, paper, &curves, &variants, &parts.groups)?;
     }
 
     Ok(Experiment {

@@ -1,7 +1,7 @@
 //! The arena (issue 11 items 4 and 7): every scheme of a scenario at several bit budgets,
 //! accuracy against bits per step, the Pareto front and the best scheme per budget.
-use super::calibrate::{render, short, Outcome, Status};
-use super::plot::{self, Line};
+use crate::engine::calibrate::{render, short, Outcome, Status};
+use crate::output::plot::{self, Line};
 use std::path::Path;
 
 /// Indices of the non-dominated points (lower bits and lower error are better), sorted by
@@ -30,7 +30,7 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
 
 /// Whether a result counts at its budget: calibrated, or spending no more than the budget
 /// (within the tolerance).
-fn within(c: &super::calibrate::Calibrated, tol: f64) -> bool {
+fn within(c: &crate::engine::calibrate::Calibrated, tol: f64) -> bool {
     c.status == Status::Calibrated || c.achieved <= c.target * (1.0 + tol)
 }
 
@@ -47,13 +47,13 @@ pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
         format!("RMSE {group}"),
     ]];
     for (b, row) in out.rows.iter().enumerate() {
-        let mut ok: Vec<&super::calibrate::Calibrated> = row
+        let mut ok: Vec<&crate::engine::calibrate::Calibrated> = row
             .iter()
             .filter(|c| within(c, out.tolerance))
             .filter(|c| c.result.mean_rmse.get(group).is_some_and(|r| r.is_finite()))
             .collect();
         ok.sort_by(|a, c| a.result.mean_rmse[group].total_cmp(&c.result.mean_rmse[group]));
-        let knob = |c: &super::calibrate::Calibrated| match (&c.knob, c.value) {
+        let knob = |c: &crate::engine::calibrate::Calibrated| match (&c.knob, c.value) {
             (Some(k), Some(v)) => format!("{k} = {}", short(v)),
             _ => "—".into(),
         };
@@ -63,7 +63,7 @@ pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
                 c.label.clone(),
                 knob(c),
                 format!("{:.4}", c.result.mean_rmse[group]),
-                super::calibrate::bits_cell(c.achieved),
+                crate::engine::calibrate::bits_cell(c.achieved),
             ]),
             None => r.extend([
                 "(none within budget)".into(),
@@ -121,7 +121,7 @@ pub fn best_markdown(out: &Outcome, group: &str) -> String {
 /// (markers; a scheme without a knob is one marker), and the Pareto front (dashed black).
 pub fn bits_lines(
     out: &Outcome,
-    metric: &dyn Fn(&super::calibrate::Calibrated) -> f64,
+    metric: &dyn Fn(&crate::engine::calibrate::Calibrated) -> f64,
     front: bool,
 ) -> Vec<Line> {
     let n = out.rows.first().map_or(0, Vec::len);

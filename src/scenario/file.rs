@@ -1,5 +1,5 @@
 //! Scenario files as written by users: serde structs that mirror the TOML. Serde rejects unknown
-//! keys, wrong types, unknown names of choices and lists of the wrong length; [`super::build`]
+//! keys, wrong types, unknown names of choices and lists of the wrong length; [`crate::scenario::build`]
 //! checks the rest (ranges, dimensions, consistency) and turns them into runtime objects that
 //! cannot be wrong. Documented field by field in `docs/scenarios.md`.
 use serde::{Deserialize, Deserializer, Serialize};

@@ -12,9 +12,9 @@
 //! 8 bytes `HUSHFUSE`, the format version (u32, little endian), the payload length (u64, little
 //! endian), the SHA-256 of the payload (32 bytes), then the payload: a [`State`] in `postcard`
 //! (floats as their 8 IEEE bytes, so they round-trip exactly).
-use super::build::Experiment;
-use super::metrics::Sums;
-use super::runner;
+use crate::scenario::build::Experiment;
+use crate::metrics::Sums;
+use crate::engine::runner;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -57,7 +57,7 @@ pub fn scenario_hash(text: &str, source: &str, trials: usize, seed: u64) -> Stri
     }
     bytes.extend_from_slice(&(trials as u64).to_le_bytes());
     bytes.extend_from_slice(&seed.to_le_bytes());
-    super::output::sha256_hex(&bytes)
+    crate::output::sha256_hex(&bytes)
 }
 
 impl RunKey {
@@ -255,7 +255,7 @@ impl State {
 
     /// Writes the file durably (temporary name, fsync, rename).
     pub fn write(&self, path: &Path) -> Result<(), String> {
-        super::output::write_file(path, &self.encode())
+        crate::output::write_file(path, &self.encode())
     }
 }
 
@@ -664,7 +664,7 @@ pub fn validate(exp: &Experiment, state: &State) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::metrics::Sums;
+    use crate::metrics::Sums;
 
     fn state(values: &[f64]) -> State {
         let mut s = Sums::new(1, 2, 2);

@@ -1,8 +1,8 @@
 //! Checks a scenario's `[paper]` section against the scenario itself before anything runs: every
 //! label names a curve, every parameter set picks exactly one variant, every metric and group
 //! exists, tolerances and ranges make sense. A typo is an error, never a `FAILS` or a `null`.
-use super::build::{Ctx, Curve, ScenarioError, Variant};
-use super::scenario::{ClaimSpec, PaperSpec, Params};
+use crate::scenario::build::{Ctx, Curve, ScenarioError, Variant};
+use crate::scenario::{ClaimSpec, PaperSpec, Params};
 
 struct Scope<'a> {
     ctx: &'a Ctx<'a>,

@@ -25,9 +25,9 @@
 //! from 1 until the rate is below the smallest target (at most 4^12), or until it stops falling
 //! (a floor: hi is then the first value on it). A kind whose knob is not
 //! in the table but documents `number >= 0` is treated as a threshold.
-use super::build::{self, LoadOptions};
-use super::results::{self, SchemeSummary, Summary};
-use super::runner;
+use crate::scenario::build::{self, LoadOptions};
+use crate::metrics::results::{self, SchemeSummary, Summary};
+use crate::engine::runner;
 use crate::scheme::registry;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -590,7 +590,7 @@ pub fn dir_label(v: f64) -> String {
 
 /// Left-aligned first column, right-aligned others, a rule under the header.
 pub fn render(rows: &[Vec<String>]) -> String {
-    super::results::text_table(rows, 1)
+    crate::metrics::results::text_table(rows, 1)
 }
 
 #[cfg(test)]

@@ -1,8 +1,8 @@
 //! The system a scenario describes: motion model, prior, initial truth, sensors (one by one or
 //! as placed fields) and the reported state groups, each validated with errors that name the
 //! field.
-use super::build::{Ctx, ScenarioError};
-use super::scenario::{
+use crate::scenario::build::{Ctx, ScenarioError};
+use crate::scenario::{
     Layout, ModelSpec, NoiseForm, PlacedKind, PriorSpec, SensorFieldSpec, SensorKind, SensorSpec,
 };
 use crate::filter::Gaussian;
@@ -461,7 +461,7 @@ pub(crate) struct SystemParts {
 /// Builds and checks the motion model, prior, initial truth, sensors and groups.
 pub(crate) fn build_system(
     ctx: &Ctx,
-    file: &super::scenario::ScenarioFile,
+    file: &crate::scenario::ScenarioFile,
 ) -> Result<SystemParts, ScenarioError> {
     let transition = transition(ctx, &file.model)?;
     let n = transition.dim();

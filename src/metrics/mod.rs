@@ -1,0 +1,7 @@
+//! Metrics as mergeable sums, the summaries computed from them, and the bounds no scheme
+//! can beat.
+pub mod pcrb;
+pub mod results;
+pub mod sums;
+
+pub use sums::*;

@@ -1,0 +1,10 @@
+//! What a run writes: the atomic output folder, CSV/JSON, SVG plots, HTML and paper
+//! reports, arena tables.
+pub mod arena;
+pub mod folder;
+pub mod html;
+pub mod plot;
+pub mod report;
+pub mod tables;
+
+pub use folder::*;

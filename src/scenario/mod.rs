@@ -1,0 +1,12 @@
+//! Scenario files: the format, validation, the built-ins, sweeps, resource limits and
+//! their errors; `build` turns a file into an [`build::Experiment`].
+pub mod build;
+pub mod builtin;
+pub mod file;
+pub mod limits;
+pub mod paper_check;
+pub mod schemes;
+pub mod sweep;
+pub mod system;
+
+pub use file::*;
