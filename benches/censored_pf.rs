@@ -4,9 +4,9 @@
 //! both CFwMD with feedback (the full likelihood of every silent sensor); and (d) the cost of
 //! CFwMD-exact's augmented particles against CFoMD on the same non-feedback run. One thread unless
 //! HUSHFUSE_BENCH_THREADS says otherwise. `cargo bench --bench censored_pf [-- b c d]`.
+use hushfuse::engine::runner;
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::engine::runner;
 use std::time::Instant;
 
 fn scenario(name: &str, trials: usize, keep: &str) -> build::Experiment {

@@ -2,9 +2,9 @@
 //! `cargo bench --bench federated_tobit`. One criterion sample is one whole case (all 1000
 //! trials of one scheme variant); a 3-state Tobit KF should take well under a second per case.
 use criterion::{criterion_group, criterion_main, Criterion};
+use hushfuse::engine::runner;
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::engine::runner;
 use std::time::Duration;
 
 fn oscillator(c: &mut Criterion) {

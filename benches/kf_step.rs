@@ -3,15 +3,15 @@
 //! numpy peers (`/work/shared/peers/kf_mc.py`, 5000 trials x 20 steps):
 //! `cargo bench --bench kf_step`.
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use hushfuse::engine::runner;
 use hushfuse::filter::{information, kf, Gaussian};
 use hushfuse::linalg::{Matrix, Vector};
 use hushfuse::link::Received;
 use hushfuse::model::{presets, LinearSensor, MeasurementModel};
+use hushfuse::scenario::build;
 use hushfuse::scheme::centralized::CentralizedScheme;
 use hushfuse::scheme::distributed_kf::{DistributedKfScheme, Trigger};
 use hushfuse::scheme::{Scheme, System};
-use hushfuse::scenario::build;
-use hushfuse::engine::runner;
 use rand::SeedableRng;
 use std::sync::Arc;
 

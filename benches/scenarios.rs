@@ -8,9 +8,9 @@
 //! Environment: HUSHFUSE_BENCH_SCENARIOS (comma-separated names, `name@threads` pins the
 //! thread count of one entry), HUSHFUSE_BENCH_THREADS (pin the thread count of the others),
 //! HUSHFUSE_BENCH_REPEATS (default 3).
+use hushfuse::engine::runner;
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::engine::runner;
 use std::time::Instant;
 
 /// The peers' workload (a): centralized KF, 1-D constant velocity, 2 position sensors.

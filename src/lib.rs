@@ -53,14 +53,14 @@
 //! let est = center.estimate();
 //! assert!((est.mean[0] - 10.0).abs() < 1.5, "position {}", est.mean[0]);
 //! ```
+pub mod engine;
 pub mod filter;
 pub mod linalg;
 pub mod link;
+pub mod metrics;
 pub mod model;
 pub mod network;
-pub mod scheme;
-pub mod engine;
-pub mod metrics;
 pub mod output;
 pub mod scenario;
+pub mod scheme;
 pub mod stats;

@@ -1,10 +1,10 @@
 //! The arena (issue 11): calibration reaches its budget for every tunable scheme of an arena,
 //! and the reported point is what the scheme does when run on its own at the calibrated knob.
 use hushfuse::engine::calibrate::{self, Status};
+use hushfuse::engine::runner;
+use hushfuse::metrics::results;
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::metrics::results;
-use hushfuse::engine::runner;
 
 /// Every scheme of `arena-1d` whose knob can reach the budget is within the tolerance of it,
 /// and rerunning each calibrated scheme alone from the scenario text as run gives the same

@@ -4,13 +4,13 @@
 //! random and event-based, Algorithm 2 over alpha x b) and of the peers' centralized KF, on the
 //! same data and coin streams — the variants of a trial sharing one `TrialCache` as the runner
 //! shares it.
+use hushfuse::engine::runner;
 use hushfuse::filter::Gaussian;
 use hushfuse::linalg::LinalgError;
 use hushfuse::network::{self, Traffic};
-use hushfuse::scheme::{StepSink, TrialCache};
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::engine::runner;
+use hushfuse::scheme::{StepSink, TrialCache};
 
 type Steps = Vec<(Vec<u64>, Vec<u64>, Traffic)>;
 

@@ -1,8 +1,8 @@
 //! Scheme health is reported: a particle filter too small for its model is flagged as
 //! diverged (issue 14), and the same filter with enough particles is not.
-use hushfuse::scenario::build;
-use hushfuse::metrics::results;
 use hushfuse::engine::runner;
+use hushfuse::metrics::results;
+use hushfuse::scenario::build;
 
 const SCENARIO: &str = r#"
 name = "pf6"

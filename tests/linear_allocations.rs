@@ -9,10 +9,10 @@
 //! products (x86-64 with FMA), and otherwise only matrixmultiply's packing buffers of its two
 //! products: a constant per step. Counted by a global allocator that counts the calls made on
 //! the current thread.
+use hushfuse::engine::runner;
 use hushfuse::link::{Received, Transmission};
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::engine::runner;
 use rand::SeedableRng;
 #[path = "common/counting_alloc.rs"]
 mod counting_alloc;

@@ -2,9 +2,9 @@
 //! huge or non-finite number) never panic, and a run that is accepted never ends as a success
 //! with a non-finite number in its summary. Everything runs in-process, so a panic anywhere in
 //! loading, building or running is caught and reported with the mutated file.
-use hushfuse::scenario::build;
-use hushfuse::metrics::results;
 use hushfuse::engine::runner;
+use hushfuse::metrics::results;
+use hushfuse::scenario::build;
 use proptest::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 

@@ -260,8 +260,12 @@ fn the_free_space_estimate_bounds_what_a_run_writes_without_refusing_ordinary_ru
     let written: usize = snapshot(&d.path().join("o")).values().map(Vec::len).sum();
     let text = std::fs::read_to_string(d.path().join("o/scenario_as_run.toml")).unwrap();
     let exp = hushfuse::scenario::build::load(&text, "scenario_as_run.toml").unwrap();
-    let estimate =
-        hushfuse::scenario::limits::output_bytes(exp.groups.len(), exp.variants.len(), exp.steps, 40);
+    let estimate = hushfuse::scenario::limits::output_bytes(
+        exp.groups.len(),
+        exp.variants.len(),
+        exp.steps,
+        40,
+    );
     assert!(
         estimate >= written as f64 && estimate <= 10.0 * written as f64,
         "estimate {estimate} bytes for {written} written"

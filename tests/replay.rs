@@ -4,9 +4,9 @@
 #[path = "common/cli.rs"]
 mod common;
 use common::hushfuse;
-use hushfuse::scenario::build;
 use hushfuse::engine::replay::{self, DataError, ReplayError, ReplayOptions};
 use hushfuse::engine::runner;
+use hushfuse::scenario::build;
 use std::path::Path;
 use std::process::Output;
 

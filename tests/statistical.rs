@@ -1,9 +1,9 @@
 //! Statistical properties with fixed seeds; tolerances come from the sampling distribution,
 //! not from trial and error.
+use hushfuse::engine::runner;
+use hushfuse::metrics::results;
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::metrics::results;
-use hushfuse::engine::runner;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 fn experiment(schemes: &str, trials: usize, seed: u64) -> build::Experiment {

@@ -2,16 +2,16 @@
 //! (`python/hushfuse/__init__.py`) turns numpy arrays and pandas frames into the command line's
 //! CSV layout and the results back into numpy arrays, so that every check and every message is
 //! the command line's own.
+use hushfuse::engine::replay;
+use hushfuse::engine::runner;
 use hushfuse::filter::Gaussian;
 use hushfuse::linalg::Vector;
 use hushfuse::link;
+use hushfuse::metrics::results;
 use hushfuse::network::Schedule;
-use hushfuse::scheme;
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::engine::replay;
-use hushfuse::metrics::results;
-use hushfuse::engine::runner;
+use hushfuse::scheme;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyReadonlyArray1};
 use pyo3::create_exception;

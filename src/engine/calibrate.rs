@@ -25,9 +25,9 @@
 //! from 1 until the rate is below the smallest target (at most 4^12), or until it stops falling
 //! (a floor: hi is then the first value on it). A kind whose knob is not
 //! in the table but documents `number >= 0` is treated as a threshold.
-use crate::scenario::build::{self, LoadOptions};
-use crate::metrics::results::{self, SchemeSummary, Summary};
 use crate::engine::runner;
+use crate::metrics::results::{self, SchemeSummary, Summary};
+use crate::scenario::build::{self, LoadOptions};
 use crate::scheme::registry;
 use serde::Serialize;
 use std::collections::BTreeMap;

@@ -12,9 +12,9 @@
 //! 8 bytes `HUSHFUSE`, the format version (u32, little endian), the payload length (u64, little
 //! endian), the SHA-256 of the payload (32 bytes), then the payload: a [`State`] in `postcard`
 //! (floats as their 8 IEEE bytes, so they round-trip exactly).
-use crate::scenario::build::Experiment;
-use crate::metrics::Sums;
 use crate::engine::runner;
+use crate::metrics::Sums;
+use crate::scenario::build::Experiment;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::path::{Path, PathBuf};

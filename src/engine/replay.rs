@@ -29,12 +29,12 @@
 //! Truth (optional), one row per step 1, 2, ..., T in order: `step,x0,x1,...` with as many
 //! components as the state. With truth, the run has T steps; without, as many as the last step
 //! of the measurements.
-use crate::scenario::build::{self, Experiment, LoadOptions, ScenarioError};
-use crate::metrics::Sums;
 use crate::engine::runner::TrialData;
 use crate::engine::trace::{self, Link, LoopOptions};
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
+use crate::metrics::Sums;
+use crate::scenario::build::{self, Experiment, LoadOptions, ScenarioError};
 use std::collections::HashMap;
 use std::fmt::{self, Write as _};
 

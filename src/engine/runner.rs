@@ -3,10 +3,11 @@
 //! processes the same data with coin flips from a stream of its own (common random numbers).
 //! Trials run in parallel in fixed blocks whose sums are merged in block order, so results are
 //! bit-identical for any number of threads.
-use crate::scenario::build::Experiment;
-use crate::metrics::Sums;
 use crate::linalg::Vector;
+use crate::metrics::Sums;
 use crate::network;
+use crate::scenario::experiment::Experiment;
+pub use crate::scenario::limits::{WINDOW_MAX_BYTES, WINDOW_PER_THREAD};
 use crate::scheme::SchemeError;
 use multiversion::multiversion;
 use rand::SeedableRng;
@@ -18,22 +19,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// and hence every bit of the result, is the same for 1 or many threads.
 const BLOCK: usize = 4;
 
-/// Blocks in flight at once, per worker thread, at the start of a run. Only memory, load
-/// balance and speed depend on the window, never the result: blocks are merged in block order
-/// whatever the window. Two keeps the in-flight sums of a 93-variant sweep (dormann-fig1) at a
-/// few MB: 8 cost 17 MB more peak memory for no measurable speed.
-pub const WINDOW_PER_THREAD: usize = 2;
-
 /// The window grows (doubling) while a window takes less than this: each window ends in a
 /// barrier of the thread pool (tens of microseconds), which cost the 5000 short trials of the
 /// peers' KF Monte Carlo 40% of their time at two blocks per thread.
 const WINDOW_MIN_SECONDS: f64 = 0.025;
-
-/// Bytes of in-flight block sums the window may grow to (it never shrinks below
-/// [`WINDOW_PER_THREAD`] blocks per thread), so memory stays flat in the number of trials.
-/// 1 MB keeps them in a core's cache: at 4 MB the peers' KF Monte Carlo (9 KB of sums per
-/// block) grew windows of some 450 blocks, each block's sums allocated and page-faulted anew.
-pub const WINDOW_MAX_BYTES: usize = 1 << 20;
 
 /// Blocks per window at most, whatever the size of a block's sums: a window is also what a
 /// Ctrl-C drops, so it stays short in time too (it only grows while it is under

@@ -3,13 +3,13 @@
 //! The same loop as [`crate::engine::runner`] (the same truths, measurements and coins: a variant's
 //! coins come from stream 1 + its index, or stream 1 for every variant when each scheme ran
 //! alone, as calibrated arenas do); [`crate::engine::runner::run`] itself is untouched.
-use crate::scenario::build::Experiment;
-use crate::metrics::Sums;
 use crate::engine::runner::{draw_trial, trial_rng};
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
 use crate::link::{Received, Transmission};
+use crate::metrics::Sums;
 use crate::network::{self, Traffic};
+use crate::scenario::build::Experiment;
 
 /// What one sensor did at one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

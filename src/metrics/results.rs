@@ -1,6 +1,6 @@
 //! From merged sums to the numbers people read: `summary.json`, `per_step.csv` and the table.
-use crate::scenario::build::Experiment;
 use crate::metrics::{Layout, Sums};
+use crate::scenario::build::Experiment;
 use crate::scenario::Params;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -602,7 +602,11 @@ pub fn table(summary: &Summary) -> String {
         );
     }
     if let Some(b) = &summary.pcrb {
-        let _ = writeln!(out, "{}.", crate::metrics::pcrb::line(b, &summary.group_order));
+        let _ = writeln!(
+            out,
+            "{}.",
+            crate::metrics::pcrb::line(b, &summary.group_order)
+        );
     }
     let w = warnings(summary);
     if !w.is_empty() {

@@ -1,12 +1,12 @@
 //! `report.html` (issue 11 item 5): one self-contained file — inline SVG figures, the tables,
 //! the scenario as run, the version and seeds; no scripts, fonts, styles or images from
 //! anywhere else, so it reads offline and can be mailed as it is.
-use crate::output::arena;
-use crate::scenario::build::Experiment;
 use crate::engine::calibrate::{short, Outcome};
-use crate::output::plot;
-use crate::metrics::results::{params_text, Summary};
 use crate::engine::trace::{self, Link};
+use crate::metrics::results::{params_text, Summary};
+use crate::output::arena;
+use crate::output::plot;
+use crate::scenario::build::Experiment;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 

@@ -1,7 +1,7 @@
 //! SVG figures: RMSE per step per scheme, and steady-state MSE (solid) and trace (dashed)
 //! against the communication rate, the layout of seed 004's Fig. 1.
-use crate::scenario::build::Experiment;
 use crate::metrics::results::{curve_points, Summary};
+use crate::scenario::build::Experiment;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -337,7 +337,11 @@ fn per_step(
         if shown.is_empty() {
             s.name.clone()
         } else {
-            format!("{} [{}]", s.name, crate::metrics::results::params_text(&shown))
+            format!(
+                "{} [{}]",
+                s.name,
+                crate::metrics::results::params_text(&shown)
+            )
         }
     };
     let single: Vec<Line> = summary

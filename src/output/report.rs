@@ -1,7 +1,7 @@
 //! `hushfuse reproduce`: our numbers beside the paper's published ones, and each of the paper's
 //! claims checked on our numbers.
-use crate::scenario::build::Experiment;
 use crate::metrics::results::{curve_points, params_text, CurvePoint, Summary};
+use crate::scenario::build::Experiment;
 use crate::scenario::ClaimSpec;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -729,9 +729,9 @@ fn verdict_text(c: &ClaimResult) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::runner;
+    use crate::metrics::results;
     use crate::scenario::build;
-use crate::metrics::results;
-use crate::engine::runner;
 
     /// A summary with two schemes "A" and "B" whose per-trial MSEs are given.
     fn two(a: Vec<f64>, b: Vec<f64>) -> Summary {

@@ -4,91 +4,12 @@
 //! [`crate::scenario::schemes`] (schemes through the registry), [`crate::scenario::paper_check`] (the `[paper]`
 //! section) and [`crate::scenario::limits`] (what the run would ask of the machine).
 use crate::scenario::limits::{self, Limits};
-use crate::scenario::{FrontierSpec, PaperSpec, Params, ScenarioFile};
-use crate::filter::Gaussian;
-use crate::scheme::{Scheme, System};
-use std::fmt;
+use crate::scenario::ScenarioFile;
 use std::sync::Arc;
 
-/// A scenario that could not be read or is inconsistent.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ScenarioError {
-    /// File (or built-in name) the scenario came from.
-    pub file: String,
-    /// Field path, e.g. `sensors[2].R`.
-    pub field: String,
-    /// What was expected and what was found.
-    pub message: String,
-}
-
-impl fmt::Display for ScenarioError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.field.is_empty() {
-            write!(f, "{}: {}", self.file, self.message)
-        } else {
-            write!(f, "{}: field `{}`: {}", self.file, self.field, self.message)
-        }
-    }
-}
-
-impl std::error::Error for ScenarioError {}
-
-/// One scheme at one sweep point, ready to run.
-#[derive(Debug)]
-pub struct Variant {
-    /// Index of the scheme entry in the file (a curve).
-    pub curve: usize,
-    /// Parameters of this point, as written (kind-specific numbers).
-    pub params: Params,
-    /// The scheme's `kind`, as registered.
-    pub kind: &'static str,
-    pub scheme: Box<dyn Scheme>,
-}
-
-/// One `[[schemes]]` entry: a curve of one or more variants.
-#[derive(Debug, Clone)]
-pub struct Curve {
-    pub label: String,
-    pub kind: String,
-    /// Names of the swept parameters (empty when not swept).
-    pub swept: Vec<String>,
-    pub frontier: Option<FrontierSpec>,
-}
-
-/// A validated experiment.
-#[derive(Debug)]
-pub struct Experiment {
-    pub name: String,
-    pub description: String,
-    pub source: String,
-    pub system: Arc<System>,
-    /// Distribution of the true x_0 (the filters' prior unless the file says otherwise).
-    pub initial_truth: Gaussian,
-    pub groups: Vec<(String, Vec<usize>)>,
-    pub curves: Vec<Curve>,
-    pub variants: Vec<Variant>,
-    pub trials: usize,
-    pub steps: usize,
-    pub seed: u64,
-    /// First step (1-based) of the steady-state averages.
-    pub steady_from: usize,
-    pub paper: Option<PaperSpec>,
-}
-
-/// Where errors point: the file.
-pub(crate) struct Ctx<'a> {
-    pub file: &'a str,
-}
-
-impl Ctx<'_> {
-    pub fn err(&self, field: impl Into<String>, message: impl Into<String>) -> ScenarioError {
-        ScenarioError {
-            file: self.file.to_string(),
-            field: field.into(),
-            message: message.into(),
-        }
-    }
-}
+pub(crate) use crate::scenario::error::Ctx;
+pub use crate::scenario::error::ScenarioError;
+pub use crate::scenario::experiment::{Curve, Experiment, Variant};
 
 /// What a caller may change about a scenario as it is loaded.
 #[derive(Debug, Clone, Copy, Default)]
@@ -294,8 +215,12 @@ pub fn build_with(
     );
     limits::check(&before, &limits, file)?;
 
-    let (curves, variants) =
-        crate::scenario::schemes::build_schemes(&ctx, &file_spec.schemes, &system, file_spec.steps)?;
+    let (curves, variants) = crate::scenario::schemes::build_schemes(
+        &ctx,
+        &file_spec.schemes,
+        &system,
+        file_spec.steps,
+    )?;
     let estimate = limits::with_schemes(
         limits::baseline(
             &system,

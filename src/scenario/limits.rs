@@ -2,7 +2,7 @@
 //! it is refused (`--allow-large` lifts them). The estimate is coarse on purpose: it exists to
 //! turn `steps = 9223372036854775807` or `particles = 10^9` into a clear error instead of an
 //! allocator abort or a run that never ends, not to predict run time to the second.
-use crate::scenario::build::ScenarioError;
+use crate::scenario::error::ScenarioError;
 use crate::scheme::{Scheme, System};
 
 /// Limits of a run.
@@ -19,6 +19,18 @@ pub const DEFAULT_MAX_MEMORY: f64 = 16.0 * 1024.0 * 1024.0 * 1024.0;
 /// Environment variable that lowers the default memory ceiling to its value in bytes (never
 /// raises it; for tests and shared machines).
 pub const MAX_MEMORY_ENV: &str = "HUSHFUSE_MAX_MEMORY_BYTES";
+// The runner's window of blocks in flight, here because the memory estimate needs them.
+/// Blocks in flight at once, per worker thread, at the start of a run. Only memory, load
+/// balance and speed depend on the window, never the result: blocks are merged in block order
+/// whatever the window. Two keeps the in-flight sums of a 93-variant sweep (dormann-fig1) at a
+/// few MB: 8 cost 17 MB more peak memory for no measurable speed.
+pub const WINDOW_PER_THREAD: usize = 2;
+
+/// Bytes of in-flight block sums the window may grow to (it never shrinks below
+/// [`WINDOW_PER_THREAD`] blocks per thread), so memory stays flat in the number of trials.
+/// 1 MB keeps them in a core's cache: at 4 MB the peers' KF Monte Carlo (9 KB of sums per
+/// block) grew windows of some 450 blocks, each block's sums allocated and page-faulted anew.
+pub const WINDOW_MAX_BYTES: usize = 1 << 20;
 /// 24 hours.
 pub const DEFAULT_MAX_SECONDS: f64 = 24.0 * 3600.0;
 /// Cost of one scheme step beyond its arithmetic (dispatch, small allocations, metrics),
@@ -116,7 +128,7 @@ fn columns(groups: usize) -> f64 {
 /// What the run needs apart from the schemes themselves: the per-trial truth and measurements
 /// (one trial per worker, each a heap vector), the per-step sums of every variant (the runner
 /// keeps one set per block of a window of blocks, merged in block order as the window
-/// finishes, plus the total: two blocks per thread, or up to `runner::WINDOW_MAX_BYTES` when
+/// finishes, plus the total: two blocks per thread, or up to [`WINDOW_MAX_BYTES`] when
 /// the blocks are small) and the per-trial steady-state values kept for paired
 /// comparisons.
 pub fn baseline(
@@ -134,10 +146,10 @@ pub fn baseline(
     let workers = threads.max(1) as f64;
     let blocks = (trials / 4.0)
         .ceil()
-        .min(crate::engine::runner::WINDOW_PER_THREAD as f64 * workers);
+        .min(WINDOW_PER_THREAD as f64 * workers);
     let trial_data = steps * (8.0 * (n + m) + 64.0 * vectors) * workers;
     let block = steps * columns(groups) * variants * 16.0;
-    let sums = block + (block * blocks).max(crate::engine::runner::WINDOW_MAX_BYTES as f64);
+    let sums = block + (block * blocks).max(WINDOW_MAX_BYTES as f64);
     let per_trial = trials * variants * (columns(groups) * 8.0 + 24.0);
     // A Kalman step: prediction n^3 plus an update per measured component.
     let kf_flops = 2.0 * n * n * n + 4.0 * n * n * m.max(1.0);

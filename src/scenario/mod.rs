@@ -2,6 +2,8 @@
 //! their errors; `build` turns a file into an [`build::Experiment`].
 pub mod build;
 pub mod builtin;
+pub mod error;
+pub mod experiment;
 pub mod file;
 pub mod limits;
 pub mod paper_check;

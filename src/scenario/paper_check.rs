@@ -1,7 +1,8 @@
 //! Checks a scenario's `[paper]` section against the scenario itself before anything runs: every
 //! label names a curve, every parameter set picks exactly one variant, every metric and group
 //! exists, tolerances and ranges make sense. A typo is an error, never a `FAILS` or a `null`.
-use crate::scenario::build::{Ctx, Curve, ScenarioError, Variant};
+use crate::scenario::error::{Ctx, ScenarioError};
+use crate::scenario::experiment::{Curve, Variant};
 use crate::scenario::{ClaimSpec, PaperSpec, Params};
 
 struct Scope<'a> {

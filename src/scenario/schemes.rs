@@ -1,8 +1,9 @@
 //! Scheme construction: each `[[schemes]]` entry is one curve; each point of its sweep one
 //! variant, parsed and built by the scheme's registry entry. This file knows no scheme by name.
-use crate::scenario::build::{Ctx, Curve, ScenarioError, Variant};
-use crate::scenario::{FrontierSpec, ParamValue, Params};
+use crate::scenario::error::{Ctx, ScenarioError};
+use crate::scenario::experiment::{Curve, Variant};
 use crate::scenario::sweep;
+use crate::scenario::{FrontierSpec, ParamValue, Params};
 use crate::scheme::registry::{self, BuildContext};
 use crate::scheme::System;
 use std::sync::Arc;

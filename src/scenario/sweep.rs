@@ -2,7 +2,7 @@
 //! variant per point of the cartesian product, in file order. A sweep may not touch what
 //! identifies the curve (`kind`, `label`), may not shadow a base value, and may not list a
 //! value twice.
-use crate::scenario::build::{Ctx, ScenarioError};
+use crate::scenario::error::{Ctx, ScenarioError};
 
 /// Keys of a scheme table that are not scheme parameters.
 pub const RESERVED: &[&str] = &["kind", "label", "sweep", "frontier"];

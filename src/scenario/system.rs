@@ -1,14 +1,14 @@
 //! The system a scenario describes: motion model, prior, initial truth, sensors (one by one or
 //! as placed fields) and the reported state groups, each validated with errors that name the
 //! field.
-use crate::scenario::build::{Ctx, ScenarioError};
-use crate::scenario::{
-    Layout, ModelSpec, NoiseForm, PlacedKind, PriorSpec, SensorFieldSpec, SensorKind, SensorSpec,
-};
 use crate::filter::Gaussian;
 use crate::linalg::{check_spd, Matrix, Vector};
 use crate::model::{presets, LinearSensor, LinearTransition, MeasurementModel};
 use crate::model::{Placement, RangeSensor, RssSensor};
+use crate::scenario::error::{Ctx, ScenarioError};
+use crate::scenario::{
+    Layout, ModelSpec, NoiseForm, PlacedKind, PriorSpec, SensorFieldSpec, SensorKind, SensorSpec,
+};
 use rand::{Rng, SeedableRng};
 use std::sync::Arc;
 

@@ -86,7 +86,9 @@ pub(crate) fn arena_run(
         trials: args.trials,
         seed: args.seed,
         threads: args.threads,
-        limits: args.allow_large.then(hushfuse::scenario::limits::Limits::none),
+        limits: args
+            .allow_large
+            .then(hushfuse::scenario::limits::Limits::none),
     };
     // Room for one run's output per budget, checked before the first pilot run (a scenario
     // that does not load is reported by the calibration with its full message).

@@ -48,7 +48,9 @@ pub(crate) fn merge(inputs: &[PathBuf], out: &Path, report: bool) -> Result<(), 
             trials: args.trials,
             seed: args.seed,
             threads: 0,
-            limits: args.allow_large.then(hushfuse::scenario::limits::Limits::none),
+            limits: args
+                .allow_large
+                .then(hushfuse::scenario::limits::Limits::none),
         },
     )
     .map_err(|e| Failure::Input(format!("the shards' scenario: {e}")))?;

@@ -114,7 +114,9 @@ pub(crate) fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(),
         trials: args.trials,
         seed: args.seed,
         threads: args.threads,
-        limits: args.allow_large.then(hushfuse::scenario::limits::Limits::none),
+        limits: args
+            .allow_large
+            .then(hushfuse::scenario::limits::Limits::none),
     };
     let exp =
         build::load_with(&text, &source, &options).map_err(|e| Failure::Input(e.to_string()))?;

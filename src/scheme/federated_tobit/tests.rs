@@ -2,15 +2,15 @@
 use super::bounds::{psd_margin, theorem4, theorem5, BoundStep, UpperVarphi};
 use super::center::{federated_fusion, reset};
 use super::*;
+use crate::engine::runner;
 use crate::filter::tobit;
 use crate::filter::{kf, Gaussian};
 use crate::link::Received;
+use crate::metrics::results;
 use crate::model::presets;
-use crate::scheme::FusionCenter;
 use crate::scenario::build;
 use crate::scenario::builtin;
-use crate::metrics::results;
-use crate::engine::runner;
+use crate::scheme::FusionCenter;
 
 fn oscillator_system(with_bias: bool) -> Arc<System> {
     let exp = build::load(builtin::get("geng-oscillator").unwrap(), "geng-oscillator").unwrap();

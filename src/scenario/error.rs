@@ -1,0 +1,40 @@
+//! The error of a scenario that cannot be read or is inconsistent, and where it points.
+use std::fmt;
+
+/// A scenario that could not be read or is inconsistent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScenarioError {
+    /// File (or built-in name) the scenario came from.
+    pub file: String,
+    /// Field path, e.g. `sensors[2].R`.
+    pub field: String,
+    /// What was expected and what was found.
+    pub message: String,
+}
+
+impl fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.field.is_empty() {
+            write!(f, "{}: {}", self.file, self.message)
+        } else {
+            write!(f, "{}: field `{}`: {}", self.file, self.field, self.message)
+        }
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+/// Where errors point: the file.
+pub(crate) struct Ctx<'a> {
+    pub file: &'a str,
+}
+
+impl Ctx<'_> {
+    pub fn err(&self, field: impl Into<String>, message: impl Into<String>) -> ScenarioError {
+        ScenarioError {
+            file: self.file.to_string(),
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+}

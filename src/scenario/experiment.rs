@@ -1,0 +1,47 @@
+//! A validated experiment: the system, the schemes' variants and the run's size, ready to run.
+use crate::filter::Gaussian;
+use crate::scenario::file::{FrontierSpec, PaperSpec, Params};
+use crate::scheme::{Scheme, System};
+use std::sync::Arc;
+
+/// One scheme at one sweep point, ready to run.
+#[derive(Debug)]
+pub struct Variant {
+    /// Index of the scheme entry in the file (a curve).
+    pub curve: usize,
+    /// Parameters of this point, as written (kind-specific numbers).
+    pub params: Params,
+    /// The scheme's `kind`, as registered.
+    pub kind: &'static str,
+    pub scheme: Box<dyn Scheme>,
+}
+
+/// One `[[schemes]]` entry: a curve of one or more variants.
+#[derive(Debug, Clone)]
+pub struct Curve {
+    pub label: String,
+    pub kind: String,
+    /// Names of the swept parameters (empty when not swept).
+    pub swept: Vec<String>,
+    pub frontier: Option<FrontierSpec>,
+}
+
+/// A validated experiment.
+#[derive(Debug)]
+pub struct Experiment {
+    pub name: String,
+    pub description: String,
+    pub source: String,
+    pub system: Arc<System>,
+    /// Distribution of the true x_0 (the filters' prior unless the file says otherwise).
+    pub initial_truth: Gaussian,
+    pub groups: Vec<(String, Vec<usize>)>,
+    pub curves: Vec<Curve>,
+    pub variants: Vec<Variant>,
+    pub trials: usize,
+    pub steps: usize,
+    pub seed: u64,
+    /// First step (1-based) of the steady-state averages.
+    pub steady_from: usize,
+    pub paper: Option<PaperSpec>,
+}
