@@ -1,4 +1,4 @@
-//! Seed 000's particle-filter fusion center, exactly the work of the benchmarks:
+//! Zheng et al.'s (2014) particle-filter fusion center, exactly the work of the benchmarks:
 //! (b) the scalar censored filter, 1,000 particles, 2 sensors, 1,000 trials x 20 steps;
 //! (c) the nonlinear one, 10,000 particles, 9 RSS sensors, 200 trials x 20 steps;
 //! both CFwMD with feedback (the full likelihood of every silent sensor); and (d) the cost of

@@ -1,4 +1,4 @@
-//! Seed 002's `geng-oscillator` (1000 runs x 100 steps, every case) on one thread:
+//! Geng et al.'s `geng-oscillator` (1000 runs x 100 steps, every case) on one thread:
 //! `cargo bench --bench federated_tobit`. One criterion sample is one whole case (all 1000
 //! trials of one scheme variant); a 3-state Tobit KF should take well under a second per case.
 use criterion::{criterion_group, criterion_main, Criterion};

@@ -1,4 +1,4 @@
-//! Micro-benchmarks of single steps on seed 004's system (6-D state, 2-D measurements), and
+//! Micro-benchmarks of single steps on Dormann et al.'s system (6-D state, 2-D measurements), and
 //! issue 12's workload (a) end to end at one thread — the centralized KF Monte Carlo of the
 //! numpy peers (`/work/shared/peers/kf_mc.py`, 5000 trials x 20 steps):
 //! `cargo bench --bench kf_step`.

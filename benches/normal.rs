@@ -1,5 +1,5 @@
 //! The censored-sensor band likelihood kernel `stats::normal::add_log_band_probability`
-//! (`cargo bench --bench normal`): 10,000 particles per call, as in seed 000's Section VII-C
+//! (`cargo bench --bench normal`): 10,000 particles per call, as in Zheng et al.'s (2014) Section VII-C
 //! filter, with realistic inputs — innovation means `mu` mostly within a few units of 0
 //! (90% N(0, 2^2)) and a tail of particles far out (10% uniform on [-50, 50]); band
 //! half-widths `c` in [0.1, 5] and inverse noise sd `s` in [0.5, 2]. Throughput is per element

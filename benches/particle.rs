@@ -1,5 +1,5 @@
 //! Per-step cost of the particle-filter machinery (`cargo bench --bench particle`), at the
-//! sizes of seed 000's experiments:
+//! sizes of Zheng et al.'s (2014) experiments:
 //! - Section VII-A: 2-D constant velocity (rank-one Q), 2 linear sensors, 1,000 particles;
 //!   target 1,000 trials x 20 steps in 0.3 s, i.e. 15 us per step;
 //! - Section VII-C: 4-D constant velocity (rank-two Q), 9 received-signal-strength sensors

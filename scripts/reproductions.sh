@@ -36,7 +36,7 @@ Measured on the 2-core development machine with the full trial counts of the bui
 
 Verdicts near the z = -2 line are Monte Carlo outcomes, not properties of the method: with 200 trials (zheng-fig8, -fig9, -fig10-table3, as in the paper) and in heavy-tailed settings (zheng-nofb-n4 at l = 1) they change with the seed; the scenario notes say by how much and how many trials settle them.
 
-Also reproduced exactly (computed, not simulated): `hushfuse reproduce zhang-tables` (18 of 18 printed values of seed 003 Tables 2, 4, 5, 6) and `hushfuse reproduce zhang-table7` (6 of 6 values of Table 7 to the printed 4 decimals).
+Also reproduced exactly (computed, not simulated): `hushfuse reproduce zhang-tables` (18 of 18 printed values of Zhang et al. (2016), Tables 2, 4, 5, 6) and `hushfuse reproduce zhang-table7` (6 of 6 values of Table 7 to the printed 4 decimals).
 
 HEAD
     for id in "${all[@]}"; do

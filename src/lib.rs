@@ -2,11 +2,11 @@
 //!
 //! Sensors decide whether and with how many bits to talk; a fusion center fuses what arrives
 //! and what the silence says. Where each paper lives:
-//! - seed 004 (Dormann, Noack, Hanebeck, distributed KF with omitted estimates):
+//! - Dormann, Noack and Hanebeck (distributed KF with omitted estimates):
 //!   [`scheme::distributed_kf`];
-//! - seed 000 (Zheng, Niu, Varshney, censoring and a particle filter that listens to
+//! - Zheng, Niu and Varshney, 2014 (censoring and a particle filter that listens to
 //!   silence): [`scheme::censored_pf`];
-//! - seed 003 (Zhang, Li, Liu, quantized innovations and 802.15.4 bits):
+//! - Zhang, Li and Liu, 2016 (quantized innovations and 802.15.4 bits):
 //!   [`scheme::quantized_innovation`], [`link::quantizer`], [`link::codec802154`];
 //! - the baselines every scheme is measured against: [`scheme::centralized`].
 //!

@@ -1,6 +1,6 @@
 //! The fast trials of the linear-Gaussian schemes (`Scheme::run_trial_fast`) give the generic
 //! per-step loop's numbers bit for bit: every fused mean, covariance and traffic count, at every
-//! step, for every variant of the seed 004 sweep (centralized KF at random rates, Algorithm 1
+//! step, for every variant of the Dormann et al. sweep (centralized KF at random rates, Algorithm 1
 //! random and event-based, Algorithm 2 over alpha x b) and of the peers' centralized KF, on the
 //! same data and coin streams — the variants of a trial sharing one `TrialCache` as the runner
 //! shares it.

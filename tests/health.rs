@@ -6,7 +6,7 @@ use hushfuse::scenario::build;
 
 const SCENARIO: &str = r#"
 name = "pf6"
-description = "Seed 004 schemes at a few communication rates (a quick look at dormann-fig1)"
+description = "Dormann et al. schemes at a few communication rates (a quick look at dormann-fig1)"
 trials = 100
 steps = 100
 seed = 2018

@@ -1,8 +1,8 @@
 //! The linear-Gaussian schemes allocate nothing per step once their shared, data-independent
 //! matrices are computed: a fusion center step allocates nothing at all, a sensor step only
 //! the message it sends (the `Message` owns its vector). On the default scenario: the
-//! centralized KF, the globalized DKF, Algorithms 1 and 2. On arena-1d: seed 003's
-//! quantized-innovation KF, the event-triggered filters, seed 002's federated Tobit filter and
+//! centralized KF, the globalized DKF, Algorithms 1 and 2. On arena-1d: Zhang et al.'s (2016)
+//! quantized-innovation KF, the event-triggered filters, Geng et al.'s federated Tobit filter and
 //! round-robin KF, and the estimate fusions (covariance intersection, naive). The centralized KF with random
 //! losses, whose covariance depends on the data and is computed per step in buffers,
 //! allocates nothing either where the fixed-size kernels reproduce matrixmultiply's 6 x 6
@@ -145,7 +145,7 @@ fn per_step_with_feedback(
 /// The other linear-Gaussian schemes of issue 12 on `arena-1d`, each at the allowance: a
 /// sensor step allocates one vector per message sent, a fusion-center step nothing. The
 /// feedback (`FusionCenter::feedback`) returns an owned `Feedback` and allocates only what it
-/// holds, counted apart: seed 003's y_hat and Delta per sensor (one vector), the innovation
+/// holds, counted apart: Zhang et al.'s (2016) y_hat and Delta per sensor (one vector), the innovation
 /// trigger's fused prediction with its covariance (a vector and a matrix), the closed-loop
 /// stochastic trigger's prediction without it (a vector), nothing for the open loop and
 /// send-on-delta (no feedback), nothing for the federated Tobit filter and the estimate

@@ -11,7 +11,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "replay"
 
-# A censoring particle filter (seed 000's CFwMD with feedback) and its all-send bound, small.
+# A censoring particle filter (Zheng et al.'s (2014) CFwMD with feedback) and its all-send bound, small.
 CENSORED_PF = """
 name = "pf-small"
 trials = 6

@@ -1,5 +1,5 @@
 //! Kalman filter in information form: Y = P^{-1}, y = P^{-1} x. Fusing independent sensors is
-//! a sum (seed 004 Section II, centralized fusion; seed 003 eq. (9), (12)), which is why
+//! a sum (Dormann et al., Section II, centralized fusion; Zhang et al. (2016), eq. (9), (12)), which is why
 //! fusion centers use this form.
 use super::{FilterError, Gaussian};
 use crate::linalg::{cholesky, symmetrize, LinalgError, Matrix, Vector};
@@ -29,7 +29,7 @@ impl Information {
 
     /// Converts a covariance-form estimate by inverting its covariance: `Y = P^{-1}` (from the
     /// Cholesky factor, symmetrized) and `y = Y x` as a product. [`from_gaussian`](Self::from_gaussian)
-    /// forms `y` by a solve instead; the two agree to rounding, and this one is what seed 003's
+    /// forms `y` by a solve instead; the two agree to rounding, and this one is what Zhang et al.'s (2016)
     /// fusion center starts from in eq. (9) and (12) (`P^{-1}` and `P^{-1} x` of the prediction).
     pub fn from_inverted_covariance(g: &Gaussian) -> Result<Self, FilterError> {
         let chol = cholesky(&g.cov).map_err(|source| FilterError::Matrix {
@@ -52,7 +52,7 @@ impl Information {
     /// ```
     ///
     /// A scalar measurement `z` with noise variance `r` is `c = 1 / (s + r)`,
-    /// `b = (z - h x) / (s + r)` (then `Y += h^T h / r`, `y += h^T z / r`); seed 003's quantized
+    /// `b = (z - h x) / (s + r)` (then `Y += h^T h / r`, `y += h^T z / r`); Zhang et al.'s (2016) quantized
     /// innovation (eq. (10), (13) with the (A24) denominator) is `c = eta / Delta^2`,
     /// `b = sigma / Delta`.
     ///
@@ -156,7 +156,7 @@ impl Information {
     }
 
     /// Adds one linear measurement: Y += H^T R^{-1} H, y += H^T R^{-1} z
-    /// (seed 004, centralized filtering step).
+    /// (Dormann et al., centralized filtering step).
     pub fn add_measurement(
         &mut self,
         sensor: &LinearSensor,

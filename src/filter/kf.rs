@@ -5,7 +5,7 @@ use super::{FilterError, Gaussian};
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::model::{LinearTransition, MeasurementModel};
 
-/// Prediction step: mean F x, covariance F P F^T + Q (seed 004, eq. (2) with N = 1).
+/// Prediction step: mean F x, covariance F P F^T + Q (Dormann et al., eq. (2) with N = 1).
 pub fn predict(model: &LinearTransition, est: &Gaussian) -> Gaussian {
     Gaussian {
         mean: model.f() * &est.mean,
@@ -136,7 +136,7 @@ pub fn update(
 /// `(P_{k|k}, K, S)`.
 ///
 /// This is a local filter's update when only the covariance is wanted (the mean is formed by
-/// the caller, `x_ref + K nu`): seed 000's sensors linearize an EKF at the fed-back estimate
+/// the caller, `x_ref + K nu`): Zheng et al.'s (2014) sensors linearize an EKF at the fed-back estimate
 /// (Remark 3), and the data-independent covariance sequence of a linear sensor
 /// (`scheme::censored_pf::local_plan`) is this recursion with any `x_ref`. At `x_ref` = the
 /// predicted mean it performs the operations of [`update`] in the same order: its covariance

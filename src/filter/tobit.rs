@@ -1,5 +1,5 @@
 //! The Tobit Kalman filter measurement update for one scalar, two-sided censored reading
-//! (seed 002, Theorem 1, eq. (20)-(25), built on Lemma 1; Allik et al.'s TKF for p = 1).
+//! (Geng et al., Theorem 1, eq. (20)-(25), built on Lemma 1; Allik et al.'s TKF for p = 1).
 //!
 //! The reading is `y = clamp(ybar, tau_l, tau_r)` with `ybar = h x + v`, `v ~ N(0, r)`
 //! (eq. (6)-(7)). With `zeta = h x^-` and `theta = (tau - zeta)/sqrt(r)`:
@@ -80,7 +80,7 @@ impl Thresholds {
     }
 }
 
-/// Where a reading fell against the censoring region `(tau_l, tau_r)` (seed 002, eq. (6)).
+/// Where a reading fell against the censoring region `(tau_l, tau_r)` (Geng et al., eq. (6)).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Censored {
     /// `z <= tau_l`: the estimator sees `y = tau_l` (alpha = 1 in eq. (7)).
@@ -107,7 +107,7 @@ impl Censored {
     }
 }
 
-/// Seed 002, eq. (6): the two-sided (dead-zone-like) censoring of a reading `z` with
+/// Geng et al., eq. (6): the two-sided (dead-zone-like) censoring of a reading `z` with
 /// `tau_l < tau_r`. The boundaries belong to the censored sides, as printed (`z <= tau_l` is
 /// left-censored, `z >= tau_r` right-censored). Infinite thresholds never censor a finite `z`.
 /// A NaN `z` compares false with everything and comes back as `Inside(NaN)`: callers reject

@@ -13,9 +13,9 @@ pub enum Message {
     Measurement(Vector),
     /// A local (possibly globalized) state estimate. The covariance is not sent where it is a
     /// deterministic function of the model that the fusion center computes itself
-    /// (seed 004: the globalized covariance is common to all sensors).
+    /// (Dormann et al.: the globalized covariance is common to all sensors).
     Estimate(Vector),
-    /// An encoded frame, exactly the octets a radio sends (seed 003's 802.15.4 codecs), with
+    /// An encoded frame, exactly the octets a radio sends (Zhang et al.'s (2016) 802.15.4 codecs), with
     /// the paper's payload bits c_i.
     Frame { octets: Vec<u8>, payload_bits: u32 },
 }

@@ -1,5 +1,5 @@
-//! Nonlinear scalar sensors with their Jacobians: range (seed 003 eq. (17)) and received signal
-//! strength (seed 000 Section VII-C). Both measure a target whose planar position sits at two
+//! Nonlinear scalar sensors with their Jacobians: range (Zhang et al. (2016), eq. (17)) and received signal
+//! strength (Zheng et al. (2014), Section VII-C). Both measure a target whose planar position sits at two
 //! state indices.
 use super::{MeasurementModel, ModelError};
 use crate::linalg::{Matrix, Vector};
@@ -65,7 +65,7 @@ fn scalar_noise(r: f64) -> Result<(Matrix, Matrix), ModelError> {
     ))
 }
 
-/// Range sensor z = ||p - s|| + v, v ~ N(0, r) (seed 003 eq. (17)).
+/// Range sensor z = ||p - s|| + v, v ~ N(0, r) (Zhang et al. (2016), eq. (17)).
 #[derive(Debug, Clone)]
 pub struct RangeSensor {
     placement: Placement,
@@ -138,7 +138,7 @@ fn range_many([sx, sy]: [f64; 2], xs: &[f64], ys: &[f64], out: &mut [f64]) {
 }
 
 /// `out[p] = sqrt(P0 / (1 + alpha d_p^n))` (the RSS sensor over a particle cloud), with the
-/// exponent 2 of seed 000's experiments free of `powf`. Multiversioned like [`range_many`]:
+/// exponent 2 of Zheng et al.'s (2014) experiments free of `powf`. Multiversioned like [`range_many`]:
 /// the divide and square root dominate, and AVX2 does four at a time.
 #[multiversion(targets("x86_64+avx2"))]
 fn rss_many(
@@ -164,7 +164,7 @@ fn rss_many(
 }
 
 /// Received-signal-strength sensor z = sqrt(P0 / (1 + alpha d^n)) + v, v ~ N(0, r)
-/// (seed 000 Section VII-C).
+/// (Zheng et al. (2014), Section VII-C).
 #[derive(Debug, Clone)]
 pub struct RssSensor {
     placement: Placement,

@@ -30,7 +30,7 @@ pub fn constant_velocity_1d(dt: f64, sigma2: f64) -> Result<LinearTransition, Mo
     LinearTransition::new(f, q)
 }
 
-/// 1-D constant velocity with discrete white-noise acceleration (seed 000 Section VII):
+/// 1-D constant velocity with discrete white-noise acceleration (Zheng et al. (2014), Section VII):
 /// Q = sigma2 [[D^4/4, D^3/2], [D^3/2, D^2]], rank one (the acceleration is constant over a
 /// sampling interval).
 pub fn constant_velocity_1d_discrete(dt: f64, sigma2: f64) -> Result<LinearTransition, ModelError> {
@@ -46,7 +46,7 @@ pub fn constant_velocity_1d_discrete(dt: f64, sigma2: f64) -> Result<LinearTrans
 }
 
 /// 2-D constant velocity with discrete white-noise acceleration, state (x, vx, y, vy)
-/// (seed 000 Section VII-C).
+/// (Zheng et al. (2014), Section VII-C).
 pub fn constant_velocity_2d_discrete(dt: f64, sigma2: f64) -> Result<LinearTransition, ModelError> {
     let one = constant_velocity_1d_discrete(dt, sigma2)?;
     LinearTransition::new(block_diag(one.f(), 2), block_diag(one.q(), 2))
@@ -59,7 +59,7 @@ pub fn constant_velocity_2d(dt: f64, sigma2: f64) -> Result<LinearTransition, Mo
 }
 
 /// 2-D near-constant acceleration, state (x, vx, ax, y, vy, ay), continuous white-noise jerk of
-/// intensity `sigma2` — seed 004 Section V. The printed system matrix has a typo in row 5
+/// intensity `sigma2` — Dormann et al., Section V. The printed system matrix has a typo in row 5
 /// (`0 0 0 0 0 1`, which would make F singular and lose vy); we use the standard block
 /// `[[1, D, D^2/2], [0, 1, D], [0, 0, 1]]` per axis, which is the one the printed noise matrix
 /// `[[D^5/20, D^4/8, D^3/6], [D^4/8, D^3/3, D^2/2], [D^3/6, D^2/2, D]]` belongs to.

@@ -21,7 +21,7 @@ pub enum Schedule {
     /// Every sensor may send at every step.
     #[default]
     All,
-    /// Round-robin: at step k only sensor (k - 1) mod N may send (seed 002's protocol).
+    /// Round-robin: at step k only sensor (k - 1) mod N may send (Geng et al.'s protocol).
     RoundRobin,
 }
 
@@ -55,7 +55,7 @@ pub fn deliver(
 }
 
 /// What a remote estimator holds for one sensor after a step under a zero-order hold
-/// (seed 002 eq. (4)-(5)): a fresh value, the last one held over, or nothing yet.
+/// (Geng et al., eq. (4)-(5)): a fresh value, the last one held over, or nothing yet.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Held {
     /// Arrived at this step (it was counted as a transmission by [`deliver`]).
@@ -85,7 +85,7 @@ impl Held {
     }
 }
 
-/// Zero-order hold at the receiving side of a network (seed 002 eq. (4)): for each sensor, the
+/// Zero-order hold at the receiving side of a network (Geng et al., eq. (4)): for each sensor, the
 /// last measurement that arrived is held until the next one. It sits after [`deliver`], so
 /// traffic is counted once, when a value arrives; a held value is never a new transmission.
 /// Only [`Received::Measurement`] refreshes the hold; silences and unscheduled steps keep it.

@@ -236,7 +236,7 @@ and one velocity sensor, each sending 32-bit readings over a link that charges e
 scheme of the library runs on the same truths and measurements; each scheme's one bandwidth knob \
 (a send probability, a threshold, the number of quantizer bits, the average number of senders) \
 is tuned so that it spends the same uplink payload bits per step, here {} bits per step (sending \
-everything costs 128). Schemes without a knob (the all-data KF bound, the round-robin seed 002 \
+everything costs 128). Schemes without a knob (the all-data KF bound, the round-robin Geng et al. \
 schemes) spend what they spend and count only at budgets they fit. The table names, per budget, \
 the scheme with the lowest mean position RMSE. `hushfuse run arena-1d --budgets 12,24,48,96 \
 --report` gives the full comparison with figures.\n",

@@ -1,5 +1,5 @@
 //! SVG figures: RMSE per step per scheme, and steady-state MSE (solid) and trace (dashed)
-//! against the communication rate, the layout of seed 004's Fig. 1.
+//! against the communication rate, the layout of Dormann et al.'s Fig. 1.
 use crate::metrics::results::{curve_points, Summary};
 use crate::scenario::build::Experiment;
 use plotters::prelude::*;

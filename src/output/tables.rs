@@ -1,4 +1,4 @@
-//! Reproductions that are computations, not Monte Carlo runs: seed 003's bandwidth tables
+//! Reproductions that are computations, not Monte Carlo runs: Zhang et al.'s (2016) bandwidth tables
 //! (Tables 1-6) and its covariance-correction coefficients (Table 7). The paper's printed
 //! values live in the report's TOML file; ours are computed here by the codecs and quantizers
 //! themselves.

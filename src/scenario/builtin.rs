@@ -4,92 +4,92 @@
 pub const BUILTIN: &[(&str, &str, &str)] = &[
     (
         "default",
-        "Seed 004 comparison at a few rates (centralized KF, Algorithms 1 and 2), 100 trials",
+        "Dormann et al. comparison at a few rates (centralized KF, Algorithms 1 and 2), 100 trials",
         include_str!("../../scenarios/default.toml"),
     ),
     (
         "dormann-fig1",
-        "Seed 004 Fig. 1: MSE and trace against the communication rate, 500 runs x 100 steps",
+        "Dormann et al., Fig. 1: MSE and trace against the communication rate, 500 runs x 100 steps",
         include_str!("../../scenarios/dormann-fig1.toml"),
     ),
     (
         "zheng-fig1",
-        "Seed 000 Fig. 1: censoring with feedback, N = 2, l = 1, 5000 trials, 1000 particles",
+        "Zheng et al. (2014), Fig. 1: censoring with feedback, N = 2, l = 1, 5000 trials, 1000 particles",
         include_str!("../../scenarios/zheng-fig1.toml"),
     ),
     (
         "zheng-fig2-table1",
-        "Seed 000 Fig. 2 / Table I: N = 4, l in {1, 1.2, 1.5, 2, 3}, CFwMD vs CFwMD2, transmissions vs Table I",
+        "Zheng et al. (2014), Fig. 2 / Table I: N = 4, l in {1, 1.2, 1.5, 2, 3}, CFwMD vs CFwMD2, transmissions vs Table I",
         include_str!("../../scenarios/zheng-fig2-table1.toml"),
     ),
     (
         "zheng-fig3",
-        "Seed 000 Fig. 3: non-feedback, N = 2, l = 1 (Prop. 3)",
+        "Zheng et al. (2014), Fig. 3: non-feedback, N = 2, l = 1 (Prop. 3)",
         include_str!("../../scenarios/zheng-fig3.toml"),
     ),
     (
         "zheng-fig4",
-        "Seed 000 Fig. 4: vector observations with feedback, N = 2, l = 1",
+        "Zheng et al. (2014), Fig. 4: vector observations with feedback, N = 2, l = 1",
         include_str!("../../scenarios/zheng-fig4.toml"),
     ),
     (
         "zheng-fig5-table2",
-        "Seed 000 Fig. 5 / Table II: vector observations, N = 4, CFwMD vs CFwMD2",
+        "Zheng et al. (2014), Fig. 5 / Table II: vector observations, N = 4, CFwMD vs CFwMD2",
         include_str!("../../scenarios/zheng-fig5-table2.toml"),
     ),
     (
         "zheng-fig6",
-        "Seed 000 Fig. 6: vector observations without feedback (Prop. 6)",
+        "Zheng et al. (2014), Fig. 6: vector observations without feedback (Prop. 6)",
         include_str!("../../scenarios/zheng-fig6.toml"),
     ),
     (
         "zheng-fig8",
-        "Seed 000 Fig. 8: 9 RSS sensors, l = 2, 10^4 particles, 200 trials",
+        "Zheng et al. (2014), Fig. 8: 9 RSS sensors, l = 2, 10^4 particles, 200 trials",
         include_str!("../../scenarios/zheng-fig8.toml"),
     ),
     (
         "zheng-fig9",
-        "Seed 000 Fig. 9: RSS sensors, RMSE against l",
+        "Zheng et al. (2014), Fig. 9: RSS sensors, RMSE against l",
         include_str!("../../scenarios/zheng-fig9.toml"),
     ),
     (
         "zheng-fig10-table3",
-        "Seed 000 Fig. 10 / Table III: RSS sensors, CFwMD vs CFwMD2 for l in {2, 4, 6}",
+        "Zheng et al. (2014), Fig. 10 / Table III: RSS sensors, CFwMD vs CFwMD2 for l in {2, 4, 6}",
         include_str!("../../scenarios/zheng-fig10-table3.toml"),
     ),
     (
         "zheng-nofb-n4",
-        "Beyond seed 000: non-feedback N = 4, l in {1, 2}, with CFwMD-exact",
+        "Beyond Zheng et al. (2014): non-feedback N = 4, l in {1, 2}, with CFwMD-exact",
         include_str!("../../scenarios/zheng-nofb-n4.toml"),
     ),
     (
         "zhang-fig4",
-        "Seed 003 Fig. 4: quantized-innovation fusion at 1 payload bit, 50 range sensors, 1000 runs",
+        "Zhang et al. (2016), Fig. 4: quantized-innovation fusion at 1 payload bit, 50 range sensors, 1000 runs",
         include_str!("../../scenarios/zhang-fig4.toml"),
     ),
     (
         "zhang-fig5",
-        "Seed 003 Fig. 5: quantized-innovation fusion at 2 payload bits, 50 range sensors, 1000 runs",
+        "Zhang et al. (2016), Fig. 5: quantized-innovation fusion at 2 payload bits, 50 range sensors, 1000 runs",
         include_str!("../../scenarios/zhang-fig5.toml"),
     ),
     (
         "zhang-table7",
-        "Seed 003 Table 7: covariance-correction coefficient rho of every quantizer (computed)",
+        "Zhang et al. (2016), Table 7: covariance-correction coefficient rho of every quantizer (computed)",
         include_str!("../../scenarios/zhang-table7.toml"),
     ),
     (
         "zhang-tables",
-        "Seed 003 Tables 1-6: quantization levels against payload bits (computed)",
+        "Zhang et al. (2016), Tables 1-6: quantization levels against payload bits (computed)",
         include_str!("../../scenarios/zhang-tables.toml"),
     ),
     (
         "geng-oscillator",
-        "Seed 002 Section IV-A / Tables II-III: federated Tobit KF, round-robin, censoring regions and noise variances, information bound",
+        "Geng et al., Section IV-A / Tables II-III: federated Tobit KF, round-robin, censoring regions and noise variances, information bound",
         include_str!("../../scenarios/geng-oscillator.toml"),
     ),
     (
         "geng-tracking",
-        "Seed 002 Section IV-B / Figs. 10-11: target tracking with acceleration bias, FTKF-DB vs FTKF",
+        "Geng et al., Section IV-B / Figs. 10-11: target tracking with acceleration bias, FTKF-DB vs FTKF",
         include_str!("../../scenarios/geng-tracking.toml"),
     ),
     (
@@ -99,22 +99,22 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
     ),
     (
         "arena-nca",
-        "Arena: seed 004's six 2-D linear sensors, every scheme that applies",
+        "Arena: Dormann et al.'s six 2-D linear sensors, every scheme that applies",
         include_str!("../../scenarios/arena-nca.toml"),
     ),
     (
         "arena-rss",
-        "Arena: seed 000's nine RSS sensors, every scheme that applies",
+        "Arena: Zheng et al.'s (2014) nine RSS sensors, every scheme that applies",
         include_str!("../../scenarios/arena-rss.toml"),
     ),
     (
         "arena-wsn",
-        "Arena: seed 003's 50 range sensors (quantized innovation activates 3), every scheme that applies",
+        "Arena: Zhang et al.'s (2016) 50 range sensors (quantized innovation activates 3), every scheme that applies",
         include_str!("../../scenarios/arena-wsn.toml"),
     ),
     (
         "arena-tobit",
-        "Arena: seed 002's oscillator with bias, two scalar sensors, every scheme that applies",
+        "Arena: Geng et al.'s oscillator with bias, two scalar sensors, every scheme that applies",
         include_str!("../../scenarios/arena-tobit.toml"),
     ),
 ];

@@ -109,7 +109,7 @@ pub struct ScenarioFile {
 pub enum ModelSpec {
     /// State (x, vx), white-noise acceleration of intensity sigma2.
     /// `noise = "discrete"` uses the discrete white-noise acceleration
-    /// Q = sigma2 [[D^4/4, D^3/2], [D^3/2, D^2]] (seed 000 Section VII) instead.
+    /// Q = sigma2 [[D^4/4, D^3/2], [D^3/2, D^2]] (Zheng et al. (2014), Section VII) instead.
     #[serde(rename = "constant-velocity-1d")]
     ConstantVelocity1d {
         dt: f64,
@@ -125,7 +125,7 @@ pub enum ModelSpec {
         #[serde(default)]
         noise: NoiseForm,
     },
-    /// State (x, vx, ax, y, vy, ay), white-noise jerk (seed 004 Section V).
+    /// State (x, vx, ax, y, vy, ay), white-noise jerk (Dormann et al., Section V).
     #[serde(rename = "near-constant-acceleration-2d")]
     NearConstantAcceleration2d { dt: f64, sigma2: f64 },
     /// 2-D rotation by omega * dt per step, noise q I.
@@ -157,9 +157,9 @@ pub enum SensorKind {
     /// z = H x + v.
     #[default]
     Linear,
-    /// Distance to the sensor (seed 003 eq. (17)).
+    /// Distance to the sensor (Zhang et al. (2016), eq. (17)).
     Range,
-    /// Received signal strength (seed 000 Section VII-C).
+    /// Received signal strength (Zheng et al. (2014), Section VII-C).
     Rss,
 }
 
@@ -200,7 +200,7 @@ pub struct PriorSpec {
 pub struct SensorSpec {
     #[serde(default)]
     pub name: Option<String>,
-    /// `linear` (default), `range` (seed 003 eq. (17)) or `rss` (seed 000 Section VII-C).
+    /// `linear` (default), `range` (Zhang et al. (2016), eq. (17)) or `rss` (Zheng et al. (2014), Section VII-C).
     #[serde(default)]
     pub kind: SensorKind,
     /// Sensor position (x, y), for `range` and `rss`.
@@ -265,7 +265,7 @@ pub struct SensorFieldSpec {
     pub path_loss_exponent: Option<f64>,
 }
 
-/// Keep only the best variant of a swept scheme per communication-rate bin (seed 004 Fig. 1
+/// Keep only the best variant of a swept scheme per communication-rate bin (Dormann et al., Fig. 1
 /// shows, for Algorithm 2, the smallest error covariance per rate).
 #[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -361,7 +361,7 @@ pub enum ClaimSpec {
         metric: String,
     },
     /// For every sweep value v of `param` shared by curves `a` and `b`, `a`'s `metric`
-    /// (`transmissions_per_step` or `rate`) is closer to the target v than `b`'s (seed 000
+    /// (`transmissions_per_step` or `rate`) is closer to the target v than `b`'s (Zheng et al. (2014)
     /// Tables I-III: CFwMD2's transmissions are closer to l than CFwMD's).
     CloserToTarget {
         text: String,

@@ -1,5 +1,5 @@
 //! Baselines: the centralized Kalman filter that receives raw measurements — all of them (the
-//! bound every scheme is measured against), or each with probability `rate` (seed 004
+//! bound every scheme is measured against), or each with probability `rate` (Dormann et al.
 //! Section V: a measurement not sent is lost for good).
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use crate::filter::{fixed, kf, Gaussian};
@@ -45,7 +45,7 @@ impl SensorNode for ForwardingSensor {
 }
 
 /// Kalman filter on whatever measurements arrive. Linear sensors are fused in information
-/// form, one sum per step (seed 004 Section II; eq. (8)-(9) for a subset); nonlinear sensors
+/// form, one sum per step (Dormann et al., Section II; eq. (8)-(9) for a subset); nonlinear sensors
 /// by sequential EKF updates.
 #[derive(Debug, Clone)]
 pub struct CentralizedKf {
@@ -169,7 +169,7 @@ impl CentralizedKf {
     /// The direct step for linear sensors: the operations of `kf::predict`,
     /// `Information::from_gaussian`, `add_measurement` and `to_gaussian` (the same products,
     /// factorizations and solves in the same order, hence the same numbers), without
-    /// allocating. Seed 004 Section II: the centralized KF fuses what arrived by a sum of
+    /// allocating. Dormann et al., Section II: the centralized KF fuses what arrived by a sum of
     /// H_i^T R_i^{-1} H_i and H_i^T R_i^{-1} z_i (eq. (8)-(9) for a subset). State dimensions
     /// 1..=6 run on stack arrays (where [`fixed::gemm_square`] has `gemm`'s kernel), others
     /// on nalgebra matrices.

@@ -63,17 +63,17 @@ impl System {
 /// without feedback. Its bits are counted as downlink traffic.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Feedback {
-    /// The fused prediction, with its covariance or not (seed 000's CFwMD / CFwMD2).
+    /// The fused prediction, with its covariance or not (Zheng et al.'s (2014) CFwMD / CFwMD2).
     Prediction {
         mean: Vector,
         cov: Option<crate::linalg::Matrix>,
     },
     /// Per sensor: the predicted measurement y_hat and the innovation standard deviation Delta
-    /// of seed 003 eq. (2), for activated sensors; `None` for the others.
+    /// of Zhang et al. (2016), eq. (2), for activated sensors; `None` for the others.
     InnovationReference(Vec<Option<InnovationReference>>),
 }
 
-/// Seed 003 eq. (2): y_hat = h x_{k|k-1}, Delta = sqrt(h P h^T + R).
+/// Zhang et al. (2016), eq. (2): y_hat = h x_{k|k-1}, Delta = sqrt(h P h^T + R).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct InnovationReference {
     pub y_hat: f64,

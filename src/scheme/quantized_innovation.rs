@@ -1,4 +1,4 @@
-//! Seed 003 — Zhang, Li, Liu, "Distributed state estimation and data fusion in wireless sensor
+//! Zhang, Li and Liu (2016), "Distributed state estimation and data fusion in wireless sensor
 //! networks using multi-level quantized innovation": activated sensors quantize their
 //! normalized innovation (eq. (3)-(5)) against the fusion center's y_hat and Delta (eq. (2)),
 //! send the level as a real IEEE 802.15.4 frame (Tables 1-4) or stay silent on the centre
@@ -46,7 +46,7 @@ impl std::fmt::Debug for QuantizerLink {
 /// Which quantizer the activated sensors use.
 #[derive(Debug, Clone, PartialEq)]
 pub enum QuantizerChoice {
-    /// Seed 003's 4l + 1 levels with the dynamic transmission strategy, at most `bits` payload
+    /// Zhang et al.'s (2016) 4l + 1 levels with the dynamic transmission strategy, at most `bits` payload
     /// bits (Tables 2 and 4: 5/21/69 levels with the flag zone, 5/13/29 without).
     Zhang { bits: u8, flag_zone: bool },
     /// You et al.: 2^c + 1 Lloyd-Max levels, silent centre, c-bit fixed-length code.
@@ -128,7 +128,7 @@ impl InnovationQuantizer for GenericLloydMax {
 pub enum Activation {
     /// Every sensor.
     All,
-    /// The `count` sensors nearest to the predicted target position (seed 003 Section 6 keeps
+    /// The `count` sensors nearest to the predicted target position (Zhang et al. (2016), Section 6 keeps
     /// the three nearest active; the fusion center can only know the prediction). Needs
     /// sensors with positions and the target's position at `indices` of the state.
     Nearest { count: usize, indices: [usize; 2] },
@@ -261,7 +261,7 @@ impl CenterWork {
     }
 }
 
-/// Fusion center of seed 003's Algorithm 1.
+/// Fusion center of Zhang et al.'s (2016) Algorithm 1.
 pub struct QuantizedFusionCenter {
     system: Arc<System>,
     link: Option<Arc<QuantizerLink>>,
@@ -452,7 +452,7 @@ impl FusionCenter for QuantizedFusionCenter {
     }
 }
 
-/// Seed 003's scheme with a chosen quantizer and activation rule.
+/// Zhang et al.'s (2016) scheme with a chosen quantizer and activation rule.
 #[derive(Debug, Clone)]
 pub struct QuantizedInnovationScheme {
     system: Arc<System>,
@@ -470,7 +470,7 @@ impl QuantizedInnovationScheme {
     ) -> Result<Self, SchemeError> {
         if let Some(i) = system.sensors.iter().position(|s| s.meas_dim() != 1) {
             return Err(SchemeError::Unsupported(format!(
-                "sensor {i} is not scalar; seed 003 quantizes scalar innovations"
+                "sensor {i} is not scalar; Zhang et al. (2016) quantizes scalar innovations"
             )));
         }
         if let Activation::Nearest { count, .. } = activation {

@@ -1,5 +1,5 @@
 //! The band-likelihood kernel of the particle filters: [`add_log_band_probability`] and
-//! [`add_log_band_probability_about`], the log no-send probability of paper 000, eq. (14),
+//! [`add_log_band_probability_about`], the log no-send probability of Zheng et al. (2014), eq. (14),
 //! for a whole particle cloud at once.
 //!
 //! Why a module of its own: [`super::normal`] holds the accurate scalar functions of the
@@ -728,7 +728,7 @@ fn add_log_band_probability_scalar(
     }
 }
 
-/// Seed 000's censored-sensor likelihood over many particles: for each `mu[p]` (the
+/// Zheng et al.'s (2014) censored-sensor likelihood over many particles: for each `mu[p]` (the
 /// innovation mean h(x_p) - h(x_ref)), adds `log(Phi((c - mu) s) - Phi((-c - mu) s))` to
 /// `out[p]`, with `c = sqrt(eta s_k)` the half-width of the no-send band and `s = 1/sqrt(r)`
 /// (eq. (9), (14), (44), (45): `Q(xi_1) - Q(xi_2)`). This is the particle filter's hot loop.

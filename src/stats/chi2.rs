@@ -1,7 +1,7 @@
 //! Chi-square distribution: CDF, survival function and the upper quantile that sets the
 //! censoring threshold.
 //!
-//! Why: a censoring sensor of paper 000 sends only when its normalized innovation squared
+//! Why: a censoring sensor of Zheng et al. (2014) sends only when its normalized innovation squared
 //! `nu^T S^{-1} nu`, which is chi-square with `n_nu` degrees of freedom when the sensor's
 //! model is right, reaches a threshold `eta`. To have on average `l` of `N` sensors send,
 //! `P(chi^2_{n_nu} >= eta) = l / N`, i.e. `eta = chi^2_{n_nu}(l/N)`, the value *exceeded*
@@ -172,7 +172,7 @@ pub fn cdf(dof: f64, x: f64) -> Result<f64, StatsError> {
 }
 
 /// Survival function `P(chi^2_dof > x)`: the probability that a sensor whose innovation is
-/// exactly as its filter predicts transmits at threshold `x` (paper 000, eq. (7)).
+/// exactly as its filter predicts transmits at threshold `x` (Zheng et al. (2014), eq. (7)).
 ///
 /// # Errors
 /// As [`cdf`].
@@ -197,7 +197,7 @@ pub fn ln_sf(dof: f64, x: f64) -> Result<f64, StatsError> {
 }
 
 /// The censoring threshold `eta = chi^2_dof(p)`: the value with `P(chi^2_dof > eta) = p`
-/// (paper 000, eqs. (8), (32), (43), with `p = l/N` the target fraction of sensors that
+/// (Zheng et al. (2014), eqs. (8), (32), (43), with `p = l/N` the target fraction of sensors that
 /// transmit). `p = 1` gives `eta = 0` (everyone sends).
 ///
 /// * `dof = 1`: `eta = z^2` with `z = -Phi^{-1}(p/2)` (relative error ~1e-15);

@@ -1,6 +1,6 @@
 //! The standard normal distribution, with tails that stay accurate in log space.
 //!
-//! Why this module exists: the fusion center of a censoring scheme (paper 000, Zheng, Niu and
+//! Why this module exists: the fusion center of a censoring scheme (Zheng, Niu and
 //! Varshney) weighs every particle by the probability that a *silent* sensor's innovation fell
 //! inside the no-send band, eq. (14):
 //!
@@ -217,7 +217,7 @@ pub fn log_pdf(x: f64) -> f64 {
     -0.5 * x * x - LN_SQRT_2PI
 }
 
-/// Upper tail `Q(x) = P(X > x) = 1 - Phi(x)`, the `Q(.)` of paper 000, eq. (9).
+/// Upper tail `Q(x) = P(X > x) = 1 - Phi(x)`, the `Q(.)` of Zheng et al. (2014), eq. (9).
 ///
 /// Relative error a few 1e-15 at most wherever the result is a normal double; it
 /// underflows to 0 beyond `x ~ 38.5` (use [`log_q`] there).
@@ -265,7 +265,7 @@ pub fn log_cdf(x: f64) -> f64 {
     log_q(-x)
 }
 
-/// `log(Q(a) - Q(b)) = log P(a < X < b)`: the log of the no-send probability of paper 000,
+/// `log(Q(a) - Q(b)) = log P(a < X < b)`: the log of the no-send probability of Zheng et al. (2014),
 /// eq. (14), as it enters the full likelihoods (9), (15), (44), (45).
 ///
 /// Computed stably for every `a < b`:

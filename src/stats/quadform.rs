@@ -1,7 +1,7 @@
 //! Probability that a Gaussian quadratic form stays below a bound, `P(q^T q < eta)` with
 //! `q ~ N(m, C)`.
 //!
-//! Why: with vector measurements a censoring sensor of paper 000 stays silent when its
+//! Why: with vector measurements a censoring sensor of Zheng et al. (2014) stays silent when its
 //! normalized innovation squared is below `eta` (eq. (31)), and the fusion center's full
 //! likelihood (33) weighs each particle by `P(q^T q < eta)` with
 //! `q ~ N(S^{-1/2} H (x - x_pred), S^{-1/2} R S^{-1/2})`. The paper estimates this by
@@ -189,7 +189,7 @@ impl QuadFormCdf {
         &self.lam
     }
 
-    /// `P(q^T q < eta)` for `q ~ N(m, C)`: paper 000's `p(q^T q < eta)` in eq. (33).
+    /// `P(q^T q < eta)` for `q ~ N(m, C)`: Zheng et al.'s (2014) `p(q^T q < eta)` in eq. (33).
     ///
     /// `eta <= 0` gives 0 (the inequality is strict). See the module documentation for the
     /// method and its error (absolute below 1e-10).
@@ -571,7 +571,7 @@ pub fn prob_below(m: &DVector<f64>, c: &DMatrix<f64>, eta: f64) -> Result<f64, S
     QuadFormCdf::new(c)?.prob_below(m, eta)
 }
 
-/// Monte Carlo estimate of `P(q^T q < eta)`, as paper 000 computes it (Section VI): draw
+/// Monte Carlo estimate of `P(q^T q < eta)`, as Zheng et al. (2014) computes it (Section VI): draw
 /// `n_samples` vectors `q = m + F z` with `F F^T = C` (Cholesky factor, or
 /// `U diag(sqrt(lambda))` when `C` is singular) and return the fraction with
 /// `q^T q < eta`. Its standard error is `sqrt(p (1 - p) / n_samples)`; kept to reproduce the

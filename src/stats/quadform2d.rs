@@ -1,5 +1,5 @@
 //! `ln P(q^T q < eta)` with `q ~ N(m, C)` in two dimensions, for one `C` and `eta` and many
-//! means `m`: the particle filter's vector-measurement likelihood (paper 000, eq. (33)).
+//! means `m`: the particle filter's vector-measurement likelihood (Zheng et al. (2014), eq. (33)).
 //!
 //! Why a separate kernel: [`QuadFormCdf::prob_below_slice`] is exact but general (any `n`,
 //! either of two methods chosen per call, truncation bounds recomputed per mean) and costs

@@ -1,5 +1,5 @@
-//! Truncated and censored normal moments for the Tobit Kalman filter (seed 002, Geng, Wang,
-//! Alsaadi, Alharbi, Cheng: Lemma 1, eq. (12)-(17), and the censoring probabilities (9)).
+//! Truncated and censored normal moments for the Tobit Kalman filter (Geng, Wang,
+//! Alsaadi, Alharbi and Cheng: Lemma 1, eq. (12)-(17), and the censoring probabilities (9)).
 //!
 //! Everything is in the standardized variable: a latent reading `ybar ~ N(zeta, R)` is censored
 //! to `[tau_l, tau_r]` (eq. (6)); with `theta = (tau - zeta) / sqrt(R)` (eq. (12)-(17) need

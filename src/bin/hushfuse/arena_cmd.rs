@@ -271,7 +271,7 @@ pub(crate) fn quick_arena() -> Result<(), Failure> {
     msg.push('\n');
     msg.push_str(&arena::best_table(&out, &group));
     msg.push_str(&format!(
-        "\n({} pilot runs, {:.1} s. `hushfuse list` shows the built-in scenarios, `hushfuse run default` the seed 004 comparison, `hushfuse --help` the commands.)\n",
+        "\n({} pilot runs, {:.1} s. `hushfuse list` shows the built-in scenarios, `hushfuse run default` the Dormann et al. comparison, `hushfuse --help` the commands.)\n",
         out.evaluations,
         start.elapsed().as_secs_f64()
     ));

@@ -28,7 +28,7 @@ struct SqrtColumns {
 
 impl SqrtColumns {
     /// Keeps the columns carrying more than 1e-12 of the total variance `trace(L L^T)`. A
-    /// singular covariance (seed 000's white-noise-acceleration `Q = sigma^2 G G^T` has rank
+    /// singular covariance (Zheng et al.'s (2014) white-noise-acceleration `Q = sigma^2 G G^T` has rank
     /// one per axis) factors with columns that are zero up to rounding; drawing normals for
     /// them would double the cost of propagation and change the covariance by less than the
     /// rounding of the filter's own sums.
@@ -201,7 +201,7 @@ impl ParticleCloud {
         })
     }
 
-    /// `n` equally weighted particles drawn from `prior` (seed 000 initializes the fusion
+    /// `n` equally weighted particles drawn from `prior` (Zheng et al. (2014) initializes the fusion
     /// center's filter from the prior of x_0).
     pub fn from_gaussian<R: Rng + ?Sized>(
         n: usize,
@@ -350,7 +350,7 @@ impl ParticleCloud {
         &self.ancestors[..self.n]
     }
 
-    /// Propagates every particle through `x' = F x + w` (seed 000, (A1.3)): `F x` as one
+    /// Propagates every particle through `x' = F x + w` (Zheng et al. (2014), (A1.3)): `F x` as one
     /// `axpy` per nonzero entry of `F` over whole components, then one block of normal draws
     /// per column of the square root of `Q`. Weights are unchanged (bootstrap proposal).
     pub fn propagate<R: Rng + ?Sized>(
@@ -489,7 +489,7 @@ impl ParticleCloud {
         Ok(())
     }
 
-    /// Resamples if `policy` asks for it (seed 000, (A1.6)); returns whether it did.
+    /// Resamples if `policy` asks for it (Zheng et al. (2014), (A1.6)); returns whether it did.
     pub fn resample_if<R: Rng + ?Sized>(
         &mut self,
         policy: ResamplePolicy,
@@ -763,7 +763,7 @@ mod tests {
         assert!(c.component(0).iter().any(|x| (x - 3.0).abs() > 0.5));
     }
 
-    /// Seed 000 Section VII-A: white-noise acceleration, D = 1, sigma^2 = 4. Q is rank one.
+    /// Zheng et al. (2014), Section VII-A: white-noise acceleration, D = 1, sigma^2 = 4. Q is rank one.
     fn paper_cv() -> LinearTransition {
         let d = 1.0_f64;
         let s2 = 4.0;

@@ -1,6 +1,6 @@
 //! Bootstrap particle filter machinery: a particle cloud, linear-Gaussian propagation, weight
-//! normalization, estimates and resampling — the fusion center of seed 000 (Zheng, Niu,
-//! Varshney), Algorithm 1 steps (A1.3)–(A1.6). Schemes compute their own likelihood (received
+//! normalization, estimates and resampling — the fusion center of Zheng, Niu and
+//! Varshney (2014), Algorithm 1 steps (A1.3)–(A1.6). Schemes compute their own likelihood (received
 //! measurements and the censoring bands of silent sensors) and add it to
 //! [`ParticleCloud::log_weights_mut`]; everything else lives here.
 //!
@@ -84,7 +84,7 @@ pub enum Resampling {
 /// When to resample.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum ResamplePolicy {
-    /// Every step, as in seed 000's Algorithm 1 (A1.6).
+    /// Every step, as in Zheng et al.'s (2014) Algorithm 1 (A1.6).
     #[default]
     Always,
     /// Only when the effective sample size falls below `fraction * n` (a common choice is

@@ -1,7 +1,7 @@
 //! The resampling algorithms behind [`Resampling`](super::Resampling): systematic (branch
 //! free, with segmented running sums), stratified and multinomial (sorted positions merged
 //! against cumulative weights; multinomial through sorted uniforms from exponential spacings)
-//! and residual, all producing sorted ancestor indices. Seed 000, Algorithm 1, (A1.6). They
+//! and residual, all producing sorted ancestor indices. Zheng et al. (2014), Algorithm 1, (A1.6). They
 //! work on the cloud's buffers as plain slices, apart from the cloud so that each algorithm and
 //! its statistical tests sit together.
 use super::ParticleError;

@@ -1,4 +1,4 @@
-//! The censoring rules of seed 000: the NIS rule (4)/(31) with the threshold (8)/(32)/(43),
+//! The censoring rules of Zheng et al. (2014): the NIS rule (4)/(31) with the threshold (8)/(32)/(43),
 //! and the KL-divergence rule (24) with the threshold that Theorem 1 maps to.
 use crate::filter::Gaussian;
 use crate::linalg::{cholesky, Matrix, Vector};
@@ -7,7 +7,7 @@ use crate::stats::chi2;
 
 /// eta = chi^2_{n_nu}(l / N): the value a chi-square with `innovation_dim` degrees of freedom
 /// exceeds with probability l / N, so that on average `l` of `n_sensors` sensors send
-/// (seed 000 eq. (8), (32), (43)).
+/// (Zheng et al. (2014), eq. (8), (32), (43)).
 pub fn nis_threshold(innovation_dim: usize, l: f64, n_sensors: usize) -> Result<f64, SchemeError> {
     if !(l > 0.0 && l <= n_sensors as f64) {
         return Err(SchemeError::Unsupported(format!(
@@ -18,7 +18,7 @@ pub fn nis_threshold(innovation_dim: usize, l: f64, n_sensors: usize) -> Result<
         .map_err(|e| SchemeError::Unsupported(e.to_string()))
 }
 
-/// Normalized innovation squared nu^T S^{-1} nu (seed 000 eq. (4), (31)).
+/// Normalized innovation squared nu^T S^{-1} nu (Zheng et al. (2014), eq. (4), (31)).
 pub fn nis(nu: &Vector, s: &Matrix) -> Result<f64, SchemeError> {
     crate::linalg::mahalanobis_sq(nu, s).map_err(|source| SchemeError::Matrix {
         what: "innovation covariance S",
@@ -26,7 +26,7 @@ pub fn nis(nu: &Vector, s: &Matrix) -> Result<f64, SchemeError> {
     })
 }
 
-/// KL divergence D(p || q) between Gaussians p = prior and q = posterior (seed 000 eq. (25)):
+/// KL divergence D(p || q) between Gaussians p = prior and q = posterior (Zheng et al. (2014), eq. (25)):
 /// 1/2 {tr(P_q^{-1} P_p) - ln(|P_p| / |P_q|) - d} + 1/2 (m_q - m_p)^T P_q^{-1} (m_q - m_p).
 pub fn kl_divergence(p: &Gaussian, q: &Gaussian) -> Result<f64, SchemeError> {
     let (cp, cq) = (chol(&p.cov)?, chol(&q.cov)?);
@@ -41,7 +41,7 @@ pub fn kl_divergence(p: &Gaussian, q: &Gaussian) -> Result<f64, SchemeError> {
 }
 
 /// The whitened innovation of a vector sensor, q = S^{-1/2} nu, is
-/// N(S^{-1/2} E[nu | x], S^{-1/2} R S^{-1/2}) (seed 000 eq. (35)-(38)); returns S^{-1/2}
+/// N(S^{-1/2} E[nu | x], S^{-1/2} R S^{-1/2}) (Zheng et al. (2014), eq. (35)-(38)); returns S^{-1/2}
 /// (symmetric) and the covariance S^{-1/2} R S^{-1/2}, shared by every particle.
 pub fn whitened_band(s: &Matrix, r: &Matrix) -> (Matrix, Matrix) {
     let eig = s.clone().symmetric_eigen();

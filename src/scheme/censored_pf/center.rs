@@ -1,4 +1,4 @@
-//! Fusion center of seed 000: a bootstrap particle filter whose weights use the received
+//! Fusion center of Zheng et al. (2014): a bootstrap particle filter whose weights use the received
 //! measurements and, with the full likelihood (CFwMD), the probability that each silent
 //! sensor's innovation stayed inside its no-send band.
 use super::censoring::whitened_band;
@@ -165,7 +165,7 @@ impl CensoredPfCenter {
     }
 
     /// Full likelihood of a silent sensor with feedback: log P(NIS < eta | x) with the
-    /// innovation taken against `x_ref` and covariance `s` (seed 000 eq. (9), (15), (44), (45)
+    /// innovation taken against `x_ref` and covariance `s` (Zheng et al. (2014), eq. (9), (15), (44), (45)
     /// for scalars with xi_1 = (-sqrt(eta s) - mu) / sqrt(r), xi_2 = (sqrt(eta s) - mu) /
     /// sqrt(r), the square root covering eta s only as (14) shows; eq. (33), (39) for vectors).
     fn add_band(

@@ -1,4 +1,4 @@
-//! CFwMD-exact: exact fusion of censored data without feedback (beyond seed 000).
+//! CFwMD-exact: exact fusion of censored data without feedback (beyond Zheng et al. (2014)).
 //!
 //! Without feedback each sensor censors against its own KF prediction, which the fusion center
 //! never sees. Proposition 3 integrates over a Gaussian model of the local predictions given

@@ -1,4 +1,4 @@
-//! The data-independent part of seed 000's local filters. A linear sensor's KF covariance,
+//! The data-independent part of Zheng et al.'s (2014) local filters. A linear sensor's KF covariance,
 //! gain and innovation covariance do not depend on its measurements (nor on the fed-back
 //! prediction, which moves only the mean), so every sensor of every trial, and the fusion
 //! center's replica of it (Remark 1 (I)), runs through the same sequence. We compute it once

@@ -1,4 +1,4 @@
-//! Seed 000 — Zheng, Niu, Varshney, "Sequential Bayesian Estimation With Censored Data for
+//! Zheng, Niu and Varshney (2014), "Sequential Bayesian Estimation With Censored Data for
 //! Multi-Sensor Systems": sensors run a local KF/EKF and send their measurement only when its
 //! normalized innovation squared passes the threshold eta = chi^2(l/N) (eq. (4), (8), (31),
 //! (43)); the fusion center runs a particle filter whose weights use the full likelihood of
@@ -249,7 +249,7 @@ pub struct PfOptions {
     pub prop3_samples: usize,
 }
 
-/// Seed 000's scheme: censoring sensors + particle-filter fusion center.
+/// Zheng et al.'s (2014) scheme: censoring sensors + particle-filter fusion center.
 #[derive(Debug, Clone)]
 pub struct CensoredPfScheme {
     system: Arc<System>,
@@ -294,7 +294,7 @@ impl CensoredPfScheme {
             && system.sensors.iter().any(|s| s.as_linear().is_none())
         {
             return Err(SchemeError::Unsupported(
-                "the full likelihood without feedback needs linear sensors (seed 000 Remark 4 (III)); use feedback or fusion = \"simple\"".into(),
+                "the full likelihood without feedback needs linear sensors (Zheng et al. (2014), Remark 4 (III)); use feedback or fusion = \"simple\"".into(),
             ));
         }
         if options.fusion == Fusion::Exact {

@@ -1,4 +1,4 @@
-//! Scenario-file parameters of seed 000's scheme. The send rule and its threshold come from
+//! Scenario-file parameters of Zheng et al.'s (2014) scheme. The send rule and its threshold come from
 //! [`Protocol::for_target`], the only place where `l` becomes eta.
 use super::{BandMethod, CensoredPfScheme, FeedbackMode, Fusion, PfOptions, Policy, Protocol};
 use crate::filter::particle::{ResamplePolicy, Resampling};
@@ -151,7 +151,7 @@ impl SchemeParams for CensoredPfParams {
 pub const ENTRY: SchemeEntry = SchemeEntry {
     kind: "censored-pf",
     label: "Censored PF",
-    summary: "seed 000: local KF/EKF sensors send z when the NIS reaches eta = chi^2(l/N) (eq. (4)/(8)/(31)/(43)); particle-filter fusion center with the likelihood of silences",
+    summary: "Zheng et al. (2014): local KF/EKF sensors send z when the NIS reaches eta = chi^2(l/N) (eq. (4)/(8)/(31)/(43)); particle-filter fusion center with the likelihood of silences",
     params: &[
         ParamDoc {
             name: "policy",

@@ -1,4 +1,4 @@
-//! Sensor node of seed 000: a local KF/EKF and a send decision (NIS censoring (4)/(31), the
+//! Sensor node of Zheng et al. (2014): a local KF/EKF and a send decision (NIS censoring (4)/(31), the
 //! KL rule (24), random selection, or all-send). The local filter always processes the
 //! sensor's own measurement; only what is sent depends on the rule.
 use super::censoring::{kl_divergence, kl_threshold_for_nis, nis};
@@ -15,7 +15,7 @@ use std::sync::Arc;
 /// Which measurements a sensor sends.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SendRule {
-    /// NIS >= eta (seed 000 eq. (4), (31)).
+    /// NIS >= eta (Zheng et al. (2014), eq. (4), (31)).
     Nis { eta: f64 },
     /// KL(prior || posterior) >= zeta_k (eq. (24)), with zeta_k mapped from eta by Theorem 1
     /// at every step (scalar measurements): the same decisions as `Nis { eta }`.

@@ -1,4 +1,4 @@
-//! Properties of seed 000's censoring sensors and particle-filter fusion center.
+//! Properties of Zheng et al.'s (2014) censoring sensors and particle-filter fusion center.
 use super::censoring::nis_threshold;
 use super::*;
 use crate::filter::Gaussian;

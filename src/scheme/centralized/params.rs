@@ -48,7 +48,8 @@ pub const ALL: SchemeEntry = SchemeEntry {
 pub const RANDOM: SchemeEntry = SchemeEntry {
     kind: "centralized-kf-random",
     label: "Centralized KF (random)",
-    summary: "each measurement sent with probability `rate`, otherwise lost (seed 004 Section V)",
+    summary:
+        "each measurement sent with probability `rate`, otherwise lost (Dormann et al., Section V)",
     params: &[ParamDoc {
         name: "rate",
         values: "number in (0, 1]",

@@ -1,4 +1,4 @@
-//! Fusion center of the globalized distributed KF (seed 004).
+//! Fusion center of the globalized distributed KF (Dormann et al.).
 use super::plan::{GlobalizedPlan, PredictedDelta};
 use super::sensor::debiased_extrapolation_into;
 use crate::filter::Gaussian;
@@ -516,7 +516,7 @@ impl FusionCenter for DkfCenter {
 /// = sensor i silent): each silent sensor, in order, is replaced by the first sensor of its
 /// class after the previous choice. (10) subtracts H_i^T R_i^{-1} H_i in sensor order, so two
 /// sets with the same sequence of (bitwise equal) matrices give the same covariance bit for
-/// bit; seed 004's Fig. 1 has its sensors in identical pairs, and the memo keys halve.
+/// bit; Dormann et al.'s Fig. 1 has its sensors in identical pairs, and the memo keys halve.
 pub(super) fn canonical_silence(class: &[usize], silent: u64) -> u64 {
     let mut out = 0u64;
     let mut next = 0usize;

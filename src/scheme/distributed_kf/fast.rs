@@ -1,4 +1,4 @@
-//! The fast trial of seed 004's schemes: the same sensors and fusion center as
+//! The fast trial of Dormann et al.'s schemes: the same sensors and fusion center as
 //! [`super::DkfSensor`] and [`super::DkfCenter`], run without the generic loop.
 //!
 //! Most of a sensor's work does not depend on the variant: the globalized local filter

@@ -1,4 +1,4 @@
-//! Seed 004 — Dormann, Noack, Hanebeck, "Distributed Kalman Filtering With Reduced
+//! Dormann, Noack and Hanebeck, "Distributed Kalman Filtering With Reduced
 //! Transmission Rate": the globalized distributed KF (Section II), Algorithm 1 with omitted
 //! estimates (Section III, eq. (10)-(12)) and Algorithm 2 with debiasing and the bound B
 //! (Section IV, eq. (13)-(14)).

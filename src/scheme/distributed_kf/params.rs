@@ -1,4 +1,4 @@
-//! Scenario-file parameters of seed 004's schemes.
+//! Scenario-file parameters of Dormann et al.'s schemes.
 use super::DistributedKfScheme;
 use crate::linalg::Matrix;
 use crate::scheme::registry::{
@@ -105,7 +105,7 @@ const ALPHA: ParamDoc = ParamDoc {
 pub const FULL_RATE: SchemeEntry = SchemeEntry {
     kind: "dkf",
     label: "Globalized DKF (full rate)",
-    summary: "globalized distributed KF, every sensor sends its estimate every step (seed 004 Section II)",
+    summary: "globalized distributed KF, every sensor sends its estimate every step (Dormann et al., Section II)",
     params: &[],
     knob: None,
     build: registry::parse_and_build::<FullRateParams>,
@@ -130,7 +130,7 @@ pub const ALG1_RANDOM: SchemeEntry = SchemeEntry {
 pub const ALG1_EVENT: SchemeEntry = SchemeEntry {
     kind: "dkf-alg1-event",
     label: "Algorithm 1 (event-based)",
-    summary: "Algorithm 1 with the event test (12) on the standard local KF (seed 004)",
+    summary: "Algorithm 1 with the event test (12) on the standard local KF (Dormann et al.)",
     params: &[ALPHA],
     knob: Some("alpha"),
     build: registry::parse_and_build::<Alg1EventParams>,

@@ -1,4 +1,4 @@
-//! The data-independent part of the globalized distributed KF (seed 004): the globalized
+//! The data-independent part of the globalized distributed KF (Dormann et al.): the globalized
 //! covariances, the matrices that turn a globalized prediction and a measurement into the
 //! globalized estimate, the debiasing matrices (eq. (14)) and the gains of the standard KF each
 //! sensor runs beside the globalized one. None of them depends on measurements, so sensors and
@@ -134,7 +134,7 @@ struct DeltaMemo {
 }
 
 impl GlobalizedPlan {
-    /// Runs the recursion of seed 004 Section II (and the debiasing of Section IV when A is
+    /// Runs the recursion of Dormann et al., Section II (and the debiasing of Section IV when A is
     /// invertible) from the common prior: the initial local estimates all equal the prior
     /// (x_0, P_0), so C̄^e_0 = N P_0 and Δ^{e,i}_0 = I. Requires linear sensors.
     pub fn new(system: &System, horizon: usize) -> Result<Self, SchemeError> {
@@ -146,7 +146,7 @@ impl GlobalizedPlan {
             .map(|s| {
                 s.as_linear().ok_or_else(|| {
                     SchemeError::Unsupported(
-                        "the distributed KF of seed 004 needs linear sensors".into(),
+                        "the distributed KF of Dormann et al. needs linear sensors".into(),
                     )
                 })
             })

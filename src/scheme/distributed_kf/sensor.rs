@@ -1,4 +1,4 @@
-//! Sensor node of the globalized distributed KF (seed 004): runs the globalized local filter
+//! Sensor node of the globalized distributed KF (Dormann et al.): runs the globalized local filter
 //! (eq. (2) and the local filtering step of Section II), a standard KF beside it for the event
 //! tests, and a replica of what the fusion center holds about it, so it can decide whether the
 //! center's extrapolation is still good enough.

@@ -1,4 +1,4 @@
-//! Exactness properties of seed 004's Section II and Algorithm 1.
+//! Exactness properties of Dormann et al.'s Section II and Algorithm 1.
 use super::*;
 use crate::filter::{information, kf, Gaussian};
 use crate::linalg::{relative_difference, Matrix, Vector};

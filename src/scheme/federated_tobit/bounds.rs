@@ -1,4 +1,4 @@
-//! The self-propagating covariance bounds of seed 002, Theorem 4 (local filters) and
+//! The self-propagating covariance bounds of Geng et al., Theorem 4 (local filters) and
 //! Theorem 5 (fused), computed along a recorded run.
 //!
 //! Readings (the printed recursion mixes `P` and `P^u` and has sign slips; documented choices):

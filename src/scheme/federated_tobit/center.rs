@@ -1,4 +1,4 @@
-//! The fusion center of seed 002: the p remote local Tobit KFs (Theorem 1, eq. (18)-(25)), the
+//! The fusion center of Geng et al.: the p remote local Tobit KFs (Theorem 1, eq. (18)-(25)), the
 //! federated fusion (Theorem 2, eq. (26)) and the reset (27), with the zero-order hold and the
 //! detection device (6) at its input.
 use crate::filter::fixed;

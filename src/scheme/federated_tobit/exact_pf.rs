@@ -1,4 +1,4 @@
-//! The exact Bayesian answer to seed 002's Tobit model (issue 10, item 5): one bootstrap
+//! The exact Bayesian answer to Geng et al.'s Tobit model (issue 10, item 5): one bootstrap
 //! particle filter at the fusion center, on the augmented state xi = [x; b] (the dynamical
 //! bias of eq. (3) is carried by the [`System`]'s transition), weighted by the exact
 //! likelihood of each censored reading.
@@ -426,7 +426,7 @@ impl FusionCenter for TobitPfCenter {
     }
 }
 
-/// Seed 002's network with the exact Bayesian fusion center: sensors forward their raw
+/// Geng et al.'s network with the exact Bayesian fusion center: sensors forward their raw
 /// measurement when round-robin schedules them ([`super::RoundRobinSensor`]), the
 /// center censors and fuses it with [`TobitPfCenter`].
 #[derive(Debug, Clone)]
@@ -435,7 +435,7 @@ pub struct TobitPfScheme {
     channels: Arc<[Channel]>,
     transition: ParticleTransition,
     options: TobitPfOptions,
-    /// Extra noise each sensor adds before sending (seed 002's Table III on one scenario, as
+    /// Extra noise each sensor adds before sending (Geng et al.'s Table III on one scenario, as
     /// [`super::RoundRobinSensor`]); zero by default.
     extra_sd: Vec<f64>,
 }

@@ -1,4 +1,4 @@
-//! Seed 002 — Geng, Wang, Alsaadi, Alharbi, Cheng, "Federated Tobit Kalman Filtering Fusion
+//! Geng, Wang, Alsaadi, Alharbi and Cheng, "Federated Tobit Kalman Filtering Fusion
 //! with Dead-Zone-Like Censoring and Dynamical Bias under the Round-Robin Protocol".
 //!
 //! How the paper's system maps onto hushfuse:
@@ -57,7 +57,7 @@ use crate::scheme::{Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use rand::RngCore;
 use std::sync::Arc;
 
-/// The sensor of seed 002: when scheduled it sends its raw reading. With a noise override
+/// The sensor of Geng et al.: when scheduled it sends its raw reading. With a noise override
 /// (`noise_var` above the sensor's R) it first adds independent `N(0, noise_var - R)` noise, so
 /// one scenario can compare noise variances (Table III) on common truths.
 ///
@@ -128,7 +128,7 @@ pub fn scalar_sensors(
                 .filter(|l| l.h().nrows() == 1)
                 .ok_or_else(|| {
                     SchemeError::Unsupported(format!(
-                        "seed 002's schemes need scalar linear sensors; sensor {i} is not one"
+                        "Geng et al.'s schemes need scalar linear sensors; sensor {i} is not one"
                     ))
                 })?;
             let r0 = lin.noise_cov()[(0, 0)];
@@ -147,7 +147,7 @@ pub fn scalar_sensors(
         .collect()
 }
 
-/// Seed 002's FTKF-DB / FTKF / LTKF under round-robin.
+/// Geng et al.'s FTKF-DB / FTKF / LTKF under round-robin.
 #[derive(Debug, Clone)]
 pub struct FederatedTobitScheme {
     model: Arc<FtkfModel>,
@@ -207,7 +207,7 @@ impl Scheme for FederatedTobitScheme {
     }
 }
 
-/// The information bound of every seed 002 report: a Kalman filter on the same round-robin
+/// The information bound of every Geng et al. report: a Kalman filter on the same round-robin
 /// schedule with the *uncensored* readings (same noise override). Censoring only removes
 /// information, so no estimator of the censored data has a smaller mean squared error.
 #[derive(Debug, Clone)]

@@ -1,4 +1,4 @@
-//! Scenario-file parameters of seed 002's schemes.
+//! Scenario-file parameters of Geng et al.'s schemes.
 use super::{FederatedTobitScheme, Fusion, RoundRobinKfScheme};
 use crate::filter::tobit::{LambdaSign, ThetaDenominator, Thresholds, TobitOptions};
 use crate::scheme::registry::{
@@ -228,7 +228,8 @@ const NOISE_VAR: ParamDoc = ParamDoc {
 pub const ENTRY: SchemeEntry = SchemeEntry {
     kind: "federated-tobit",
     label: "FTKF-DB",
-    summary: "seed 002: round-robin (one 32-bit reading per step), zero-order hold and two-sided \
+    summary:
+        "Geng et al.: round-robin (one 32-bit reading per step), zero-order hold and two-sided \
               censoring (6) at the center, local Tobit KFs (Theorem 1) fused federatedly with \
               reset (Theorem 2); estimator -> center is co-located (not counted)",
     params: &[
@@ -303,7 +304,7 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
 pub const ROUND_ROBIN_KF: SchemeEntry = SchemeEntry {
     kind: "round-robin-kf",
     label: "Round-robin KF (uncensored)",
-    summary: "information bound of seed 002: KF on the same round-robin schedule with the \
+    summary: "information bound of Geng et al.: KF on the same round-robin schedule with the \
               uncensored readings",
     params: &[NOISE_VAR],
     knob: None,

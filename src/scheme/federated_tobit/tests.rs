@@ -1,4 +1,4 @@
-//! Tests of seed 002's schemes; each can fail.
+//! Tests of Geng et al.'s schemes; each can fail.
 use super::bounds::{psd_margin, theorem4, theorem5, BoundStep, UpperVarphi};
 use super::center::{federated_fusion, reset};
 use super::*;

@@ -1,4 +1,4 @@
-//! Scenario-file parameters of seed 003's scheme.
+//! Scenario-file parameters of Zhang et al.'s (2016) scheme.
 use super::{Activation, QuantizedInnovationScheme, QuantizerChoice};
 use crate::scheme::registry::{
     self, BuildContext, ParamDoc, ParamError, SchemeEntry, SchemeParams,
@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum QuantizerKind {
-    /// Seed 003's 4l + 1 levels with the dynamic strategy (needs `bits`, takes `flag_zone`).
+    /// Zhang et al.'s (2016) 4l + 1 levels with the dynamic strategy (needs `bits`, takes `flag_zone`).
     Zhang,
     /// You et al.: 2^c + 1 Lloyd-Max levels (needs `bits`).
     You,
@@ -141,7 +141,7 @@ impl SchemeParams for QuantizedParams {
 pub const ENTRY: SchemeEntry = SchemeEntry {
     kind: "quantized-innovation",
     label: "Quantized innovation",
-    summary: "seed 003: activated sensors quantize their normalized innovation (eq. (2)-(5)) into real 802.15.4 frames; information-form fusion (eq. (9)-(14)); scalar sensors",
+    summary: "Zhang et al. (2016): activated sensors quantize their normalized innovation (eq. (2)-(5)) into real 802.15.4 frames; information-form fusion (eq. (9)-(14)); scalar sensors",
     params: &[
         ParamDoc {
             name: "quantizer",

@@ -80,7 +80,7 @@ impl SchemeParams for TobitPfParams {
 pub const ENTRY: SchemeEntry = SchemeEntry {
     kind: "tobit-pf",
     label: "Exact Tobit PF",
-    summary: "seed 002, beyond the paper: round-robin raw measurements censored two-sided at the center (eq. (6)); bootstrap particle filter on the augmented state with the exact Tobit likelihood, the Bayes-optimal reference for the Tobit KF",
+    summary: "Geng et al., beyond the paper: round-robin raw measurements censored two-sided at the center (eq. (6)); bootstrap particle filter on the augmented state with the exact Tobit likelihood, the Bayes-optimal reference for the Tobit KF",
     params: &[
         ParamDoc {
             name: "tau",

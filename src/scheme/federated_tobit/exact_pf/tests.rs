@@ -10,7 +10,7 @@ use crate::scheme::centralized::CentralizedKf;
 use crate::scheme::registry::{self, BuildContext};
 use rand::SeedableRng;
 
-/// Seed 002, Section IV-A, as hushfuse carries it: xi = [x1, x2, b], F = [[A, B], [0, 1]],
+/// Geng et al., Section IV-A, as hushfuse carries it: xi = [x1, x2, b], F = [[A, B], [0, 1]],
 /// Q = blockdiag(0.0025 I, Xi = 0.25), C1 = [1 0 0], C2 = [0 1 0], R = 0.6,
 /// prior N([5, 0, 0], 0.1 I).
 fn oscillator() -> Arc<System> {
