@@ -1,7 +1,9 @@
-//! The Monte Carlo engine: the trial loop, runs in blocks with checkpoints and shards,
+//! The Monte Carlo engine: the trial loop ([`trial`], with the seeding rule of [`seeding`]), runs in blocks with checkpoints and shards,
 //! the trial-0 trace, replay of recorded data and calibration to bit budgets.
 pub mod calibrate;
 pub mod durable;
 pub mod replay;
 pub mod runner;
+pub mod seeding;
+pub mod trial;
 pub mod trace;

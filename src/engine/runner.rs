@@ -10,7 +10,6 @@ use crate::scenario::experiment::Experiment;
 pub use crate::scenario::limits::{WINDOW_MAX_BYTES, WINDOW_PER_THREAD};
 use crate::scheme::SchemeError;
 use multiversion::multiversion;
-use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -29,28 +28,11 @@ const WINDOW_MIN_SECONDS: f64 = 0.025;
 /// [`WINDOW_MIN_SECONDS`]).
 const WINDOW_MAX_BLOCKS: usize = 1024;
 
-/// Stream 0 of a trial draws truth and measurements; stream 1 + v is variant v's coins.
-pub fn trial_rng(seed: u64, trial: u64, stream: u64) -> Xoshiro256PlusPlus {
-    Xoshiro256PlusPlus::seed_from_u64(trial_seed(seed, trial, stream))
-}
-
-/// The seed of the fusion center's own generator (particle filters) for the variant whose coin
-/// stream is `stream`: independent of the coins, and the same wherever a trial is replayed
-/// (`trace`, calibration).
-pub fn center_seed(seed: u64, trial: u64, stream: u64) -> u64 {
-    splitmix64(trial_seed(seed, trial, stream) ^ 0xC3A5_C85C_97CB_3127)
-}
-
-fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
-    splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream)
-}
-
-fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
+pub use crate::engine::seeding::{center_seed, trial_rng};
+use crate::engine::seeding::coin_stream;
+use crate::engine::trial::{
+    run_trial, LoopBuffers, LoopError, Observer, ObserverError, StepOutput, TrialSpec,
+};
 
 /// A run that failed, with where.
 #[derive(Debug, thiserror::Error)]
@@ -281,7 +263,7 @@ fn standard_normal(rng: &mut Xoshiro256PlusPlus) -> f64 {
 /// when the variants run blocks in lockstep, else one) and the variants' work space.
 struct Worker<'e> {
     drawers: Vec<Drawer>,
-    scratch: Scratch,
+    scratch: LoopBuffers,
     /// The trial states of a lockstep batch, restarted for each variant of each block.
     states: Vec<crate::metrics::TrialState<'e>>,
 }
@@ -290,7 +272,7 @@ impl<'e> Worker<'e> {
     fn new(exp: &Experiment) -> Self {
         Self {
             drawers: vec![Drawer::new(exp)],
-            scratch: Scratch::new(exp.system.n_sensors()),
+            scratch: LoopBuffers::new(exp.system.n_sensors()),
             states: Vec::new(),
         }
     }
@@ -392,7 +374,7 @@ fn run_block<'e>(
         let outcome = scheme.run_batch_fast(
             measurements,
             exp.steps,
-            &mut worker.scratch.cache,
+            worker.scratch.batch_cache(),
             &mut recorder,
         );
         match outcome {
@@ -485,7 +467,7 @@ pub fn run_trial_on(
         trial,
         data,
         sums,
-        &mut Scratch::new(exp.system.n_sensors()),
+        &mut LoopBuffers::new(exp.system.n_sensors()),
     )
 }
 
@@ -495,7 +477,7 @@ fn run_trial_with(
     trial: usize,
     data: &TrialData,
     sums: &mut [Sums],
-    scratch: &mut Scratch,
+    scratch: &mut LoopBuffers,
 ) -> Result<(), RunError> {
     for (v, s) in sums.iter_mut().enumerate().take(exp.variants.len()) {
         run_variant(exp, trial, v, data, s, scratch)?;
@@ -503,158 +485,94 @@ fn run_trial_with(
     Ok(())
 }
 
-/// Per-step buffers of [`run_variant`], reused across variants.
-struct Scratch {
-    inbox: Vec<crate::link::Received>,
-    transmissions: Vec<crate::link::Transmission>,
-    /// Work shared by the variants of one trial (fast paths), and which trial and data it
-    /// belongs to.
-    cache: crate::scheme::TrialCache,
-    /// (trial, address of its measurements): an identity only, never dereferenced.
-    cache_of: Option<(usize, usize)>,
+/// The metrics of one variant's trial as an engine [`Observer`]: every fused step into its
+/// trial's sums, and the sink of the scheme's fast path (no links needed).
+struct SumsObserver<'a, 'b> {
+    obs: &'b mut crate::metrics::TrialObserver<'a>,
+    truth: &'b [Vector],
 }
 
-impl Scratch {
-    fn new(n_sensors: usize) -> Self {
-        Self {
-            inbox: Vec::with_capacity(n_sensors),
-            transmissions: Vec::with_capacity(n_sensors),
-            cache: crate::scheme::TrialCache::new(),
-            cache_of: None,
-        }
+impl Observer for SumsObserver<'_, '_> {
+    fn needs_links(&self) -> bool {
+        false
+    }
+
+    fn step(&mut self, s: &StepOutput) -> Result<(), ObserverError> {
+        self.obs
+            .record(s.k, &self.truth[s.k - 1], s.estimate, s.traffic)
+            .map_err(ObserverError::Covariance)?;
+        self.obs.record_ess(s.k, s.ess);
+        Ok(())
+    }
+
+    fn fast_sink(&mut self) -> Option<&mut dyn crate::scheme::StepSink> {
+        Some(self)
     }
 }
 
-/// Runs variant `v` over one trial's data, adding into its `sums`.
+impl crate::scheme::StepSink for SumsObserver<'_, '_> {
+    fn step(
+        &mut self,
+        k: usize,
+        estimate: &crate::filter::Gaussian,
+        traffic: network::Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        self.obs.record(k, &self.truth[k - 1], estimate, traffic)?;
+        self.obs.record_ess(k, None);
+        Ok(())
+    }
+
+    fn step_factored(
+        &mut self,
+        k: usize,
+        estimate: &crate::filter::Gaussian,
+        factor: &[f64],
+        traffic: network::Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        self.obs
+            .record_factored(k, &self.truth[k - 1], estimate, factor, traffic)?;
+        self.obs.record_ess(k, None);
+        Ok(())
+    }
+}
+
+/// Runs variant `v` over one trial's data (the engine's loop), adding into its `sums`.
 fn run_variant(
     exp: &Experiment,
     trial: usize,
     v: usize,
     data: &TrialData,
     sums: &mut Sums,
-    scratch: &mut Scratch,
+    scratch: &mut LoopBuffers,
 ) -> Result<(), RunError> {
-    let n_sensors = exp.system.n_sensors();
-    let Scratch {
-        inbox,
-        transmissions,
-        cache,
-        cache_of,
-    } = scratch;
-    let variant = &exp.variants[v];
-    let label = &exp.curves[variant.curve].label;
-    let scheme_err = |k: usize, source: SchemeError| RunError::Scheme {
-        label: label.clone(),
-        variant: v,
-        trial,
-        k,
-        source,
-    };
-    let mut rng = trial_rng(exp.seed, trial as u64, 1 + v as u64);
-    // The fast path of the scheme, if it has one for this data: the same numbers.
-    let of = Some((trial, data.measurements.as_ptr() as usize));
-    if *cache_of != of {
-        cache.clear();
-        *cache_of = of;
-    }
+    let label = &exp.curves[exp.variants[v].curve].label;
     let mut obs = sums.trial(&exp.groups, exp.steady_from);
-    {
-        struct Sink<'a, 'b> {
-            obs: &'b mut crate::metrics::TrialObserver<'a>,
-            truth: &'b [Vector],
-        }
-        impl crate::scheme::StepSink for Sink<'_, '_> {
-            fn step(
-                &mut self,
-                k: usize,
-                estimate: &crate::filter::Gaussian,
-                traffic: network::Traffic,
-            ) -> Result<(), crate::linalg::LinalgError> {
-                self.obs.record(k, &self.truth[k - 1], estimate, traffic)?;
-                self.obs.record_ess(k, None);
-                Ok(())
-            }
-            fn step_factored(
-                &mut self,
-                k: usize,
-                estimate: &crate::filter::Gaussian,
-                factor: &[f64],
-                traffic: network::Traffic,
-            ) -> Result<(), crate::linalg::LinalgError> {
-                self.obs
-                    .record_factored(k, &self.truth[k - 1], estimate, factor, traffic)?;
-                self.obs.record_ess(k, None);
-                Ok(())
-            }
-        }
-        let mut sink = Sink {
-            obs: &mut obs,
-            truth: &data.truth,
-        };
-        if let Some(r) =
-            variant
-                .scheme
-                .run_trial_fast(&data.measurements, exp.steps, &mut rng, cache, &mut sink)
-        {
-            return match r {
-                Ok(()) => {
-                    obs.finish();
-                    Ok(())
-                }
-                Err(crate::scheme::FastTrialError::Scheme { k, source }) => {
-                    Err(scheme_err(k, source))
-                }
-                Err(crate::scheme::FastTrialError::Sink { k, source }) => {
-                    Err(RunError::Covariance {
-                        label: label.clone(),
-                        trial,
-                        k,
-                        source,
-                    })
-                }
-            };
-        }
-    }
-    // The fusion center's own stream (particle filters) is independent of the sensors'.
-    let center_seed = center_seed(exp.seed, trial as u64, 1 + v as u64);
-    let mut inst = variant
-        .scheme
-        .build_with_seed(center_seed)
-        .map_err(|e| scheme_err(0, e))?;
-    let schedule = variant.scheme.schedule();
-    // What the fusion center tells the sensors before the first measurement.
-    let mut feedback = inst.center.feedback();
-    for k in 1..=exp.steps {
-        transmissions.clear();
-        for (i, node) in inst.sensors.iter_mut().enumerate() {
-            let t = if schedule.allows(k, i, n_sensors) {
-                node.step(k, &data.measurements[k - 1][i], feedback.as_ref(), &mut rng)
-                    .map_err(|e| scheme_err(k, e))?
-            } else {
-                crate::link::Transmission::Silent
-            };
-            transmissions.push(t);
-        }
-        let mut traffic = network::deliver(transmissions.drain(..), inbox);
-        traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
-        if schedule != network::Schedule::All {
-            for (i, r) in inbox.iter_mut().enumerate() {
-                if !schedule.allows(k, i, n_sensors) {
-                    *r = crate::link::Received::NotScheduled;
-                }
-            }
-        }
-        inst.center.step(k, inbox).map_err(|e| scheme_err(k, e))?;
-        feedback = inst.center.feedback();
-        obs.record(k, &data.truth[k - 1], inst.center.estimate(), traffic)
-            .map_err(|source| RunError::Covariance {
-                label: label.clone(),
-                trial,
-                k,
-                source,
-            })?;
-        obs.record_ess(k, inst.center.ess());
-    }
+    let spec = TrialSpec {
+        trial,
+        variant: v,
+        stream: coin_stream(v),
+        available: None,
+    };
+    let mut observer = SumsObserver {
+        obs: &mut obs,
+        truth: &data.truth,
+    };
+    run_trial(exp, &data.measurements, spec, scratch, &mut observer).map_err(|e| match e {
+        LoopError::Scheme { k, source } => RunError::Scheme {
+            label: label.clone(),
+            variant: v,
+            trial,
+            k,
+            source,
+        },
+        LoopError::Covariance { k, source } => RunError::Covariance {
+            label: label.clone(),
+            trial,
+            k,
+            source,
+        },
+        LoopError::Observer { .. } => unreachable!("the metrics observer fails only on covariances"),
+    })?;
     obs.finish();
     Ok(())
 }

@@ -1,25 +1,17 @@
 //! One trial in detail, and per-step errors with their standard errors, for `report.html`; and
-//! the loop that replays recorded measurements ([`crate::engine::replay`]).
-//! The same loop as [`crate::engine::runner`] (the same truths, measurements and coins: a variant's
-//! coins come from stream 1 + its index, or stream 1 for every variant when each scheme ran
-//! alone, as calibrated arenas do); [`crate::engine::runner::run`] itself is untouched.
-use crate::engine::runner::{draw_trial, trial_rng};
+//! the loops that replay recorded measurements ([`crate::engine::replay`]). Both run the
+//! engine's loop ([`crate::engine::trial`]): the same truths, measurements and coins as the
+//! runner; a variant's coins come from its own stream, or from variant 0's for every variant
+//! when each scheme ran alone, as calibrated arenas do.
+use crate::engine::runner::draw_trial;
+use crate::engine::seeding::coin_stream;
+use crate::engine::trial::{self, LoopBuffers, Observer, ObserverError, TrialSpec};
+pub use crate::engine::trial::{Link, StepOutput};
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
-use crate::link::{Received, Transmission};
 use crate::metrics::Sums;
-use crate::network::{self, Traffic};
 use crate::scenario::build::Experiment;
-
-/// What one sensor did at one step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Link {
-    Sent,
-    Silent,
-    NotScheduled,
-}
-
-/// One variant over one trial.
+/// One variant's trial: its fused estimates and what each sensor did.
 #[derive(Debug, Clone)]
 pub struct VariantTrace {
     /// Fused estimate after step k (k = 1..T).
@@ -41,30 +33,13 @@ type StepFn<'a> = &'a mut dyn FnMut(usize, &Vector, &Gaussian, &[Link]);
 /// Per variant: per-step RMSE and its standard error.
 pub type RmseSe = Vec<(Vec<f64>, Vec<f64>)>;
 
-/// Everything one step of one variant produced.
-#[derive(Debug)]
-pub struct StepOutput<'a> {
-    /// Step (1-based).
-    pub k: usize,
-    /// Fused estimate after the step.
-    pub estimate: &'a Gaussian,
-    /// What each sensor did.
-    pub links: &'a [Link],
-    /// Payload bits each sensor sent (0 when it did not send).
-    pub bits: &'a [u64],
-    /// The step's traffic, counted as the runner counts it (uplink by the network, downlink
-    /// from the feedback the sensors were given before the step).
-    pub traffic: Traffic,
-    /// The fusion center's effective sample size (particle filters).
-    pub ess: Option<f64>,
-}
-
 /// Where a variant's coins come from and which readings exist.
 #[derive(Debug, Clone, Copy)]
 pub struct LoopOptions<'a> {
-    /// Trial index of the coin streams (stream 1 + v of this trial, as in the runner).
+    /// Trial index of the coin streams (each variant's own stream of this trial, as in the
+    /// runner).
     pub trial: usize,
-    /// Every variant on stream 1 (schemes run alone, as calibrated arenas do).
+    /// Every variant on variant 0's stream (schemes run alone, as calibrated arenas do).
     pub alone: bool,
     /// `available[k - 1][i]`: whether sensor i has a reading at step k. A sensor without one
     /// is not asked (its node does not step) and reaches the fusion center as
@@ -72,10 +47,31 @@ pub struct LoopOptions<'a> {
     pub available: Option<&'a [Vec<bool>]>,
 }
 
+impl LoopOptions<'_> {
+    /// The engine's description of variant `v`'s trial.
+    fn spec(&self, v: usize) -> TrialSpec<'_> {
+        TrialSpec {
+            trial: self.trial,
+            variant: v,
+            stream: coin_stream(if self.alone { 0 } else { v }),
+            available: self.available,
+        }
+    }
+}
+
+/// A closure as an engine observer: its error stops the loop with its words.
+struct Calls<'f>(&'f mut dyn FnMut(&StepOutput) -> Result<(), String>);
+
+impl Observer for Calls<'_> {
+    fn step(&mut self, s: &StepOutput) -> Result<(), ObserverError> {
+        (self.0)(s).map_err(ObserverError::Message)
+    }
+}
+
 /// Runs variant `v` over `measurements` (`measurements[k - 1][i]`, read only where
 /// available), calling `f` after every step; a scheme error or an error of `f` stops the loop.
-/// With every reading available this is the runner's loop step for step: the same coins, the
-/// same inbox, the same traffic.
+/// With every reading available this is the runner's loop: the same coins, the same inbox,
+/// the same traffic.
 pub fn run_variant_with(
     exp: &Experiment,
     measurements: &[Vec<Vector>],
@@ -83,77 +79,31 @@ pub fn run_variant_with(
     opts: LoopOptions,
     f: &mut dyn FnMut(&StepOutput) -> Result<(), String>,
 ) -> Result<(), String> {
-    let n = exp.system.n_sensors();
-    let stream = 1 + if opts.alone { 0 } else { v as u64 };
-    let trial = opts.trial as u64;
-    let mut rng = trial_rng(exp.seed, trial, stream);
-    let center_seed = crate::engine::runner::center_seed(exp.seed, trial, stream);
-    let variant = &exp.variants[v];
-    let label = &exp.curves[variant.curve].label;
-    let err = |k: usize, e: &dyn std::fmt::Display| format!("scheme {label}, step {k}: {e}");
-    let mut inst = variant
-        .scheme
-        .build_with_seed(center_seed)
-        .map_err(|e| err(0, &e))?;
-    let schedule = variant.scheme.schedule();
-    let mut feedback = inst.center.feedback();
-    let mut inbox = Vec::with_capacity(n);
-    let mut tx = Vec::with_capacity(n);
-    let mut links = Vec::with_capacity(n);
-    let mut bits = Vec::with_capacity(n);
-    for k in 1..=exp.steps {
-        tx.clear();
-        links.clear();
-        bits.clear();
-        let has = |i: usize| opts.available.is_none_or(|a| a[k - 1][i]);
-        for (i, node) in inst.sensors.iter_mut().enumerate() {
-            let t = if schedule.allows(k, i, n) && has(i) {
-                let t = node
-                    .step(k, &measurements[k - 1][i], feedback.as_ref(), &mut rng)
-                    .map_err(|e| err(k, &e))?;
-                match &t {
-                    Transmission::Send(m) => {
-                        links.push(Link::Sent);
-                        bits.push(m.bits());
-                    }
-                    Transmission::Silent => {
-                        links.push(Link::Silent);
-                        bits.push(0);
-                    }
-                }
-                t
-            } else {
-                links.push(Link::NotScheduled);
-                bits.push(0);
-                Transmission::Silent
-            };
-            tx.push(t);
-        }
-        let mut traffic = network::deliver(tx.drain(..), &mut inbox);
-        traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n));
-        if schedule != network::Schedule::All || opts.available.is_some() {
-            for (i, r) in inbox.iter_mut().enumerate() {
-                if !schedule.allows(k, i, n) || !has(i) {
-                    *r = Received::NotScheduled;
-                }
-            }
-        }
-        inst.center.step(k, &inbox).map_err(|e| err(k, &e))?;
-        feedback = inst.center.feedback();
-        f(&StepOutput {
-            k,
-            estimate: inst.center.estimate(),
-            links: &links,
-            bits: &bits,
-            traffic,
-            ess: inst.center.ess(),
-        })?;
-    }
-    Ok(())
+    let label = &exp.curves[exp.variants[v].curve].label;
+    let mut buffers = LoopBuffers::new(exp.system.n_sensors());
+    trial::run_trial(exp, measurements, opts.spec(v), &mut buffers, &mut Calls(f))
+        .map_err(|e| e.describe(label))
 }
 
-/// Runs variant `v` over `measurements` and adds the trial into `sums` exactly as the runner
-/// does (the same observer calls in the same order), calling `f` after every step too.
+/// A trial's metrics beside a closure: every step into the sums, then to the closure.
+struct SumsAndCalls<'a, 'b, 'f> {
+    obs: crate::metrics::TrialObserver<'a>,
+    truth: &'b [Vector],
+    f: &'f mut dyn FnMut(&StepOutput) -> Result<(), String>,
+}
+
+impl Observer for SumsAndCalls<'_, '_, '_> {
+    fn step(&mut self, s: &StepOutput) -> Result<(), ObserverError> {
+        self.obs
+            .record(s.k, &self.truth[s.k - 1], s.estimate, s.traffic)
+            .map_err(ObserverError::Covariance)?;
+        self.obs.record_ess(s.k, s.ess);
+        (self.f)(s).map_err(ObserverError::Message)
+    }
+}
+
+/// [`run_variant_with`] adding the trial's metrics against `truth` into `sums`, as the runner
+/// does.
 pub fn run_variant_into(
     exp: &Experiment,
     measurements: &[Vec<Vector>],
@@ -163,24 +113,20 @@ pub fn run_variant_into(
     sums: &mut Sums,
     f: &mut dyn FnMut(&StepOutput) -> Result<(), String>,
 ) -> Result<(), String> {
-    let label = exp.curves[exp.variants[v].curve].label.clone();
-    let mut obs = sums.trial(&exp.groups, exp.steady_from);
-    run_variant_with(exp, measurements, v, opts, &mut |s| {
-        obs.record(s.k, &truth[s.k - 1], s.estimate, s.traffic)
-            .map_err(|e| {
-                format!(
-                    "scheme {label}, step {}: fused covariance is not positive definite ({e})",
-                    s.k
-                )
-            })?;
-        obs.record_ess(s.k, s.ess);
-        f(s)
-    })?;
-    obs.finish();
+    let label = &exp.curves[exp.variants[v].curve].label;
+    let mut buffers = LoopBuffers::new(exp.system.n_sensors());
+    let mut observer = SumsAndCalls {
+        obs: sums.trial(&exp.groups, exp.steady_from),
+        truth,
+        f,
+    };
+    trial::run_trial(exp, measurements, opts.spec(v), &mut buffers, &mut observer)
+        .map_err(|e| e.describe(label))?;
+    observer.obs.finish();
     Ok(())
 }
 
-/// Runs variant `v` over `trial`, calling `f(k, truth, estimate, links)` after every step.
+/// Variant `v` of `trial` on drawn data, calling `f` with (step, truth, estimate, links).
 fn run_variant(
     exp: &Experiment,
     data: &crate::engine::runner::TrialData,

@@ -1,0 +1,46 @@
+//! The seeding rule of every trial, written once: truth and measurements come from stream
+//! [`DATA_STREAM`] of (seed, trial); variant v's coins from stream [`coin_stream`]`(v)`, so every
+//! variant of a trial sees the same data (common random numbers) and no variant's coins depend
+//! on another's. The fusion center's own generator (particle filters) has a seed of its own
+//! derived from the same stream.
+use rand::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+/// The stream of a trial's truth and measurements.
+pub const DATA_STREAM: u64 = 0;
+
+/// The coin stream of variant `v` of an experiment.
+pub fn coin_stream(v: usize) -> u64 {
+    1 + v as u64
+}
+
+/// The coins of one variant's trial: the sensors' generator and the fusion center's seed.
+pub fn coins(seed: u64, trial: usize, stream: u64) -> (Xoshiro256PlusPlus, u64) {
+    (
+        trial_rng(seed, trial as u64, stream),
+        center_seed(seed, trial as u64, stream),
+    )
+}
+
+/// The generator of stream `stream` of trial `trial` (see [`DATA_STREAM`] and [`coin_stream`]).
+pub fn trial_rng(seed: u64, trial: u64, stream: u64) -> Xoshiro256PlusPlus {
+    Xoshiro256PlusPlus::seed_from_u64(trial_seed(seed, trial, stream))
+}
+
+/// The seed of the fusion center's own generator (particle filters) for the variant whose coin
+/// stream is `stream`: independent of the coins, and the same wherever a trial is replayed
+/// (`trace`, calibration).
+pub fn center_seed(seed: u64, trial: u64, stream: u64) -> u64 {
+    splitmix64(trial_seed(seed, trial, stream) ^ 0xC3A5_C85C_97CB_3127)
+}
+
+fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
+    splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream)
+}
+
+fn splitmix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}

@@ -1,0 +1,244 @@
+//! The time loop of one trial of one scheme variant, written once: sense (every scheduled
+//! sensor node steps on its measurement with the variant's coins), schedule (the scheme's
+//! mask, and which readings a recording has), deliver (the network counts the bits and fills
+//! the fusion center's inbox), fuse, feed back. The Monte Carlo runner, the trial-0 trace,
+//! replay of recorded data and the report's error bands all run their trials here, seeded by
+//! [`crate::engine::seeding`]; an [`Observer`] sees every fused step.
+//!
+//! A scheme's lockstep fast path ([`Scheme::run_trial_fast`]) is a hook of this loop: taken
+//! when the observer can take its report ([`Observer::fast_sink`]) and every reading exists,
+//! with the same numbers as the loop (the bit-for-bit tests are in `tests/fast_paths.rs`).
+use crate::engine::seeding::coins;
+use crate::filter::Gaussian;
+use crate::linalg::{LinalgError, Vector};
+use crate::link::{Received, Transmission};
+use crate::network::{self, Schedule, Traffic};
+use crate::scenario::experiment::Experiment;
+#[cfg(doc)]
+use crate::scheme::Scheme;
+use crate::scheme::{FastTrialError, SchemeError, StepSink, TrialCache};
+
+/// What one sensor did at one step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Link {
+    Sent,
+    Silent,
+    NotScheduled,
+}
+
+/// One fused step, as an [`Observer`] sees it.
+#[derive(Debug)]
+pub struct StepOutput<'a> {
+    /// The step, 1-based.
+    pub k: usize,
+    pub estimate: &'a Gaussian,
+    /// Per sensor: sent, silent or not scheduled (empty unless [`Observer::needs_links`]).
+    pub links: &'a [Link],
+    /// Per sensor: the payload bits sent (empty unless [`Observer::needs_links`]).
+    pub bits: &'a [u64],
+    pub traffic: Traffic,
+    /// Effective sample size of a particle filter's fusion center.
+    pub ess: Option<f64>,
+}
+
+/// Why an observer stopped the loop.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ObserverError {
+    /// The fused covariance could not be factored for the metrics.
+    Covariance(LinalgError),
+    /// Any other reason, in words.
+    Message(String),
+}
+
+/// Why a trial's loop stopped, at which step (0: building the scheme).
+#[derive(Debug, Clone, PartialEq)]
+pub enum LoopError {
+    Scheme { k: usize, source: SchemeError },
+    Covariance { k: usize, source: LinalgError },
+    Observer { k: usize, message: String },
+}
+
+impl LoopError {
+    /// The command line's words for a failure of scheme `label`:
+    /// "scheme {label}, step {k}: …".
+    pub fn describe(&self, label: &str) -> String {
+        match self {
+            LoopError::Scheme { k, source } => format!("scheme {label}, step {k}: {source}"),
+            LoopError::Covariance { k, source } => format!(
+                "scheme {label}, step {k}: fused covariance is not positive definite ({source})"
+            ),
+            LoopError::Observer { message, .. } => message.clone(),
+        }
+    }
+}
+
+/// Sees the fused steps of a trial.
+pub trait Observer {
+    /// Whether [`StepOutput::links`] and [`StepOutput::bits`] are read (collecting them costs a
+    /// little per sensor and step).
+    fn needs_links(&self) -> bool {
+        true
+    }
+
+    /// Fused step `s.k`.
+    fn step(&mut self, s: &StepOutput) -> Result<(), ObserverError>;
+
+    /// The observer as the sink of a scheme's fast path (which reports estimates and traffic,
+    /// no links), or `None` when it needs what only the loop gives.
+    fn fast_sink(&mut self) -> Option<&mut dyn StepSink> {
+        None
+    }
+}
+
+/// Which trial, which variant, which coins, which readings.
+#[derive(Debug, Clone, Copy)]
+pub struct TrialSpec<'a> {
+    pub trial: usize,
+    /// The variant of the experiment.
+    pub variant: usize,
+    /// Its coin stream: [`crate::engine::seeding::coin_stream`] of the variant, or of 0 for a
+    /// variant run alone as the only one of its experiment would be (calibration).
+    pub stream: u64,
+    /// Recorded data: `available[k - 1][i]` says whether sensor i has a reading at step k (one
+    /// that has none is not scheduled). `None`: every reading exists.
+    pub available: Option<&'a [Vec<bool>]>,
+}
+
+/// Work space of the loop, reused from variant to variant and trial to trial.
+pub struct LoopBuffers {
+    inbox: Vec<Received>,
+    transmissions: Vec<Transmission>,
+    links: Vec<Link>,
+    bits: Vec<u64>,
+    /// Work shared by the variants of one trial (fast paths).
+    cache: TrialCache,
+    /// (trial, address of its measurements) the cache belongs to: an identity only, never
+    /// dereferenced.
+    cache_of: Option<(usize, usize)>,
+}
+
+impl LoopBuffers {
+    pub fn new(n_sensors: usize) -> Self {
+        Self {
+            inbox: Vec::with_capacity(n_sensors),
+            transmissions: Vec::with_capacity(n_sensors),
+            links: Vec::with_capacity(n_sensors),
+            bits: Vec::with_capacity(n_sensors),
+            cache: TrialCache::new(),
+            cache_of: None,
+        }
+    }
+
+    /// The cache as a lockstep batch uses it: work space and data-independent entries only
+    /// (a batch has no single trial the cache could belong to).
+    pub(crate) fn batch_cache(&mut self) -> &mut TrialCache {
+        &mut self.cache
+    }
+
+    /// The trial cache, emptied first when it belongs to another trial's data.
+    pub(crate) fn cache_for(&mut self, trial: usize, measurements: &[Vec<Vector>]) -> &mut TrialCache {
+        let of = Some((trial, measurements.as_ptr() as usize));
+        if self.cache_of != of {
+            self.cache.clear();
+            self.cache_of = of;
+        }
+        &mut self.cache
+    }
+}
+
+/// Runs one trial of one variant on `measurements` (`measurements[k - 1][i]` = z_k^i),
+/// reporting every fused step to `observer`.
+pub fn run_trial(
+    exp: &Experiment,
+    measurements: &[Vec<Vector>],
+    spec: TrialSpec,
+    buffers: &mut LoopBuffers,
+    observer: &mut dyn Observer,
+) -> Result<(), LoopError> {
+    let n_sensors = exp.system.n_sensors();
+    let variant = &exp.variants[spec.variant];
+    let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
+    if spec.available.is_none() {
+        if let Some(sink) = observer.fast_sink() {
+            let cache = buffers.cache_for(spec.trial, measurements);
+            if let Some(r) =
+                variant
+                    .scheme
+                    .run_trial_fast(measurements, exp.steps, &mut rng, cache, sink)
+            {
+                return r.map_err(|e| match e {
+                    FastTrialError::Scheme { k, source } => LoopError::Scheme { k, source },
+                    FastTrialError::Sink { k, source } => LoopError::Covariance { k, source },
+                });
+            }
+        }
+    }
+    let mut inst = variant
+        .scheme
+        .build_with_seed(center_seed)
+        .map_err(|source| LoopError::Scheme { k: 0, source })?;
+    let schedule = variant.scheme.schedule();
+    let with_links = observer.needs_links();
+    let LoopBuffers {
+        inbox,
+        transmissions,
+        links,
+        bits,
+        ..
+    } = buffers;
+    // What the fusion center tells the sensors before the first measurement.
+    let mut feedback = inst.center.feedback();
+    for k in 1..=exp.steps {
+        let scheduled = |i: usize| {
+            schedule.allows(k, i, n_sensors) && spec.available.is_none_or(|a| a[k - 1][i])
+        };
+        transmissions.clear();
+        links.clear();
+        bits.clear();
+        for (i, node) in inst.sensors.iter_mut().enumerate() {
+            let t = if scheduled(i) {
+                node.step(k, &measurements[k - 1][i], feedback.as_ref(), &mut rng)
+                    .map_err(|source| LoopError::Scheme { k, source })?
+            } else {
+                Transmission::Silent
+            };
+            if with_links {
+                let (link, b) = match &t {
+                    _ if !scheduled(i) => (Link::NotScheduled, 0),
+                    Transmission::Send(m) => (Link::Sent, m.bits()),
+                    Transmission::Silent => (Link::Silent, 0),
+                };
+                links.push(link);
+                bits.push(b);
+            }
+            transmissions.push(t);
+        }
+        let mut traffic = network::deliver(transmissions.drain(..), inbox);
+        traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
+        if schedule != Schedule::All || spec.available.is_some() {
+            for (i, r) in inbox.iter_mut().enumerate() {
+                if !scheduled(i) {
+                    *r = Received::NotScheduled;
+                }
+            }
+        }
+        inst.center
+            .step(k, inbox)
+            .map_err(|source| LoopError::Scheme { k, source })?;
+        feedback = inst.center.feedback();
+        observer
+            .step(&StepOutput {
+                k,
+                estimate: inst.center.estimate(),
+                links,
+                bits,
+                traffic,
+                ess: inst.center.ess(),
+            })
+            .map_err(|e| match e {
+                ObserverError::Covariance(source) => LoopError::Covariance { k, source },
+                ObserverError::Message(message) => LoopError::Observer { k, message },
+            })?;
+    }
+    Ok(())
+}
