@@ -2,7 +2,8 @@
 //! bound every scheme is measured against), or each with probability `rate` (seed 004
 //! Section V: a measurement not sent is lost for good).
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
-use crate::filter::{fixed, kf, Gaussian};
+use crate::filter::{kf, Gaussian};
+use crate::linalg::fixed;
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
 use multiversion::multiversion;
@@ -138,7 +139,7 @@ fn cholesky_in(
         _ => Matrix::zeros(a.nrows(), a.ncols()),
     };
     m.as_mut_slice().copy_from_slice(a.as_slice());
-    crate::filter::fixed::cholesky(m).ok_or(err(crate::linalg::LinalgError::NotPositiveDefinite))
+    crate::linalg::fixed::cholesky(m).ok_or(err(crate::linalg::LinalgError::NotPositiveDefinite))
 }
 
 impl CentralizedKf {
@@ -273,16 +274,16 @@ impl CentralizedKf {
         let t = &self.system.transition;
         let w = DirectWork::get(&mut self.work, t.f());
         // kf::predict: F x, and F P F^T + Q symmetrized.
-        crate::filter::fixed::gemv(&mut self.pred_mean, t.f(), &self.est.mean);
-        crate::filter::fixed::gemm(&mut w.fp, t.f(), &self.est.cov);
-        crate::filter::fixed::gemm(&mut w.pred_cov, &w.fp, &w.ft);
+        crate::linalg::fixed::gemv(&mut self.pred_mean, t.f(), &self.est.mean);
+        crate::linalg::fixed::gemm(&mut w.fp, t.f(), &self.est.cov);
+        crate::linalg::fixed::gemm(&mut w.pred_cov, &w.fp, &w.ft);
         fixed::add_assign(w.pred_cov.as_mut_slice(), t.q().as_slice());
         symmetrize(&mut w.pred_cov);
         // Information::from_gaussian: y = P^{-1} x, Y = P^{-1} symmetrized.
         let chol = cholesky_in(&w.pred_cov, &mut w.chol, "covariance")?;
-        crate::filter::fixed::chol_solve(&chol, &mut self.pred_mean);
+        crate::linalg::fixed::chol_solve(&chol, &mut self.pred_mean);
         identity(&mut w.info);
-        crate::filter::fixed::chol_solve_matrix(&chol, &mut w.info);
+        crate::linalg::fixed::chol_solve_matrix(&chol, &mut w.info);
         w.chol = Some(chol.unpack_dirty());
         symmetrize(&mut w.info);
         // add_measurement of each arrived measurement, in sensor order.
@@ -291,16 +292,16 @@ impl CentralizedKf {
                 let sensor = self.system.sensors[i].as_linear().expect("checked linear");
                 kf::check_measurement(sensor, z)?;
                 fixed::add_assign(w.info.as_mut_slice(), sensor.information().as_slice());
-                crate::filter::fixed::gemv(&mut self.tmp, sensor.ht_rinv(), z);
+                crate::linalg::fixed::gemv(&mut self.tmp, sensor.ht_rinv(), z);
                 fixed::add_assign(self.pred_mean.as_mut_slice(), self.tmp.as_slice());
             }
         }
         // Information::to_gaussian.
         let chol = cholesky_in(&w.info, &mut w.chol, "information matrix")?;
         self.est.mean.copy_from_slice(self.pred_mean.as_slice());
-        crate::filter::fixed::chol_solve(&chol, &mut self.est.mean);
+        crate::linalg::fixed::chol_solve(&chol, &mut self.est.mean);
         identity(&mut self.est.cov);
-        crate::filter::fixed::chol_solve_matrix(&chol, &mut self.est.cov);
+        crate::linalg::fixed::chol_solve_matrix(&chol, &mut self.est.cov);
         w.chol = Some(chol.unpack_dirty());
         symmetrize(&mut self.est.cov);
         Ok(())
@@ -355,12 +356,12 @@ impl CentralizedKf {
             return Ok(false);
         };
         // Information vector of the prediction, P^{-1} (F x) (from_gaussian) ...
-        crate::filter::fixed::gemv(
+        crate::linalg::fixed::gemv(
             &mut self.pred_mean,
             self.system.transition.f(),
             &self.est.mean,
         );
-        crate::filter::fixed::chol_solve(&step.pred_chol, &mut self.pred_mean);
+        crate::linalg::fixed::chol_solve(&step.pred_chol, &mut self.pred_mean);
         // ... plus H_i^T R_i^{-1} z_i of each sensor, in sensor order (add_measurement) ...
         for i in 0..len {
             let Ok(Some(z)) = arrived(i) else {
@@ -368,12 +369,12 @@ impl CentralizedKf {
             };
             let sensor = self.system.sensors[i].as_linear().expect("checked linear");
             kf::check_measurement(sensor, z)?;
-            crate::filter::fixed::gemv(&mut self.tmp, sensor.ht_rinv(), z);
+            crate::linalg::fixed::gemv(&mut self.tmp, sensor.ht_rinv(), z);
             self.pred_mean += &self.tmp;
         }
         // ... and back to covariance form (to_gaussian).
         self.est.mean.copy_from(&self.pred_mean);
-        crate::filter::fixed::chol_solve(&step.fused_chol, &mut self.est.mean);
+        crate::linalg::fixed::chol_solve(&step.fused_chol, &mut self.est.mean);
         self.est.cov.copy_from(&step.cov);
         Ok(true)
     }
@@ -625,7 +626,7 @@ fn scheduled_mean<const N: usize>(
     x: &[f64; N],
     zs: &[Vector],
 ) -> [f64; N] {
-    use crate::filter::fixed::{chol_solve_array, mat_vec, mat_vec_cols};
+    use crate::linalg::fixed::{chol_solve_array, mat_vec, mat_vec_cols};
     let mut y: [f64; N] = mat_vec(f, x);
     chol_solve_array(step.pred_chol.l_dirty().as_slice(), &mut y);
     for ((_, ht_rinv), z) in linear.iter().zip(zs) {

@@ -313,7 +313,7 @@ impl QuantizedFusionCenter {
                 Some(lin) => {
                     h.copy_from(lin.h());
                     let mut y = [0.0];
-                    crate::filter::fixed::mat_vec_dyn(&mut y, h.as_slice(), x.as_slice());
+                    crate::linalg::fixed::mat_vec_dyn(&mut y, h.as_slice(), x.as_slice());
                     y[0]
                 }
                 None => {

@@ -180,15 +180,15 @@ impl Drawer {
         };
         // x_0 = mean + S n_0.
         self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
-        crate::filter::fixed::gemv(&mut self.a, &self.x0_sqrt, &self.normals);
+        crate::linalg::fixed::gemv(&mut self.a, &self.x0_sqrt, &self.normals);
         self.x.copy_from(&exp.initial_truth.mean);
         self.x += &self.a;
         let t = &sys.transition;
         for k in 0..exp.steps {
             // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
             self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
-            crate::filter::fixed::gemv(&mut self.a, t.f(), &self.x);
-            crate::filter::fixed::gemv(&mut self.b, t.q_sqrt(), &self.normals);
+            crate::linalg::fixed::gemv(&mut self.a, t.f(), &self.x);
+            crate::linalg::fixed::gemv(&mut self.b, t.q_sqrt(), &self.normals);
             self.a += &self.b;
             std::mem::swap(&mut self.x, &mut self.a);
             for (i, (s, z)) in sys
@@ -202,8 +202,8 @@ impl Drawer {
                     Some(lin) => {
                         let (v, rv) = (&mut self.v[i], &mut self.rv[i]);
                         v.iter_mut().for_each(|e| *e = normal(&mut rng));
-                        crate::filter::fixed::gemv(z, lin.h(), &self.x);
-                        crate::filter::fixed::gemv(rv, s.noise_sqrt(), v);
+                        crate::linalg::fixed::gemv(z, lin.h(), &self.x);
+                        crate::linalg::fixed::gemv(rv, s.noise_sqrt(), v);
                         *z += &*rv;
                     }
                     None => *z = s.sample(&self.x, &mut rng),
@@ -220,7 +220,7 @@ impl Drawer {
 /// contraction), so the same draws on every x86-64 machine.
 #[multiversion(targets("x86_64+avx2"))]
 fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
-    use crate::filter::fixed::{mat_vec, mat_vec_dyn, mat_vec_rows};
+    use crate::linalg::fixed::{mat_vec, mat_vec_dyn, mat_vec_rows};
     let sys = &exp.system;
     let mut rng = trial_rng(exp.seed, trial as u64, 0);
     let normal = standard_normal;

@@ -338,7 +338,7 @@ impl DkfCenter {
 pub(super) fn unsymmetrized_inverse(chol: &Cholesky<f64, Dyn>) -> Matrix {
     let n = chol.l_dirty().nrows();
     let mut cov = Matrix::identity(n, n);
-    crate::filter::fixed::chol_solve_matrix(chol, &mut cov);
+    crate::linalg::fixed::chol_solve_matrix(chol, &mut cov);
     cov
 }
 
@@ -347,7 +347,7 @@ pub(super) fn unsymmetrized_inverse(chol: &Cholesky<f64, Dyn>) -> Matrix {
 pub(super) fn unit_inflation(raw: &Matrix, cbar_p_inv: &Matrix, b: &Matrix) -> Matrix {
     let product = |a: &Matrix, b: &Matrix| {
         let mut y = Matrix::zeros(a.nrows(), b.ncols());
-        crate::filter::fixed::gemm(&mut y, a, b);
+        crate::linalg::fixed::gemm(&mut y, a, b);
         y
     };
     let g = product(raw, cbar_p_inv);
@@ -432,7 +432,7 @@ impl FusionCenter for DkfCenter {
                         });
                     }
                     // (11), first sum.
-                    crate::filter::fixed::gemv(&mut self.tmp, &m.cbar_e_inv, x);
+                    crate::linalg::fixed::gemv(&mut self.tmp, &m.cbar_e_inv, x);
                     self.info_vec += &self.tmp;
                     self.held[i].copy_from(x);
                     if bounded {
@@ -479,7 +479,7 @@ impl FusionCenter for DkfCenter {
                             }
                         }
                     };
-                    crate::filter::fixed::gemv(&mut self.tmp, &m.cbar_p_inv, contribution);
+                    crate::linalg::fixed::gemv(&mut self.tmp, &m.cbar_p_inv, contribution);
                     self.info_vec += &self.tmp;
                 }
                 Received::Measurement(_) | Received::Frame(_) => {
@@ -502,7 +502,7 @@ impl FusionCenter for DkfCenter {
             )?)
         };
         self.est.mean.copy_from(&self.info_vec);
-        crate::filter::fixed::chol_solve(&fused.chol, &mut self.est.mean);
+        crate::linalg::fixed::chol_solve(&fused.chol, &mut self.est.mean);
         self.est.cov.copy_from(&fused.cov);
         Ok(())
     }

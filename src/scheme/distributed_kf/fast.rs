@@ -18,7 +18,8 @@ use super::center::{canonical_silence, DkfCenter};
 use super::replica::Replicas;
 use super::sensor::{predict_in_place, Trigger};
 use super::{DistributedKfScheme, Fusion};
-use crate::filter::{fixed, Gaussian};
+use crate::filter::Gaussian;
+use crate::linalg::fixed;
 use crate::linalg::Vector;
 use crate::link::Message;
 use crate::network::Traffic;
@@ -102,24 +103,24 @@ impl Signals {
                     .as_linear()
                     .expect("the plan exists only for linear sensors");
                 let (xbar, kf) = (&mut xbar[i], &mut kf[i]);
-                crate::filter::fixed::gemv(&mut xbar_p, a, xbar);
-                crate::filter::fixed::gemv(xbar, &m.prediction_weight, &xbar_p);
-                crate::filter::fixed::gemv(&mut tmp, &m.measurement_weight[i], z);
+                crate::linalg::fixed::gemv(&mut xbar_p, a, xbar);
+                crate::linalg::fixed::gemv(xbar, &m.prediction_weight, &xbar_p);
+                crate::linalg::fixed::gemv(&mut tmp, &m.measurement_weight[i], z);
                 fixed::add_assign(xbar.as_mut_slice(), tmp.as_slice());
                 predict_in_place(a, kf, &mut tmp);
                 t.kf_p.extend_from_slice(kf.as_slice());
                 let (zbuf, zbuf2) = (&mut zbuf[i], &mut zbuf2[i]);
-                crate::filter::fixed::gemv(zbuf2, lin.h(), kf);
+                crate::linalg::fixed::gemv(zbuf2, lin.h(), kf);
                 zbuf.copy_from_slice(z.as_slice());
                 fixed::sub_assign(zbuf.as_mut_slice(), zbuf2.as_slice());
-                crate::filter::fixed::gemv(&mut tmp2, &m.kf_gain[i], zbuf);
+                crate::linalg::fixed::gemv(&mut tmp2, &m.kf_gain[i], zbuf);
                 fixed::add_assign(kf.as_mut_slice(), tmp2.as_slice());
                 t.correction_norm.push(fixed::norm(tmp2.as_slice()));
                 t.xbar_p.extend_from_slice(xbar_p.as_slice());
                 t.kf.extend_from_slice(kf.as_slice());
-                crate::filter::fixed::gemv(&mut tmp, &m.cbar_e_inv, xbar);
+                crate::linalg::fixed::gemv(&mut tmp, &m.cbar_e_inv, xbar);
                 t.info_sent.extend_from_slice(tmp.as_slice());
-                crate::filter::fixed::gemv(&mut tmp, &m.cbar_p_inv, &xbar_p);
+                crate::linalg::fixed::gemv(&mut tmp, &m.cbar_p_inv, &xbar_p);
                 t.info_omitted.extend_from_slice(tmp.as_slice());
             }
         }

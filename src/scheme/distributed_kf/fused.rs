@@ -133,7 +133,7 @@ impl DenseMemo {
             let raw = unsymmetrized_inverse(&chol);
             let mut cov = raw.clone();
             symmetrize(&mut cov);
-            let nees = crate::filter::fixed::nees_factor(&cov);
+            let nees = crate::linalg::fixed::nees_factor(&cov);
             Ok(FusedBase {
                 chol,
                 raw,

@@ -14,7 +14,7 @@
 use super::fast::Signals;
 use super::plan::{GlobalizedPlan, PredictedDelta};
 use super::sensor::debiased_extrapolation_into;
-use crate::filter::fixed;
+use crate::linalg::fixed;
 use crate::linalg::{Matrix, Vector};
 use crate::scheme::SchemeError;
 use std::sync::Arc;

@@ -14,9 +14,9 @@
 //! **Naive information sum**: P^{-1} = Σ P_i^{-1}, x = P Σ P_i^{-1} x_i — exact for
 //! independent errors, overconfident when they are correlated (common process noise, common
 //! prior), which is what it is here to show.
-use crate::filter::fixed;
 use crate::filter::information::Information;
 use crate::filter::{FilterError, Gaussian};
+use crate::linalg::fixed;
 use crate::linalg::{cholesky_into, symmetrize, Matrix, Vector};
 
 /// Golden-section iterations for two estimates: the bracket shrinks by 0.618 per step, so

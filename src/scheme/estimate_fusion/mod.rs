@@ -64,7 +64,8 @@ pub mod params;
 #[cfg(test)]
 mod tests;
 
-use crate::filter::{fixed, kf, FilterError, Gaussian};
+use crate::filter::{kf, FilterError, Gaussian};
+use crate::linalg::fixed;
 use crate::linalg::{cholesky_into, mahalanobis_sq, symmetrize, Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
 use crate::model::{LinearSensor, LinearTransition, MeasurementModel};
