@@ -24,7 +24,7 @@ use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::model::{LinearSensor, LinearTransition};
 use crate::scheme::{FusionCenter, SchemeError, System};
-use crate::stats::{normal, quadform::QuadFormCdf};
+use crate::stats::{band_kernel, quadform::QuadFormCdf};
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -328,7 +328,7 @@ impl FusionCenter for ExactCensoredCenter {
                         for ((v, hx), pr) in mu.iter_mut().zip(&self.hx[..n]).zip(&self.pred[..n]) {
                             *v = hx - pr;
                         }
-                        normal::add_log_band_probability(
+                        band_kernel::add_log_band_probability(
                             &self.z[..n],
                             half,
                             1.0 / sd,
@@ -484,6 +484,7 @@ mod tests {
         censoring::nis_threshold, BandMethod, CensoringSensor, FeedbackMode, Fusion, SendRule,
     };
     use crate::scheme::SensorNode;
+    use crate::stats::normal;
 
     fn system(vector: bool) -> Arc<System> {
         let transition = presets::constant_velocity_1d_discrete(1.0, 4.0).unwrap();
