@@ -47,7 +47,7 @@ impl PredictWork {
 
 /// [`predict`] into `out` through `work`: the same operations (`F x` as gemv, `F P` and
 /// `(F P) F^T` in the exact fixed-size gemm, `+ Q`, symmetrized) in the same order, hence the
-/// same bits, without a temporary (issue 12).
+/// same bits, without a temporary.
 pub fn predict_into(
     model: &LinearTransition,
     est: &Gaussian,

@@ -210,7 +210,7 @@ pub fn update(
 }
 
 /// Buffers of [`update_in_place`] for an n-dimensional state, sized at construction so an
-/// update allocates nothing (issue 12).
+/// update allocates nothing.
 #[derive(Debug, Clone)]
 pub struct UpdateWork {
     /// `h x^-` (1).

@@ -206,7 +206,7 @@ mod tests {
 /// [`cholesky`] of `a` computed in the storage of `storage` (which it takes; the caller puts
 /// the factor back with `unpack_dirty`, and it is resized to `a`'s shape if it differs, so only
 /// a first call allocates): the same checks and the same factorization (`fixed::cholesky`)
-/// without the copy `cholesky` allocates (issue 12). On failure `storage` is left empty (the
+/// without the copy `cholesky` allocates. On failure `storage` is left empty (the
 /// next call sizes it again).
 pub fn cholesky_into(a: &Matrix, storage: &mut Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
     check_square_finite(a)?;
@@ -220,7 +220,7 @@ pub fn cholesky_into(a: &Matrix, storage: &mut Matrix) -> Result<Cholesky<f64, D
 
 /// [`spd_inverse`] of `a` into `out` (resized to `a`'s shape if it differs), factoring in the
 /// storage of `factor` ([`cholesky_into`]): the same checks, factorization, solves of the
-/// identity and symmetrization, hence the same bits, without allocating (issue 12).
+/// identity and symmetrization, hence the same bits, without allocating.
 pub fn spd_inverse_into(
     a: &Matrix,
     out: &mut Matrix,

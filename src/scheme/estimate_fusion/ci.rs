@@ -26,7 +26,7 @@ const GOLDEN_STEPS: usize = 60;
 const EG_STEPS: usize = 100;
 
 /// Buffers of the fusion rules for `m` estimates of dimension `n`, allocated once so that a
-/// fusion (the weight search included) allocates nothing (issue 12). Every function below
+/// fusion (the weight search included) allocates nothing. Every function below
 /// works in them with the operations of the allocating forms (`Information::from_gaussian`,
 /// `cholesky(..).inverse()`, nalgebra's products and `to_gaussian`), in the same order, hence
 /// the same bits.

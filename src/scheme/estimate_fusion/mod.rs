@@ -178,7 +178,7 @@ impl LinearUpdateWork {
 /// kernels that are those bit for bit), Cholesky factor and solves (`kf::gain`'s
 /// `chol.solve(H P^-)` as `fixed::chol_solve_matrix`), the Joseph form
 /// `(I - K H) P^- (I - K H)^T + K R K^T` and the symmetrization, in the same order, hence the
-/// same bits, without allocating (issue 12). On an error `est` may be partly updated (the
+/// same bits, without allocating. On an error `est` may be partly updated (the
 /// step fails).
 fn update_linear(
     sensor: &LinearSensor,
@@ -252,7 +252,7 @@ pub struct LocalKfSensor {
     copy: Gaussian,
     /// The last step this node was called at (0: none yet).
     last_k: usize,
-    /// Buffers of the step (a linear sensor's step allocates only its message; issue 12).
+    /// Buffers of the step (a linear sensor's step allocates only its message).
     work: SensorWork,
 }
 
@@ -360,7 +360,7 @@ pub struct EstimateFusionCenter {
     copies: Vec<Gaussian>,
     weights: Vec<f64>,
     est: Gaussian,
-    /// Buffers of the step (a step allocates nothing; issue 12).
+    /// Buffers of the step (a step allocates nothing).
     work: CenterWork,
 }
 

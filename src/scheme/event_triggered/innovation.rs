@@ -68,7 +68,7 @@ pub struct InnovationTriggerSensor {
 }
 
 /// Buffers of the whitened innovation for a linear sensor, sized at construction so a step
-/// allocates only the message it sends (issue 12).
+/// allocates only the message it sends.
 #[derive(Debug, Clone)]
 struct WhitenWork {
     /// H P^- (m x n).

@@ -198,7 +198,7 @@ pub struct LocalRecord {
 }
 
 /// Per-trial state of the fusion center, with the buffers every step works in (allocated
-/// once, so a step allocates nothing; issue 12).
+/// once, so a step allocates nothing).
 #[derive(Debug, Clone)]
 pub struct FtkfCenter {
     model: Arc<FtkfModel>,

@@ -224,7 +224,7 @@ struct Activated {
 }
 
 /// The fusion center's per-step buffers, sized at construction so a step allocates nothing
-/// (issue 12) for linear sensors.
+/// for linear sensors.
 #[derive(Debug, Clone)]
 struct CenterWork {
     predict: kf::PredictWork,
