@@ -1,4 +1,4 @@
-//! The censored-sensor band likelihood kernel `stats::normal::add_log_band_probability`
+//! The censored-sensor band likelihood kernel `stats::band_kernel::add_log_band_probability`
 //! (`cargo bench --bench normal`): 10,000 particles per call, as in Zheng et al.'s (2014) Section VII-C
 //! filter, with realistic inputs — innovation means `mu` mostly within a few units of 0
 //! (90% N(0, 2^2)) and a tail of particles far out (10% uniform on [-50, 50]); band
@@ -10,7 +10,8 @@
 //! thread: kernel 29.6-30.5 us per 10,000 (2.96-3.05 ns per element; the c-sweep 3.00 ns,
 //! table construction included, ~7% of it); scalar `log_q_band` 394 us (39 ns per element).
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use hushfuse::stats::normal::{add_log_band_probability, log_q_band};
+use hushfuse::stats::band_kernel::add_log_band_probability;
+use hushfuse::stats::normal::log_q_band;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use rand_xoshiro::Xoshiro256PlusPlus;

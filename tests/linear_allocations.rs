@@ -50,7 +50,7 @@ fn per_step(exp: &build::Experiment, variant: &build::Variant) -> Vec<(usize, us
     out
 }
 
-/// Whether `filter::fixed::gemm` reproduces matrixmultiply's 6 x 6 products itself (its FMA
+/// Whether `linalg::fixed::gemm` reproduces matrixmultiply's 6 x 6 products itself (its FMA
 /// kernels), rather than calling it.
 fn fma_kernel() -> bool {
     #[cfg(target_arch = "x86_64")]

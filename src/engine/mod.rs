@@ -5,5 +5,5 @@ pub mod durable;
 pub mod replay;
 pub mod runner;
 pub mod seeding;
-pub mod trial;
 pub mod trace;
+pub mod trial;

@@ -28,8 +28,8 @@ const WINDOW_MIN_SECONDS: f64 = 0.025;
 /// [`WINDOW_MIN_SECONDS`]).
 const WINDOW_MAX_BLOCKS: usize = 1024;
 
-pub use crate::engine::seeding::{center_seed, trial_rng};
 use crate::engine::seeding::coin_stream;
+pub use crate::engine::seeding::{center_seed, trial_rng};
 use crate::engine::trial::{
     run_trial, LoopBuffers, LoopError, Observer, ObserverError, StepOutput, TrialSpec,
 };
@@ -151,15 +151,15 @@ impl Drawer {
         };
         // x_0 = mean + S n_0.
         self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
-        crate::filter::fixed::gemv(&mut self.a, &self.x0_sqrt, &self.normals);
+        crate::linalg::fixed::gemv(&mut self.a, &self.x0_sqrt, &self.normals);
         self.x.copy_from(&exp.initial_truth.mean);
         self.x += &self.a;
         let t = &sys.transition;
         for k in 0..exp.steps {
             // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
             self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
-            crate::filter::fixed::gemv(&mut self.a, t.f(), &self.x);
-            crate::filter::fixed::gemv(&mut self.b, t.q_sqrt(), &self.normals);
+            crate::linalg::fixed::gemv(&mut self.a, t.f(), &self.x);
+            crate::linalg::fixed::gemv(&mut self.b, t.q_sqrt(), &self.normals);
             self.a += &self.b;
             std::mem::swap(&mut self.x, &mut self.a);
             for (i, (s, z)) in sys
@@ -173,8 +173,8 @@ impl Drawer {
                     Some(lin) => {
                         let (v, rv) = (&mut self.v[i], &mut self.rv[i]);
                         v.iter_mut().for_each(|e| *e = normal(&mut rng));
-                        crate::filter::fixed::gemv(z, lin.h(), &self.x);
-                        crate::filter::fixed::gemv(rv, s.noise_sqrt(), v);
+                        crate::linalg::fixed::gemv(z, lin.h(), &self.x);
+                        crate::linalg::fixed::gemv(rv, s.noise_sqrt(), v);
                         *z += &*rv;
                     }
                     None => *z = s.sample(&self.x, &mut rng),
@@ -191,7 +191,7 @@ impl Drawer {
 /// contraction), so the same draws on every x86-64 machine.
 #[multiversion(targets("x86_64+avx2"))]
 fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
-    use crate::filter::fixed::{mat_vec, mat_vec_dyn, mat_vec_rows};
+    use crate::linalg::fixed::{mat_vec, mat_vec_dyn, mat_vec_rows};
     let sys = &exp.system;
     let mut rng = trial_rng(exp.seed, trial as u64, 0);
     let normal = standard_normal;
@@ -571,7 +571,9 @@ fn run_variant(
             k,
             source,
         },
-        LoopError::Observer { .. } => unreachable!("the metrics observer fails only on covariances"),
+        LoopError::Observer { .. } => {
+            unreachable!("the metrics observer fails only on covariances")
+        }
     })?;
     obs.finish();
     Ok(())

@@ -136,7 +136,11 @@ impl LoopBuffers {
     }
 
     /// The trial cache, emptied first when it belongs to another trial's data.
-    pub(crate) fn cache_for(&mut self, trial: usize, measurements: &[Vec<Vector>]) -> &mut TrialCache {
+    pub(crate) fn cache_for(
+        &mut self,
+        trial: usize,
+        measurements: &[Vec<Vector>],
+    ) -> &mut TrialCache {
         let of = Some((trial, measurements.as_ptr() as usize));
         if self.cache_of != of {
             self.cache.clear();

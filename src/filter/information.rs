@@ -94,7 +94,7 @@ impl Information {
             return false;
         }
         let mut hx = [0.0];
-        super::fixed::mat_vec_dyn(&mut hx, h.as_slice(), prior.mean.as_slice());
+        crate::linalg::fixed::mat_vec_dyn(&mut hx, h.as_slice(), prior.mean.as_slice());
         let (hs, ks) = (h.as_slice(), c / denom);
         let m = self.matrix.as_mut_slice();
         for j in 0..n {
@@ -119,10 +119,10 @@ impl Information {
     ) -> Result<(), FilterError> {
         let chol = factor_in(factor, &g.cov, "predicted covariance")?;
         self.matrix.fill_with_identity();
-        super::fixed::chol_solve_matrix(&chol, &mut self.matrix);
+        crate::linalg::fixed::chol_solve_matrix(&chol, &mut self.matrix);
         *factor = chol.unpack_dirty();
         symmetrize(&mut self.matrix);
-        super::fixed::gemv(&mut self.vector, &self.matrix, &g.mean);
+        crate::linalg::fixed::gemv(&mut self.vector, &self.matrix, &g.mean);
         Ok(())
     }
 
@@ -135,9 +135,9 @@ impl Information {
     ) -> Result<(), FilterError> {
         let chol = factor_in(factor, &self.matrix, "information matrix")?;
         out.mean.copy_from(&self.vector);
-        super::fixed::chol_solve(&chol, &mut out.mean);
+        crate::linalg::fixed::chol_solve(&chol, &mut out.mean);
         out.cov.fill_with_identity();
-        super::fixed::chol_solve_matrix(&chol, &mut out.cov);
+        crate::linalg::fixed::chol_solve_matrix(&chol, &mut out.cov);
         *factor = chol.unpack_dirty();
         symmetrize(&mut out.cov);
         Ok(())
@@ -193,7 +193,7 @@ fn factor_in(
         m = Matrix::zeros(a.nrows(), a.ncols());
     }
     m.copy_from(a);
-    super::fixed::cholesky(m).ok_or(err(LinalgError::NotPositiveDefinite))
+    crate::linalg::fixed::cholesky(m).ok_or(err(LinalgError::NotPositiveDefinite))
 }
 
 /// `(h * p * h^T)[(0, 0)]` for a 1 x n row h, without the temporaries, in nalgebra's order:

@@ -18,10 +18,10 @@ pub fn predict_cov(model: &LinearTransition, cov: &Matrix) -> Matrix {
     // The products in the exact fixed-size gemm (`F * cov`, then `* F^T`), then `+ Q`.
     let n = cov.nrows();
     let mut fp = Matrix::zeros(n, cov.ncols());
-    super::fixed::gemm(&mut fp, model.f(), cov);
+    crate::linalg::fixed::gemm(&mut fp, model.f(), cov);
     let mut out = Matrix::zeros(n, n);
-    super::fixed::gemm(&mut out, &fp, &model.f().transpose());
-    super::fixed::add_assign(out.as_mut_slice(), model.q().as_slice());
+    crate::linalg::fixed::gemm(&mut out, &fp, &model.f().transpose());
+    crate::linalg::fixed::add_assign(out.as_mut_slice(), model.q().as_slice());
     symmetrize(&mut out);
     out
 }
@@ -47,18 +47,18 @@ impl PredictWork {
 
 /// [`predict`] into `out` through `work`: the same operations (`F x` as gemv, `F P` and
 /// `(F P) F^T` in the exact fixed-size gemm, `+ Q`, symmetrized) in the same order, hence the
-/// same bits, without a temporary (issue 12).
+/// same bits, without a temporary.
 pub fn predict_into(
     model: &LinearTransition,
     est: &Gaussian,
     out: &mut Gaussian,
     work: &mut PredictWork,
 ) {
-    super::fixed::gemv(&mut out.mean, model.f(), &est.mean);
-    super::fixed::gemm(&mut work.fp, model.f(), &est.cov);
+    crate::linalg::fixed::gemv(&mut out.mean, model.f(), &est.mean);
+    crate::linalg::fixed::gemm(&mut work.fp, model.f(), &est.cov);
     work.ft.tr_copy_from(model.f());
-    super::fixed::gemm(&mut out.cov, &work.fp, &work.ft);
-    super::fixed::add_assign(out.cov.as_mut_slice(), model.q().as_slice());
+    crate::linalg::fixed::gemm(&mut out.cov, &work.fp, &work.ft);
+    crate::linalg::fixed::add_assign(out.cov.as_mut_slice(), model.q().as_slice());
     symmetrize(&mut out.cov);
 }
 

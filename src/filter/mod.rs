@@ -1,6 +1,5 @@
 //! Filters as step functions: each takes the model by reference and the estimate by value and
 //! returns the next estimate; only the simulator owns a time loop.
-pub mod fixed;
 pub mod information;
 pub mod kf;
 pub mod particle;

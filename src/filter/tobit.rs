@@ -210,7 +210,7 @@ pub fn update(
 }
 
 /// Buffers of [`update_in_place`] for an n-dimensional state, sized at construction so an
-/// update allocates nothing (issue 12).
+/// update allocates nothing.
 #[derive(Debug, Clone)]
 pub struct UpdateWork {
     /// `h x^-` (1).
@@ -252,7 +252,7 @@ impl UpdateWork {
 
 /// [`update`] of `est` in place through `work`: the same operations in the same order (each
 /// product by nalgebra's gemm into a buffer, as `a * b` computes it, the n x n ones by
-/// [`fixed::gemm`](super::fixed::gemm), which is that gemm bit for bit; the scalings, sums and
+/// [`fixed::gemm`](crate::linalg::fixed::gemm), which is that gemm bit for bit; the scalings, sums and
 /// differences entry by entry with the same operands), hence the same bits, without
 /// allocating. On an error `est` is left as it was.
 #[allow(clippy::too_many_arguments, clippy::assign_op_pattern)]
@@ -266,7 +266,7 @@ pub fn update_in_place(
     opts: &TobitOptions,
     work: &mut UpdateWork,
 ) -> Result<TobitTerms, FilterError> {
-    use super::fixed;
+    use crate::linalg::fixed;
     if !y.is_finite() {
         return Err(FilterError::NonFiniteMeasurement(vec![y]));
     }

@@ -622,7 +622,7 @@ impl TrialState<'_> {
     }
 
     /// [`TrialState::record`] with the Cholesky factor of the estimate's covariance from
-    /// [`crate::filter::fixed::nees_factor`] (the same factor record would compute, so the
+    /// [`crate::linalg::fixed::nees_factor`] (the same factor record would compute, so the
     /// same NEES): a covariance shared by all trials is factored once, not once per trial.
     pub fn record_factored(
         &mut self,
@@ -691,7 +691,7 @@ impl TrialState<'_> {
         est: &Gaussian,
         factor: Option<&[f64]>,
     ) -> Result<(f64, bool), crate::linalg::LinalgError> {
-        let factored = factor.and_then(|f| crate::filter::fixed::mahalanobis_sq_factored(err, f));
+        let factored = factor.and_then(|f| crate::linalg::fixed::mahalanobis_sq_factored(err, f));
         let nees_direct = match factored {
             Some(v) => Ok(v),
             None => nees_buffered(err, &est.cov, &mut self.white, &mut self.chol_buf),
@@ -952,7 +952,7 @@ pub fn record_shared(
                 for ((e, m), t) in err.iter_mut().zip(*mean).zip(truth.as_slice()) {
                     *e = m - t;
                 }
-                *nees = crate::filter::fixed::mahalanobis_sq_factored(err, f);
+                *nees = crate::linalg::fixed::mahalanobis_sq_factored(err, f);
             }
         }
         for ((trial, err), nees) in group.into_iter().zip(&errs).zip(nees) {
@@ -1016,7 +1016,7 @@ fn nees_buffered(
         return Err(LinalgError::NonFinite);
     }
     // Dimensions 1..=6: the same factorization, solve and sum in fixed-size buffers.
-    if let Some(r) = crate::filter::fixed::mahalanobis_sq_small_slice(e, p) {
+    if let Some(r) = crate::linalg::fixed::mahalanobis_sq_small_slice(e, p) {
         return r.ok_or(LinalgError::NotPositiveDefinite);
     }
     let mut m = match buf.take() {

@@ -28,12 +28,10 @@
 //! Everything is scalar, `#[inline]`, allocation free and has at most a few well-predicted
 //! branches: it is meant for particle-filter likelihood loops of ~10^8 calls.
 //!
-//! The particle filters' hot loop itself, [`add_log_band_probability`] (one band, ~10^4
+//! The particle filters' hot loop itself, [`super::band_kernel::add_log_band_probability`] (one band, ~10^4
 //! particles per call), goes further: it tabulates the band's log probability once per call as
 //! a piecewise polynomial built from these functions and then costs ~3 ns per particle
-//! (notes in [`super::band_kernel`], the module that holds it; re-exported here).
-
-pub use super::band_kernel::{add_log_band_probability, add_log_band_probability_about};
+//! (notes in [`super::band_kernel`], the module that holds it).
 
 /// `1 / sqrt(2 pi)`.
 const FRAC_1_SQRT_2PI: f64 = 0.398_942_280_401_432_7;

@@ -10,7 +10,7 @@ use crate::filter::{kf, Gaussian};
 use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::scheme::{Feedback, FusionCenter, SchemeError, System};
-use crate::stats::{normal, quadform::QuadFormCdf, quadform2d::EllipseBand2};
+use crate::stats::{band_kernel, normal, quadform::QuadFormCdf, quadform2d::EllipseBand2};
 use multiversion::multiversion;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -187,7 +187,13 @@ impl CensoredPfCenter {
             let half_width = (eta * s[(0, 0)]).sqrt();
             let inv_sd = 1.0 / r[(0, 0)].sqrt();
             // mu = h(x) - h(x_{k|k-1}), eq. (13) / Prop. 7, formed inside the kernel.
-            normal::add_log_band_probability_about(&self.hx[..n], h_ref[0], half_width, inv_sd, lw);
+            band_kernel::add_log_band_probability_about(
+                &self.hx[..n],
+                h_ref[0],
+                half_width,
+                inv_sd,
+                lw,
+            );
             return Ok(());
         }
         // Vector: q = S^{-1/2} nu ~ N(S^{-1/2} (h(x) - h(x_ref)), S^{-1/2} R S^{-1/2}) (35)-(38).

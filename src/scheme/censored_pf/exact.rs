@@ -24,7 +24,7 @@ use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::model::{LinearSensor, LinearTransition};
 use crate::scheme::{FusionCenter, SchemeError, System};
-use crate::stats::{normal, quadform::QuadFormCdf};
+use crate::stats::{band_kernel, quadform::QuadFormCdf};
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -252,7 +252,6 @@ impl FusionCenter for ExactCensoredCenter {
             )));
         }
         let d = sys.state_dim();
-        let n = self.cloud.len();
         self.cloud
             .propagate(&self.transition, &mut self.rng)
             .map_err(pf_err)?;
@@ -267,149 +266,13 @@ impl FusionCenter for ExactCensoredCenter {
             self.project(i);
             match msg {
                 Received::Measurement(z) => {
-                    if z.len() != m || z.iter().any(|v| !v.is_finite()) {
-                        return Err(SchemeError::Protocol {
-                            sensor: i,
-                            message: format!("corrupt measurement {:?}", z.as_slice()),
-                        });
-                    }
-                    let r_inv = crate::linalg::spd_inverse(&r)
-                        .map_err(|source| SchemeError::Matrix { what: "R", source })?;
-                    let s_inv = crate::linalg::spd_inverse(&s)
-                        .map_err(|source| SchemeError::Matrix { what: "S", source })?;
-                    // The send event for each particle's copy, then p(z | x).
-                    // Only particles still alive count: sensors are conditioned one after the
-                    // other, so a send event could otherwise kill the survivors of another.
-                    // NIS of each copy goes into the z scratch row (z is filled after use).
-                    let mut consistent = 0usize;
-                    let (nis, lw) = (&mut self.z[..n], self.cloud.log_weights());
-                    for (p, (v, l)) in nis.iter_mut().zip(lw).enumerate() {
-                        let mut acc = 0.0;
-                        for a in 0..m {
-                            for b in 0..m {
-                                acc += (z[a] - self.pred[a * n + p])
-                                    * s_inv[(a, b)]
-                                    * (z[b] - self.pred[b * n + p]);
-                            }
-                        }
-                        *v = acc;
-                        consistent += usize::from(acc >= self.eta && l.is_finite());
-                    }
-                    let use_event = consistent > 0;
-                    if !use_event {
-                        self.send_event_skips += 1;
-                    }
-                    let lw = self.cloud.log_weights_mut();
-                    for (p, l) in lw.iter_mut().enumerate() {
-                        let mut quad = 0.0;
-                        for a in 0..m {
-                            for b in 0..m {
-                                quad += (z[a] - self.hx[a * n + p])
-                                    * r_inv[(a, b)]
-                                    * (z[b] - self.hx[b * n + p]);
-                            }
-                        }
-                        *l -= 0.5 * quad;
-                        if use_event && self.z[p] < self.eta {
-                            *l = f64::NEG_INFINITY;
-                        }
-                    }
-                    for a in 0..m {
-                        self.z[a * n..(a + 1) * n].fill(z[a]);
-                    }
+                    self.weigh_measurement(i, z, m, &r, &s)?;
                 }
                 Received::Silent => {
                     if m == 1 {
-                        let half = (self.eta * s[(0, 0)]).sqrt();
-                        let sd = r[(0, 0)].sqrt();
-                        // mu = h (x - x_hat^i): band term, then the truncated draw of z.
-                        // mu goes into the z scratch row; the draws below overwrite it.
-                        let mu = &mut self.z[..n];
-                        for ((v, hx), pr) in mu.iter_mut().zip(&self.hx[..n]).zip(&self.pred[..n]) {
-                            *v = hx - pr;
-                        }
-                        normal::add_log_band_probability(
-                            &self.z[..n],
-                            half,
-                            1.0 / sd,
-                            self.cloud.log_weights_mut(),
-                        );
-                        for p in 0..n {
-                            let (hx, pr) = (self.hx[p], self.pred[p]);
-                            let t = truncated_standard_normal(
-                                (pr - half - hx) / sd,
-                                (pr + half - hx) / sd,
-                                &mut self.rng,
-                            );
-                            self.z[p] = hx + sd * t;
-                        }
+                        self.weigh_silence_scalar(&s, &r);
                     } else {
-                        // q = S^{-1/2} (z - H x_hat) ~ N(S^{-1/2} H (x - x_hat), S^{-1/2} R S^{-1/2}).
-                        let (s_inv_sqrt, c) = super::censoring::whitened_band(&s, &r);
-                        let qf = QuadFormCdf::new(&c)
-                            .map_err(|e| SchemeError::Unsupported(e.to_string()))?;
-                        let r_sqrt = crate::model::MeasurementModel::noise_sqrt(&sensor).clone();
-                        let s_chol = crate::linalg::cholesky(&s)
-                            .map_err(|source| SchemeError::Matrix { what: "S", source })?;
-                        let s_l = s_chol.l();
-                        let mut mean = vec![0.0; m];
-                        // Scratch of the rejection loop (it may try many times per particle:
-                        // no allocation in it): normals, R^{1/2} draw, innovation, L^{-1} nu.
-                        let mut draw = vec![0.0; m];
-                        let mut nu = vec![0.0; m];
-                        let mut y = vec![0.0; m];
-                        for p in 0..n {
-                            for (a, v) in mean.iter_mut().enumerate() {
-                                *v = (0..m)
-                                    .map(|b| {
-                                        s_inv_sqrt[(a, b)]
-                                            * (self.hx[b * n + p] - self.pred[b * n + p])
-                                    })
-                                    .sum();
-                            }
-                            let prob = qf
-                                .prob_below_slice(&mean, self.eta)
-                                .map_err(|e| SchemeError::Unsupported(e.to_string()))?;
-                            self.cloud.log_weights_mut()[p] += prob.max(f64::MIN_POSITIVE).ln();
-                            // Rejection from N(H x, R) until the copy's NIS is below eta; a
-                            // particle whose band is nearly impossible (weight < 1e-6 of its
-                            // prior share) keeps its last draw pulled radially into the band.
-                            let tries = if prob > 1e-6 { 100_000 } else { 64 };
-                            for _ in 0..tries {
-                                for v in draw.iter_mut() {
-                                    *v = StandardNormal.sample(&mut self.rng);
-                                }
-                                // nu = h(x) + R^{1/2} draw - H x_hat, then y = L^{-1} nu by
-                                // forward substitution (S = L L^T), NIS = |y|^2.
-                                for (a, v) in nu.iter_mut().enumerate() {
-                                    let mut e = 0.0;
-                                    for (b, d) in draw.iter().enumerate() {
-                                        e += r_sqrt[(a, b)] * d;
-                                    }
-                                    *v = self.hx[a * n + p] + e - self.pred[a * n + p];
-                                }
-                                let mut nis = 0.0;
-                                for (a, &nu_a) in nu.iter().enumerate() {
-                                    let mut acc = nu_a;
-                                    for (b, &y_b) in y[..a].iter().enumerate() {
-                                        acc -= s_l[(a, b)] * y_b;
-                                    }
-                                    y[a] = acc / s_l[(a, a)];
-                                    nis += y[a] * y[a];
-                                }
-                                let scale = if nis < self.eta {
-                                    1.0
-                                } else {
-                                    0.999 * (self.eta / nis).sqrt()
-                                };
-                                for (a, nu_a) in nu.iter().enumerate() {
-                                    self.z[a * n + p] = self.pred[a * n + p] + scale * nu_a;
-                                }
-                                if nis < self.eta {
-                                    break;
-                                }
-                            }
-                        }
+                        self.weigh_silence_band(&sensor, m, &s, &r)?;
                     }
                 }
                 Received::NotScheduled => {
@@ -429,6 +292,195 @@ impl FusionCenter for ExactCensoredCenter {
         }
         self.cloud.normalize().map_err(pf_err)?;
         self.last_ess = self.cloud.ess().map_err(pf_err)?;
+        self.fused_estimate(d)?;
+        self.cloud
+            .resample_if(
+                self.options.resample_policy,
+                self.options.resampling,
+                &mut self.rng,
+            )
+            .map_err(pf_err)?;
+        Ok(())
+    }
+
+    fn estimate(&self) -> &Gaussian {
+        &self.est
+    }
+    fn ess(&self) -> Option<f64> {
+        Some(self.last_ess)
+    }
+}
+
+impl ExactCensoredCenter {
+    /// A received measurement `z` of sensor `i` (dimension `m`): each particle's send event
+    /// (its copy's NIS at least eta, when any live particle has one), then p(z | x).
+    fn weigh_measurement(
+        &mut self,
+        i: usize,
+        z: &Vector,
+        m: usize,
+        r: &Matrix,
+        s: &Matrix,
+    ) -> Result<(), SchemeError> {
+        let n = self.cloud.len();
+        if z.len() != m || z.iter().any(|v| !v.is_finite()) {
+            return Err(SchemeError::Protocol {
+                sensor: i,
+                message: format!("corrupt measurement {:?}", z.as_slice()),
+            });
+        }
+        let r_inv = crate::linalg::spd_inverse(r)
+            .map_err(|source| SchemeError::Matrix { what: "R", source })?;
+        let s_inv = crate::linalg::spd_inverse(s)
+            .map_err(|source| SchemeError::Matrix { what: "S", source })?;
+        // The send event for each particle's copy, then p(z | x).
+        // Only particles still alive count: sensors are conditioned one after the
+        // other, so a send event could otherwise kill the survivors of another.
+        // NIS of each copy goes into the z scratch row (z is filled after use).
+        let mut consistent = 0usize;
+        let (nis, lw) = (&mut self.z[..n], self.cloud.log_weights());
+        for (p, (v, l)) in nis.iter_mut().zip(lw).enumerate() {
+            let mut acc = 0.0;
+            for a in 0..m {
+                for b in 0..m {
+                    acc += (z[a] - self.pred[a * n + p])
+                        * s_inv[(a, b)]
+                        * (z[b] - self.pred[b * n + p]);
+                }
+            }
+            *v = acc;
+            consistent += usize::from(acc >= self.eta && l.is_finite());
+        }
+        let use_event = consistent > 0;
+        if !use_event {
+            self.send_event_skips += 1;
+        }
+        let lw = self.cloud.log_weights_mut();
+        for (p, l) in lw.iter_mut().enumerate() {
+            let mut quad = 0.0;
+            for a in 0..m {
+                for b in 0..m {
+                    quad +=
+                        (z[a] - self.hx[a * n + p]) * r_inv[(a, b)] * (z[b] - self.hx[b * n + p]);
+                }
+            }
+            *l -= 0.5 * quad;
+            if use_event && self.z[p] < self.eta {
+                *l = f64::NEG_INFINITY;
+            }
+        }
+        for a in 0..m {
+            self.z[a * n..(a + 1) * n].fill(z[a]);
+        }
+        Ok(())
+    }
+
+    /// Silence of a scalar sensor: the band term of each particle, then its copy's
+    /// measurement drawn from the truncated normal of the band.
+    fn weigh_silence_scalar(&mut self, s: &Matrix, r: &Matrix) {
+        let n = self.cloud.len();
+        let half = (self.eta * s[(0, 0)]).sqrt();
+        let sd = r[(0, 0)].sqrt();
+        // mu = h (x - x_hat^i): band term, then the truncated draw of z.
+        // mu goes into the z scratch row; the draws below overwrite it.
+        let mu = &mut self.z[..n];
+        for ((v, hx), pr) in mu.iter_mut().zip(&self.hx[..n]).zip(&self.pred[..n]) {
+            *v = hx - pr;
+        }
+        band_kernel::add_log_band_probability(
+            &self.z[..n],
+            half,
+            1.0 / sd,
+            self.cloud.log_weights_mut(),
+        );
+        for p in 0..n {
+            let (hx, pr) = (self.hx[p], self.pred[p]);
+            let t = truncated_standard_normal(
+                (pr - half - hx) / sd,
+                (pr + half - hx) / sd,
+                &mut self.rng,
+            );
+            self.z[p] = hx + sd * t;
+        }
+    }
+
+    /// Silence of a vector sensor: the probability of the whitened band (a quadratic form)
+    /// of each particle, then its copy's measurement drawn by rejection into the band.
+    fn weigh_silence_band(
+        &mut self,
+        sensor: &LinearSensor,
+        m: usize,
+        s: &Matrix,
+        r: &Matrix,
+    ) -> Result<(), SchemeError> {
+        let n = self.cloud.len();
+        // q = S^{-1/2} (z - H x_hat) ~ N(S^{-1/2} H (x - x_hat), S^{-1/2} R S^{-1/2}).
+        let (s_inv_sqrt, c) = super::censoring::whitened_band(s, r);
+        let qf = QuadFormCdf::new(&c).map_err(|e| SchemeError::Unsupported(e.to_string()))?;
+        let r_sqrt = crate::model::MeasurementModel::noise_sqrt(sensor).clone();
+        let s_chol = crate::linalg::cholesky(s)
+            .map_err(|source| SchemeError::Matrix { what: "S", source })?;
+        let s_l = s_chol.l();
+        let mut mean = vec![0.0; m];
+        // Scratch of the rejection loop (it may try many times per particle:
+        // no allocation in it): normals, R^{1/2} draw, innovation, L^{-1} nu.
+        let mut draw = vec![0.0; m];
+        let mut nu = vec![0.0; m];
+        let mut y = vec![0.0; m];
+        for p in 0..n {
+            for (a, v) in mean.iter_mut().enumerate() {
+                *v = (0..m)
+                    .map(|b| s_inv_sqrt[(a, b)] * (self.hx[b * n + p] - self.pred[b * n + p]))
+                    .sum();
+            }
+            let prob = qf
+                .prob_below_slice(&mean, self.eta)
+                .map_err(|e| SchemeError::Unsupported(e.to_string()))?;
+            self.cloud.log_weights_mut()[p] += prob.max(f64::MIN_POSITIVE).ln();
+            // Rejection from N(H x, R) until the copy's NIS is below eta; a
+            // particle whose band is nearly impossible (weight < 1e-6 of its
+            // prior share) keeps its last draw pulled radially into the band.
+            let tries = if prob > 1e-6 { 100_000 } else { 64 };
+            for _ in 0..tries {
+                for v in draw.iter_mut() {
+                    *v = StandardNormal.sample(&mut self.rng);
+                }
+                // nu = h(x) + R^{1/2} draw - H x_hat, then y = L^{-1} nu by
+                // forward substitution (S = L L^T), NIS = |y|^2.
+                for (a, v) in nu.iter_mut().enumerate() {
+                    let mut e = 0.0;
+                    for (b, d) in draw.iter().enumerate() {
+                        e += r_sqrt[(a, b)] * d;
+                    }
+                    *v = self.hx[a * n + p] + e - self.pred[a * n + p];
+                }
+                let mut nis = 0.0;
+                for (a, &nu_a) in nu.iter().enumerate() {
+                    let mut acc = nu_a;
+                    for (b, &y_b) in y[..a].iter().enumerate() {
+                        acc -= s_l[(a, b)] * y_b;
+                    }
+                    y[a] = acc / s_l[(a, a)];
+                    nis += y[a] * y[a];
+                }
+                let scale = if nis < self.eta {
+                    1.0
+                } else {
+                    0.999 * (self.eta / nis).sqrt()
+                };
+                for (a, nu_a) in nu.iter().enumerate() {
+                    self.z[a * n + p] = self.pred[a * n + p] + scale * nu_a;
+                }
+                if nis < self.eta {
+                    break;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The fused estimate of dimension `d` into `self.est`.
+    fn fused_estimate(&mut self, d: usize) -> Result<(), SchemeError> {
         // The fused estimate: weighted mean and covariance of the state part only.
         let w = self.cloud.weights().map_err(pf_err)?.to_vec();
         let mut mean = Vector::zeros(d);
@@ -456,21 +508,7 @@ impl FusionCenter for ExactCensoredCenter {
             }
         }
         self.est = Gaussian::new(mean, cov);
-        self.cloud
-            .resample_if(
-                self.options.resample_policy,
-                self.options.resampling,
-                &mut self.rng,
-            )
-            .map_err(pf_err)?;
         Ok(())
-    }
-
-    fn estimate(&self) -> &Gaussian {
-        &self.est
-    }
-    fn ess(&self) -> Option<f64> {
-        Some(self.last_ess)
     }
 }
 
@@ -484,6 +522,7 @@ mod tests {
         censoring::nis_threshold, BandMethod, CensoringSensor, FeedbackMode, Fusion, SendRule,
     };
     use crate::scheme::SensorNode;
+    use crate::stats::normal;
 
     fn system(vector: bool) -> Arc<System> {
         let transition = presets::constant_velocity_1d_discrete(1.0, 4.0).unwrap();

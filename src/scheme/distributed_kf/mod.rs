@@ -8,11 +8,11 @@
 //! its own.
 pub mod center;
 mod fast;
-mod fused;
 pub mod params;
 pub mod plan;
 mod replica;
 pub mod sensor;
+mod signals;
 
 pub use center::{CovarianceMemo, DkfCenter, Fusion};
 pub use plan::GlobalizedPlan;

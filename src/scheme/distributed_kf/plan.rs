@@ -62,13 +62,13 @@ pub struct PredictedDelta {
     /// a long sweep keeps thousands of links (`dormann-fig1`: 2 MB of matrices otherwise).
     delta: Mutex<Option<Matrix>>,
     /// Its LU factorization (as `Δ.clone().lu()`), ready for the fixed-size solve.
-    pub lu: crate::filter::fixed::PackedLu,
+    pub lu: crate::linalg::fixed::PackedLu,
     next: OnceLock<Arc<PredictedDelta>>,
 }
 
 impl PredictedDelta {
     fn new(delta: Matrix) -> Self {
-        let lu = crate::filter::fixed::PackedLu::from_packed(delta.clone().lu());
+        let lu = crate::linalg::fixed::PackedLu::from_packed(delta.clone().lu());
         Self {
             delta: Mutex::new(Some(delta)),
             lu,
@@ -102,7 +102,7 @@ impl PredictedDelta {
 fn predict_delta(a: &Matrix, delta: &Matrix, a_inv: &Matrix) -> Matrix {
     let product = |x: &Matrix, y: &Matrix| {
         let mut out = Matrix::zeros(x.nrows(), y.ncols());
-        crate::filter::fixed::gemm(&mut out, x, y);
+        crate::linalg::fixed::gemm(&mut out, x, y);
         out
     };
     product(&product(a, delta), a_inv)

@@ -1,5 +1,5 @@
-//! The per-step code of the globalized DKF as it was before the shared memos and buffers
-//! (commit 66c57f1), kept as the oracle of the property test that the fast path computes the
+//! The per-step code of the globalized DKF as it was before the shared memos and buffers,
+//! kept as the oracle of the property test that the fast path computes the
 //! same numbers bit for bit. Test-only.
 #![allow(dead_code)]
 use super::plan::GlobalizedPlan;

@@ -11,10 +11,10 @@
 //! entry"), by the operations the per-variant replica performed — each prediction `x <- A x`
 //! from the step before, as the sensor steps it, and every other value from the same operands
 //! in the same order — so the numbers are the same bit for bit.
-use super::fast::Signals;
 use super::plan::{GlobalizedPlan, PredictedDelta};
 use super::sensor::debiased_extrapolation_into;
-use crate::filter::fixed;
+use super::signals::Signals;
+use crate::linalg::fixed;
 use crate::linalg::{Matrix, Vector};
 use crate::scheme::SchemeError;
 use std::sync::Arc;

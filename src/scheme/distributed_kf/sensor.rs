@@ -119,7 +119,7 @@ impl DkfSensor {
 
 /// `x <- a x` through the buffer `tmp` (the same gemv as `a * &x`).
 pub(crate) fn predict_in_place(a: &Matrix, x: &mut Vector, tmp: &mut Vector) {
-    crate::filter::fixed::gemv(tmp, a, x);
+    crate::linalg::fixed::gemv(tmp, a, x);
     std::mem::swap(x, tmp);
 }
 
@@ -138,20 +138,20 @@ impl SensorNode for DkfSensor {
         let i = self.index;
         // Globalized prediction (2) and local filtering step (Section II):
         // x̄^e = C̄^e (C̄^p)^{-1} x̄^p + C̄^e H^T R^{-1} z.
-        crate::filter::fixed::gemv(&mut self.xbar_p, a, &self.xbar);
-        crate::filter::fixed::gemv(&mut self.xbar, &m.prediction_weight, &self.xbar_p);
-        crate::filter::fixed::gemv(&mut self.tmp, &m.measurement_weight[i], z);
+        crate::linalg::fixed::gemv(&mut self.xbar_p, a, &self.xbar);
+        crate::linalg::fixed::gemv(&mut self.xbar, &m.prediction_weight, &self.xbar_p);
+        crate::linalg::fixed::gemv(&mut self.tmp, &m.measurement_weight[i], z);
         self.xbar += &self.tmp;
         // Standard KF beside it: x̂^e = x̂^p + K (z - h(x̂^p)); `kf` holds x̂^p, `tmp2` the
         // correction.
         predict_in_place(a, &mut self.kf, &mut self.tmp);
         match self.sensor.as_linear() {
-            Some(lin) => crate::filter::fixed::gemv(&mut self.zbuf2, lin.h(), &self.kf),
+            Some(lin) => crate::linalg::fixed::gemv(&mut self.zbuf2, lin.h(), &self.kf),
             None => self.zbuf2.copy_from(&self.sensor.predict(&self.kf)),
         }
         self.zbuf.copy_from(z);
         self.zbuf -= &self.zbuf2;
-        crate::filter::fixed::gemv(&mut self.tmp2, &m.kf_gain[i], &self.zbuf);
+        crate::linalg::fixed::gemv(&mut self.tmp2, &m.kf_gain[i], &self.zbuf);
         self.kf += &self.tmp2;
         // Replica of the center's extrapolation.
         predict_in_place(a, &mut self.held, &mut self.tmp);
@@ -190,7 +190,7 @@ impl SensorNode for DkfSensor {
                     self.tmp2 -= &self.kf;
                     let far = self.tmp2.norm() > *alpha;
                     far || {
-                        crate::filter::fixed::gemv(&mut self.tmp2, b_inv, &self.tmp);
+                        crate::linalg::fixed::gemv(&mut self.tmp2, b_inv, &self.tmp);
                         self.tmp.dot(&self.tmp2) > 1.0
                     }
                 }
@@ -226,7 +226,7 @@ pub fn debiased_extrapolation_into(
             "debiasing matrix Δ^pp is singular".into(),
         ));
     }
-    crate::filter::fixed::gemv(out, delta_p, work);
+    crate::linalg::fixed::gemv(out, delta_p, work);
     Ok(())
 }
 

@@ -14,9 +14,9 @@
 //! **Naive information sum**: P^{-1} = Σ P_i^{-1}, x = P Σ P_i^{-1} x_i — exact for
 //! independent errors, overconfident when they are correlated (common process noise, common
 //! prior), which is what it is here to show.
-use crate::filter::fixed;
 use crate::filter::information::Information;
 use crate::filter::{FilterError, Gaussian};
+use crate::linalg::fixed;
 use crate::linalg::{cholesky_into, symmetrize, Matrix, Vector};
 
 /// Golden-section iterations for two estimates: the bracket shrinks by 0.618 per step, so
@@ -26,7 +26,7 @@ const GOLDEN_STEPS: usize = 60;
 const EG_STEPS: usize = 100;
 
 /// Buffers of the fusion rules for `m` estimates of dimension `n`, allocated once so that a
-/// fusion (the weight search included) allocates nothing (issue 12). Every function below
+/// fusion (the weight search included) allocates nothing. Every function below
 /// works in them with the operations of the allocating forms (`Information::from_gaussian`,
 /// `cholesky(..).inverse()`, nalgebra's products and `to_gaussian`), in the same order, hence
 /// the same bits.

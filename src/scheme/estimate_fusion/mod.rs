@@ -64,7 +64,8 @@ pub mod params;
 #[cfg(test)]
 mod tests;
 
-use crate::filter::{fixed, kf, FilterError, Gaussian};
+use crate::filter::{kf, FilterError, Gaussian};
+use crate::linalg::fixed;
 use crate::linalg::{cholesky_into, mahalanobis_sq, symmetrize, Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
 use crate::model::{LinearSensor, LinearTransition, MeasurementModel};
@@ -177,7 +178,7 @@ impl LinearUpdateWork {
 /// kernels that are those bit for bit), Cholesky factor and solves (`kf::gain`'s
 /// `chol.solve(H P^-)` as `fixed::chol_solve_matrix`), the Joseph form
 /// `(I - K H) P^- (I - K H)^T + K R K^T` and the symmetrization, in the same order, hence the
-/// same bits, without allocating (issue 12). On an error `est` may be partly updated (the
+/// same bits, without allocating. On an error `est` may be partly updated (the
 /// step fails).
 fn update_linear(
     sensor: &LinearSensor,
@@ -251,7 +252,7 @@ pub struct LocalKfSensor {
     copy: Gaussian,
     /// The last step this node was called at (0: none yet).
     last_k: usize,
-    /// Buffers of the step (a linear sensor's step allocates only its message; issue 12).
+    /// Buffers of the step (a linear sensor's step allocates only its message).
     work: SensorWork,
 }
 
@@ -359,7 +360,7 @@ pub struct EstimateFusionCenter {
     copies: Vec<Gaussian>,
     weights: Vec<f64>,
     est: Gaussian,
-    /// Buffers of the step (a step allocates nothing; issue 12).
+    /// Buffers of the step (a step allocates nothing).
     work: CenterWork,
 }
 

@@ -343,7 +343,7 @@ fn params_and_validation() {
     }
 }
 
-/// The allocating forms the in-place ones replaced (issue 12), kept as the reference they must
+/// The allocating forms the in-place ones replaced, kept as the reference they must
 /// reproduce bit for bit.
 mod reference {
     use crate::filter::information::Information;

@@ -68,7 +68,7 @@ pub struct InnovationTriggerSensor {
 }
 
 /// Buffers of the whitened innovation for a linear sensor, sized at construction so a step
-/// allocates only the message it sends (issue 12).
+/// allocates only the message it sends.
 #[derive(Debug, Clone)]
 struct WhitenWork {
     /// H P^- (m x n).
@@ -130,7 +130,7 @@ impl InnovationTriggerSensor {
         mean: &Vector,
         cov: &Matrix,
     ) -> Result<f64, SchemeError> {
-        use crate::filter::fixed;
+        use crate::linalg::fixed;
         use crate::model::MeasurementModel;
         kf::check_measurement(sensor, z)?;
         let w = &mut self.work;
@@ -251,7 +251,7 @@ fn effective_noise(
     hp: &mut Matrix,
     r: &mut Matrix,
 ) {
-    use crate::filter::fixed;
+    use crate::linalg::fixed;
     fixed::gemm(hp, h, cov);
     fixed::gemm(r, hp, ht);
     fixed::add_assign(r.as_mut_slice(), noise.as_slice());
@@ -333,7 +333,7 @@ impl InnovationTriggerCenter {
         match sensor.as_linear() {
             Some(l) => {
                 let w = &mut self.silences[i];
-                crate::filter::fixed::gemv(&mut w.z, l.h(), &self.pred.mean);
+                crate::linalg::fixed::gemv(&mut w.z, l.h(), &self.pred.mean);
                 let (beta, cov) = (self.beta, &self.pred.cov);
                 effective_noise(
                     beta,

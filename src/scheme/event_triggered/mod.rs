@@ -76,7 +76,8 @@ pub use stochastic::{
 };
 
 use crate::filter::information::Information;
-use crate::filter::{fixed, kf, FilterError, Gaussian};
+use crate::filter::{kf, FilterError, Gaussian};
+use crate::linalg::fixed;
 use crate::linalg::{cholesky_into, spd_inverse_into, symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::model::{LinearSensor, MeasurementModel};

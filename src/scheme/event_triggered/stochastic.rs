@@ -139,7 +139,7 @@ impl StochasticTrigger {
         match self.y(i) {
             None => 0.0,
             Some(y) => {
-                crate::filter::fixed::gemv(yu, y, u);
+                crate::linalg::fixed::gemv(yu, y, u);
                 (-0.5 * u.dot(yu)).exp()
             }
         }
@@ -191,7 +191,7 @@ impl SensorNode for StochasticTriggerSensor {
                 match sensor.as_linear() {
                     // z - H x̂^- with H x̂^- as nalgebra's gemv.
                     Some(l) => {
-                        crate::filter::fixed::gemv(&mut self.nu, l.h(), mean);
+                        crate::linalg::fixed::gemv(&mut self.nu, l.h(), mean);
                         assert_eq!(z.len(), self.nu.len(), "measurement dimension");
                         for (v, zi) in self.nu.iter_mut().zip(z.iter()) {
                             *v = zi - *v;
@@ -279,7 +279,7 @@ impl FusionCenter for StochasticTriggerCenter {
                 let sensor = self.system.sensors[i].as_ref();
                 match sensor.as_linear() {
                     Some(l) => {
-                        crate::filter::fixed::gemv(&mut self.pseudo[i], l.h(), &self.pred.mean)
+                        crate::linalg::fixed::gemv(&mut self.pseudo[i], l.h(), &self.pred.mean)
                     }
                     None => self.pseudo[i] = sensor.predict(&self.pred.mean),
                 }

@@ -1,9 +1,9 @@
 //! The fusion center of Geng et al.: the p remote local Tobit KFs (Theorem 1, eq. (18)-(25)), the
 //! federated fusion (Theorem 2, eq. (26)) and the reset (27), with the zero-order hold and the
 //! detection device (6) at its input.
-use crate::filter::fixed;
 use crate::filter::tobit::{self, Thresholds, TobitOptions};
 use crate::filter::{kf, Gaussian};
+use crate::linalg::fixed;
 use crate::linalg::{spd_inverse_into, symmetrize, Matrix, Vector};
 use crate::link::Received;
 use crate::model::LinearTransition;
@@ -198,7 +198,7 @@ pub struct LocalRecord {
 }
 
 /// Per-trial state of the fusion center, with the buffers every step works in (allocated
-/// once, so a step allocates nothing; issue 12).
+/// once, so a step allocates nothing).
 #[derive(Debug, Clone)]
 pub struct FtkfCenter {
     model: Arc<FtkfModel>,

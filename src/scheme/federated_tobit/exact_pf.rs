@@ -1,4 +1,4 @@
-//! The exact Bayesian answer to Geng et al.'s Tobit model (issue 10, item 5): one bootstrap
+//! The exact Bayesian answer to Geng et al.'s Tobit model (the exact reference beside the Tobit approximation): one bootstrap
 //! particle filter at the fusion center, on the augmented state xi = [x; b] (the dynamical
 //! bias of eq. (3) is carried by the [`System`]'s transition), weighted by the exact
 //! likelihood of each censored reading.

@@ -35,8 +35,7 @@
 //! scheduled sensor (the test `federated_equals_the_centralized_tobit_kf`): the fused filter
 //! does not depend on the sharing coefficients.
 //!
-//! [`exact_pf`] is the exact-likelihood particle filter shown beside the Tobit KF (issue 10
-//! item 5): one particle filter on the augmented state weighing the scheduled reading by its
+//! [`exact_pf`] is the exact-likelihood particle filter shown beside the Tobit KF: one particle filter on the augmented state weighing the scheduled reading by its
 //! exact censored likelihood, the Bayes-optimal answer on the same data.
 pub mod bounds;
 pub mod center;

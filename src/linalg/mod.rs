@@ -1,11 +1,10 @@
 //! Small dense linear-algebra helpers shared by every filter: symmetrization, SPD checks and
 //! Cholesky-based inverses with errors instead of panics.
-use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
+pub mod fixed;
+mod types;
 
-/// Dense matrix with run-time dimensions (scenarios choose dimensions at run time).
-pub type Matrix = DMatrix<f64>;
-/// Dense vector with run-time dimension.
-pub type Vector = DVector<f64>;
+use nalgebra::{Cholesky, Dyn};
+pub use types::{Matrix, Vector};
 
 /// Why a matrix was rejected.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -62,7 +61,7 @@ pub fn spd_inverse(a: &Matrix) -> Result<Matrix, LinalgError> {
     // `Cholesky::inverse`: the identity solved in place (fixed size for n <= 6).
     let chol = cholesky(a)?;
     let mut inv = Matrix::identity(a.nrows(), a.ncols());
-    crate::filter::fixed::chol_solve_matrix(&chol, &mut inv);
+    fixed::chol_solve_matrix(&chol, &mut inv);
     symmetrize(&mut inv);
     Ok(inv)
 }
@@ -115,7 +114,7 @@ pub fn check_spd(a: &Matrix) -> Result<(), LinalgError> {
 pub fn mahalanobis_sq(e: &Vector, p: &Matrix) -> Result<f64, LinalgError> {
     if p.nrows() == p.ncols() && p.iter().all(|v| v.is_finite()) {
         // The checks of `cholesky` passed: the fixed-size path for n <= 6.
-        if let Some(r) = crate::filter::fixed::mahalanobis_sq_small(e, p) {
+        if let Some(r) = fixed::mahalanobis_sq_small(e, p) {
             return r.ok_or(LinalgError::NotPositiveDefinite);
         }
     }
@@ -207,7 +206,7 @@ mod tests {
 /// [`cholesky`] of `a` computed in the storage of `storage` (which it takes; the caller puts
 /// the factor back with `unpack_dirty`, and it is resized to `a`'s shape if it differs, so only
 /// a first call allocates): the same checks and the same factorization (`fixed::cholesky`)
-/// without the copy `cholesky` allocates (issue 12). On failure `storage` is left empty (the
+/// without the copy `cholesky` allocates. On failure `storage` is left empty (the
 /// next call sizes it again).
 pub fn cholesky_into(a: &Matrix, storage: &mut Matrix) -> Result<Cholesky<f64, Dyn>, LinalgError> {
     check_square_finite(a)?;
@@ -216,12 +215,12 @@ pub fn cholesky_into(a: &Matrix, storage: &mut Matrix) -> Result<Cholesky<f64, D
         m = Matrix::zeros(a.nrows(), a.ncols());
     }
     m.copy_from(a);
-    crate::filter::fixed::cholesky(m).ok_or(LinalgError::NotPositiveDefinite)
+    fixed::cholesky(m).ok_or(LinalgError::NotPositiveDefinite)
 }
 
 /// [`spd_inverse`] of `a` into `out` (resized to `a`'s shape if it differs), factoring in the
 /// storage of `factor` ([`cholesky_into`]): the same checks, factorization, solves of the
-/// identity and symmetrization, hence the same bits, without allocating (issue 12).
+/// identity and symmetrization, hence the same bits, without allocating.
 pub fn spd_inverse_into(
     a: &Matrix,
     out: &mut Matrix,
@@ -232,7 +231,7 @@ pub fn spd_inverse_into(
         *out = Matrix::zeros(a.nrows(), a.ncols());
     }
     out.fill_with_identity();
-    crate::filter::fixed::chol_solve_matrix(&chol, out);
+    fixed::chol_solve_matrix(&chol, out);
     *factor = chol.unpack_dirty();
     symmetrize(out);
     Ok(())
