@@ -4,6 +4,7 @@
 //! the command line's own.
 use hushfuse::engine::replay;
 use hushfuse::engine::runner;
+use hushfuse::engine::seeding;
 use hushfuse::filter::Gaussian;
 use hushfuse::linalg::Vector;
 use hushfuse::link;
@@ -601,11 +602,11 @@ impl Scheme {
                 exp.variants.len() - 1
             )));
         };
-        let stream = 1 + variant as u64;
-        let rng = runner::trial_rng(exp.seed, trial as u64, stream);
+        // The engine's seeding rule: a notebook's loop draws the coins the runner draws.
+        let (rng, center_seed) = seeding::coins(exp.seed, trial, seeding::coin_stream(variant));
         let inst = v
             .scheme
-            .build_with_seed(runner::center_seed(exp.seed, trial as u64, stream))
+            .build_with_seed(center_seed)
             .map_err(|e| RunError::new_err(e.to_string()))?;
         let rng = Arc::new(Mutex::new(rng));
         let sensors = inst
