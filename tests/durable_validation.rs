@@ -179,8 +179,14 @@ fn shard_specs_near_2_pow_64_are_clear_errors_not_overflows() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(24))]
-    /// Random byte edits of a shard, its checksum made valid again: never a panic (exit 0 or 2);
+    #![proptest_config(proptest::prelude::ProptestConfig {
+        cases: 24,
+        // A fixed seed: the same cases on every run and machine (CI included).
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed0001),
+        ..proptest::prelude::ProptestConfig::default()
+    })]
+    /// Random byte edits of a shard, its checksum made valid again: never a panic (exit 0 or 2, or
+    /// 1 naming numbers that are not finite);
     /// random structural edits: exit 2, or exit 0 with the clean run's numbers.
     #[test]
     fn random_edits_never_panic_nor_merge_wrong_numbers(
@@ -201,7 +207,11 @@ proptest! {
         bytes[20..52].copy_from_slice(&sum);
         std::fs::write(&p, &bytes).unwrap();
         let (code, err) = merge(d, "bytes");
-        prop_assert!(matches!(code, Some(0 | 2)), "byte {}: {:?} {}", at, code, err);
+        // A refusal (2), or numbers the merge itself finds not finite and says so (1).
+        prop_assert!(
+            matches!(code, Some(0 | 2)) || (code == Some(1) && err.contains("not finite")),
+            "byte {}: {:?} {}", at, code, err
+        );
         std::fs::write(&p, &good).unwrap();
         edit_shard(d, 2, |s| {
             let x = first_sums(s);
