@@ -396,12 +396,12 @@ fn check_closer_to_target(
             s.steady_state.rate_se * summary.sensors as f64
         }
     };
-    for sa in summary.schemes.iter().filter(|s| &s.name == a) {
+    for sa in summary.schemes.iter().filter(|s| s.name == a) {
         let Some(crate::scenario::ParamValue::Number(target)) = sa.params.get(param) else {
             continue;
         };
         let Some(sb) = summary.schemes.iter().find(|s| {
-            &s.name == b
+            s.name == b
                 && s.params
                     .get(param)
                     .is_some_and(|v| v.matches(&crate::scenario::ParamValue::Number(*target)))
