@@ -336,6 +336,33 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
     let key = first.key.clone();
     let first_path = first_path.clone();
     let nb = key.n_blocks;
+    check_each_shard(&shards, &key, &first_path)?;
+    let order = block_order(&shards)?;
+    check_split_complete(&shards, &key)?;
+    check_no_gaps(&shards, &order, nb)?;
+    // Every block is in exactly one shard: move the sums out in block order.
+    let mut shards: Vec<Option<State>> = shards.into_iter().map(|(_, s)| Some(s)).collect();
+    let mut by_block = Vec::new();
+    for f in order {
+        if let Some(State {
+            progress: Progress::Blocks(blocks),
+            ..
+        }) = shards[f].take()
+        {
+            by_block.extend(blocks);
+        }
+    }
+    Ok((key, by_block))
+}
+
+/// Each file on its own (in the order given): of the run of `key` (as `first_path` is), a
+/// complete shard, not given twice, holding one sums entry per block of its range.
+fn check_each_shard(
+    shards: &[(PathBuf, State)],
+    key: &RunKey,
+    first_path: &Path,
+) -> Result<(), String> {
+    let nb = key.n_blocks;
     for (f, (path, s)) in shards.iter().enumerate() {
         if let Some(m) = key.mismatch(&s.key) {
             return Err(format!(
@@ -391,6 +418,12 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
             ));
         }
     }
+    Ok(())
+}
+
+/// The indices of the shards with a non-empty range, in block order; refuses two ranges that
+/// overlap, naming both files.
+fn block_order(shards: &[(PathBuf, State)]) -> Result<Vec<usize>, String> {
     // The non-empty ranges in block order: each must start at or after the end of those before.
     let mut order: Vec<usize> = (0..shards.len())
         .filter(|&f| shards[f].1.start < shards[f].1.end)
@@ -414,6 +447,12 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
             ));
         }
     }
+    Ok(order)
+}
+
+/// When every file is of one split (the same N), refuses a missing shard of it (empty ones
+/// too), naming the first few missing.
+fn check_split_complete(shards: &[(PathBuf, State)], key: &RunKey) -> Result<(), String> {
     // One split (every file says the same N): every shard of it must be there, empty ones too.
     let splits: Vec<usize> = shards
         .iter()
@@ -459,10 +498,15 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
             ));
         }
     }
+    Ok(())
+}
+
+/// Refuses blocks of the `nb` in none of the ranges (taken in `order`, the block order).
+fn check_no_gaps(shards: &[(PathBuf, State)], order: &[usize], nb: usize) -> Result<(), String> {
     // Gaps: blocks before the first range, between ranges, after the last.
     let mut missing: Vec<Range<usize>> = Vec::new();
     let mut covered = 0usize;
-    for &f in &order {
+    for &f in order {
         let s = &shards[f].1;
         if s.start > covered {
             missing.push(covered..s.start);
@@ -480,19 +524,7 @@ pub fn check_shards(shards: Vec<(PathBuf, State)>) -> Result<(RunKey, Vec<Vec<Su
             hi.end - 1
         ));
     }
-    // Every block is in exactly one shard: move the sums out in block order.
-    let mut shards: Vec<Option<State>> = shards.into_iter().map(|(_, s)| Some(s)).collect();
-    let mut by_block = Vec::new();
-    for f in order {
-        if let Some(State {
-            progress: Progress::Blocks(blocks),
-            ..
-        }) = shards[f].take()
-        {
-            by_block.extend(blocks);
-        }
-    }
-    Ok((key, by_block))
+    Ok(())
 }
 
 /// Folds every block's sums in block order from empty sums: the result of one run.

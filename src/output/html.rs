@@ -229,189 +229,225 @@ fn trajectory(input: &Input, tr: &trace::Trace, sel: &[usize]) -> Result<String,
         let mut names = vec![("truth".to_string(), BLACK)];
         let every = (exp.steps / 10).max(1);
         if idx.len() == 2 {
-            let (ix, iy) = (idx[0], idx[1]);
-            let mut pts: Vec<(f64, f64)> = tr.truth.iter().map(|x| (x[ix], x[iy])).collect();
-            for &v in sel {
-                pts.extend(
-                    tr.variants[v]
-                        .estimates
-                        .iter()
-                        .map(|e| (e.mean[ix], e.mean[iy])),
-                );
-            }
-            let finite: Vec<(f64, f64)> = pts
-                .iter()
-                .copied()
-                .filter(|p| p.0.is_finite() && p.1.is_finite())
-                .collect();
-            let (mut x0, mut x1, mut y0, mut y1) = finite.iter().fold(
-                (
-                    f64::INFINITY,
-                    f64::NEG_INFINITY,
-                    f64::INFINITY,
-                    f64::NEG_INFINITY,
-                ),
-                |(a, b, c, d), p| (a.min(p.0), b.max(p.0), c.min(p.1), d.max(p.1)),
-            );
-            // Zoom on the track (with a margin of a quarter of its extent); sensors inside
-            // the frame are drawn, the others are counted in the legend.
-            let (mx, my) = (0.25 * (x1 - x0).max(1e-9), 0.25 * (y1 - y0).max(1e-9));
-            let m = mx.max(my);
-            (x0, x1, y0, y1) = (x0 - m, x1 + m, y0 - m, y1 + m);
-            let shown: Vec<[f64; 2]> = positions
-                .iter()
-                .copied()
-                .filter(|p| p[0] >= x0 && p[0] <= x1 && p[1] >= y0 && p[1] <= y1)
-                .collect();
-            let hidden = positions.len() - shown.len();
-            let positions = shown;
-            let (px, py) = (0.0, 0.0);
-            let mut chart = ChartBuilder::on(&a)
-                .caption(
-                    format!("trial 0: {gname}, estimates with 2σ ellipses every {every} steps"),
-                    ("sans-serif", 17),
-                )
-                .margin(12)
-                .x_label_area_size(40)
-                .y_label_area_size(60)
-                .build_cartesian_2d(x0 - px..x1 + px, y0 - py..y1 + py)
-                .map_err(pe)?;
-            chart
-                .configure_mesh()
-                .x_desc(format!("state {ix}"))
-                .y_desc(format!("state {iy}"))
-                .draw()
-                .map_err(pe)?;
-            if !positions.is_empty() || hidden > 0 {
-                chart
-                    .draw_series(
-                        positions
-                            .iter()
-                            .map(|p| TriangleMarker::new((p[0], p[1]), 6, BLACK.mix(0.6).filled())),
-                    )
-                    .map_err(pe)?;
-                names.push((
-                    if hidden > 0 {
-                        format!("sensor positions (▲; {hidden} outside the frame)")
-                    } else {
-                        "sensor positions (▲)".into()
-                    },
-                    RGBColor(110, 110, 110),
-                ));
-            }
-            chart
-                .draw_series(LineSeries::new(
-                    tr.truth.iter().map(|x| (x[ix], x[iy])),
-                    BLACK.stroke_width(3),
-                ))
-                .map_err(pe)?;
-            for (j, &v) in sel.iter().enumerate() {
-                let c = PALETTE[j % PALETTE.len()];
-                let est = &tr.variants[v].estimates;
-                chart
-                    .draw_series(LineSeries::new(
-                        est.iter().map(|e| (e.mean[ix], e.mean[iy])),
-                        c.stroke_width(2),
-                    ))
-                    .map_err(pe)?;
-                for e in est.iter().skip(every - 1).step_by(every) {
-                    let p = [
-                        [e.cov[(ix, ix)], e.cov[(ix, iy)]],
-                        [e.cov[(iy, ix)], e.cov[(iy, iy)]],
-                    ];
-                    chart
-                        .draw_series(std::iter::once(PathElement::new(
-                            ellipse((e.mean[ix], e.mean[iy]), p),
-                            c.stroke_width(1),
-                        )))
-                        .map_err(pe)?;
-                }
-                names.push((input.summary.schemes[v].name.clone(), c));
-            }
+            trajectory_2d(
+                input, tr, sel, &a, gname, idx, &positions, every, &mut names,
+            )?;
         } else {
-            let i = idx[0];
-            let t = exp.steps as f64;
-            // Estimates minus the truth, so that small errors stay visible on a long track.
-            let truth: Vec<f64> = tr.truth.iter().map(|x| x[i]).collect();
-            let mut ys: Vec<f64> = vec![0.0];
-            for &v in sel {
-                ys.extend(
-                    tr.variants[v]
-                        .estimates
-                        .iter()
-                        .zip(&truth)
-                        .flat_map(|(e, x)| {
-                            let s = 2.0 * e.cov[(i, i)].max(0.0).sqrt();
-                            [e.mean[i] - x - s, e.mean[i] - x + s]
-                        }),
-                );
-            }
-            let ys: Vec<f64> = ys.into_iter().filter(|y| y.is_finite()).collect();
-            let (y0, y1) = ys
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
-                    (a.min(*y), b.max(*y))
-                });
-            let pad = 0.05 * (y1 - y0).max(1e-9);
-            let mut chart = ChartBuilder::on(&a)
-                .caption(
-                    format!("trial 0: estimate − truth of state {i} ({gname}), ±2σ (truth = 0)"),
-                    ("sans-serif", 17),
-                )
-                .margin(12)
-                .x_label_area_size(40)
-                .y_label_area_size(60)
-                .build_cartesian_2d(1.0..t, y0 - pad..y1 + pad)
-                .map_err(pe)?;
-            chart
-                .configure_mesh()
-                .x_desc("step k")
-                .y_desc(format!("error of state {i}"))
-                .draw()
-                .map_err(pe)?;
-            for (j, &v) in sel.iter().enumerate() {
-                let c = PALETTE[j % PALETTE.len()];
-                let est = &tr.variants[v].estimates;
-                let mut poly: Vec<(f64, f64)> = est
-                    .iter()
-                    .enumerate()
-                    .map(|(k, e)| {
-                        (
-                            (k + 1) as f64,
-                            e.mean[i] - truth[k] + 2.0 * e.cov[(i, i)].max(0.0).sqrt(),
-                        )
-                    })
-                    .collect();
-                poly.extend(est.iter().enumerate().rev().map(|(k, e)| {
-                    (
-                        (k + 1) as f64,
-                        e.mean[i] - truth[k] - 2.0 * e.cov[(i, i)].max(0.0).sqrt(),
-                    )
-                }));
-                chart
-                    .draw_series(std::iter::once(Polygon::new(poly, c.mix(0.12).filled())))
-                    .map_err(pe)?;
-                chart
-                    .draw_series(LineSeries::new(
-                        est.iter()
-                            .enumerate()
-                            .map(|(k, e)| ((k + 1) as f64, e.mean[i] - truth[k])),
-                        c.stroke_width(2),
-                    ))
-                    .map_err(pe)?;
-                names.push((input.summary.schemes[v].name.clone(), c));
-            }
-            chart
-                .draw_series(LineSeries::new(
-                    (1..=exp.steps).map(|k| (k as f64, 0.0)),
-                    BLACK.stroke_width(3),
-                ))
-                .map_err(pe)?;
+            trajectory_1d(input, tr, sel, &a, gname, idx, &mut names)?;
         }
         legend(&b, &names)?;
         root.present().map_err(pe)?;
     }
     Ok(buf)
+}
+
+/// The 2-D panel of [`trajectory`]: the position group `idx` (two indices) of trial 0, truth
+/// and estimates in the plane with 2σ ellipses every `every` steps, the sensors in the frame.
+#[allow(clippy::too_many_arguments)]
+fn trajectory_2d(
+    input: &Input,
+    tr: &trace::Trace,
+    sel: &[usize],
+    a: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    gname: &str,
+    idx: &[usize],
+    positions: &[[f64; 2]],
+    every: usize,
+    names: &mut Vec<(String, RGBColor)>,
+) -> Result<(), String> {
+    let (ix, iy) = (idx[0], idx[1]);
+    let mut pts: Vec<(f64, f64)> = tr.truth.iter().map(|x| (x[ix], x[iy])).collect();
+    for &v in sel {
+        pts.extend(
+            tr.variants[v]
+                .estimates
+                .iter()
+                .map(|e| (e.mean[ix], e.mean[iy])),
+        );
+    }
+    let finite: Vec<(f64, f64)> = pts
+        .iter()
+        .copied()
+        .filter(|p| p.0.is_finite() && p.1.is_finite())
+        .collect();
+    let (mut x0, mut x1, mut y0, mut y1) = finite.iter().fold(
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |(a, b, c, d), p| (a.min(p.0), b.max(p.0), c.min(p.1), d.max(p.1)),
+    );
+    // Zoom on the track (with a margin of a quarter of its extent); sensors inside
+    // the frame are drawn, the others are counted in the legend.
+    let (mx, my) = (0.25 * (x1 - x0).max(1e-9), 0.25 * (y1 - y0).max(1e-9));
+    let m = mx.max(my);
+    (x0, x1, y0, y1) = (x0 - m, x1 + m, y0 - m, y1 + m);
+    let shown: Vec<[f64; 2]> = positions
+        .iter()
+        .copied()
+        .filter(|p| p[0] >= x0 && p[0] <= x1 && p[1] >= y0 && p[1] <= y1)
+        .collect();
+    let hidden = positions.len() - shown.len();
+    let positions = shown;
+    let (px, py) = (0.0, 0.0);
+    let mut chart = ChartBuilder::on(a)
+        .caption(
+            format!("trial 0: {gname}, estimates with 2σ ellipses every {every} steps"),
+            ("sans-serif", 17),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x0 - px..x1 + px, y0 - py..y1 + py)
+        .map_err(pe)?;
+    chart
+        .configure_mesh()
+        .x_desc(format!("state {ix}"))
+        .y_desc(format!("state {iy}"))
+        .draw()
+        .map_err(pe)?;
+    if !positions.is_empty() || hidden > 0 {
+        chart
+            .draw_series(
+                positions
+                    .iter()
+                    .map(|p| TriangleMarker::new((p[0], p[1]), 6, BLACK.mix(0.6).filled())),
+            )
+            .map_err(pe)?;
+        names.push((
+            if hidden > 0 {
+                format!("sensor positions (▲; {hidden} outside the frame)")
+            } else {
+                "sensor positions (▲)".into()
+            },
+            RGBColor(110, 110, 110),
+        ));
+    }
+    chart
+        .draw_series(LineSeries::new(
+            tr.truth.iter().map(|x| (x[ix], x[iy])),
+            BLACK.stroke_width(3),
+        ))
+        .map_err(pe)?;
+    for (j, &v) in sel.iter().enumerate() {
+        let c = PALETTE[j % PALETTE.len()];
+        let est = &tr.variants[v].estimates;
+        chart
+            .draw_series(LineSeries::new(
+                est.iter().map(|e| (e.mean[ix], e.mean[iy])),
+                c.stroke_width(2),
+            ))
+            .map_err(pe)?;
+        for e in est.iter().skip(every - 1).step_by(every) {
+            let p = [
+                [e.cov[(ix, ix)], e.cov[(ix, iy)]],
+                [e.cov[(iy, ix)], e.cov[(iy, iy)]],
+            ];
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    ellipse((e.mean[ix], e.mean[iy]), p),
+                    c.stroke_width(1),
+                )))
+                .map_err(pe)?;
+        }
+        names.push((input.summary.schemes[v].name.clone(), c));
+    }
+    Ok(())
+}
+
+/// The 1-D panel of [`trajectory`]: estimate minus truth of the first index of `idx` over
+/// the steps of trial 0, with ±2σ bands.
+fn trajectory_1d(
+    input: &Input,
+    tr: &trace::Trace,
+    sel: &[usize],
+    a: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    gname: &str,
+    idx: &[usize],
+    names: &mut Vec<(String, RGBColor)>,
+) -> Result<(), String> {
+    let exp = input.exp;
+    let i = idx[0];
+    let t = exp.steps as f64;
+    // Estimates minus the truth, so that small errors stay visible on a long track.
+    let truth: Vec<f64> = tr.truth.iter().map(|x| x[i]).collect();
+    let mut ys: Vec<f64> = vec![0.0];
+    for &v in sel {
+        ys.extend(
+            tr.variants[v]
+                .estimates
+                .iter()
+                .zip(&truth)
+                .flat_map(|(e, x)| {
+                    let s = 2.0 * e.cov[(i, i)].max(0.0).sqrt();
+                    [e.mean[i] - x - s, e.mean[i] - x + s]
+                }),
+        );
+    }
+    let ys: Vec<f64> = ys.into_iter().filter(|y| y.is_finite()).collect();
+    let (y0, y1) = ys
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
+            (a.min(*y), b.max(*y))
+        });
+    let pad = 0.05 * (y1 - y0).max(1e-9);
+    let mut chart = ChartBuilder::on(a)
+        .caption(
+            format!("trial 0: estimate − truth of state {i} ({gname}), ±2σ (truth = 0)"),
+            ("sans-serif", 17),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(1.0..t, y0 - pad..y1 + pad)
+        .map_err(pe)?;
+    chart
+        .configure_mesh()
+        .x_desc("step k")
+        .y_desc(format!("error of state {i}"))
+        .draw()
+        .map_err(pe)?;
+    for (j, &v) in sel.iter().enumerate() {
+        let c = PALETTE[j % PALETTE.len()];
+        let est = &tr.variants[v].estimates;
+        let mut poly: Vec<(f64, f64)> = est
+            .iter()
+            .enumerate()
+            .map(|(k, e)| {
+                (
+                    (k + 1) as f64,
+                    e.mean[i] - truth[k] + 2.0 * e.cov[(i, i)].max(0.0).sqrt(),
+                )
+            })
+            .collect();
+        poly.extend(est.iter().enumerate().rev().map(|(k, e)| {
+            (
+                (k + 1) as f64,
+                e.mean[i] - truth[k] - 2.0 * e.cov[(i, i)].max(0.0).sqrt(),
+            )
+        }));
+        chart
+            .draw_series(std::iter::once(Polygon::new(poly, c.mix(0.12).filled())))
+            .map_err(pe)?;
+        chart
+            .draw_series(LineSeries::new(
+                est.iter()
+                    .enumerate()
+                    .map(|(k, e)| ((k + 1) as f64, e.mean[i] - truth[k])),
+                c.stroke_width(2),
+            ))
+            .map_err(pe)?;
+        names.push((input.summary.schemes[v].name.clone(), c));
+    }
+    chart
+        .draw_series(LineSeries::new(
+            (1..=exp.steps).map(|k| (k as f64, 0.0)),
+            BLACK.stroke_width(3),
+        ))
+        .map_err(pe)?;
+    Ok(())
 }
 
 #[allow(clippy::needless_range_loop)] // i indexes sensors across the per-step rows
@@ -497,6 +533,44 @@ pub fn render(input: &Input) -> Result<String, String> {
     let exp = input.exp;
     let group = &s.group_order[0];
     let mut h = String::new();
+    header(&mut h, input);
+    if let Some(out) = input.arena {
+        arena_section(&mut h, out, group)?;
+    }
+    results_section(&mut h, input);
+    let within = |i: usize| {
+        input.arena.is_none_or(|o| {
+            let c = &o.rows[0][i];
+            c.status == crate::engine::calibrate::Status::Calibrated
+                || c.achieved <= c.target * (1.0 + o.tolerance)
+        })
+    };
+    let sel = selected(s, 6, &within);
+    let _ = writeln!(h, "<h2>Per-step error</h2>\n<p>The all-data bound and the best schemes by mean RMSE of {}{}; bands: ±2 standard errors of the RMSE (delta method on the per-trial squared errors).</p>", esc(group), if input.arena.is_some() { " among those within the first budget" } else { "" });
+    let _ = writeln!(h, "<figure>{}</figure>", rmse_bands(input, &sel)?);
+    let tr = trace::trace(exp, 0, input.alone)?;
+    let _ = writeln!(
+        h,
+        "<h2>One trial</h2>\n<figure>{}</figure>",
+        trajectory(input, &tr, &sel)?
+    );
+    let _ = writeln!(
+        h,
+        "<h3>Who sent when (trial 0)</h3>\n<figure>{}</figure>",
+        timeline(input, &tr, &sel)
+    );
+    let _ = writeln!(
+        h,
+        "<h2>The scenario as run</h2>\n<pre>{}</pre>",
+        esc(input.scenario_text)
+    );
+    h.push_str("</body></html>\n");
+    Ok(h)
+}
+
+/// The page head and the run's title, description and metadata table.
+fn header(h: &mut String, input: &Input) {
+    let s = input.summary;
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>hushfuse report: {}</title><style>{STYLE}</style></head><body>\n",
@@ -520,64 +594,74 @@ pub fn render(input: &Input) -> Result<String, String> {
         s.sensors,
         s.state_dim
     );
-    if let Some(out) = input.arena {
-        let _ = writeln!(h, "<h2>Best scheme per budget</h2>\n<p>Every scheme's bandwidth knob tuned so that it spends the budget in {} bits per step (pilot runs on common random numbers, tolerance {}%); schemes without a knob count at budgets they fit.</p>", out.axis.name(), short(100.0 * out.tolerance));
-        h.push_str(&html_table(&arena::best_per_budget(out, group)));
-        let x = format!("{} bits per step (achieved)", out.axis.name());
-        let g = group.clone();
-        let svg = plot::lines_svg(
-            &format!("mean RMSE of {group} against bits"),
-            &x,
-            &format!("mean RMSE {group}"),
-            &arena::bits_lines(
-                out,
-                &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN),
-                true,
-            ),
-        )?;
-        let _ = writeln!(h, "<h2>Accuracy against bits</h2>\n<figure>{svg}</figure>");
-        let svg = plot::lines_svg(
-            "ANEES against bits (1 = consistent)",
-            &x,
-            "ANEES",
-            &arena::bits_lines(out, &|c| c.result.anees, false),
-        )?;
-        let _ = writeln!(h, "<figure>{svg}</figure>");
-        let _ = writeln!(h, "<h2>Calibration</h2>");
-        for (b, row) in out.rows.iter().enumerate() {
-            let mut rows = vec![vec![
-                "scheme".to_string(),
-                "knob".into(),
-                "target".into(),
-                "achieved".into(),
-                "status".into(),
-                format!("mean RMSE {group}"),
-                "ANEES".into(),
-                "payload bits".into(),
-                "frame bits".into(),
-                "downlink bits".into(),
-            ]];
-            for c in row {
-                rows.push(vec![
-                    c.label.clone(),
-                    match (&c.knob, c.value) {
-                        (Some(k), Some(v)) => format!("{k} = {}", short(v)),
-                        _ => "—".into(),
-                    },
-                    format!("{:.1}", c.target),
-                    format!("{:.1}", c.achieved),
-                    c.status.text().into(),
-                    format!("{:.4}", c.result.mean_rmse[group]),
-                    format!("{:.3}", c.result.anees),
-                    format!("{:.1}", c.result.bits_per_step),
-                    format!("{:.1}", c.result.frame_bits_per_step),
-                    format!("{:.1}", c.result.downlink_bits_per_step),
-                ]);
-            }
-            let _ = writeln!(h, "<h3>budget {} bits per step</h3>", short(out.budgets[b]));
-            h.push_str(&html_table(&rows));
+}
+
+/// The calibrated arena's section: the best scheme per budget, accuracy and ANEES against bits,
+/// the calibration table of every budget.
+fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), String> {
+    let _ = writeln!(h, "<h2>Best scheme per budget</h2>\n<p>Every scheme's bandwidth knob tuned so that it spends the budget in {} bits per step (pilot runs on common random numbers, tolerance {}%); schemes without a knob count at budgets they fit.</p>", out.axis.name(), short(100.0 * out.tolerance));
+    h.push_str(&html_table(&arena::best_per_budget(out, group)));
+    let x = format!("{} bits per step (achieved)", out.axis.name());
+    let g = group.to_string();
+    let svg = plot::lines_svg(
+        &format!("mean RMSE of {group} against bits"),
+        &x,
+        &format!("mean RMSE {group}"),
+        &arena::bits_lines(
+            out,
+            &|c| c.result.mean_rmse.get(&g).copied().unwrap_or(f64::NAN),
+            true,
+        ),
+    )?;
+    let _ = writeln!(h, "<h2>Accuracy against bits</h2>\n<figure>{svg}</figure>");
+    let svg = plot::lines_svg(
+        "ANEES against bits (1 = consistent)",
+        &x,
+        "ANEES",
+        &arena::bits_lines(out, &|c| c.result.anees, false),
+    )?;
+    let _ = writeln!(h, "<figure>{svg}</figure>");
+    let _ = writeln!(h, "<h2>Calibration</h2>");
+    for (b, row) in out.rows.iter().enumerate() {
+        let mut rows = vec![vec![
+            "scheme".to_string(),
+            "knob".into(),
+            "target".into(),
+            "achieved".into(),
+            "status".into(),
+            format!("mean RMSE {group}"),
+            "ANEES".into(),
+            "payload bits".into(),
+            "frame bits".into(),
+            "downlink bits".into(),
+        ]];
+        for c in row {
+            rows.push(vec![
+                c.label.clone(),
+                match (&c.knob, c.value) {
+                    (Some(k), Some(v)) => format!("{k} = {}", short(v)),
+                    _ => "—".into(),
+                },
+                format!("{:.1}", c.target),
+                format!("{:.1}", c.achieved),
+                c.status.text().into(),
+                format!("{:.4}", c.result.mean_rmse[group]),
+                format!("{:.3}", c.result.anees),
+                format!("{:.1}", c.result.bits_per_step),
+                format!("{:.1}", c.result.frame_bits_per_step),
+                format!("{:.1}", c.result.downlink_bits_per_step),
+            ]);
         }
+        let _ = writeln!(h, "<h3>budget {} bits per step</h3>", short(out.budgets[b]));
+        h.push_str(&html_table(&rows));
     }
+    Ok(())
+}
+
+/// The results table: every scheme's mean RMSE per group, steady-state MSE, ANEES, rate and
+/// bits, and the all-data bound when there is one.
+fn results_section(h: &mut String, input: &Input) {
+    let s = input.summary;
     let _ = writeln!(
         h,
         "<h2>Results{}</h2>",
@@ -637,34 +721,6 @@ pub fn render(input: &Input) -> Result<String, String> {
         rows.push(row);
     }
     h.push_str(&html_table(&rows));
-    let within = |i: usize| {
-        input.arena.is_none_or(|o| {
-            let c = &o.rows[0][i];
-            c.status == crate::engine::calibrate::Status::Calibrated
-                || c.achieved <= c.target * (1.0 + o.tolerance)
-        })
-    };
-    let sel = selected(s, 6, &within);
-    let _ = writeln!(h, "<h2>Per-step error</h2>\n<p>The all-data bound and the best schemes by mean RMSE of {}{}; bands: ±2 standard errors of the RMSE (delta method on the per-trial squared errors).</p>", esc(group), if input.arena.is_some() { " among those within the first budget" } else { "" });
-    let _ = writeln!(h, "<figure>{}</figure>", rmse_bands(input, &sel)?);
-    let tr = trace::trace(exp, 0, input.alone)?;
-    let _ = writeln!(
-        h,
-        "<h2>One trial</h2>\n<figure>{}</figure>",
-        trajectory(input, &tr, &sel)?
-    );
-    let _ = writeln!(
-        h,
-        "<h3>Who sent when (trial 0)</h3>\n<figure>{}</figure>",
-        timeline(input, &tr, &sel)
-    );
-    let _ = writeln!(
-        h,
-        "<h2>The scenario as run</h2>\n<pre>{}</pre>",
-        esc(input.scenario_text)
-    );
-    h.push_str("</body></html>\n");
-    Ok(h)
 }
 
 /// Whether an HTML text refers to anything outside itself: `src=` or `href=` attributes (any

@@ -229,46 +229,55 @@ pub fn lines_svg(
                 .build_cartesian_2d(x0..x1, ymin..(ymax * 1.1).max(ymin + 1e-12))
                 .map_err(plot_err)?);
         }
-        // The legend: a sample of each line (dashed when dashed, with its marker), then its name.
-        for (i, l) in data.iter().enumerate() {
-            let c = color(l.color);
-            let y = 40 + 18 * i as i32;
-            let (xa, xb) = (8, 40);
-            if l.dashed {
-                for seg in 0..3 {
-                    let s0 = xa + seg * 12;
-                    legend_area
-                        .draw(&PathElement::new(
-                            vec![(s0, y), (s0 + 7, y)],
-                            c.stroke_width(2),
-                        ))
-                        .map_err(plot_err)?;
-                }
-            } else if l.points.len() > 1 {
-                legend_area
-                    .draw(&PathElement::new(vec![(xa, y), (xb, y)], c.stroke_width(2)))
-                    .map_err(plot_err)?;
-            }
-            if l.markers || l.points.len() == 1 {
-                let p = (24, y);
-                match shape(l.color) {
-                    0 => legend_area.draw(&Circle::new(p, 4, c.filled())),
-                    1 => legend_area.draw(&TriangleMarker::new(p, 5, c.filled())),
-                    _ => legend_area.draw(&Cross::new(p, 4, c.stroke_width(2))),
-                }
-                .map_err(plot_err)?;
-            }
-            legend_area
-                .draw(&Text::new(
-                    l.name.clone(),
-                    (48, y - 7),
-                    ("sans-serif", 13).into_font().color(&BLACK),
-                ))
-                .map_err(plot_err)?;
-        }
+        draw_legend(&legend_area, data)?;
         root.present().map_err(plot_err)?;
     }
     Ok(buf)
+}
+
+/// The legend of [`lines_svg`] in its area right of the plot.
+fn draw_legend(
+    legend_area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    data: &[Line],
+) -> Result<(), String> {
+    // The legend: a sample of each line (dashed when dashed, with its marker), then its name.
+    for (i, l) in data.iter().enumerate() {
+        let c = color(l.color);
+        let y = 40 + 18 * i as i32;
+        let (xa, xb) = (8, 40);
+        if l.dashed {
+            for seg in 0..3 {
+                let s0 = xa + seg * 12;
+                legend_area
+                    .draw(&PathElement::new(
+                        vec![(s0, y), (s0 + 7, y)],
+                        c.stroke_width(2),
+                    ))
+                    .map_err(plot_err)?;
+            }
+        } else if l.points.len() > 1 {
+            legend_area
+                .draw(&PathElement::new(vec![(xa, y), (xb, y)], c.stroke_width(2)))
+                .map_err(plot_err)?;
+        }
+        if l.markers || l.points.len() == 1 {
+            let p = (24, y);
+            match shape(l.color) {
+                0 => legend_area.draw(&Circle::new(p, 4, c.filled())),
+                1 => legend_area.draw(&TriangleMarker::new(p, 5, c.filled())),
+                _ => legend_area.draw(&Cross::new(p, 4, c.stroke_width(2))),
+            }
+            .map_err(plot_err)?;
+        }
+        legend_area
+            .draw(&Text::new(
+                l.name.clone(),
+                (48, y - 7),
+                ("sans-serif", 13).into_font().color(&BLACK),
+            ))
+            .map_err(plot_err)?;
+    }
+    Ok(())
 }
 
 /// Writes the figures of a run into `dir`; returns the files written.

@@ -68,19 +68,7 @@ pub(crate) fn arena_run(
 ) -> Result<(calibrate::Outcome, PathBuf), Failure> {
     let (text, source) = scenario_text(scenario)?;
     let budgets = budgets_of(args)?;
-    // The output folder is checked before the calibration runs, when its name is known.
-    let named_dir = args.out.clone().or_else(|| {
-        toml::from_str::<toml::Table>(&text)
-            .ok()
-            .and_then(|t| t.get("name").and_then(|n| n.as_str().map(str::to_string)))
-            .filter(|n| build::check_name(n).is_ok())
-            .map(|n| PathBuf::from("hushfuse-out").join(n))
-    });
-    let early_dir = named_dir
-        .as_deref()
-        .map(OutputDir::open)
-        .transpose()
-        .map_err(Failure::Input)?;
+    let early_dir = early_out_dir(args, &text)?;
     let axis = calibrate::Axis::parse(budget_axis(args)).map_err(Failure::Input)?;
     let load = build::LoadOptions {
         trials: args.trials,
@@ -90,18 +78,7 @@ pub(crate) fn arena_run(
             .allow_large
             .then(hushfuse::scenario::limits::Limits::none),
     };
-    // Room for one run's output per budget, checked before the first pilot run (a scenario
-    // that does not load is reported by the calibration with its full message).
-    if let (Some(d), Ok(exp)) = (&early_dir, build::load_with(&text, &source, &load)) {
-        let per_budget = hushfuse::scenario::limits::output_bytes(
-            exp.groups.len(),
-            exp.variants.len(),
-            exp.steps,
-            exp.trials,
-        );
-        output::check_free_space(d.dir(), per_budget * budgets.len() as f64)
-            .map_err(Failure::Input)?;
-    }
+    check_arena_room(&early_dir, &text, &source, &load, budgets.len())?;
     let opts = calibrate::Options {
         axis,
         pilot_trials: args.pilot_trials,
@@ -118,43 +95,10 @@ pub(crate) fn arena_run(
         }
     })?;
     let elapsed = start.elapsed().as_secs_f64();
-    let bad: Vec<String> = out
-        .summaries
-        .iter()
-        .zip(&budgets)
-        .flat_map(|(s, b)| {
-            results::non_finite(s)
-                .into_iter()
-                .map(move |m| format!("budget {}: {m}", calibrate::dir_label(*b)))
-        })
-        .collect();
-    check_finite(bad)?;
+    check_arena_finite(&out, &budgets)?;
     let first = &out.summaries[0];
     let group = first.group_order[0].clone();
-    let mut msg = format!(
-        "{} — {} trials x {} steps, seed {}, {} sensors: {} schemes calibrated to {} budget(s) on the {} axis ({} pilot runs, {:.1} s)\n",
-        first.scenario,
-        first.trials,
-        first.steps,
-        first.seed,
-        first.sensors,
-        out.rows[0].len(),
-        budgets.len(),
-        axis.name(),
-        out.evaluations,
-        elapsed
-    );
-    for (b, budget) in budgets.iter().enumerate() {
-        msg.push_str(&format!(
-            "\nbudget {} {} bits/step (tolerance {}%):\n",
-            calibrate::short(*budget),
-            axis.name(),
-            calibrate::short(100.0 * out.tolerance)
-        ));
-        msg.push_str(&calibrate::table(&out, b, &group));
-    }
-    msg.push_str("\nbest scheme per budget (lowest mean RMSE among schemes within the budget):\n");
-    msg.push_str(&arena::best_table(&out, &group));
+    let msg = arena_message(&out, &budgets, &axis, elapsed, &group);
     let dir = args
         .out
         .clone()
@@ -165,68 +109,9 @@ pub(crate) fn arena_run(
     };
     // The results first: a failed write below loses no computed number from sight.
     print_out(&msg);
-    let mut write =
-        |name: &str, text: &str| out_dir.stage(name, text.as_bytes()).map_err(Failure::Run);
-    let json = serde_json::json!({
-        "scenario": first.scenario,
-        "axis": axis.name(),
-        "tolerance": out.tolerance,
-        "pilot_runs": out.evaluations,
-        "seconds": elapsed,
-        "budgets": budgets,
-        "rows": out.rows.iter().map(|row| row.iter().map(|c| serde_json::json!({
-            "scheme": c.label, "kind": c.kind, "knob": c.knob, "value": c.value,
-            "target": c.target, "achieved": c.achieved, "status": c.status,
-            "bits_per_step": c.result.bits_per_step,
-            "frame_bits_per_step": c.result.frame_bits_per_step,
-            "downlink_bits_per_step": c.result.downlink_bits_per_step,
-            "mean_rmse": c.result.mean_rmse, "anees": c.result.anees,
-            "steady_state": c.result.steady_state,
-        })).collect::<Vec<_>>()).collect::<Vec<_>>(),
-    });
-    write(
-        "calibration.json",
-        &serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?,
-    )?;
-    write("best_per_budget.md", &arena::best_markdown(&out, &group))?;
-    let mut files = vec![
-        "calibration.json".to_string(),
-        "best_per_budget.md".to_string(),
-    ];
-    for (b, s) in out.summaries.iter().enumerate() {
-        let sub = format!("budget-{}", calibrate::dir_label(budgets[b]));
-        write(&format!("{sub}/scenario.toml"), &out.texts[b])?;
-        write(
-            &format!("{sub}/summary.json"),
-            &serde_json::to_string_pretty(s).map_err(|e| Failure::Run(e.to_string()))?,
-        )?;
-        write(&format!("{sub}/per_step.csv"), &results::per_step_csv(s))?;
-        files.push(format!("{sub}/"));
-    }
-    let plots = arena::write_plots(
-        &out,
-        &group,
-        &first.scenario,
-        out_dir.staging().map_err(Failure::Run)?,
-    )
-    .map_err(Failure::Run)?;
-    out_dir.record(plots.iter().cloned());
-    files.extend(plots);
+    let mut files = write_arena_files(&mut out_dir, &out, &budgets, &axis, elapsed, &group)?;
     if args.report {
-        let exp = build::load_with(&out.texts[0], &source, &opts.load)
-            .map_err(|e| Failure::Run(e.to_string()))?;
-        let page = html::render(&html::Input {
-            exp: &exp,
-            summary: &out.summaries[0],
-            scenario_text: &out.texts[0],
-            alone: true,
-            arena: Some(&out),
-            se_trials: exp.trials.min(200),
-        })
-        .map_err(Failure::Run)?;
-        out_dir
-            .stage("report.html", page.as_bytes())
-            .map_err(Failure::Run)?;
+        write_arena_report(&mut out_dir, &out, &source, &opts)?;
         files.push("report.html".into());
     }
     let hash = output::sha256_hex(
@@ -250,6 +135,185 @@ pub(crate) fn arena_run(
         files.join(", ")
     ));
     Ok((out, dir))
+}
+
+/// The arena's output folder when its name is known before the calibration runs (`--out`, or
+/// the scenario's valid `name`), opened (checked) early.
+fn early_out_dir(args: &RunArgs, text: &str) -> Result<Option<OutputDir>, Failure> {
+    // The output folder is checked before the calibration runs, when its name is known.
+    let named_dir = args.out.clone().or_else(|| {
+        toml::from_str::<toml::Table>(text)
+            .ok()
+            .and_then(|t| t.get("name").and_then(|n| n.as_str().map(str::to_string)))
+            .filter(|n| build::check_name(n).is_ok())
+            .map(|n| PathBuf::from("hushfuse-out").join(n))
+    });
+    let early_dir = named_dir
+        .as_deref()
+        .map(OutputDir::open)
+        .transpose()
+        .map_err(Failure::Input)?;
+    Ok(early_dir)
+}
+
+/// Refuses a calibration whose outputs (one run's per budget) would not fit on the disk of the
+/// early output folder.
+fn check_arena_room(
+    early_dir: &Option<OutputDir>,
+    text: &str,
+    source: &str,
+    load: &build::LoadOptions,
+    budget_count: usize,
+) -> Result<(), Failure> {
+    // Room for one run's output per budget, checked before the first pilot run (a scenario
+    // that does not load is reported by the calibration with its full message).
+    if let (Some(d), Ok(exp)) = (early_dir, build::load_with(text, source, load)) {
+        let per_budget = hushfuse::scenario::limits::output_bytes(
+            exp.groups.len(),
+            exp.variants.len(),
+            exp.steps,
+            exp.trials,
+        );
+        output::check_free_space(d.dir(), per_budget * budget_count as f64)
+            .map_err(Failure::Input)?;
+    }
+    Ok(())
+}
+
+/// Refuses a calibration outcome with a non-finite number in any budget's summary.
+fn check_arena_finite(out: &calibrate::Outcome, budgets: &[f64]) -> Result<(), Failure> {
+    let bad: Vec<String> = out
+        .summaries
+        .iter()
+        .zip(budgets)
+        .flat_map(|(s, b)| {
+            results::non_finite(s)
+                .into_iter()
+                .map(move |m| format!("budget {}: {m}", calibrate::dir_label(*b)))
+        })
+        .collect();
+    check_finite(bad)
+}
+
+/// The printed comparison: the headline, one table per budget, the best scheme per budget.
+fn arena_message(
+    out: &calibrate::Outcome,
+    budgets: &[f64],
+    axis: &calibrate::Axis,
+    elapsed: f64,
+    group: &str,
+) -> String {
+    let first = &out.summaries[0];
+    let mut msg = format!(
+        "{} — {} trials x {} steps, seed {}, {} sensors: {} schemes calibrated to {} budget(s) on the {} axis ({} pilot runs, {:.1} s)\n",
+        first.scenario,
+        first.trials,
+        first.steps,
+        first.seed,
+        first.sensors,
+        out.rows[0].len(),
+        budgets.len(),
+        axis.name(),
+        out.evaluations,
+        elapsed
+    );
+    for (b, budget) in budgets.iter().enumerate() {
+        msg.push_str(&format!(
+            "\nbudget {} {} bits/step (tolerance {}%):\n",
+            calibrate::short(*budget),
+            axis.name(),
+            calibrate::short(100.0 * out.tolerance)
+        ));
+        msg.push_str(&calibrate::table(out, b, group));
+    }
+    msg.push_str("\nbest scheme per budget (lowest mean RMSE among schemes within the budget):\n");
+    msg.push_str(&arena::best_table(out, group));
+    msg
+}
+
+/// Stages the arena's files (calibration.json, best_per_budget.md, each budget's folder, the
+/// plots) and returns their names as listed to the user.
+fn write_arena_files(
+    out_dir: &mut OutputDir,
+    out: &calibrate::Outcome,
+    budgets: &[f64],
+    axis: &calibrate::Axis,
+    elapsed: f64,
+    group: &str,
+) -> Result<Vec<String>, Failure> {
+    let first = &out.summaries[0];
+    let mut write =
+        |name: &str, text: &str| out_dir.stage(name, text.as_bytes()).map_err(Failure::Run);
+    let json = serde_json::json!({
+        "scenario": first.scenario,
+        "axis": axis.name(),
+        "tolerance": out.tolerance,
+        "pilot_runs": out.evaluations,
+        "seconds": elapsed,
+        "budgets": budgets,
+        "rows": out.rows.iter().map(|row| row.iter().map(|c| serde_json::json!({
+            "scheme": c.label, "kind": c.kind, "knob": c.knob, "value": c.value,
+            "target": c.target, "achieved": c.achieved, "status": c.status,
+            "bits_per_step": c.result.bits_per_step,
+            "frame_bits_per_step": c.result.frame_bits_per_step,
+            "downlink_bits_per_step": c.result.downlink_bits_per_step,
+            "mean_rmse": c.result.mean_rmse, "anees": c.result.anees,
+            "steady_state": c.result.steady_state,
+        })).collect::<Vec<_>>()).collect::<Vec<_>>(),
+    });
+    write(
+        "calibration.json",
+        &serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?,
+    )?;
+    write("best_per_budget.md", &arena::best_markdown(out, group))?;
+    let mut files = vec![
+        "calibration.json".to_string(),
+        "best_per_budget.md".to_string(),
+    ];
+    for (b, s) in out.summaries.iter().enumerate() {
+        let sub = format!("budget-{}", calibrate::dir_label(budgets[b]));
+        write(&format!("{sub}/scenario.toml"), &out.texts[b])?;
+        write(
+            &format!("{sub}/summary.json"),
+            &serde_json::to_string_pretty(s).map_err(|e| Failure::Run(e.to_string()))?,
+        )?;
+        write(&format!("{sub}/per_step.csv"), &results::per_step_csv(s))?;
+        files.push(format!("{sub}/"));
+    }
+    let plots = arena::write_plots(
+        out,
+        group,
+        &first.scenario,
+        out_dir.staging().map_err(Failure::Run)?,
+    )
+    .map_err(Failure::Run)?;
+    out_dir.record(plots.iter().cloned());
+    files.extend(plots);
+    Ok(files)
+}
+
+/// `--report`: stages report.html, the page of the first budget's run with the arena's tables.
+fn write_arena_report(
+    out_dir: &mut OutputDir,
+    out: &calibrate::Outcome,
+    source: &str,
+    opts: &calibrate::Options,
+) -> Result<(), Failure> {
+    let exp = build::load_with(&out.texts[0], source, &opts.load)
+        .map_err(|e| Failure::Run(e.to_string()))?;
+    let page = html::render(&html::Input {
+        exp: &exp,
+        summary: &out.summaries[0],
+        scenario_text: &out.texts[0],
+        alone: true,
+        arena: Some(out),
+        se_trials: exp.trials.min(200),
+    })
+    .map_err(Failure::Run)?;
+    out_dir
+        .stage("report.html", page.as_bytes())
+        .map_err(Failure::Run)?;
+    Ok(())
 }
 
 /// `hushfuse` without arguments: the quick arena, and which scheme wins at which budget.

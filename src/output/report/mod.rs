@@ -1,5 +1,8 @@
 //! `hushfuse reproduce`: our numbers beside the paper's published ones, and each of the paper's
 //! claims checked on our numbers.
+#[cfg(test)]
+mod tests;
+
 use crate::metrics::results::{curve_points, params_text, CurvePoint, Summary};
 use crate::scenario::build::Experiment;
 use crate::scenario::ClaimSpec;
@@ -167,88 +170,9 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                 b,
                 metric,
                 rate_range,
-            } => {
-                let (Some(ia), Some(ib)) = (curve_index(exp, a), curve_index(exp, b)) else {
-                    return missing(text, &format!("{a} / {b}"));
-                };
-                let pa = curve_points(exp, summary, ia);
-                let pb = curve_points(exp, summary, ib);
-                let mut evidence = Vec::new();
-                let mut verdict = Verdict::Holds;
-                let mut need: Option<usize> = None;
-                let mut compared = 0;
-                for p in pa
-                    .iter()
-                    .filter(|p| p.rate >= rate_range[0] && p.rate <= rate_range[1])
-                {
-                    let Some((d, se)) = below_difference(summary, p, &pb, metric) else {
-                        continue;
-                    };
-                    let va = metric_of(p, metric);
-                    if d == 0.0 && se == 0.0 {
-                        evidence.push(format!(
-                            "rate {:.3}: {va:.4} vs {va:.4} (identical on every trial: the same scheme, not counted)",
-                            p.rate
-                        ));
-                        continue;
-                    }
-                    compared += 1;
-                    let z = d / se;
-                    let v = Verdict::of_z(z);
-                    verdict = verdict.and(v);
-                    if v == Verdict::NotResolved {
-                        need = need.max(trials_to_resolve(summary.trials, z));
-                    }
-                    evidence.push(format!(
-                        "rate {:.3}: {va:.4} vs {:.4}, z = {z:.1} ({})",
-                        p.rate,
-                        va - d,
-                        v.label()
-                    ));
-                }
-                if compared == 0 {
-                    verdict = Verdict::Fails;
-                    evidence.push(format!(
-                        "no distinct rate of {a:?} in [{}, {}] is covered by {b:?}",
-                        rate_range[0], rate_range[1]
-                    ));
-                }
-                ClaimResult::new(
-                    text,
-                    verdict,
-                    need,
-                    format!(
-                        "{metric} of {a} vs {b} (criterion: difference below 0 by more than {Z_DECIDE} standard errors at every rate): {}",
-                        evidence.join("; ")
-                    ),
-                )
-            }
+            } => check_below(exp, summary, text, a, b, metric, rate_range),
             ClaimSpec::ReachesRateBelow { text, scheme, rate } => {
-                let Some(i) = curve_index(exp, scheme) else {
-                    return missing(text, scheme);
-                };
-                let lowest = summary
-                    .schemes
-                    .iter()
-                    .filter(|s| s.curve == i)
-                    .min_by(|x, y| x.steady_state.rate.total_cmp(&y.steady_state.rate));
-                let Some(low) = lowest else {
-                    return missing(text, scheme);
-                };
-                let (min, se) = (low.steady_state.rate, low.steady_state.rate_se);
-                let z = if se > 0.0 {
-                    (min - rate) / se
-                } else if min < *rate {
-                    f64::NEG_INFINITY
-                } else {
-                    f64::INFINITY
-                };
-                ClaimResult::new(
-                    text,
-                    Verdict::of_z(z),
-                    trials_to_resolve(summary.trials, z),
-                    format!("lowest steady-state rate of {scheme}: {min:.3} ± {se:.3} (bound {rate}; z = {z:.1}, criterion: below by more than {Z_DECIDE} standard errors)"),
-                )
+                check_reaches_rate_below(exp, summary, text, scheme, rate)
             }
             ClaimSpec::Better {
                 text,
@@ -281,137 +205,291 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
                 metric,
                 within,
                 tolerance_source,
-            } => {
-                let mut r = pairwise(summary, text, (a, a_params), (b, b_params), metric, |d, se, _, mb| {
-                    let rel = d.abs() / mb;
-                    let rel_se = se / mb;
-                    // Negative z supports the claim: |rel| is below the tolerance.
-                    let z = if rel_se > 0.0 {
-                        (rel - within) / rel_se
-                    } else if rel <= *within {
-                        f64::NEG_INFINITY
-                    } else {
-                        f64::INFINITY
-                    };
-                    (
-                        Verdict::of_z(z),
-                        trials_to_resolve(summary.trials, z),
-                        format!(
-                            "relative difference {:.1}% ± {:.1}% (criterion: <= {:.1}% ({tolerance_source}) by more than {Z_DECIDE} standard errors; z = {z:.1})",
-                            100.0 * rel,
-                            100.0 * rel_se,
-                            100.0 * within
-                        ),
-                    )
-                });
-                r.tolerance_source = Some(tolerance_source.clone());
-                r
-            }
+            } => check_close(
+                summary,
+                text,
+                (a, a_params),
+                (b, b_params),
+                metric,
+                within,
+                tolerance_source,
+            ),
             ClaimSpec::CloserToTarget { text, a, b, param, metric } => {
-                let value = |s: &crate::metrics::results::SchemeSummary| -> Option<f64> {
-                    match metric.as_str() {
-                        "transmissions_per_step" => Some(s.transmissions_per_step),
-                        "rate" => Some(s.rate),
-                        _ => None,
-                    }
-                };
-                let mut verdict = Verdict::Holds;
-                let mut need: Option<usize> = None;
-                let mut evidence = Vec::new();
-                // Standard error of the metric (both are rates of transmissions).
-                let se_of = |s: &crate::metrics::results::SchemeSummary| -> f64 {
-                    if metric == "rate" {
-                        s.steady_state.rate_se
-                    } else {
-                        s.steady_state.rate_se * summary.sensors as f64
-                    }
-                };
-                for sa in summary.schemes.iter().filter(|s| &s.name == a) {
-                    let Some(crate::scenario::ParamValue::Number(target)) = sa.params.get(param) else {
-                        continue;
-                    };
-                    let Some(sb) = summary.schemes.iter().find(|s| {
-                        &s.name == b && s.params.get(param).is_some_and(|v| v.matches(&crate::scenario::ParamValue::Number(*target)))
-                    }) else {
-                        continue;
-                    };
-                    let (Some(va), Some(vb)) = (value(sa), value(sb)) else {
-                        return missing(text, metric);
-                    };
-                    // Unpaired (the steady-state rates are summaries): a conservative SE.
-                    let d = (va - target).abs() - (vb - target).abs();
-                    let se = se_of(sa).hypot(se_of(sb));
-                    let z = if se > 0.0 {
-                        d / se
-                    } else if d < 0.0 {
-                        f64::NEG_INFINITY
-                    } else {
-                        f64::INFINITY
-                    };
-                    let v = Verdict::of_z(z);
-                    verdict = verdict.and(v);
-                    if v == Verdict::NotResolved {
-                        need = need.max(trials_to_resolve(summary.trials, z));
-                    }
-                    evidence.push(format!(
-                        "{param} = {target}: {a} {va:.4}, {b} {vb:.4}, z = {z:.1} ({})",
-                        v.label()
-                    ));
-                }
-                if evidence.is_empty() {
-                    verdict = Verdict::Fails;
-                    evidence.push(format!("no common values of {param}"));
-                }
-                ClaimResult::new(
-                    text,
-                    verdict,
-                    need,
-                    format!(
-                        "{metric} (criterion: |{a} - target| below |{b} - target| by more than {Z_DECIDE} standard errors): {}",
-                        evidence.join("; ")
-                    ),
-                )
+                check_closer_to_target(summary, text, a, b, param, metric)
             }
-            ClaimSpec::Consistent { text, schemes } => {
-                let mut holds = true;
-                let mut worst: Option<(f64, String)> = None;
-                let mut count = 0;
-                for name in schemes {
-                    let Some(i) = curve_index(exp, name) else {
-                        return missing(text, name);
-                    };
-                    for s in summary.schemes.iter().filter(|s| s.curve == i) {
-                        count += 1;
-                        let ss = &s.steady_state;
-                        holds &= ss.mse <= ss.trace + 3.0 * ss.mse_se;
-                        let ratio = ss.mse / ss.trace;
-                        if worst.as_ref().is_none_or(|(w, _)| ratio > *w) {
-                            worst = Some((
-                                ratio,
-                                format!(
-                                    "{} [{}]: MSE {:.4} ± {:.4}, trace {:.4}",
-                                    s.name,
-                                    params_text(&s.params),
-                                    ss.mse,
-                                    ss.mse_se,
-                                    ss.trace
-                                ),
-                            ));
-                        }
-                    }
-                }
-                let (ratio, at) = worst.unwrap_or((f64::NAN, String::new()));
-                ClaimResult::new(
-                    text,
-                    if holds { Verdict::Holds } else { Verdict::Fails },
-                    None,
-                    format!(
-                        "{count} variants; largest MSE/trace = {ratio:.3} at {at} (criterion: MSE <= trace + 3 se)"
-                    ),
-                )
-            }
+            ClaimSpec::Consistent { text, schemes } => check_consistent(exp, summary, text, schemes),
         })
         .collect()
+}
+
+/// A `below` claim: `metric` of curve `a` below curve `b` (interpolated at the rates of `a`) by
+/// more than [`Z_DECIDE`] standard errors at every distinct rate of `a` in `rate_range`.
+fn check_below(
+    exp: &Experiment,
+    summary: &Summary,
+    text: &str,
+    a: &str,
+    b: &str,
+    metric: &str,
+    rate_range: &[f64; 2],
+) -> ClaimResult {
+    let (Some(ia), Some(ib)) = (curve_index(exp, a), curve_index(exp, b)) else {
+        return missing(text, &format!("{a} / {b}"));
+    };
+    let pa = curve_points(exp, summary, ia);
+    let pb = curve_points(exp, summary, ib);
+    let mut evidence = Vec::new();
+    let mut verdict = Verdict::Holds;
+    let mut need: Option<usize> = None;
+    let mut compared = 0;
+    for p in pa
+        .iter()
+        .filter(|p| p.rate >= rate_range[0] && p.rate <= rate_range[1])
+    {
+        let Some((d, se)) = below_difference(summary, p, &pb, metric) else {
+            continue;
+        };
+        let va = metric_of(p, metric);
+        if d == 0.0 && se == 0.0 {
+            evidence.push(format!(
+                "rate {:.3}: {va:.4} vs {va:.4} (identical on every trial: the same scheme, not counted)",
+                p.rate
+            ));
+            continue;
+        }
+        compared += 1;
+        let z = d / se;
+        let v = Verdict::of_z(z);
+        verdict = verdict.and(v);
+        if v == Verdict::NotResolved {
+            need = need.max(trials_to_resolve(summary.trials, z));
+        }
+        evidence.push(format!(
+            "rate {:.3}: {va:.4} vs {:.4}, z = {z:.1} ({})",
+            p.rate,
+            va - d,
+            v.label()
+        ));
+    }
+    if compared == 0 {
+        verdict = Verdict::Fails;
+        evidence.push(format!(
+            "no distinct rate of {a:?} in [{}, {}] is covered by {b:?}",
+            rate_range[0], rate_range[1]
+        ));
+    }
+    ClaimResult::new(
+        text,
+        verdict,
+        need,
+        format!(
+            "{metric} of {a} vs {b} (criterion: difference below 0 by more than {Z_DECIDE} standard errors at every rate): {}",
+            evidence.join("; ")
+        ),
+    )
+}
+
+/// A `reaches-rate-below` claim: the lowest steady-state rate of curve `scheme` below `rate`.
+fn check_reaches_rate_below(
+    exp: &Experiment,
+    summary: &Summary,
+    text: &str,
+    scheme: &str,
+    rate: &f64,
+) -> ClaimResult {
+    let Some(i) = curve_index(exp, scheme) else {
+        return missing(text, scheme);
+    };
+    let lowest = summary
+        .schemes
+        .iter()
+        .filter(|s| s.curve == i)
+        .min_by(|x, y| x.steady_state.rate.total_cmp(&y.steady_state.rate));
+    let Some(low) = lowest else {
+        return missing(text, scheme);
+    };
+    let (min, se) = (low.steady_state.rate, low.steady_state.rate_se);
+    let z = if se > 0.0 {
+        (min - rate) / se
+    } else if min < *rate {
+        f64::NEG_INFINITY
+    } else {
+        f64::INFINITY
+    };
+    ClaimResult::new(
+        text,
+        Verdict::of_z(z),
+        trials_to_resolve(summary.trials, z),
+        format!("lowest steady-state rate of {scheme}: {min:.3} ± {se:.3} (bound {rate}; z = {z:.1}, criterion: below by more than {Z_DECIDE} standard errors)"),
+    )
+}
+
+/// A `close` claim: the relative difference of `metric` between the variants `a` and `b`
+/// within `within` (from `tolerance_source`).
+fn check_close(
+    summary: &Summary,
+    text: &str,
+    (a, a_params): (&str, &crate::scenario::Params),
+    (b, b_params): (&str, &crate::scenario::Params),
+    metric: &str,
+    within: &f64,
+    tolerance_source: &str,
+) -> ClaimResult {
+    let mut r = pairwise(
+        summary,
+        text,
+        (a, a_params),
+        (b, b_params),
+        metric,
+        |d, se, _, mb| {
+            let rel = d.abs() / mb;
+            let rel_se = se / mb;
+            // Negative z supports the claim: |rel| is below the tolerance.
+            let z = if rel_se > 0.0 {
+                (rel - within) / rel_se
+            } else if rel <= *within {
+                f64::NEG_INFINITY
+            } else {
+                f64::INFINITY
+            };
+            (
+            Verdict::of_z(z),
+            trials_to_resolve(summary.trials, z),
+            format!(
+                "relative difference {:.1}% ± {:.1}% (criterion: <= {:.1}% ({tolerance_source}) by more than {Z_DECIDE} standard errors; z = {z:.1})",
+                100.0 * rel,
+                100.0 * rel_se,
+                100.0 * within
+            ),
+        )
+        },
+    );
+    r.tolerance_source = Some(tolerance_source.to_string());
+    r
+}
+
+/// A `closer-to-target` claim: at every common value of `param` (the target), `metric` of
+/// scheme `a` closer to it than that of scheme `b`.
+fn check_closer_to_target(
+    summary: &Summary,
+    text: &str,
+    a: &str,
+    b: &str,
+    param: &str,
+    metric: &str,
+) -> ClaimResult {
+    let value = |s: &crate::metrics::results::SchemeSummary| -> Option<f64> {
+        match metric {
+            "transmissions_per_step" => Some(s.transmissions_per_step),
+            "rate" => Some(s.rate),
+            _ => None,
+        }
+    };
+    let mut verdict = Verdict::Holds;
+    let mut need: Option<usize> = None;
+    let mut evidence = Vec::new();
+    // Standard error of the metric (both are rates of transmissions).
+    let se_of = |s: &crate::metrics::results::SchemeSummary| -> f64 {
+        if metric == "rate" {
+            s.steady_state.rate_se
+        } else {
+            s.steady_state.rate_se * summary.sensors as f64
+        }
+    };
+    for sa in summary.schemes.iter().filter(|s| s.name == a) {
+        let Some(crate::scenario::ParamValue::Number(target)) = sa.params.get(param) else {
+            continue;
+        };
+        let Some(sb) = summary.schemes.iter().find(|s| {
+            s.name == b
+                && s.params
+                    .get(param)
+                    .is_some_and(|v| v.matches(&crate::scenario::ParamValue::Number(*target)))
+        }) else {
+            continue;
+        };
+        let (Some(va), Some(vb)) = (value(sa), value(sb)) else {
+            return missing(text, metric);
+        };
+        // Unpaired (the steady-state rates are summaries): a conservative SE.
+        let d = (va - target).abs() - (vb - target).abs();
+        let se = se_of(sa).hypot(se_of(sb));
+        let z = if se > 0.0 {
+            d / se
+        } else if d < 0.0 {
+            f64::NEG_INFINITY
+        } else {
+            f64::INFINITY
+        };
+        let v = Verdict::of_z(z);
+        verdict = verdict.and(v);
+        if v == Verdict::NotResolved {
+            need = need.max(trials_to_resolve(summary.trials, z));
+        }
+        evidence.push(format!(
+            "{param} = {target}: {a} {va:.4}, {b} {vb:.4}, z = {z:.1} ({})",
+            v.label()
+        ));
+    }
+    if evidence.is_empty() {
+        verdict = Verdict::Fails;
+        evidence.push(format!("no common values of {param}"));
+    }
+    ClaimResult::new(
+        text,
+        verdict,
+        need,
+        format!(
+            "{metric} (criterion: |{a} - target| below |{b} - target| by more than {Z_DECIDE} standard errors): {}",
+            evidence.join("; ")
+        ),
+    )
+}
+
+/// A `consistent` claim: every variant of the curves `schemes` with steady-state MSE at most
+/// its trace plus 3 standard errors.
+fn check_consistent(
+    exp: &Experiment,
+    summary: &Summary,
+    text: &str,
+    schemes: &[String],
+) -> ClaimResult {
+    let mut holds = true;
+    let mut worst: Option<(f64, String)> = None;
+    let mut count = 0;
+    for name in schemes {
+        let Some(i) = curve_index(exp, name) else {
+            return missing(text, name);
+        };
+        for s in summary.schemes.iter().filter(|s| s.curve == i) {
+            count += 1;
+            let ss = &s.steady_state;
+            holds &= ss.mse <= ss.trace + 3.0 * ss.mse_se;
+            let ratio = ss.mse / ss.trace;
+            if worst.as_ref().is_none_or(|(w, _)| ratio > *w) {
+                worst = Some((
+                    ratio,
+                    format!(
+                        "{} [{}]: MSE {:.4} ± {:.4}, trace {:.4}",
+                        s.name,
+                        params_text(&s.params),
+                        ss.mse,
+                        ss.mse_se,
+                        ss.trace
+                    ),
+                ));
+            }
+        }
+    }
+    let (ratio, at) = worst.unwrap_or((f64::NAN, String::new()));
+    ClaimResult::new(
+        text,
+        if holds { Verdict::Holds } else { Verdict::Fails },
+        None,
+        format!(
+            "{count} variants; largest MSE/trace = {ratio:.3} at {at} (criterion: MSE <= trace + 3 se)"
+        ),
+    )
 }
 
 /// The one variant of curve `label` whose parameters include `params`.
@@ -723,116 +801,5 @@ fn verdict_text(c: &ClaimResult) -> String {
         }
         (Verdict::NotResolved, None) => "not resolved at this trial count".to_string(),
         (v, _) => v.label().to_string(),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::engine::runner;
-    use crate::metrics::results;
-    use crate::scenario::build;
-
-    /// A summary with two schemes "A" and "B" whose per-trial MSEs are given.
-    fn two(a: Vec<f64>, b: Vec<f64>) -> Summary {
-        let opts = build::LoadOptions {
-            trials: Some(2),
-            ..Default::default()
-        };
-        let text = crate::scenario::builtin::get("default").unwrap();
-        let exp = build::load_with(text, "default", &opts).unwrap();
-        let sums = runner::run(&exp, runner::RunOptions::default(), &|_| {}).unwrap();
-        let mut s = results::summarize(&exp, &sums);
-        s.trials = a.len();
-        let mut sa = s.schemes[0].clone();
-        let mut sb = s.schemes[0].clone();
-        sa.name = "A".into();
-        sb.name = "B".into();
-        sa.per_trial = a.into_iter().map(|v| vec![v]).collect();
-        sb.per_trial = b.into_iter().map(|v| vec![v]).collect();
-        s.schemes = vec![sa, sb];
-        s
-    }
-
-    fn better(s: &Summary) -> ClaimResult {
-        let none = crate::scenario::Params::default();
-        pairwise(
-            s,
-            "A beats B",
-            ("A", &none),
-            ("B", &none),
-            "mse",
-            |d, se, _, _| {
-                if d == 0.0 && se == 0.0 {
-                    return (Verdict::Fails, None, "identical".into());
-                }
-                let z = d / se;
-                (
-                    Verdict::of_z(z),
-                    trials_to_resolve(s.trials, z),
-                    String::new(),
-                )
-            },
-        )
-    }
-
-    /// Per-trial values with mean 0 and standard error exactly `se` over 100 trials
-    /// (alternating +-sqrt(var)).
-    fn noise(se: f64) -> Vec<f64> {
-        let n = 100.0_f64;
-        // sample sd s with s / sqrt(n) = se; alternating +-c has sd c sqrt(n / (n - 1)).
-        let c = se * n.sqrt() * ((n - 1.0) / n).sqrt();
-        (0..100).map(|i| if i % 2 == 0 { c } else { -c }).collect()
-    }
-
-    #[test]
-    fn identical_schemes_never_beat_each_other() {
-        let a: Vec<f64> = (0..100).map(|i| 1.0 + 0.01 * f64::from(i % 7)).collect();
-        let s = two(a.clone(), a);
-        let r = better(&s);
-        assert!(!r.holds);
-        assert_ne!(r.verdict, Verdict::Holds);
-        // ...and in the other direction either.
-        let none = crate::scenario::Params::default();
-        let r2 = pairwise(
-            &s,
-            "B beats A",
-            ("B", &none),
-            ("A", &none),
-            "mse",
-            |d, se, _, _| (Verdict::of_z(d / se), None, String::new()),
-        );
-        assert_ne!(r2.verdict, Verdict::Holds);
-    }
-
-    #[test]
-    fn ten_standard_errors_hold_and_one_is_not_resolved() {
-        let base: Vec<f64> = vec![2.0; 100];
-        for (k, expected) in [
-            (10.0, Verdict::Holds),
-            (1.0, Verdict::NotResolved),
-            (-10.0, Verdict::Fails),
-        ] {
-            let a: Vec<f64> = noise(0.01).iter().map(|e| 2.0 - k * 0.01 + e).collect();
-            let r = better(&two(a, base.clone()));
-            assert_eq!(r.verdict, expected, "{k} SE: {}", r.evidence);
-            assert_eq!(r.holds, expected == Verdict::Holds);
-            if expected == Verdict::NotResolved {
-                // 1 SE at 100 trials: (2.5 / 1)^2 x 100 = 625 trials.
-                assert_eq!(r.trials_to_resolve, Some(625));
-                assert!(verdict_text(&r).contains("625 trials"));
-            } else {
-                assert_eq!(r.trials_to_resolve, None);
-            }
-        }
-    }
-
-    #[test]
-    fn trials_to_resolve_follows_the_square_law() {
-        assert_eq!(trials_to_resolve(100, 1.25), Some(400));
-        assert_eq!(trials_to_resolve(100, 0.0), None);
-        assert_eq!(Verdict::of_z(-2.01), Verdict::Holds);
-        assert_eq!(Verdict::of_z(1.99), Verdict::NotResolved);
-        assert_eq!(Verdict::of_z(f64::NEG_INFINITY), Verdict::Holds);
     }
 }

@@ -1,0 +1,187 @@
+//! Tests of the sums: the NEES histogram, the row layout, recording and merging.
+use super::*;
+use crate::linalg::Matrix;
+
+#[test]
+fn histograms_merge_and_clear_only_what_they_touched_with_the_counts_of_a_full_pass() {
+    let fill = |values: &[f64]| {
+        let mut h = NeesHistogram::new();
+        values.iter().for_each(|&v| h.add(v));
+        h
+    };
+    let a = fill(&[1e-3, 0.5, 0.5, 2.0]);
+    let b = fill(&[1e6, 3.0, f64::NAN, 1e-9]);
+    // Values added divided, all at once: the counts and the touched range of one by one.
+    let mut d = NeesHistogram::new();
+    d.add_divided(&[2e-3, 1.0, 1.0, 4.0], 2.0);
+    assert_eq!((&d.counts, d.touched), (&a.counts, a.touched));
+    d.add_divided(&[], 2.0);
+    assert_eq!(d.touched, a.touched);
+    let mut m = NeesHistogram::new();
+    m.merge(&a);
+    m.merge(&b);
+    let full: Vec<u64> = a.counts.iter().zip(&b.counts).map(|(x, y)| x + y).collect();
+    assert_eq!(m.counts, full);
+    assert_eq!(m.total(), 8);
+    // One read back from a file touches every bin.
+    let back: NeesHistogram = serde_json::from_str(&serde_json::to_string(&m).unwrap()).unwrap();
+    assert_eq!(back.touched, NeesHistogram::every_bin());
+    let mut twice = back.clone();
+    twice.merge(&back);
+    assert_eq!(twice.total(), 16);
+    twice.clear();
+    assert_eq!(twice, NeesHistogram::new());
+    m.clear();
+    assert_eq!(m.counts, NeesHistogram::new().counts);
+}
+
+#[test]
+fn the_fast_histogram_bin_is_the_bin_of_the_library_log10() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(7);
+    let mut worst: f64 = 0.0;
+    let mut check = |v: f64| {
+        assert_eq!(
+            NeesHistogram::bin(v),
+            NeesHistogram::exact_bin(v),
+            "value {v:e}"
+        );
+        if let Some(t) = approx_t(v) {
+            let exact = (v.log10() - NeesHistogram::LO) * NeesHistogram::PER_DECADE;
+            worst = worst.max((t - exact).abs());
+        }
+    };
+    // Log-uniform over 1e-8 .. 1e16 (beyond both ends of the histogram).
+    for _ in 0..400_000 {
+        let v = 10f64.powf(rng.random_range(-8.0..16.0));
+        check(v);
+    }
+    // Every bin edge and its floating-point neighbours, where the cheap value cannot
+    // decide and the library's log10 must.
+    for b in 0..=NeesHistogram::BINS + 1 {
+        let edge = 10f64.powf(NeesHistogram::LO + b as f64 / NeesHistogram::PER_DECADE);
+        let mut v = edge;
+        for _ in 0..4 {
+            v = v.next_down();
+        }
+        for _ in 0..9 {
+            check(v);
+            v = v.next_up();
+        }
+    }
+    // Around the margin: t a few APPROX_T_ERROR from every edge, where the fast path
+    // starts or stops deciding.
+    for b in 0..=NeesHistogram::BINS + 1 {
+        for d in [-3.0, -1.0, -0.5, 0.5, 1.0, 3.0] {
+            let t = b as f64 + d * APPROX_T_ERROR;
+            check(10f64.powf(NeesHistogram::LO + t / NeesHistogram::PER_DECADE));
+        }
+    }
+    for v in [
+        0.0,
+        -0.0,
+        -1.0,
+        f64::MIN_POSITIVE,
+        f64::MIN_POSITIVE / 4.0,
+        f64::MAX,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+        1.0,
+        1e-4,
+        1e12,
+    ] {
+        check(v);
+    }
+    assert!(worst < 1e-8, "approximation error {worst:e}");
+    assert!(worst < APPROX_T_ERROR / 100.0);
+}
+
+#[test]
+fn records_hand_computed_errors_and_merges() {
+    let groups = vec![("a".to_string(), vec![0]), ("b".to_string(), vec![1])];
+    let mut s = Sums::new(2, 2, 2);
+    let truth = Vector::from_vec(vec![1.0, 2.0]);
+    let est = Gaussian::new(
+        Vector::from_vec(vec![2.0, 4.0]),
+        Matrix::from_diagonal(&Vector::from_vec(vec![1.0, 4.0])),
+    );
+    let mut t = s.trial(&groups, 2);
+    let traffic = Traffic {
+        messages: 3,
+        bits: 96,
+        frame_bits: 400,
+        downlink_bits: 64,
+    };
+    t.record(1, &truth, &est, traffic).unwrap();
+    t.record(2, &truth, &est, traffic).unwrap();
+    t.finish();
+    let l = s.layout();
+    assert_eq!(s.at(0, l.group(0)), 1.0);
+    assert_eq!(s.at(0, l.group(1)), 4.0);
+    assert_eq!(s.at(1, Layout::TOTAL_SE), 5.0);
+    assert_eq!(s.at(1, Layout::NEES), 2.0); // 1/1 + 4/4
+    assert_eq!(s.at(1, Layout::TRACE), 5.0);
+    assert_eq!(s.at(1, Layout::BITS), 96.0);
+    assert_eq!(s.at(1, Layout::FRAME_BITS), 400.0);
+    assert_eq!(s.at(1, Layout::DOWNLINK_BITS), 64.0);
+    assert_eq!(s.steady_mse.sum, 5.0);
+    assert_eq!(s.per_trial, vec![5.0, 1.0, 4.0]);
+    assert_eq!(
+        s.per_trial_rows().collect::<Vec<_>>(),
+        vec![&[5.0, 1.0, 4.0][..]]
+    );
+    let mut m = s.clone();
+    m.merge(&s);
+    assert_eq!(m.trials, 2);
+    // Cleared sums are new sums.
+    let mut cleared = m.clone();
+    cleared.clear();
+    assert_eq!(cleared, Sums::new(2, 2, 2));
+    assert_eq!(m.at(1, Layout::TOTAL_SE), 10.0);
+    let (mean, se) = m.steady_mse.mean_se(2);
+    assert_eq!((mean, se), (5.0, 0.0));
+}
+
+#[test]
+fn second_moments_and_whole_run_averages_give_hand_computed_standard_errors() {
+    // One 1-D state, 3 trials x 2 steps; the estimate is off by e(t, k), covariance 1.
+    let groups = vec![("x".to_string(), vec![0])];
+    let errors = [[1.0, 2.0], [2.0, 0.0], [3.0, 1.0]];
+    let mut s = Sums::new(1, 2, 1);
+    let truth = Vector::from_vec(vec![0.0]);
+    for (t, e) in errors.iter().enumerate() {
+        let mut obs = s.trial(&groups, 1);
+        for (k, &e) in e.iter().enumerate() {
+            let est = Gaussian::new(Vector::from_vec(vec![e]), Matrix::identity(1, 1));
+            let traffic = Traffic {
+                messages: t as _,
+                bits: 8 * k as u64,
+                ..Traffic::default()
+            };
+            obs.record(k + 1, &truth, &est, traffic).unwrap();
+        }
+        obs.finish();
+    }
+    // Step 1 squared errors 1, 4, 9: mean 14/3, sample variance (98 - 196/3) / 2 = 49/3,
+    // se sqrt(49/9) = 7/3.
+    let (m, se) = s.mean_se_at(0, Layout::TOTAL_SE);
+    assert!((m - 14.0 / 3.0).abs() < 1e-12);
+    assert!((se - 7.0 / 3.0).abs() < 1e-12, "{se}");
+    // Per-trial time averages of the squared error: 2.5, 2, 5 -> mean 19/6; sample
+    // variance (35.25 - 361/12) / 2 = 31/12, se sqrt(31/36).
+    let (m, se) = s.whole_run[Layout::TOTAL_SE].mean_se(3);
+    assert!((m - 19.0 / 6.0).abs() < 1e-12);
+    assert!((se - (31.0f64 / 36.0).sqrt()).abs() < 1e-12, "{se}");
+    // Messages: trial t sends t per step; whole-run averages 0, 1, 2 -> se 1 / sqrt(3).
+    let (m, se) = s.whole_run[Layout::MESSAGES].mean_se(3);
+    assert_eq!(m, 1.0);
+    assert!((se - 1.0 / 3f64.sqrt()).abs() < 1e-12);
+    // Bits are 0 at step 1 and 8 at step 2 in every trial: no spread at either step.
+    assert_eq!(s.mean_se_at(1, Layout::BITS), (8.0, 0.0));
+    // Merging two halves gives the same second moments as one pass.
+    let mut m2 = Sums::new(1, 2, 1);
+    m2.merge(&s);
+    assert_eq!(m2.per_step_sq, s.per_step_sq);
+    assert_eq!(m2.whole_run, s.whole_run);
+}
