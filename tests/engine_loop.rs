@@ -146,7 +146,12 @@ fn the_links_and_bits_add_up_to_the_traffic_of_every_step() {
         {
             let sent = links.iter().filter(|l| **l == Link::Sent).count() as u64;
             assert_eq!(sent, traffic.messages, "variant {v}, step {}", k + 1);
-            assert_eq!(bits.iter().sum::<u64>(), traffic.bits, "variant {v}, step {}", k + 1);
+            assert_eq!(
+                bits.iter().sum::<u64>(),
+                traffic.bits,
+                "variant {v}, step {}",
+                k + 1
+            );
             for (l, b) in links.iter().zip(bits) {
                 assert_eq!(*l == Link::Sent, *b > 0, "variant {v}, step {}", k + 1);
             }
