@@ -177,11 +177,13 @@ impl Knob {
             grows: Direction::MoreBits,
         }
     }
-    /// The range as text, e.g. `[0.001 N, N]` or `[0, open)`.
+    /// The range as text, e.g. `[0.001 N, N]`, `[0, open)` or `integers 1..=8`.
     pub fn range_text(&self) -> String {
+        if self.integer {
+            return format!("integers {}..={}", self.lo.text(), self.hi.text());
+        }
         let close = if self.hi == Bound::Open { ")" } else { "]" };
-        let ints = if self.integer { "integers in " } else { "" };
-        format!("{ints}[{}, {}{close}", self.lo.text(), self.hi.text())
+        format!("[{}, {}{close}", self.lo.text(), self.hi.text())
     }
 }
 
