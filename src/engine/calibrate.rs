@@ -17,17 +17,21 @@
 //! (`pilot_trials`) the calibrated knob is rerun at the full trial count and the achieved budget
 //! is measured there (it then differs from the target by Monte Carlo error).
 //!
-//! **Knob ranges** ([`knob_range`]): a small table per kind, from the parameters' documented
-//! values: `rate` of `centralized-kf-random` in [0.001, 1]; `rate` of `dkf-alg1-random` in
-//! [0.5, 1]; `l` of `censored-pf` in [0.001 N, N] (N sensors); `bits` of
-//! `quantized-innovation` the integers 1..=8 (values that do not build, e.g. zhang above 3, end
-//! the range); every threshold (`alpha`, `delta`, `tau`) in [0, hi], hi found by quadrupling
-//! from 1 until the rate is below the smallest target (at most 4^12), or until it stops falling
-//! (a floor: hi is then the first value on it). A kind whose knob is not
-//! in the table but documents `number >= 0` is treated as a threshold.
+//! **Knob ranges** ([`knob_range`]): declared by each kind's registry entry
+//! ([`registry::Knob`]), from the parameters' documented values: `rate` of
+//! `centralized-kf-random` in [0.001, 1]; `rate` of `dkf-alg1-random` in [0.5, 1]; `l` of
+//! `censored-pf` in [0.001 N, N] (N sensors); `bits` of `quantized-innovation` the integers
+//! 1..=8 (values that do not build, e.g. zhang above 3, end the range); every threshold
+//! (`alpha`, `delta`, `tau`) in [0, hi], hi found by quadrupling from 1 until the rate is below
+//! the smallest target (at most 4^12), or until it stops falling (a floor: hi is then the first
+//! value on it).
+//!
+//! **Pilot runs** are built from the scenario parsed once ([`ScenarioFile`]) with the one
+//! entry's table, the knob set in it: no scenario text is written or parsed per pilot run.
 use crate::engine::runner;
 use crate::metrics::results::{self, SchemeSummary, Summary};
-use crate::scenario::build::{self, LoadOptions};
+use crate::scenario::build::{self, Experiment, LoadOptions};
+use crate::scenario::ScenarioFile;
 use crate::scheme::registry;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -82,33 +86,15 @@ pub struct KnobRange {
     pub integer: bool,
 }
 
-/// The range of `kind`'s knob on a system of `n_sensors` sensors (module docs).
+/// The range of `kind`'s knob on a system of `n_sensors` sensors: the registry's
+/// [`registry::Knob`] of the kind with its per-sensor ends resolved.
 pub fn knob_range(kind: &str, n_sensors: usize) -> Option<KnobRange> {
-    let r = |lo, hi, integer| Some(KnobRange { lo, hi, integer });
-    match kind {
-        "centralized-kf-random" => r(1e-3, Some(1.0), false),
-        "dkf-alg1-random" => r(0.5, Some(1.0), false),
-        "censored-pf" => r(1e-3 * n_sensors as f64, Some(n_sensors as f64), false),
-        "quantized-innovation" => r(1.0, Some(8.0), true),
-        "dkf-alg1-event"
-        | "dkf-alg2-event"
-        | "innovation-trigger-kf"
-        | "stochastic-trigger-open"
-        | "stochastic-trigger-closed"
-        | "send-on-delta"
-        | "ci-fusion"
-        | "naive-fusion" => r(0.0, None, false),
-        other => {
-            let e = registry::find(other)?;
-            let knob = e.knob?;
-            let doc = e.params.iter().find(|p| p.name == knob)?;
-            doc.values.starts_with("number >= 0").then_some(KnobRange {
-                lo: 0.0,
-                hi: None,
-                integer: false,
-            })
-        }
-    }
+    let k = registry::find(kind)?.knob?;
+    Some(KnobRange {
+        lo: k.lo.at(n_sensors)?,
+        hi: k.hi.at(n_sensors),
+        integer: k.integer,
+    })
 }
 
 /// How a scheme met its budget.
@@ -196,9 +182,26 @@ pub struct Outcome {
 
 struct Evaluator<'a> {
     base: toml::Table,
+    /// The scenario as parsed (once), without its schemes: a pilot run is this with one entry,
+    /// built directly (no TOML text per pilot run).
+    spec: ScenarioFile,
     file: &'a str,
     opts: &'a Options,
     evaluations: usize,
+    /// Tests: build each pilot run from the scenario text, as before the typed path.
+    #[cfg(test)]
+    via_text: bool,
+}
+
+/// `spec` with the caller's `trials` and `seed` (as [`build::load_with`] applies them).
+fn with_load(mut spec: ScenarioFile, load: &LoadOptions) -> ScenarioFile {
+    if let Some(t) = load.trials {
+        spec.trials = t;
+    }
+    if let Some(s) = load.seed {
+        spec.seed = s;
+    }
+    spec
 }
 
 impl Evaluator<'_> {
@@ -215,11 +218,26 @@ impl Evaluator<'_> {
         toml::to_string(&t).expect("a TOML table serializes")
     }
 
+    /// The experiment of `entry` alone, at `trials`.
+    fn experiment(&self, entry: &toml::Table, trials: Option<usize>) -> Result<Experiment, String> {
+        #[cfg(test)]
+        if self.via_text {
+            let text = self.text(std::slice::from_ref(entry), trials);
+            return build::load_with(&text, self.file, &self.opts.load).map_err(|e| e.to_string());
+        }
+        let mut spec = self.spec.clone();
+        spec.schemes = vec![entry.clone()];
+        if let Some(n) = trials {
+            spec.trials = n;
+        }
+        build::build_with(with_load(spec, &self.opts.load), self.file, &self.opts.load)
+            .map_err(|e| e.to_string())
+    }
+
     /// Runs `entry` alone; `Err` when it does not build (a knob value out of its range).
     fn run(&mut self, entry: &toml::Table, trials: Option<usize>) -> Result<Summary, String> {
         self.evaluations += 1;
-        let text = self.text(std::slice::from_ref(entry), trials);
-        let exp = build::load_with(&text, self.file, &self.opts.load).map_err(|e| e.to_string())?;
+        let exp = self.experiment(entry, trials)?;
         let sums = runner::run(
             &exp,
             runner::RunOptions {
@@ -273,6 +291,44 @@ fn entries(base: &toml::Table) -> Result<Vec<toml::Table>, String> {
         .collect()
 }
 
+/// What every scheme's calibration shares.
+struct Setup<'a> {
+    /// The whole scenario, validated.
+    full: Experiment,
+    /// Its scheme entries, one point each.
+    list: Vec<toml::Table>,
+    n_sensors: usize,
+    trials: usize,
+    pilot: Option<usize>,
+    budgets: &'a [f64],
+    axis: Axis,
+    tol: f64,
+}
+
+/// The pilot runs of one scheme entry, cached by knob value; a failure keeps its cause.
+struct Pilot<'a> {
+    entry: &'a toml::Table,
+    knob: &'static str,
+    range: KnobRange,
+    trials: Option<usize>,
+    cache: BTreeMap<u64, Result<SchemeSummary, String>>,
+}
+
+impl Pilot<'_> {
+    fn eval(&mut self, ev: &mut Evaluator, x: f64) -> Result<SchemeSummary, String> {
+        let x = if self.range.integer { x.round() } else { x };
+        let (entry, knob, integer, trials) =
+            (self.entry, self.knob, self.range.integer, self.trials);
+        self.cache
+            .entry(x.to_bits())
+            .or_insert_with(|| {
+                ev.run(&with_knob(entry, knob, x, integer), trials)
+                    .map(|s| s.schemes[0].clone())
+            })
+            .clone()
+    }
+}
+
 /// Calibrates every scheme of the scenario `text` at every budget.
 pub fn calibrate(
     text: &str,
@@ -280,6 +336,17 @@ pub fn calibrate(
     budgets: &[f64],
     opts: &Options,
 ) -> Result<Outcome, String> {
+    let (mut ev, setup) = prepare(text, file, budgets, opts)?;
+    calibrate_all(&mut ev, &setup)
+}
+
+/// Checks the budgets, applies the caller's trials and seed, validates the whole scenario.
+fn prepare<'a>(
+    text: &str,
+    file: &'a str,
+    budgets: &'a [f64],
+    opts: &'a Options,
+) -> Result<(Evaluator<'a>, Setup<'a>), String> {
     if budgets.is_empty() || budgets.iter().any(|b| !(b.is_finite() && *b > 0.0)) {
         return Err("budgets must be positive numbers of bits per step".into());
     }
@@ -291,197 +358,294 @@ pub fn calibrate(
         base.insert("seed".into(), toml::Value::Integer(s as i64));
     }
     // Validate the whole scenario first (errors name the original file and field).
-    let full = build::load_with(&toml::to_string(&base).expect("table"), file, &opts.load)
+    let mut spec =
+        build::parse(&toml::to_string(&base).expect("table"), file).map_err(|e| e.to_string())?;
+    let full = build::build_with(with_load(spec.clone(), &opts.load), file, &opts.load)
         .map_err(|e| e.to_string())?;
+    spec.schemes.clear();
     let n_sensors = full.system.n_sensors();
     let trials = full.trials;
     let pilot = opts.pilot_trials.map(|p| p.clamp(1, trials));
     let list = entries(&base)?;
-    let mut ev = Evaluator {
+    let ev = Evaluator {
         base,
+        spec,
         file,
         opts,
         evaluations: 0,
+        #[cfg(test)]
+        via_text: false,
     };
-    let axis = opts.axis;
-    let tol = opts.tolerance.max(1e-6);
+    let setup = Setup {
+        full,
+        list,
+        n_sensors,
+        trials,
+        pilot,
+        budgets,
+        axis: opts.axis,
+        tol: opts.tolerance.max(1e-6),
+    };
+    Ok((ev, setup))
+}
+
+/// Every scheme at every budget, then the summaries and texts per budget.
+fn calibrate_all(ev: &mut Evaluator, s: &Setup) -> Result<Outcome, String> {
     let mut per_scheme: Vec<Vec<Calibrated>> = Vec::new();
-    for (ci, entry) in list.iter().enumerate() {
-        let kind = full.curves[ci].kind.clone();
-        let label = full.curves[ci].label.clone();
-        let reg = registry::find(&kind).ok_or("unknown kind")?;
-        let range = reg
-            .knob
-            .and_then(|k| knob_range(&kind, n_sensors).map(|r| (k, r)));
-        let mut rows = Vec::new();
-        let Some((knob, range)) = range else {
-            let s = ev.run(entry, None)?;
-            let r = s.schemes[0].clone();
-            for &b in budgets {
-                rows.push(Calibrated {
-                    label: label.clone(),
-                    kind: kind.clone(),
-                    knob: reg.knob.map(str::to_string),
-                    value: None,
-                    target: b,
-                    achieved: axis.of(&r),
-                    status: if reg.knob.is_some() {
-                        Status::NotTunable
-                    } else {
-                        Status::NoKnob
-                    },
-                    result: r.clone(),
-                });
-            }
-            per_scheme.push(rows);
-            continue;
-        };
-        // Pilot evaluations, cached by knob value; a failure keeps its cause.
-        let mut cache: BTreeMap<u64, Result<SchemeSummary, String>> = BTreeMap::new();
-        let mut eval = |ev: &mut Evaluator, x: f64| -> Result<SchemeSummary, String> {
-            let x = if range.integer { x.round() } else { x };
-            cache
-                .entry(x.to_bits())
-                .or_insert_with(|| {
-                    ev.run(&with_knob(entry, knob, x, range.integer), pilot)
-                        .map(|s| s.schemes[0].clone())
-                })
-                .clone()
-        };
-        let min_target = budgets.iter().copied().fold(f64::INFINITY, f64::min);
-        let mut chosen: Vec<(f64, SchemeSummary, Status)> = Vec::new();
-        if range.integer {
-            let mut points = Vec::new();
-            let mut first_err: Option<(f64, String)> = None;
-            let mut x = range.lo;
-            while x <= range.hi.unwrap_or(range.lo) + 0.5 {
-                match eval(&mut ev, x) {
-                    Ok(s) => points.push((x, s)),
-                    Err(e) if points.is_empty() => {
-                        first_err.get_or_insert((x, e));
-                    }
-                    Err(_) => break,
-                }
-                x += 1.0;
-            }
-            if points.is_empty() {
-                let cause = first_err
-                    .map(|(x, e)| format!(" (`{knob}` = {x}: {e})"))
-                    .unwrap_or_default();
-                return Err(format!("{label}: no value of `{knob}` builds{cause}"));
-            }
-            for &b in budgets {
-                let (x, s) = points
-                    .iter()
-                    .min_by(|p, q| {
-                        (axis.of(&p.1) - b)
-                            .abs()
-                            .total_cmp(&(axis.of(&q.1) - b).abs())
-                    })
-                    .expect("non-empty");
-                let st = if (axis.of(s) - b).abs() <= tol * b {
-                    Status::Calibrated
-                } else {
-                    Status::NearestInteger
-                };
-                chosen.push((*x, s.clone(), st));
-            }
-        } else {
-            let lo = range.lo;
-            let f_lo = eval(&mut ev, lo)
-                .map_err(|e| format!("{label}: `{knob}` = {lo} does not build: {e}"))?;
-            let mut hi = range.hi.unwrap_or(1.0);
-            let mut f_hi = eval(&mut ev, hi)
-                .map_err(|e| format!("{label}: `{knob}` = {hi} does not build: {e}"))?;
-            if range.hi.is_none() {
-                let mut n = 0;
-                // Quadruple until below the smallest target; stop where the rate no longer
-                // falls (a scheme with a floor, e.g. Algorithm 1's send-after-silence), keeping
-                // the first value of the floor.
-                while axis.of(&f_hi) > min_target && n < 12 {
-                    match eval(&mut ev, hi * 4.0) {
-                        Ok(s) if axis.of(&s) < axis.of(&f_hi) => {
-                            hi *= 4.0;
-                            f_hi = s;
-                        }
-                        _ => break,
-                    }
-                    n += 1;
-                }
-            }
-            let increasing = axis.of(&f_hi) >= axis.of(&f_lo);
-            for &b in budgets {
-                let (a_lo, a_hi) = (axis.of(&f_lo), axis.of(&f_hi));
-                let (min, max) = (a_lo.min(a_hi), a_lo.max(a_hi));
-                if b <= min * (1.0 - tol) || b >= max * (1.0 + tol) {
-                    let at_lo = (b < min) == (a_lo <= a_hi);
-                    let (x, s) = if at_lo { (lo, &f_lo) } else { (hi, &f_hi) };
-                    let st = if (axis.of(s) - b).abs() <= tol * b {
-                        Status::Calibrated
-                    } else {
-                        Status::OutOfRange
-                    };
-                    chosen.push((x, s.clone(), st));
-                    continue;
-                }
-                let (mut a, mut c) = (lo, hi);
-                let mut best = if (a_lo - b).abs() < (a_hi - b).abs() {
-                    (lo, f_lo.clone())
-                } else {
-                    (hi, f_hi.clone())
-                };
-                for _ in 0..40 {
-                    if (axis.of(&best.1) - b).abs() <= tol * b {
-                        break;
-                    }
-                    let mid = 0.5 * (a + c);
-                    let Ok(s) = eval(&mut ev, mid) else { break };
-                    let f = axis.of(&s);
-                    if (f - b).abs() < (axis.of(&best.1) - b).abs() {
-                        best = (mid, s.clone());
-                    }
-                    if (f < b) == increasing {
-                        a = mid;
-                    } else {
-                        c = mid;
-                    }
-                }
-                let st = if (axis.of(&best.1) - b).abs() <= tol * b {
-                    Status::Calibrated
-                } else {
-                    Status::OutOfRange
-                };
-                chosen.push((best.0, best.1, st));
-            }
-        }
-        for ((x, mut s, st), &b) in chosen.into_iter().zip(budgets) {
-            if pilot.is_some_and(|p| p < trials) {
-                s = ev
-                    .run(&with_knob(entry, knob, x, range.integer), None)?
-                    .schemes[0]
-                    .clone();
-            }
-            rows.push(Calibrated {
-                label: label.clone(),
-                kind: kind.clone(),
-                knob: Some(knob.to_string()),
-                value: Some(if range.integer { x.round() } else { x }),
-                target: b,
-                achieved: axis.of(&s),
-                status: st,
-                result: s,
-            });
-        }
-        per_scheme.push(rows);
+    for (ci, entry) in s.list.iter().enumerate() {
+        per_scheme.push(calibrate_entry(ev, s, ci, entry)?);
     }
-    // Per budget: the summary of every scheme at its knob, and the scenario as run.
+    Ok(assemble(ev, s, &per_scheme))
+}
+
+/// One scheme entry at every budget.
+fn calibrate_entry(
+    ev: &mut Evaluator,
+    s: &Setup,
+    ci: usize,
+    entry: &toml::Table,
+) -> Result<Vec<Calibrated>, String> {
+    let kind = s.full.curves[ci].kind.clone();
+    let label = s.full.curves[ci].label.clone();
+    let reg = registry::find(&kind).ok_or("unknown kind")?;
+    let range = reg
+        .knob
+        .and_then(|k| knob_range(&kind, s.n_sensors).map(|r| (k.name, r)));
+    let Some((knob, range)) = range else {
+        return uncalibrated(ev, s, entry, &label, &kind, reg.knob.map(|k| k.name));
+    };
+    let mut p = Pilot {
+        entry,
+        knob,
+        range,
+        trials: s.pilot,
+        cache: BTreeMap::new(),
+    };
+    let chosen = if range.integer {
+        choose_integer(ev, s, &mut p, &label)?
+    } else {
+        choose_continuous(ev, s, &mut p, &label)?
+    };
+    let mut rows = Vec::new();
+    for ((x, mut sum, st), &b) in chosen.into_iter().zip(s.budgets) {
+        if s.pilot.is_some_and(|p| p < s.trials) {
+            sum = ev
+                .run(&with_knob(entry, knob, x, range.integer), None)?
+                .schemes[0]
+                .clone();
+        }
+        rows.push(Calibrated {
+            label: label.clone(),
+            kind: kind.clone(),
+            knob: Some(knob.to_string()),
+            value: Some(if range.integer { x.round() } else { x }),
+            target: b,
+            achieved: s.axis.of(&sum),
+            status: st,
+            result: sum,
+        });
+    }
+    Ok(rows)
+}
+
+/// A scheme without a knob (or whose knob cannot be set): run as it is, at every budget.
+fn uncalibrated(
+    ev: &mut Evaluator,
+    s: &Setup,
+    entry: &toml::Table,
+    label: &str,
+    kind: &str,
+    knob: Option<&str>,
+) -> Result<Vec<Calibrated>, String> {
+    let sum = ev.run(entry, None)?;
+    let r = sum.schemes[0].clone();
+    Ok(s.budgets
+        .iter()
+        .map(|&b| Calibrated {
+            label: label.to_string(),
+            kind: kind.to_string(),
+            knob: knob.map(str::to_string),
+            value: None,
+            target: b,
+            achieved: s.axis.of(&r),
+            status: if knob.is_some() {
+                Status::NotTunable
+            } else {
+                Status::NoKnob
+            },
+            result: r.clone(),
+        })
+        .collect())
+}
+
+/// An integer knob: every integer of the range (a value that does not build ends it), and the
+/// nearest per budget.
+fn choose_integer(
+    ev: &mut Evaluator,
+    s: &Setup,
+    p: &mut Pilot,
+    label: &str,
+) -> Result<Vec<(f64, SchemeSummary, Status)>, String> {
+    let (axis, tol, knob, range) = (s.axis, s.tol, p.knob, p.range);
+    let mut chosen = Vec::new();
+    let mut points = Vec::new();
+    let mut first_err: Option<(f64, String)> = None;
+    let mut x = range.lo;
+    while x <= range.hi.unwrap_or(range.lo) + 0.5 {
+        match p.eval(ev, x) {
+            Ok(s) => points.push((x, s)),
+            Err(e) if points.is_empty() => {
+                first_err.get_or_insert((x, e));
+            }
+            Err(_) => break,
+        }
+        x += 1.0;
+    }
+    if points.is_empty() {
+        let cause = first_err
+            .map(|(x, e)| format!(" (`{knob}` = {x}: {e})"))
+            .unwrap_or_default();
+        return Err(format!("{label}: no value of `{knob}` builds{cause}"));
+    }
+    for &b in s.budgets {
+        let (x, s) = points
+            .iter()
+            .min_by(|p, q| {
+                (axis.of(&p.1) - b)
+                    .abs()
+                    .total_cmp(&(axis.of(&q.1) - b).abs())
+            })
+            .expect("non-empty");
+        let st = if (axis.of(s) - b).abs() <= tol * b {
+            Status::Calibrated
+        } else {
+            Status::NearestInteger
+        };
+        chosen.push((*x, s.clone(), st));
+    }
+    Ok(chosen)
+}
+
+/// A continuous knob's two ends and their pilot runs; an open upper end is found by
+/// quadrupling from 1 until below the smallest target, or until the rate stops falling.
+#[allow(clippy::type_complexity)]
+fn ends(
+    ev: &mut Evaluator,
+    s: &Setup,
+    p: &mut Pilot,
+    label: &str,
+) -> Result<((f64, SchemeSummary), (f64, SchemeSummary)), String> {
+    let (axis, knob, range) = (s.axis, p.knob, p.range);
+    let min_target = s.budgets.iter().copied().fold(f64::INFINITY, f64::min);
+    let lo = range.lo;
+    let f_lo = p
+        .eval(ev, lo)
+        .map_err(|e| format!("{label}: `{knob}` = {lo} does not build: {e}"))?;
+    let mut hi = range.hi.unwrap_or(1.0);
+    let mut f_hi = p
+        .eval(ev, hi)
+        .map_err(|e| format!("{label}: `{knob}` = {hi} does not build: {e}"))?;
+    if range.hi.is_none() {
+        let mut n = 0;
+        // Quadruple until below the smallest target; stop where the rate no longer
+        // falls (a scheme with a floor, e.g. Algorithm 1's send-after-silence), keeping
+        // the first value of the floor.
+        while axis.of(&f_hi) > min_target && n < 12 {
+            match p.eval(ev, hi * 4.0) {
+                Ok(s) if axis.of(&s) < axis.of(&f_hi) => {
+                    hi *= 4.0;
+                    f_hi = s;
+                }
+                _ => break,
+            }
+            n += 1;
+        }
+    }
+    Ok(((lo, f_lo), (hi, f_hi)))
+}
+
+/// A continuous knob: its ends, then per budget the nearer end when the budget is out of
+/// reach, else a bisection.
+fn choose_continuous(
+    ev: &mut Evaluator,
+    s: &Setup,
+    p: &mut Pilot,
+    label: &str,
+) -> Result<Vec<(f64, SchemeSummary, Status)>, String> {
+    let (axis, tol) = (s.axis, s.tol);
+    let ((lo, f_lo), (hi, f_hi)) = ends(ev, s, p, label)?;
+    let increasing = axis.of(&f_hi) >= axis.of(&f_lo);
+    let mut chosen = Vec::new();
+    for &b in s.budgets {
+        let (a_lo, a_hi) = (axis.of(&f_lo), axis.of(&f_hi));
+        let (min, max) = (a_lo.min(a_hi), a_lo.max(a_hi));
+        if b <= min * (1.0 - tol) || b >= max * (1.0 + tol) {
+            let at_lo = (b < min) == (a_lo <= a_hi);
+            let (x, s) = if at_lo { (lo, &f_lo) } else { (hi, &f_hi) };
+            let st = if (axis.of(s) - b).abs() <= tol * b {
+                Status::Calibrated
+            } else {
+                Status::OutOfRange
+            };
+            chosen.push((x, s.clone(), st));
+            continue;
+        }
+        let best = if (a_lo - b).abs() < (a_hi - b).abs() {
+            (lo, f_lo.clone())
+        } else {
+            (hi, f_hi.clone())
+        };
+        chosen.push(bisect(ev, s, p, b, (lo, hi), best, increasing));
+    }
+    Ok(chosen)
+}
+
+/// Bisects `[lo, hi]` towards budget `b` from the nearer end `best` (at most 40 halvings).
+fn bisect(
+    ev: &mut Evaluator,
+    s: &Setup,
+    p: &mut Pilot,
+    b: f64,
+    (lo, hi): (f64, f64),
+    mut best: (f64, SchemeSummary),
+    increasing: bool,
+) -> (f64, SchemeSummary, Status) {
+    let (axis, tol) = (s.axis, s.tol);
+    let (mut a, mut c) = (lo, hi);
+    for _ in 0..40 {
+        if (axis.of(&best.1) - b).abs() <= tol * b {
+            break;
+        }
+        let mid = 0.5 * (a + c);
+        let Ok(s) = p.eval(ev, mid) else { break };
+        let f = axis.of(&s);
+        if (f - b).abs() < (axis.of(&best.1) - b).abs() {
+            best = (mid, s.clone());
+        }
+        if (f < b) == increasing {
+            a = mid;
+        } else {
+            c = mid;
+        }
+    }
+    let st = if (axis.of(&best.1) - b).abs() <= tol * b {
+        Status::Calibrated
+    } else {
+        Status::OutOfRange
+    };
+    (best.0, best.1, st)
+}
+
+/// Per budget: the summary of every scheme at its knob, and the scenario as run.
+fn assemble(ev: &Evaluator, s: &Setup, per_scheme: &[Vec<Calibrated>]) -> Outcome {
     let mut rows = Vec::new();
     let mut summaries = Vec::new();
     let mut texts = Vec::new();
-    let header = results::summarize(&full, &[]);
-    for b in 0..budgets.len() {
+    let header = results::summarize(&s.full, &[]);
+    for b in 0..s.budgets.len() {
         let row: Vec<Calibrated> = per_scheme.iter().map(|r| r[b].clone()).collect();
-        let tables: Vec<toml::Table> = list
+        let tables: Vec<toml::Table> = s
+            .list
             .iter()
             .zip(&row)
             .map(|(e, c)| match (&c.knob, c.value) {
@@ -489,7 +653,7 @@ pub fn calibrate(
                     e,
                     k,
                     v,
-                    knob_range(&c.kind, n_sensors).is_some_and(|r| r.integer),
+                    knob_range(&c.kind, s.n_sensors).is_some_and(|r| r.integer),
                 ),
                 _ => e.clone(),
             })
@@ -508,15 +672,15 @@ pub fn calibrate(
         summaries.push(summary);
         rows.push(row);
     }
-    Ok(Outcome {
-        budgets: budgets.to_vec(),
+    Outcome {
+        budgets: s.budgets.to_vec(),
         rows,
         summaries,
         texts,
         evaluations: ev.evaluations,
-        axis,
-        tolerance: tol,
-    })
+        axis: s.axis,
+        tolerance: s.tol,
+    }
 }
 
 /// The calibration table of one budget: target and achieved beside each scheme.
@@ -594,37 +758,4 @@ pub fn render(rows: &[Vec<String>]) -> String {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn short_drops_trailing_zeros_and_writes_huge_values_with_an_exponent() {
-        assert_eq!(short(24.0), "24");
-        assert_eq!(short(12.5), "12.5");
-        assert_eq!(short(0.123456), "0.1235");
-        assert_eq!(short(999_999_999.0), "999999999");
-        assert_eq!(short(1e9), "1e9");
-        assert_eq!(short(1e300), "1e300");
-        assert_eq!(short(1.23456789e12), "1.2346e12");
-        assert_eq!(bits_cell(384.0), "384.0");
-        assert_eq!(bits_cell(1e300), "1e300");
-    }
-
-    #[test]
-    fn directory_labels_read_back_as_their_budget() {
-        for v in [
-            24.0,
-            12.5,
-            24.00001,
-            24.00004,
-            1e9,
-            5e9,
-            1.23456789e12,
-            1e300,
-            2e-300,
-        ] {
-            let label = dir_label(v);
-            assert_eq!(label.parse::<f64>(), Ok(v), "{v}: {label}");
-        }
-    }
-}
+mod tests;

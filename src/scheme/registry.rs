@@ -8,6 +8,7 @@
 //! defaults and its validation; the scenario layer only attaches the file and the field path
 //! to a [`ParamError`].
 use super::{Scheme, SchemeError, System};
+use crate::model::MeasurementModel;
 use serde::de::DeserializeOwned;
 use std::sync::Arc;
 
@@ -87,6 +88,145 @@ pub trait SchemeParams: DeserializeOwned {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError>;
 }
 
+/// One end of a knob's range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Bound {
+    /// This value.
+    Fixed(f64),
+    /// This many times the number of sensors N (e.g. censored-pf's `l` in [0.001 N, N]).
+    PerSensor(f64),
+    /// No end (a threshold's upper end): the calibrator finds one by quadrupling from 1.
+    Open,
+}
+
+impl Bound {
+    /// The end on a system of `n_sensors` sensors; `None` for [`Bound::Open`].
+    pub fn at(self, n_sensors: usize) -> Option<f64> {
+        match self {
+            Bound::Fixed(v) => Some(v),
+            Bound::PerSensor(c) => Some(c * n_sensors as f64),
+            Bound::Open => None,
+        }
+    }
+    fn text(self) -> String {
+        match self {
+            Bound::Fixed(v) => format!("{v}"),
+            Bound::PerSensor(1.0) => "N".to_string(),
+            Bound::PerSensor(c) => format!("{c} N"),
+            Bound::Open => "open".to_string(),
+        }
+    }
+}
+
+/// How the calibrator steps between the ends of a knob's range.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scale {
+    /// Bisection at the arithmetic midpoint (integer knobs: every integer of the range).
+    Linear,
+    /// Bisection at the geometric midpoint (declared for completeness: no knob uses it yet).
+    Log,
+}
+
+/// Which way the bits per step move when a knob grows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Direction {
+    /// A send probability, an expected number of senders, quantizer bits.
+    MoreBits,
+    /// A trigger threshold.
+    FewerBits,
+}
+
+/// A scheme's bandwidth knob: the parameter that sets how much it talks, and where the
+/// calibrator may move it (`engine::calibrate`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Knob {
+    /// The parameter's name in scenario files.
+    pub name: &'static str,
+    /// Lower end of the range (never [`Bound::Open`]).
+    pub lo: Bound,
+    /// Upper end; [`Bound::Open`] for a threshold.
+    pub hi: Bound,
+    pub scale: Scale,
+    /// Integer values only (written as TOML integers).
+    pub integer: bool,
+    /// Which way the bits move as the knob grows. The calibrator measures the direction off
+    /// the two ends of the range on each system; this is what the scheme promises.
+    pub grows: Direction,
+}
+
+impl Knob {
+    /// A trigger threshold: [0, open), linear, fewer bits as it grows.
+    pub const fn threshold(name: &'static str) -> Self {
+        Self {
+            name,
+            lo: Bound::Fixed(0.0),
+            hi: Bound::Open,
+            scale: Scale::Linear,
+            integer: false,
+            grows: Direction::FewerBits,
+        }
+    }
+    /// A continuous knob on [lo, hi] whose bits grow with it, linear.
+    pub const fn rising(name: &'static str, lo: Bound, hi: Bound) -> Self {
+        Self {
+            name,
+            lo,
+            hi,
+            scale: Scale::Linear,
+            integer: false,
+            grows: Direction::MoreBits,
+        }
+    }
+    /// The range as text, e.g. `[0.001 N, N]`, `[0, open)` or `integers 1..=8`.
+    pub fn range_text(&self) -> String {
+        if self.integer {
+            return format!("integers {}..={}", self.lo.text(), self.hi.text());
+        }
+        let close = if self.hi == Bound::Open { ")" } else { "]" };
+        format!("[{}, {}{close}", self.lo.text(), self.hi.text())
+    }
+}
+
+/// Which systems a scheme applies to: what its builder refuses otherwise (with its default
+/// options; some options ask for more, e.g. censored-pf's `fusion = "exact"` needs linear
+/// sensors).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Applies {
+    /// Every system.
+    Any,
+    /// Linear sensors (z = H x + v) of any dimension.
+    LinearSensors,
+    /// Scalar measurements, linear or not.
+    ScalarMeasurements,
+    /// Scalar linear sensors (z = h x + v, h 1 x n).
+    ScalarLinearSensors,
+}
+
+impl Applies {
+    /// Whether `system` is one the scheme applies to.
+    pub fn holds(self, system: &System) -> bool {
+        let all = |f: &dyn Fn(&dyn MeasurementModel) -> bool| {
+            system.sensors.iter().all(|s| f(s.as_ref()))
+        };
+        match self {
+            Applies::Any => true,
+            Applies::LinearSensors => all(&|s| s.as_linear().is_some()),
+            Applies::ScalarMeasurements => all(&|s| s.meas_dim() == 1),
+            Applies::ScalarLinearSensors => {
+                all(&|s| s.as_linear().is_some_and(|l| l.meas_dim() == 1))
+            }
+        }
+    }
+    pub fn text(self) -> &'static str {
+        match self {
+            Applies::Any => "any system",
+            Applies::LinearSensors => "linear sensors",
+            Applies::ScalarMeasurements => "scalar measurements",
+            Applies::ScalarLinearSensors => "scalar linear sensors",
+        }
+    }
+}
+
 /// Parses a scheme table and builds the scheme.
 pub type BuildFn = fn(toml::Table, &BuildContext) -> Result<Box<dyn Scheme>, ParamError>;
 
@@ -102,7 +242,9 @@ pub struct SchemeEntry {
     pub params: &'static [ParamDoc],
     /// The parameter that sets how much the scheme talks (a rate, a threshold, a number of
     /// levels), for calibrating schemes to one bit budget; `None` if it has none.
-    pub knob: Option<&'static str>,
+    pub knob: Option<Knob>,
+    /// Which systems the scheme builds on (with its default options).
+    pub applies: Applies,
     /// Parses a scheme table (its parameters only: no `kind`, `label`, `sweep`, `frontier`)
     /// and builds the scheme.
     pub build: BuildFn,
@@ -172,8 +314,17 @@ pub fn describe() -> String {
             example
         ));
         if let Some(k) = e.knob {
-            out.push_str(&format!("  bandwidth knob: {k}\n"));
+            out.push_str(&format!(
+                "  bandwidth knob: {} in {} ({} as it grows)\n",
+                k.name,
+                k.range_text(),
+                match k.grows {
+                    Direction::MoreBits => "more bits",
+                    Direction::FewerBits => "fewer bits",
+                }
+            ));
         }
+        out.push_str(&format!("  applies to: {}\n", e.applies.text()));
         for p in e.params {
             out.push_str(&format!(
                 "  {:<16} {:<34} default {:<12} {}\n",
@@ -239,7 +390,7 @@ pub fn markdown() -> String {
             e.kind, e.label, e.summary
         ));
         if let Some(k) = e.knob {
-            out.push_str(&format!("\nBandwidth knob: `{k}`.\n"));
+            out.push_str(&format!("\nBandwidth knob: `{}`.\n", k.name));
         }
         let example = e.example.trim().replace('\n', ", ");
         out.push_str(&format!(
@@ -302,10 +453,12 @@ mod tests {
             assert!(!e.label.is_empty() && !e.summary.is_empty(), "{}", e.kind);
             if let Some(k) = e.knob {
                 assert!(
-                    e.params.iter().any(|p| p.name == k),
-                    "{}: knob {k} is not a documented parameter",
-                    e.kind
+                    e.params.iter().any(|p| p.name == k.name),
+                    "{}: knob {} is not a documented parameter",
+                    e.kind,
+                    k.name
                 );
+                assert!(k.lo != Bound::Open, "{}: the lower end is open", e.kind);
             }
         }
     }

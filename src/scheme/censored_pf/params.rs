@@ -204,7 +204,12 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
             meaning: "Monte Carlo draws of the Prop. 3 / 6 integral (no feedback)",
         },
     ],
-    knob: Some("l"),
+    knob: Some(registry::Knob::rising(
+        "l",
+        registry::Bound::PerSensor(1e-3),
+        registry::Bound::PerSensor(1.0),
+    )),
+    applies: registry::Applies::Any,
     build: registry::parse_and_build::<CensoredPfParams>,
     example: "l = 1.0\nparticles = 200",
 };

@@ -41,6 +41,7 @@ pub const ALL: SchemeEntry = SchemeEntry {
         "KF at the fusion center with every raw measurement (32 bits per component): the bound",
     params: &[],
     knob: None,
+    applies: registry::Applies::Any,
     build: registry::parse_and_build::<AllParams>,
     example: "",
 };
@@ -56,7 +57,12 @@ pub const RANDOM: SchemeEntry = SchemeEntry {
         default: "required",
         meaning: "probability that a sensor sends its measurement at a step",
     }],
-    knob: Some("rate"),
+    knob: Some(registry::Knob::rising(
+        "rate",
+        registry::Bound::Fixed(1e-3),
+        registry::Bound::Fixed(1.0),
+    )),
+    applies: registry::Applies::Any,
     build: registry::parse_and_build::<RandomParams>,
     example: "rate = 0.5",
 };

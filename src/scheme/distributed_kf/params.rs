@@ -108,6 +108,7 @@ pub const FULL_RATE: SchemeEntry = SchemeEntry {
     summary: "globalized distributed KF, every sensor sends its estimate every step (Dormann et al., Section II)",
     params: &[],
     knob: None,
+    applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<FullRateParams>,
     example: "",
 };
@@ -122,7 +123,12 @@ pub const ALG1_RANDOM: SchemeEntry = SchemeEntry {
         default: "required",
         meaning: "average communication rate",
     }],
-    knob: Some("rate"),
+    knob: Some(registry::Knob::rising(
+        "rate",
+        registry::Bound::Fixed(0.5),
+        registry::Bound::Fixed(1.0),
+    )),
+    applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<Alg1RandomParams>,
     example: "rate = 0.75",
 };
@@ -132,7 +138,8 @@ pub const ALG1_EVENT: SchemeEntry = SchemeEntry {
     label: "Algorithm 1 (event-based)",
     summary: "Algorithm 1 with the event test (12) on the standard local KF (Dormann et al.)",
     params: &[ALPHA],
-    knob: Some("alpha"),
+    knob: Some(registry::Knob::threshold("alpha")),
+    applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<Alg1EventParams>,
     example: "alpha = 0.3",
 };
@@ -156,7 +163,8 @@ pub const ALG2_EVENT: SchemeEntry = SchemeEntry {
             meaning: "the bound B as a matrix (give `b` or `B`)",
         },
     ],
-    knob: Some("alpha"),
+    knob: Some(registry::Knob::threshold("alpha")),
+    applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<Alg2EventParams>,
     example: "alpha = 0.4\nb = 10.0",
 };

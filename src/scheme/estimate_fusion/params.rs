@@ -49,7 +49,8 @@ pub const CI: SchemeEntry = SchemeEntry {
     label: "Local KFs + covariance intersection",
     summary: "sensors run local KFs and send x (and P for nonlinear sensors); covariance intersection with the trace-minimizing weights (Julier & Uhlmann 1997)",
     params: &[DELTA],
-    knob: Some("delta"),
+    knob: Some(registry::Knob::threshold("delta")),
+    applies: registry::Applies::Any,
     build: build_ci,
     example: "",
 };
@@ -59,7 +60,8 @@ pub const NAIVE: SchemeEntry = SchemeEntry {
     label: "Local KFs + naive information sum",
     summary: "sensors run local KFs and send x (and P for nonlinear sensors); the center adds their informations as if independent (overconfident)",
     params: &[DELTA],
-    knob: Some("delta"),
+    knob: Some(registry::Knob::threshold("delta")),
+    applies: registry::Applies::Any,
     build: build_naive,
     example: "",
 };

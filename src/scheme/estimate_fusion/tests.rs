@@ -325,7 +325,7 @@ fn params_and_validation() {
     };
     for kind in ["ci-fusion", "naive-fusion"] {
         let entry = registry::find(kind).unwrap();
-        assert_eq!(entry.knob, Some("delta"));
+        assert_eq!(entry.knob.map(|k| k.name), Some("delta"));
         assert!(
             (entry.build)(toml::Table::new(), &cx).is_ok(),
             "delta defaults to 0"

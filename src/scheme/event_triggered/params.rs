@@ -123,7 +123,8 @@ pub const INNOVATION: SchemeEntry = SchemeEntry {
         default: "required",
         meaning: "threshold on the largest whitened innovation component (0: always send)",
     }],
-    knob: Some("delta"),
+    knob: Some(registry::Knob::threshold("delta")),
+    applies: registry::Applies::Any,
     build: registry::parse_and_build::<InnovationTriggerParams>,
     example: "delta = 1.0",
 };
@@ -133,7 +134,8 @@ pub const STOCHASTIC_OPEN: SchemeEntry = SchemeEntry {
     label: "Stochastic trigger, open loop (Han 2015)",
     summary: "Han et al., IEEE TAC 2015: silent iff zeta <= exp(-z^T Y z / 2), exact MMSE KF with silence noise R + Y^-1 (Theorem 1); no feedback",
     params: &[TAU, Y],
-    knob: Some("tau"),
+    knob: Some(registry::Knob::threshold("tau")),
+    applies: registry::Applies::Any,
     build: build_open,
     example: "tau = 1.0",
 };
@@ -143,7 +145,8 @@ pub const STOCHASTIC_CLOSED: SchemeEntry = SchemeEntry {
     label: "Stochastic trigger, closed loop (Han 2015)",
     summary: "Han et al., IEEE TAC 2015: silent iff zeta <= exp(-nu^T Y nu / 2) on the innovation, exact MMSE KF (Theorem 2); center feeds back x^-",
     params: &[TAU, Y],
-    knob: Some("tau"),
+    knob: Some(registry::Knob::threshold("tau")),
+    applies: registry::Applies::Any,
     build: build_closed,
     example: "tau = 1.0",
 };
@@ -166,7 +169,8 @@ pub const SEND_ON_DELTA: SchemeEntry = SchemeEntry {
             meaning: "uniform: silence is z_last with extra noise delta^2/3; ignore: no measurement",
         },
     ],
-    knob: Some("delta"),
+    knob: Some(registry::Knob::threshold("delta")),
+    applies: registry::Applies::Any,
     build: registry::parse_and_build::<SendOnDeltaParams>,
     example: "delta = 1.0",
 };

@@ -297,6 +297,7 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
         },
     ],
     knob: None,
+    applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<FtkfParams>,
     example: "tau = 5.0",
 };
@@ -308,6 +309,7 @@ pub const ROUND_ROBIN_KF: SchemeEntry = SchemeEntry {
               uncensored readings",
     params: &[NOISE_VAR],
     knob: None,
+    applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<RoundRobinKfParams>,
     example: "",
 };

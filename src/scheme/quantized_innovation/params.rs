@@ -174,7 +174,16 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
             meaning: "activate the k sensors nearest to the predicted position (placed sensors)",
         },
     ],
-    knob: Some("bits"),
+    knob: Some(registry::Knob {
+        name: "bits",
+        lo: registry::Bound::Fixed(1.0),
+        // Values that do not build (zhang above 3) end the range on the calibrator's walk.
+        hi: registry::Bound::Fixed(8.0),
+        scale: registry::Scale::Linear,
+        integer: true,
+        grows: registry::Direction::MoreBits,
+    }),
+    applies: registry::Applies::ScalarMeasurements,
     build: registry::parse_and_build::<QuantizedParams>,
     example: "quantizer = \"zhang\"\nbits = 1",
 };

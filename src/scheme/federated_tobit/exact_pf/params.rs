@@ -116,6 +116,7 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
         registry::ESS_THRESHOLD,
     ],
     knob: None,
+    applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<TobitPfParams>,
     example: "tau = 5.0\nparticles = 200",
 };
