@@ -1,4 +1,4 @@
-//! Rate calibration (issue 11 item 3): tune every scheme's bandwidth knob so that all schemes of
+//! Rate calibration: tune every scheme's bandwidth knob so that all schemes of
 //! a scenario spend the same bits per step, then compare their accuracy at that budget.
 //!
 //! **Method.** Each `[[schemes]]` entry is run *alone* (so its coins always come from the same

@@ -1,4 +1,4 @@
-//! The arena (issue 11 items 4 and 7): every scheme of a scenario at several bit budgets,
+//! The arena: every scheme of a scenario at several bit budgets,
 //! accuracy against bits per step, the Pareto front and the best scheme per budget.
 use crate::engine::calibrate::{render, short, Outcome, Status};
 use crate::output::plot::{self, Line};

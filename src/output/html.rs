@@ -1,4 +1,4 @@
-//! `report.html` (issue 11 item 5): one self-contained file — inline SVG figures, the tables,
+//! `report.html`: one self-contained file — inline SVG figures, the tables,
 //! the scenario as run, the version and seeds; no scripts, fonts, styles or images from
 //! anywhere else, so it reads offline and can be mailed as it is.
 use crate::engine::calibrate::{short, Outcome};

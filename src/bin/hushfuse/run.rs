@@ -410,7 +410,7 @@ pub(crate) fn write_run_outputs(
         paper,
     };
     // The two large files are streamed into their staged files, never held whole in memory:
-    // together they were most of the peak memory of a large run (issue 12).
+    // together they were most of the peak memory of a large run.
     out_dir
         .stage_with("summary.json", |w| {
             serde_json::to_writer_pretty(w, &out).map_err(std::io::Error::from)
