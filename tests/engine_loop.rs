@@ -1,6 +1,9 @@
 //! The engine's one trial loop (`engine::trial`), seen from outside: the mask of recorded
 //! readings, the per-sensor links and bits against the traffic, the fast-path hook against the
 //! loop, and the seeding rule.
+#[path = "common/cli.rs"]
+mod common;
+
 use hushfuse::engine::runner::{self, draw_trial};
 use hushfuse::engine::seeding::{coin_stream, coins, trial_rng, DATA_STREAM};
 use hushfuse::engine::trial::{
@@ -50,33 +53,17 @@ fn record(
 
 /// Schemes with coins, feedback, silence and a round-robin schedule, on two sensors.
 fn scenario() -> build::Experiment {
-    let text = r#"
-name = "loop"
-trials = 3
-steps = 30
-seed = 5
-
-[model]
-kind = "constant-velocity-1d"
-dt = 1.0
-sigma2 = 0.1
-
-[prior]
-mean = [0.0, 1.0]
-cov_diag = [1.0, 1.0]
-
-[groups]
-position = [0]
-
-[[sensors]]
-observe = [0]
-R_diag = [1.0]
-
-[[sensors]]
-H = [[1.0, 0.0]]
-R = [[2.0]]
-
-[[schemes]]
+    // The shared tiny model, prior and sensors, with this test's schemes.
+    let head = common::TINY
+        .split("[[schemes]]")
+        .next()
+        .unwrap()
+        .replacen("name = \"tiny\"", "name = \"loop\"", 1)
+        .replacen("trials = 8", "trials = 3", 1)
+        .replacen("steps = 20", "steps = 30", 1)
+        .replacen("seed = 1", "seed = 5", 1);
+    let text = format!(
+        r#"{head}[[schemes]]
 kind = "centralized-kf"
 
 [[schemes]]
@@ -94,8 +81,9 @@ particles = 200
 
 [[schemes]]
 kind = "round-robin-kf"
-"#;
-    build::load(text, "loop.toml").unwrap_or_else(|e| panic!("{e}"))
+"#
+    );
+    build::load(&text, "loop.toml").unwrap_or_else(|e| panic!("{e}"))
 }
 
 #[test]
