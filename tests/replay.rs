@@ -212,8 +212,8 @@ fn data_error(meas: &str, truth: Option<&str>) -> String {
         truth.map(|t| (t, "t.csv")),
         &ReplayOptions::default(),
     ) {
-        Err(ReplayError::Input(m)) => m,
         Err(ReplayError::Run(m)) => panic!("expected an input error, got a run error: {m}"),
+        Err(e) => e.to_string(),
         Ok(_) => panic!("expected an error for\n{meas}"),
     }
 }

@@ -3,6 +3,7 @@
 pub mod calibrate;
 pub mod durable;
 pub mod replay;
+pub mod run;
 pub mod runner;
 pub mod seeding;
 pub mod trace;

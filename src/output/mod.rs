@@ -5,6 +5,7 @@ pub mod folder;
 pub mod html;
 pub mod plot;
 pub mod report;
+pub mod run_files;
 pub mod tables;
 
 pub use folder::*;

@@ -73,6 +73,7 @@ fn toml_error(text: &str, file: &str, e: &toml::de::Error, path: &str) -> Scenar
         file: file.to_string(),
         field,
         message,
+        limit: None,
     }
 }
 
@@ -91,6 +92,7 @@ fn check_magnitudes(value: &toml::Value, path: &str, file: &str) -> Result<(), S
             message: format!(
                 "{x:e} is too large: numbers must stay within ±{MAX_MAGNITUDE:e} so that squared errors stay finite; rescale the units"
             ),
+            limit: None,
         }),
         toml::Value::Table(t) => t.iter().try_for_each(|(k, v)| {
             let p = if path.is_empty() {

@@ -10,6 +10,16 @@ pub struct ScenarioError {
     pub field: String,
     /// What was expected and what was found.
     pub message: String,
+    /// Set when the scenario is valid but the run would pass a limit of the machine (memory
+    /// or run time): callers tell "too large" from "wrong" by this, never by the message.
+    pub limit: Option<Limit>,
+}
+
+/// Which limit a valid scenario would pass.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Limit {
+    Memory,
+    Time,
 }
 
 impl fmt::Display for ScenarioError {
@@ -35,6 +45,7 @@ impl Ctx<'_> {
             file: self.file.to_string(),
             field: field.into(),
             message: message.into(),
+            limit: None,
         }
     }
 }

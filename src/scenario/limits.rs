@@ -2,7 +2,7 @@
 //! it is refused (`--allow-large` lifts them). The estimate is coarse on purpose: it exists to
 //! turn `steps = 9223372036854775807` or `particles = 10^9` into a clear error instead of an
 //! allocator abort or a run that never ends, not to predict run time to the second.
-use crate::scenario::error::ScenarioError;
+use crate::scenario::error::{Limit, ScenarioError};
 use crate::scheme::{Scheme, System};
 
 /// Limits of a run.
@@ -196,26 +196,33 @@ pub fn gib(b: f64) -> String {
 
 /// Refuses an estimate above the limits, with a message that says what to change.
 pub fn check(e: &Estimate, limits: &Limits, file: &str) -> Result<(), ScenarioError> {
-    let err = |message: String| ScenarioError {
+    let err = |limit: Limit, message: String| ScenarioError {
         file: file.to_string(),
         field: String::new(),
         message,
+        limit: Some(limit),
     };
     // NaN (an estimate that overflowed) is refused too.
     if e.memory_bytes.is_nan() || e.memory_bytes > limits.max_memory_bytes {
-        return Err(err(format!(
+        return Err(err(
+            Limit::Memory,
+            format!(
             "this run would hold about {} in memory, more than the limit of {}; lower `steps`, `trials` (or --trials), the number of variants or particles, or pass --allow-large",
             gib(e.memory_bytes),
             gib(limits.max_memory_bytes)
-        )));
+        ),
+        ));
     }
     if e.seconds.is_nan() || e.seconds > limits.max_seconds {
-        return Err(err(format!(
+        return Err(err(
+            Limit::Time,
+            format!(
             "this run would take about {:.0} hours on {} threads, more than the limit of {:.0} hours; lower `steps`, `trials` (or --trials), the number of variants or particles, or pass --allow-large",
             e.seconds / 3600.0,
             e.threads,
             limits.max_seconds / 3600.0
-        )));
+        ),
+        ));
     }
     Ok(())
 }

@@ -109,7 +109,15 @@ pub(crate) fn arena_run(
     };
     // The results first: a failed write below loses no computed number from sight.
     print_out(&msg);
-    let mut files = write_arena_files(&mut out_dir, &out, &budgets, &axis, elapsed, &group)?;
+    let mut files = write_arena_files(
+        &mut out_dir,
+        &out,
+        &budgets,
+        &axis,
+        elapsed,
+        &group,
+        (&source, &opts.load),
+    )?;
     if args.report {
         write_arena_report(&mut out_dir, &out, &source, &opts)?;
         files.push("report.html".into());
@@ -240,6 +248,7 @@ fn write_arena_files(
     axis: &calibrate::Axis,
     elapsed: f64,
     group: &str,
+    (source, load): (&str, &build::LoadOptions),
 ) -> Result<Vec<String>, Failure> {
     let first = &out.summaries[0];
     let mut write =
@@ -271,14 +280,26 @@ fn write_arena_files(
         "best_per_budget.md".to_string(),
     ];
     for (b, s) in out.summaries.iter().enumerate() {
-        let sub = format!("budget-{}", calibrate::dir_label(budgets[b]));
-        write(&format!("{sub}/scenario.toml"), &out.texts[b])?;
-        write(
-            &format!("{sub}/summary.json"),
-            &serde_json::to_string_pretty(s).map_err(|e| Failure::Run(e.to_string()))?,
-        )?;
-        write(&format!("{sub}/per_step.csv"), &results::per_step_csv(s))?;
-        files.push(format!("{sub}/"));
+        let sub = format!("budget-{}/", calibrate::dir_label(budgets[b]));
+        // The budget's scenario as run, rebuilt: the same files as a run of it would write.
+        let exp =
+            build::load_with(&out.texts[b], source, load).map_err(|e| Failure::Run(e.to_string()))?;
+        let results = run_files::Results {
+            exp: &exp,
+            summary: Some(s),
+            paper: None,
+            replay: None,
+        };
+        let parts = [
+            run_files::Part::Scenario {
+                name: "scenario.toml",
+                text: &out.texts[b],
+            },
+            run_files::Part::Summary,
+            run_files::Part::PerStep,
+        ];
+        run_files::stage(out_dir, &sub, &results, &parts).map_err(Failure::Run)?;
+        files.push(sub);
     }
     let plots = arena::write_plots(
         out,

@@ -48,9 +48,9 @@ pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
         truth.as_deref().zip(truth_name.as_deref()),
         &opts,
     )
-    .map_err(|e| match e {
-        replay::ReplayError::Input(m) => Failure::Input(m),
-        replay::ReplayError::Run(m) => Failure::Run(m),
+    .map_err(|e| match e.is_input() {
+        true => Failure::Input(e.to_string()),
+        false => Failure::Run(e.to_string()),
     })?;
     let elapsed = start.elapsed().as_secs_f64();
     let dir = a
@@ -59,7 +59,6 @@ pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
         .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(format!("{}-replay", r.exp.name)));
     // Staged and committed with a manifest, like every run's output (all or nothing).
     let mut out_dir = OutputDir::open(&dir).map_err(Failure::Input)?;
-    let mut staged: Vec<(&str, String)> = Vec::new();
     let readings: usize = r
         .recorded
         .available
@@ -77,42 +76,41 @@ pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
         r.exp.variants.len(),
         elapsed
     );
-    staged.push((
-        "estimates.csv",
-        replay::estimates_csv(&r.exp, &r.recorded, &r.replayed),
-    ));
     for n in &r.notes {
         msg.push_str(&format!("note: {n}\n"));
     }
-    let mut files = vec!["estimates.csv".to_string()];
     let mut bad = replay::non_finite_estimates(&r.exp, &r.replayed);
-    if let Some(sums) = &r.replayed.sums {
-        let summary = results::summarize(&r.exp, sums);
-        msg.push('\n');
-        msg.push_str(&results::table(&summary));
-        let json =
-            serde_json::to_string_pretty(&summary).map_err(|e| Failure::Run(e.to_string()))?;
-        staged.push(("summary.json", json));
-        staged.push(("per_step.csv", results::per_step_csv(&summary)));
-        files.extend(["summary.json".to_string(), "per_step.csv".to_string()]);
-        bad.extend(replay::non_finite(&summary));
-    } else {
-        msg.push_str("(no --truth: estimates only, no error metrics)\n");
+    let summary = r
+        .replayed
+        .sums
+        .as_ref()
+        .map(|sums| results::summarize(&r.exp, sums));
+    match &summary {
+        Some(summary) => {
+            msg.push('\n');
+            msg.push_str(&results::table(summary));
+            bad.extend(replay::non_finite(summary));
+        }
+        None => msg.push_str("(no --truth: estimates only, no error metrics)\n"),
     }
     // The results first: a failed write below loses nothing from sight.
     print_out(&msg);
     msg.clear();
-    // The files are in memory: their exact size (and the manifest's room) must fit.
-    let needed: usize = staged.iter().map(|(_, t)| t.len()).sum();
-    output::check_free_space(&dir, needed as f64 + 64.0 * 1024.0).map_err(Failure::Input)?;
-    for (name, text) in &staged {
-        out_dir.stage(name, text.as_bytes()).map_err(Failure::Run)?;
-    }
+    output::check_free_space(&dir, replay::output_bytes(&r.exp, summary.is_some()))
+        .map_err(Failure::Input)?;
+    let results = run_files::Results {
+        exp: &r.exp,
+        summary: summary.as_ref(),
+        paper: None,
+        replay: Some((&r.recorded, &r.replayed)),
+    };
+    let parts = run_files::replay_parts(summary.is_some());
+    run_files::stage(&mut out_dir, "", &results, &parts).map_err(Failure::Run)?;
     let mut manifest =
         output::Manifest::new("replay", &r.exp.name, &output::sha256_hex(text.as_bytes()));
     manifest.seed = Some(r.exp.seed);
     manifest.trials = Some(1);
-    out_dir.commit(manifest, false).map_err(Failure::Run)?;
+    let files = out_dir.commit(manifest, false).map_err(Failure::Run)?;
     msg.push_str(&format!(
         "\nwrote {}: {}\n",
         dir.display(),

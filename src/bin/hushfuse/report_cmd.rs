@@ -23,15 +23,7 @@ pub(crate) fn report_dir(dir: &Path) -> Result<(), Failure> {
             dir.display()
         )));
     }
-    let page = html::render(&html::Input {
-        exp: &exp,
-        summary: &summary,
-        scenario_text: &text,
-        alone: false,
-        arena: None,
-        se_trials: exp.trials.min(200),
-    })
-    .map_err(Failure::Run)?;
+    let page = run_files::report_page(&exp, &summary, &text).map_err(Failure::Run)?;
     let path = dir.join("report.html");
     match output::read_manifest(dir).map_err(Failure::Input)? {
         // Joins the run's files in its manifest.

@@ -32,6 +32,7 @@
 //!
 //! The files are read and checked on their own in `parse.rs`; this file checks them against the
 //! scenario, replays them and writes the replay's CSV files and memory checks.
+pub mod arrays;
 mod parse;
 
 use crate::engine::runner::TrialData;
@@ -425,7 +426,8 @@ pub fn truth_csv(data: &TrialData) -> String {
     out
 }
 
-/// A whole replay from CSV texts, as `hushfuse replay` runs it: the experiment, the data and
+/// A whole replay from CSV texts ([`replay_csv`], as `hushfuse replay` runs it) or arrays
+/// ([`arrays::replay_arrays`]): the experiment, the data and
 /// the replayed variants.
 pub struct CsvReplay {
     pub exp: Experiment,
@@ -435,18 +437,42 @@ pub struct CsvReplay {
     pub notes: Vec<String>,
 }
 
-/// Why a replay failed: bad input (scenario or data; the command line exits 2) or a failed
-/// run (exit 1).
+/// Why a replay failed. The first three are bad input (the command line exits 2), the last a
+/// failed run (exit 1); Python raises a different exception for each.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ReplayError {
-    Input(String),
+    /// The scenario cannot be read or is inconsistent.
+    Scenario(String),
+    /// The recorded data cannot be replayed (the message names the file, line and column).
+    Data(String),
+    /// The data or the replay would not fit in the memory limit.
+    TooLarge(String),
+    /// A scheme failed on the data.
     Run(String),
+}
+
+impl ReplayError {
+    /// Bad input rather than a failed run.
+    pub fn is_input(&self) -> bool {
+        !matches!(self, ReplayError::Run(_))
+    }
+
+    /// A scenario error as a replay error: one that passes a memory limit is [`TooLarge`](Self::TooLarge).
+    pub fn scenario(e: &ScenarioError) -> Self {
+        match e.limit {
+            Some(crate::scenario::error::Limit::Memory) => ReplayError::TooLarge(e.to_string()),
+            _ => ReplayError::Scenario(e.to_string()),
+        }
+    }
 }
 
 impl fmt::Display for ReplayError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            ReplayError::Input(m) | ReplayError::Run(m) => f.write_str(m),
+            ReplayError::Scenario(m)
+            | ReplayError::Data(m)
+            | ReplayError::TooLarge(m)
+            | ReplayError::Run(m) => f.write_str(m),
         }
     }
 }
@@ -472,27 +498,28 @@ pub fn replay_csv(
     truth: Option<(&str, &str)>,
     opts: &ReplayOptions,
 ) -> Result<CsvReplay, ReplayError> {
-    let input = |e: &dyn fmt::Display| ReplayError::Input(e.to_string());
+    let data = |e: DataError| ReplayError::Data(e.to_string());
+    let too_large = |e: DataError| ReplayError::TooLarge(e.to_string());
     let limits = opts.load.limits.unwrap_or_default();
     for (text, file) in std::iter::once(measurements).chain(truth) {
-        check_read(file, parse_bytes(text), text.len() as u64, &limits).map_err(|e| input(&e))?;
+        check_read(file, parse_bytes(text), text.len() as u64, &limits).map_err(too_large)?;
     }
-    let meas = parse_measurements(measurements.0, measurements.1).map_err(|e| input(&e))?;
+    let meas = parse_measurements(measurements.0, measurements.1).map_err(data)?;
     let truth = truth
         .map(|(text, file)| parse_truth(text, file))
         .transpose()
-        .map_err(|e| input(&e))?;
-    let steps = steps_of(&meas, truth.as_ref()).map_err(|e| input(&e))?;
+        .map_err(data)?;
+    let steps = steps_of(&meas, truth.as_ref()).map_err(data)?;
     check_replay_memory(
         scenario_text,
         source,
-        &meas,
+        &Readings::of(&meas),
         steps,
         truth.is_some(),
         opts,
         &limits,
     )
-    .map_err(|e| input(&e))?;
+    .map_err(too_large)?;
     // One trial, replayed on this thread.
     let load = LoadOptions {
         threads: if opts.load.threads == 0 {
@@ -502,9 +529,9 @@ pub fn replay_csv(
         },
         ..opts.load
     };
-    let (exp, notes) =
-        load_experiment(scenario_text, source, steps, opts.seed, &load).map_err(|e| input(&e))?;
-    let recorded = recorded(&exp, &meas, truth.as_ref()).map_err(|e| input(&e))?;
+    let (exp, notes) = load_experiment(scenario_text, source, steps, opts.seed, &load)
+        .map_err(|e| ReplayError::scenario(&e))?;
+    let recorded = recorded(&exp, &meas, truth.as_ref()).map_err(data)?;
     let replayed = replay(&exp, &recorded, opts.trial).map_err(ReplayError::Run)?;
     Ok(CsvReplay {
         exp,
@@ -582,15 +609,7 @@ pub fn replay_bytes(exp: &Experiment, steps: usize, rows: usize, truth: bool) ->
         + 8.0 * (n + n * n)
         + 2.0 * (VEC_BYTES + ALLOC_BYTES)
         + ns * (f(size_of::<Link>()) + 8.0);
-    // A number is written in at most 24 characters, a link and its bits in about 20.
-    let csv_row = |v: &crate::scenario::build::Variant| {
-        f(exp.curves[v.curve].label.len())
-            + f(crate::metrics::results::params_text(&v.params).len())
-            + 24.0
-            + 2.0 * n * 25.0
-            + ns * 20.0
-    };
-    let csv: f64 = 2.0 * t * exp.variants.iter().map(csv_row).sum::<f64>();
+    let csv = 2.0 * estimates_csv_bytes(exp, steps);
     let metrics = if truth {
         t * f(exp.variants.len()) * (f(exp.groups.len()) + 12.0) * 80.0
     } else {
@@ -599,13 +618,57 @@ pub fn replay_bytes(exp: &Experiment, steps: usize, rows: usize, truth: bool) ->
     readings + recorded + truth_bytes + t * f(exp.variants.len()) * per_step + csv + metrics
 }
 
+/// About how many bytes `estimates.csv` of `steps` steps takes (an upper bound): a number is
+/// written in at most 24 characters, a link and its bits in about 20.
+pub fn estimates_csv_bytes(exp: &Experiment, steps: usize) -> f64 {
+    let f = |x: usize| x as f64;
+    let (n, ns) = (f(exp.system.state_dim()), f(exp.system.n_sensors()));
+    let row = |v: &crate::scenario::build::Variant| {
+        f(exp.curves[v.curve].label.len())
+            + f(crate::metrics::results::params_text(&v.params).len())
+            + 24.0
+            + 2.0 * n * 25.0
+            + ns * 20.0
+    };
+    f(steps) * exp.variants.iter().map(row).sum::<f64>()
+}
+
+/// Room a replay's output folder needs: `estimates.csv`, with truth the one-trial
+/// `summary.json` and `per_step.csv`, and the manifest.
+pub fn output_bytes(exp: &Experiment, truth: bool) -> f64 {
+    let metrics = if truth {
+        crate::scenario::limits::output_bytes(exp.groups.len(), exp.variants.len(), exp.steps, 1)
+    } else {
+        0.0
+    };
+    estimates_csv_bytes(exp, exp.steps) + metrics + 64.0 * 1024.0
+}
+
+/// What the memory check needs of the recorded readings: where they come from, how many there
+/// are and the last step they name.
+pub(super) struct Readings<'a> {
+    pub(super) file: &'a str,
+    pub(super) rows: usize,
+    pub(super) last_step: usize,
+}
+
+impl<'a> Readings<'a> {
+    fn of(meas: &'a MeasTable) -> Self {
+        Self {
+            file: &meas.file,
+            rows: meas.rows.len(),
+            last_step: meas.rows.last().map_or(0, |r| r.step),
+        }
+    }
+}
+
 /// Refuses a replay whose data would not fit: the experiment (one trial, one thread) and
 /// [`replay_bytes`], from a build of the scenario for one step (dimensions and variants do not
 /// depend on the steps). A scenario that does not build for one step is left to the real load.
-fn check_replay_memory(
+pub(super) fn check_replay_memory(
     scenario_text: &str,
     source: &str,
-    meas: &MeasTable,
+    meas: &Readings,
     steps: usize,
     truth: bool,
     opts: &ReplayOptions,
@@ -638,16 +701,16 @@ fn check_replay_memory(
         steps,
         1,
     );
-    let bytes = base.memory_bytes + replay_bytes(&probe, steps, meas.rows.len(), truth);
+    let bytes = base.memory_bytes + replay_bytes(&probe, steps, meas.rows, truth);
     if bytes.is_nan() || bytes > limits.max_memory_bytes {
-        let last = meas.rows.last().map_or(0, |r| r.step);
+        let last = meas.last_step;
         return Err(err_at(
             &meas.file,
             None,
             None,
             format!(
                 "a replay of its {steps} steps ({} readings of {} sensors, state dimension {}, {} scheme variants; the last step in the file is {last}) would hold about {} in memory, more than the limit of {}; replay a shorter recording (the step column counts the steps 1, 2, 3, ...), or pass --allow-large",
-                meas.rows.len(),
+                meas.rows,
                 probe.system.n_sensors(),
                 probe.system.state_dim(),
                 probe.variants.len(),
