@@ -16,8 +16,8 @@ Bad input raises :class:`ScenarioError` or :class:`DataError` (both :class:`Inpu
 from __future__ import annotations
 
 import io
-import json
 import math
+import os
 from typing import Any, Dict, List, Optional, Sequence, Union
 
 import numpy as np
@@ -81,8 +81,6 @@ def _check_scenario(scenario: Any) -> str:
     if isinstance(scenario, (str,)):
         return scenario
     if hasattr(scenario, "__fspath__"):
-        import os
-
         return os.fspath(scenario)
     raise TypeError(
         f"scenario: expected a built-in name, a path or TOML text, got {type(scenario).__name__}"
@@ -94,6 +92,12 @@ def run(
     trials: Optional[int] = None,
     seed: Optional[int] = None,
     threads: int = 0,
+    out: Optional[Union[str, "os.PathLike[str]"]] = None,
+    resume: bool = False,
+    shard: Optional[Union[str, Sequence[int]]] = None,
+    report: bool = False,
+    reproduce: bool = False,
+    checkpoint_every: float = 10.0,
 ) -> Dict[str, Any]:
     """Runs a scenario (Monte Carlo), as ``hushfuse run`` does, and returns its summary.
 
@@ -102,20 +106,42 @@ def run(
         trials: replaces the scenario's number of trials.
         seed: replaces the scenario's seed.
         threads: worker threads (0: one per core); the result does not depend on it.
+        out: an output folder: the run writes there exactly the files of ``hushfuse run
+            --out`` (summary.json, per_step.csv, plots, scenario_as_run.toml, a manifest), and
+            checkpoints its finished trials every ``checkpoint_every`` seconds.
+        resume: continue the interrupted run whose checkpoint is in ``out`` (the same
+            arguments; from the first trial when there is none).
+        shard: ``"I/N"`` or ``(I, N)``: run only shard I of N (1-based) into ``out``;
+            ``hushfuse merge`` turns the N shard files into the whole run's folder.
+        report: also write report.html (needs ``out``).
+        reproduce: a reproduction, as ``hushfuse reproduce``: also reproduction.md.
 
     Returns:
-        The summary.json of ``hushfuse run`` (without its ``paper`` section) as Python objects:
-        ``scenario``, ``trials``, ``steps``, ``seed``, ``groups``, and ``schemes``, one dict per
-        scheme variant with ``name``, ``kind``, ``params``, ``rmse`` (group -> numpy array per
-        step), ``mse``, ``trace``, ``anees_per_step`` (numpy arrays per step), ``mean_rmse``,
-        ``anees``, ``rate``, ``bits_per_step``, ``steady_state`` and the rest.
+        The summary.json of ``hushfuse run`` as Python objects: ``scenario``, ``trials``,
+        ``steps``, ``seed``, ``groups``, ``schemes`` (one dict per scheme variant with
+        ``name``, ``kind``, ``params``, ``rmse`` (group -> numpy array per step), ``mse``,
+        ``trace``, ``anees_per_step`` (numpy arrays per step), ``mean_rmse``, ``anees``,
+        ``rate``, ``bits_per_step``, ``steady_state`` and the rest) and, for a scenario that
+        reproduces a paper, ``paper`` (the published numbers beside ours and the checked
+        claims). With ``out``: also ``out`` and ``files``. A shard returns only ``shard`` (its
+        file), ``blocks`` and ``done``.
 
     Raises:
-        ScenarioError: the scenario cannot be read or is inconsistent.
+        ScenarioError: the scenario cannot be read or is inconsistent, or the output folder or
+            checkpoint cannot be used.
+        MemoryError: the run would not fit in memory (refused before it starts).
         RunError: a scheme failed during the run.
     """
-    text = _hushfuse.run_json(_check_scenario(scenario), trials, seed, threads)
-    return _arrays(json.loads(text))
+    if shard is not None and not isinstance(shard, str):
+        i, n = shard
+        shard = f"{int(i)}/{int(n)}"
+    if out is not None:
+        out = os.fspath(out)
+    r = _hushfuse.run(
+        _check_scenario(scenario), trials, seed, threads, out, resume, shard, report, reproduce,
+        checkpoint_every,
+    )
+    return r if "schemes" not in r else _arrays(r)
 
 
 def simulate(scenario: str, trial: int = 0, seed: Optional[int] = None) -> Dict[str, Any]:
@@ -132,7 +158,7 @@ def simulate(scenario: str, trial: int = 0, seed: Optional[int] = None) -> Dict[
 def variants(scenario: str) -> List[Dict[str, Any]]:
     """The scheme variants of a scenario, in order: dicts with ``label``, ``kind``, ``params``."""
     return [
-        {"label": label, "kind": kind, "params": json.loads(params)}
+        {"label": label, "kind": kind, "params": params}
         for label, kind, params in _hushfuse.variants(_check_scenario(scenario))
     ]
 
@@ -260,6 +286,15 @@ def _truth_csv(truth: Any) -> str:
     return out.getvalue()
 
 
+def _truth_array(truth: Any) -> np.ndarray:
+    t = _real(truth, "truth")
+    if t.ndim == 1:
+        t = t[:, None]
+    if t.ndim != 2:
+        raise ValueError(f"truth: expected a 2-D array (steps, state components), got shape {t.shape}")
+    return np.ascontiguousarray(t, dtype=float)
+
+
 def measurements_frame(measurements: Any) -> "Any":
     """Per-sensor arrays (or a 3-D array) as the long-form pandas DataFrame ``replay`` and the
     command line read: columns ``step``, ``sensor``, ``z0``, ``z1``, ...; all-NaN rows left out."""
@@ -308,22 +343,24 @@ def replay(
         RunError: a scheme failed on the data.
     """
     scenario = _check_scenario(scenario)
-    n_arrays = None
-    if _is_frame(measurements):
-        meas_csv, meas_name = _frame_csv(measurements), "measurements (DataFrame)"
+    if _is_frame(measurements) or _is_frame(truth):
+        # A DataFrame is the command line's file layout: read as the command line reads it,
+        # with its messages (line, row, column).
+        meas_csv, meas_name = (
+            (_frame_csv(measurements), "measurements (DataFrame)")
+            if _is_frame(measurements)
+            else (_measurements_csv(_measurement_arrays(measurements)), "measurements")
+        )
+        truth_name = "truth (DataFrame)" if _is_frame(truth) else "truth"
+        truth_csv = None if truth is None else _truth_csv(truth)
+        r = _hushfuse.replay_csv(scenario, meas_csv, meas_name, truth_csv, truth_name, seed, trial)
     else:
-        arrays = _measurement_arrays(measurements)
-        meas_csv, meas_name, n_arrays = _measurements_csv(arrays), "measurements", len(arrays)
-    truth_csv = None
-    truth_name = "truth (DataFrame)" if _is_frame(truth) else "truth"
-    if truth is not None:
-        truth_csv = _truth_csv(truth)
-    r = _hushfuse.replay_csv(
-        scenario, meas_csv, meas_name, truth_csv, truth_name, seed, trial, n_arrays
-    )
+        # Arrays go to the library as they are (float64, row-major): no text in between.
+        arrays = [np.ascontiguousarray(a, dtype=float) for a in _measurement_arrays(measurements)]
+        t = None if truth is None else _truth_array(truth)
+        r = _hushfuse.replay_arrays(scenario, arrays, t, seed, trial)
     for s in r["schemes"]:
-        s["params"] = json.loads(s["params"])
         s["links"] = np.array(s["links"], dtype=str).reshape(r["available"].shape)
-    summary = r.pop("summary_json")
-    r["summary"] = None if summary is None else _arrays(json.loads(summary))
+    if r["summary"] is not None:
+        r["summary"] = _arrays(r["summary"])
     return r

@@ -2,13 +2,13 @@
 //! (`python/hushfuse/__init__.py`) turns numpy arrays and pandas frames into the command line's
 //! CSV layout and the results back into numpy arrays, so that every check and every message is
 //! the command line's own.
+mod runs;
+
 use hushfuse::engine::replay;
-use hushfuse::engine::runner;
 use hushfuse::engine::seeding;
 use hushfuse::filter::Gaussian;
 use hushfuse::linalg::Vector;
 use hushfuse::link;
-use hushfuse::metrics::results;
 use hushfuse::network::Schedule;
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
@@ -18,7 +18,7 @@ use numpy::{IntoPyArray, PyReadonlyArray1};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict, PyList};
+use pyo3::types::PyBytes;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::sync::{Arc, Mutex};
 
@@ -49,7 +49,7 @@ create_exception!(
 
 /// The library's message in the words of the Python API: its options are arguments, and it
 /// has no `--allow-large`.
-fn python_words(message: &str) -> String {
+pub(crate) fn python_words(message: &str) -> String {
     message
         .replace("(or --trials)", "(or trials=)")
         .replace(", or pass --allow-large", "")
@@ -59,21 +59,20 @@ fn python_words(message: &str) -> String {
 
 /// A scenario error as a Python exception: a request larger than the machine can hold is a
 /// `MemoryError` (raised before anything is allocated), anything else a [`ScenarioError`].
-fn scenario_err(e: impl std::fmt::Display) -> PyErr {
+pub(crate) fn scenario_err(e: build::ScenarioError) -> PyErr {
     let message = python_words(&e.to_string());
-    if message.contains("in memory, more than the limit") {
-        PyMemoryError::new_err(message)
-    } else {
-        ScenarioError::new_err(message)
+    match e.limit {
+        Some(hushfuse::scenario::error::Limit::Memory) => PyMemoryError::new_err(message),
+        _ => ScenarioError::new_err(message),
     }
 }
 
 /// A scenario's text and source from a built-in name, a path or TOML text.
-fn resolve(scenario: &str) -> PyResult<(String, String)> {
+pub(crate) fn resolve(scenario: &str) -> PyResult<(String, String)> {
     builtin::resolve(scenario, true).map_err(ScenarioError::new_err)
 }
 
-fn load(
+pub(crate) fn load(
     scenario: &str,
     trials: Option<usize>,
     seed: Option<u64>,
@@ -95,33 +94,7 @@ fn load(
     build::load_with(&text, &source, &opts).map_err(scenario_err)
 }
 
-/// Runs a scenario (Monte Carlo) and returns its summary as JSON text: the summary.json of
-/// `hushfuse run` without the `paper` section.
-#[pyfunction]
-#[pyo3(signature = (scenario, trials=None, seed=None, threads=0))]
-fn run_json(
-    py: Python<'_>,
-    scenario: &str,
-    trials: Option<usize>,
-    seed: Option<u64>,
-    threads: usize,
-) -> PyResult<String> {
-    let exp = load(scenario, trials, seed, threads)?;
-    let sums = py
-        .allow_threads(|| runner::run(&exp, runner::RunOptions { threads }, &|_| {}))
-        .map_err(|e| RunError::new_err(e.to_string()))?;
-    let summary = results::summarize(&exp, &sums);
-    let bad = results::non_finite(&summary);
-    if !bad.is_empty() {
-        return Err(RunError::new_err(format!(
-            "the run produced numbers that are not finite, so its results cannot be trusted:\n  {}\nrescale the scenario's units or check its noise levels",
-            bad.join("\n  ")
-        )));
-    }
-    serde_json::to_string(&summary).map_err(|e| RunError::new_err(e.to_string()))
-}
-
-fn vectors_to_array2(rows: &[Vector], cols: usize) -> Array2<f64> {
+pub(crate) fn vectors_to_array2(rows: &[Vector], cols: usize) -> Array2<f64> {
     let mut a = Array2::zeros((rows.len(), cols));
     for (k, v) in rows.iter().enumerate() {
         for (j, x) in v.iter().enumerate() {
@@ -131,7 +104,7 @@ fn vectors_to_array2(rows: &[Vector], cols: usize) -> Array2<f64> {
     a
 }
 
-fn estimates_arrays(ests: &[Gaussian], n: usize) -> (Array2<f64>, Array3<f64>) {
+pub(crate) fn estimates_arrays(ests: &[Gaussian], n: usize) -> (Array2<f64>, Array3<f64>) {
     let mut mean = Array2::zeros((ests.len(), n));
     let mut cov = Array3::zeros((ests.len(), n, n));
     for (k, e) in ests.iter().enumerate() {
@@ -143,171 +116,6 @@ fn estimates_arrays(ests: &[Gaussian], n: usize) -> (Array2<f64>, Array3<f64>) {
         }
     }
     (mean, cov)
-}
-
-/// Simulates trial `trial` of a scenario: truth (T, n) and per sensor its measurements
-/// (T, m_i), drawn exactly as `hushfuse run` draws them.
-#[pyfunction]
-#[pyo3(signature = (scenario, trial=0, seed=None))]
-fn simulate<'py>(
-    py: Python<'py>,
-    scenario: &str,
-    trial: usize,
-    seed: Option<u64>,
-) -> PyResult<Bound<'py, PyDict>> {
-    let exp = load(scenario, None, seed, 0)?;
-    let data = runner::draw_trial(&exp, trial);
-    let d = PyDict::new(py);
-    d.set_item(
-        "truth",
-        vectors_to_array2(&data.truth, exp.system.state_dim()).into_pyarray(py),
-    )?;
-    let per_sensor = PyList::empty(py);
-    for (i, s) in exp.system.sensors.iter().enumerate() {
-        let rows: Vec<Vector> = data.measurements.iter().map(|m| m[i].clone()).collect();
-        per_sensor.append(vectors_to_array2(&rows, s.meas_dim()).into_pyarray(py))?;
-    }
-    d.set_item("measurements", per_sensor)?;
-    d.set_item("steps", exp.steps)?;
-    d.set_item("seed", exp.seed)?;
-    Ok(d)
-}
-
-/// Replays CSV texts (the command line's layout) through every variant of a scenario.
-/// Returns a dict: `steps`, `available` (T, N), `schemes` (per variant: name, kind, variant,
-/// params, mean (T, n), cov (T, n, n), links (T x N names), bits (T, N)) and `summary_json`
-/// (None without truth).
-#[pyfunction]
-#[pyo3(signature = (scenario, measurements_csv, measurements_name, truth_csv=None, truth_name="truth", seed=None, trial=0, n_arrays=None))]
-#[allow(clippy::too_many_arguments)]
-fn replay_csv<'py>(
-    py: Python<'py>,
-    scenario: &str,
-    measurements_csv: &str,
-    measurements_name: &str,
-    truth_csv: Option<&str>,
-    truth_name: &str,
-    seed: Option<u64>,
-    trial: usize,
-    n_arrays: Option<usize>,
-) -> PyResult<Bound<'py, PyDict>> {
-    let (text, source) = resolve(scenario)?;
-    if let Some(given) = n_arrays {
-        let exp = load(scenario, None, seed, 1)?;
-        let ns = exp.system.n_sensors();
-        if given != ns {
-            return Err(DataError::new_err(format!(
-                "measurements: {given} sensor arrays given, but {source} has {ns} sensors: give one array per sensor, in sensor order (an all-NaN row where a sensor has no reading)"
-            )));
-        }
-    }
-    let opts = replay::ReplayOptions {
-        seed,
-        trial,
-        load: build::LoadOptions::default(),
-    };
-    let r = py
-        .allow_threads(|| {
-            replay::replay_csv(
-                &text,
-                &source,
-                (measurements_csv, measurements_name),
-                truth_csv.map(|t| (t, truth_name)),
-                &opts,
-            )
-        })
-        .map_err(|e| match e {
-            replay::ReplayError::Input(m) if m.starts_with(&format!("{source}:")) => {
-                scenario_err(m)
-            }
-            replay::ReplayError::Input(m) if m.contains("in memory, more than the limit") => {
-                PyMemoryError::new_err(python_words(&m))
-            }
-            replay::ReplayError::Input(m) => DataError::new_err(python_words(&m)),
-            replay::ReplayError::Run(m) => RunError::new_err(m),
-        })?;
-    let exp = &r.exp;
-    let n = exp.system.state_dim();
-    let ns = exp.system.n_sensors();
-    check_estimates(exp, &r.replayed)?;
-    let d = PyDict::new(py);
-    d.set_item("steps", exp.steps)?;
-    d.set_item("seed", exp.seed)?;
-    d.set_item("notes", r.notes.clone())?;
-    let mut avail = Array2::from_elem((exp.steps, ns), false);
-    for (k, a) in r.recorded.available.iter().enumerate() {
-        for (i, b) in a.iter().enumerate() {
-            avail[(k, i)] = *b;
-        }
-    }
-    d.set_item("available", avail.into_pyarray(py))?;
-    let schemes = PyList::empty(py);
-    for (v, vr) in r.replayed.variants.iter().enumerate() {
-        let variant = &exp.variants[v];
-        let s = PyDict::new(py);
-        s.set_item("name", &exp.curves[variant.curve].label)?;
-        s.set_item("kind", variant.kind)?;
-        s.set_item("variant", v)?;
-        s.set_item(
-            "params",
-            serde_json::to_string(&variant.params).map_err(|e| RunError::new_err(e.to_string()))?,
-        )?;
-        let (mean, cov) = estimates_arrays(&vr.estimates, n);
-        s.set_item("mean", mean.into_pyarray(py))?;
-        s.set_item("cov", cov.into_pyarray(py))?;
-        let links: Vec<Vec<&str>> = vr
-            .links
-            .iter()
-            .zip(&r.recorded.available)
-            .map(|(l, a)| {
-                l.iter()
-                    .zip(a)
-                    .map(|(l, a)| replay::link_name(*l, *a))
-                    .collect()
-            })
-            .collect();
-        s.set_item("links", links)?;
-        let mut bits = Array2::<u64>::zeros((exp.steps, ns));
-        for (k, b) in vr.bits.iter().enumerate() {
-            for (i, x) in b.iter().enumerate() {
-                bits[(k, i)] = *x;
-            }
-        }
-        s.set_item("bits", bits.into_pyarray(py))?;
-        schemes.append(s)?;
-    }
-    d.set_item("schemes", schemes)?;
-    let summary = match &r.replayed.sums {
-        Some(sums) => Some(
-            serde_json::to_string(&results::summarize(exp, sums))
-                .map_err(|e| RunError::new_err(e.to_string()))?,
-        ),
-        None => None,
-    };
-    d.set_item("summary_json", summary)?;
-    if let Some(sums) = &r.replayed.sums {
-        let bad = replay::non_finite(&results::summarize(exp, sums));
-        if !bad.is_empty() {
-            return Err(RunError::new_err(format!(
-                "the replay produced numbers that are not finite:\n  {}",
-                bad.join("\n  ")
-            )));
-        }
-    }
-    Ok(d)
-}
-
-/// A replay whose estimates are not all finite (readings that overflow a filter) fails,
-/// naming every such scheme, its variant and first step, with the command line's words.
-fn check_estimates(exp: &build::Experiment, replayed: &replay::Replayed) -> PyResult<()> {
-    let bad = replay::non_finite_estimates(exp, replayed);
-    if bad.is_empty() {
-        return Ok(());
-    }
-    Err(RunError::new_err(format!(
-        "the replay produced estimates that are not finite: {}; rescale the data's units or check the scenario's noise levels",
-        bad.join("; ")
-    )))
 }
 
 /// What one sensor put on the network at one step.
@@ -692,9 +500,12 @@ impl Scheme {
     }
 }
 
-/// Lists every variant of a scenario: (label, kind, params as JSON).
+/// Lists every variant of a scenario: (label, kind, params).
 #[pyfunction]
-fn variants(scenario: &str) -> PyResult<Vec<(String, String, String)>> {
+fn variants<'py>(
+    py: Python<'py>,
+    scenario: &str,
+) -> PyResult<Vec<(String, String, Bound<'py, PyAny>)>> {
     let exp = load(scenario, None, None, 0)?;
     exp.variants
         .iter()
@@ -702,7 +513,7 @@ fn variants(scenario: &str) -> PyResult<Vec<(String, String, String)>> {
             Ok((
                 exp.curves[v.curve].label.clone(),
                 v.kind.to_string(),
-                serde_json::to_string(&v.params).map_err(|e| RunError::new_err(e.to_string()))?,
+                runs::serialize(py, &v.params)?,
             ))
         })
         .collect()
@@ -721,9 +532,10 @@ fn _hushfuse(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ScenarioError", py.get_type::<ScenarioError>())?;
     m.add("DataError", py.get_type::<DataError>())?;
     m.add("RunError", py.get_type::<RunError>())?;
-    m.add_function(wrap_pyfunction!(run_json, m)?)?;
-    m.add_function(wrap_pyfunction!(simulate, m)?)?;
-    m.add_function(wrap_pyfunction!(replay_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(runs::run, m)?)?;
+    m.add_function(wrap_pyfunction!(runs::simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(runs::replay_arrays, m)?)?;
+    m.add_function(wrap_pyfunction!(runs::replay_csv, m)?)?;
     m.add_function(wrap_pyfunction!(variants, m)?)?;
     m.add_function(wrap_pyfunction!(builtins, m)?)?;
     m.add_class::<Scheme>()?;

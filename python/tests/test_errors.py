@@ -31,8 +31,8 @@ def test_wrong_array_shapes_raise():
         hushfuse.replay(SCEN, np.zeros((40, 4)))
     with pytest.raises(ValueError, match="same number of steps"):
         hushfuse.replay(SCEN, [np.zeros((40, 1)), np.zeros((39, 1)), np.zeros((40, 2)), np.zeros((40, 2))])
-    # A sensor array of the wrong width: the replay's own error, naming column and row.
-    with pytest.raises(hushfuse.DataError, match=r"column 4 \(z1\): sensor 0 measures 1 component, this row has 2"):
+    # A sensor array of the wrong width: the replay's own error, naming the array.
+    with pytest.raises(hushfuse.DataError, match=r"measurements\[0\]: sensor 0 measures 1 component, the array has 2 columns"):
         hushfuse.replay(SCEN, [np.zeros((40, 2)), np.zeros((40, 1)), np.zeros((40, 2)), np.zeros((40, 2))])
     # One array per sensor: too many or too few is an error naming the counts.
     with pytest.raises(hushfuse.DataError, match="5 sensor arrays given, but .* has 4 sensors"):
@@ -42,7 +42,7 @@ def test_wrong_array_shapes_raise():
     with pytest.raises(ValueError, match="not finite"):
         hushfuse.replay(SCEN, [np.full((40, 1), np.inf)])
     # Truth of the wrong dimension.
-    with pytest.raises(hushfuse.DataError, match=r"truth: line 2 \(data row 1\), column 3 \(beyond the header\): the state has 2 components, this row has 1"):
+    with pytest.raises(hushfuse.DataError, match=r"truth: the state has 2 components, the array has 1 columns"):
         hushfuse.replay(SCEN, FOUR, np.zeros((40, 1)))
     with pytest.raises(ValueError, match="2-D array"):
         hushfuse.replay(SCEN, FOUR, np.zeros((40, 2, 1)))

@@ -72,6 +72,9 @@ impl Default for Hooks<'_> {
 pub enum RunFailure {
     /// Bad input: the scenario, the arguments, the output folder, a checkpoint or a shard.
     Input(String),
+    /// A valid scenario whose run would pass the machine's memory limit (refused before
+    /// anything is allocated).
+    TooLarge(String),
     /// The run failed (a scheme could not take a step, a file could not be written).
     Run(String),
     /// Stopped on request: `done` of `total` trials are kept in the checkpoint.
@@ -85,7 +88,7 @@ pub enum RunFailure {
 impl std::fmt::Display for RunFailure {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            RunFailure::Input(m) | RunFailure::Run(m) => f.write_str(m),
+            RunFailure::Input(m) | RunFailure::TooLarge(m) | RunFailure::Run(m) => f.write_str(m),
             RunFailure::Interrupted {
                 done,
                 total,
@@ -152,7 +155,10 @@ pub fn execute(req: &Request, hooks: &Hooks) -> Result<Outcome, RunFailure> {
         threads: req.threads,
         limits: req.allow_large.then(limits::Limits::none),
     };
-    let exp = build::load_with(&req.text, &req.source, &options).map_err(input)?;
+    let exp = build::load_with(&req.text, &req.source, &options).map_err(|e| match e.limit {
+        Some(crate::scenario::error::Limit::Memory) => RunFailure::TooLarge(e.to_string()),
+        _ => input(e),
+    })?;
     let key = RunKey::new(
         &exp,
         &req.text,

@@ -196,7 +196,7 @@ pub(crate) fn wrote(done: &engine_run::Finished, extra: Vec<String>) {
 /// The command line's failure for an engine's: an interrupted run says how to continue it.
 pub(crate) fn failure(e: engine_run::RunFailure) -> Failure {
     match e {
-        engine_run::RunFailure::Input(m) => Failure::Input(m),
+        engine_run::RunFailure::Input(m) | engine_run::RunFailure::TooLarge(m) => Failure::Input(m),
         engine_run::RunFailure::Run(m) => Failure::Run(m),
         stopped @ engine_run::RunFailure::Interrupted { .. } => Failure::Interrupted(format!(
             "{stopped}\ncontinue with: {}",

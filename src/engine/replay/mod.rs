@@ -705,7 +705,7 @@ pub(super) fn check_replay_memory(
     if bytes.is_nan() || bytes > limits.max_memory_bytes {
         let last = meas.last_step;
         return Err(err_at(
-            &meas.file,
+            meas.file,
             None,
             None,
             format!(

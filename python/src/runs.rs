@@ -1,0 +1,367 @@
+//! Runs, replays and simulated trials for Python: numpy arrays in and out, results as Python
+//! objects (never JSON or CSV text in between), and the engine's own run layer
+//! ([`hushfuse::engine::run`]) for output folders, resuming and shards.
+use crate::{
+    estimates_arrays, load, python_words, resolve, vectors_to_array2, DataError,
+    RunError, ScenarioError,
+};
+use hushfuse::engine::replay::{self, arrays};
+use hushfuse::engine::run as engine_run;
+use hushfuse::engine::{durable, runner};
+use hushfuse::linalg::Vector;
+use hushfuse::metrics::results;
+use hushfuse::output::run_files;
+use hushfuse::scenario::build;
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyReadonlyArray2};
+use pyo3::exceptions::PyMemoryError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use std::path::PathBuf;
+
+/// A serde value as the Python object `json.loads` would give (`null` -> `None`), made
+/// without text in between.
+pub(crate) fn to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    use serde_json::Value;
+    Ok(match v {
+        Value::Null => py.None().into_bound(py),
+        Value::Bool(b) => b.into_pyobject(py)?.to_owned().into_any(),
+        Value::Number(n) => match (n.as_u64(), n.as_i64()) {
+            (Some(u), _) => u.into_pyobject(py)?.into_any(),
+            (None, Some(i)) => i.into_pyobject(py)?.into_any(),
+            _ => n.as_f64().unwrap_or(f64::NAN).into_pyobject(py)?.into_any(),
+        },
+        Value::String(s) => s.into_pyobject(py)?.into_any(),
+        Value::Array(a) => {
+            let list = PyList::empty(py);
+            for x in a {
+                list.append(to_py(py, x)?)?;
+            }
+            list.into_any()
+        }
+        Value::Object(o) => {
+            let d = PyDict::new(py);
+            for (k, x) in o {
+                d.set_item(k, to_py(py, x)?)?;
+            }
+            d.into_any()
+        }
+    })
+}
+
+pub(crate) fn serialize<'py>(py: Python<'py>, x: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+    let v = serde_json::to_value(x).map_err(|e| RunError::new_err(e.to_string()))?;
+    to_py(py, &v)
+}
+
+/// The summary of a run as Python objects, with the `paper` section of `summary.json` when
+/// the scenario reproduces a paper.
+fn summary_object<'py>(
+    py: Python<'py>,
+    exp: &build::Experiment,
+    summary: &results::Summary,
+) -> PyResult<Bound<'py, PyAny>> {
+    let out = serialize(py, summary)?;
+    if let Some(paper) = run_files::paper_section(exp, summary) {
+        out.set_item("paper", serialize(py, &paper)?)?;
+    }
+    Ok(out)
+}
+
+fn check_finite(bad: Vec<String>) -> PyResult<()> {
+    if bad.is_empty() {
+        return Ok(());
+    }
+    Err(RunError::new_err(format!(
+        "the run produced numbers that are not finite, so its results cannot be trusted:\n  {}\nrescale the scenario's units or check its noise levels",
+        bad.join("\n  ")
+    )))
+}
+
+fn run_failure(e: engine_run::RunFailure) -> PyErr {
+    match e {
+        engine_run::RunFailure::Input(m) => ScenarioError::new_err(python_words(&m)),
+        engine_run::RunFailure::TooLarge(m) => PyMemoryError::new_err(python_words(&m)),
+        engine_run::RunFailure::Run(m) => RunError::new_err(m),
+        stopped @ engine_run::RunFailure::Interrupted { .. } => RunError::new_err(format!(
+            "{stopped}; continue with run(..., resume=True)"
+        )),
+    }
+}
+
+/// Runs a scenario (Monte Carlo) as `hushfuse run` does. Without `out`: in memory, returns
+/// the summary (with its `paper` section). With `out`: the run's folder, written exactly as
+/// the command line writes it, checkpointed every `checkpoint_every` seconds so that
+/// `resume=True` continues a run that was killed; `shard="I/N"` runs one shard (for
+/// `hushfuse merge`). Returns a dict; with `out`, also `out` and `files` (or, for a shard,
+/// only `shard`, `blocks` and `done`).
+#[pyfunction]
+#[pyo3(signature = (scenario, trials=None, seed=None, threads=0, out=None, resume=false, shard=None, report=false, reproduce=false, checkpoint_every=10.0))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run<'py>(
+    py: Python<'py>,
+    scenario: &str,
+    trials: Option<usize>,
+    seed: Option<u64>,
+    threads: usize,
+    out: Option<PathBuf>,
+    resume: bool,
+    shard: Option<&str>,
+    report: bool,
+    reproduce: bool,
+    checkpoint_every: f64,
+) -> PyResult<Bound<'py, PyAny>> {
+    if out.is_none() && (resume || shard.is_some() || report) {
+        return Err(pyo3::exceptions::PyValueError::new_err(
+            "resume=, shard= and report= need out= (the folder that keeps the run's files)",
+        ));
+    }
+    let Some(out) = out else {
+        let exp = load(scenario, trials, seed, threads)?;
+        let sums = py
+            .allow_threads(|| runner::run(&exp, runner::RunOptions { threads }, &|_| {}))
+            .map_err(|e| RunError::new_err(e.to_string()))?;
+        let summary = results::summarize(&exp, &sums);
+        check_finite(results::non_finite(&summary))?;
+        return summary_object(py, &exp, &summary);
+    };
+    let (text, source) = resolve(scenario)?;
+    let shard = shard
+        .map(durable::parse_shard)
+        .transpose()
+        .map_err(|m| pyo3::exceptions::PyValueError::new_err(format!("shard: {m}")))?;
+    let request = engine_run::Request {
+        text,
+        source,
+        trials,
+        seed,
+        threads,
+        allow_large: false,
+        reproduce,
+        report,
+        out: Some(out),
+        shard,
+        resume,
+        checkpoint_every,
+    };
+    let outcome = py
+        .allow_threads(|| engine_run::execute(&request, &engine_run::Hooks::default()))
+        .map_err(run_failure)?;
+    let d = PyDict::new(py);
+    match outcome {
+        engine_run::Outcome::Whole(done) => {
+            check_finite(done.non_finite.clone())?;
+            let s = summary_object(py, &done.exp, &done.summary)?;
+            s.set_item("out", done.dir.display().to_string())?;
+            s.set_item("files", done.files.clone())?;
+            return Ok(s);
+        }
+        engine_run::Outcome::Shard { path, blocks, .. } => {
+            d.set_item("shard", path.display().to_string())?;
+            d.set_item("blocks", (blocks.start, blocks.end))?;
+            d.set_item("done", false)?;
+        }
+        engine_run::Outcome::ShardAlreadyDone { path } => {
+            d.set_item("shard", path.display().to_string())?;
+            d.set_item("done", true)?;
+        }
+    }
+    Ok(d.into_any())
+}
+
+/// Simulates trial `trial` of a scenario: truth (T, n) and per sensor its measurements
+/// (T, m_i), drawn exactly as `hushfuse run` draws them.
+#[pyfunction]
+#[pyo3(signature = (scenario, trial=0, seed=None))]
+pub(crate) fn simulate<'py>(
+    py: Python<'py>,
+    scenario: &str,
+    trial: usize,
+    seed: Option<u64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let exp = load(scenario, None, seed, 0)?;
+    let data = runner::draw_trial(&exp, trial);
+    let d = PyDict::new(py);
+    d.set_item(
+        "truth",
+        vectors_to_array2(&data.truth, exp.system.state_dim()).into_pyarray(py),
+    )?;
+    let per_sensor = PyList::empty(py);
+    for (i, s) in exp.system.sensors.iter().enumerate() {
+        let rows: Vec<Vector> = data.measurements.iter().map(|m| m[i].clone()).collect();
+        per_sensor.append(vectors_to_array2(&rows, s.meas_dim()).into_pyarray(py))?;
+    }
+    d.set_item("measurements", per_sensor)?;
+    d.set_item("steps", exp.steps)?;
+    d.set_item("seed", exp.seed)?;
+    Ok(d)
+}
+
+/// A replay's error as the Python exception of its kind.
+fn replay_err(e: replay::ReplayError) -> PyErr {
+    match e {
+        replay::ReplayError::Scenario(m) => ScenarioError::new_err(python_words(&m)),
+        replay::ReplayError::Data(m) => DataError::new_err(python_words(&m)),
+        replay::ReplayError::TooLarge(m) => PyMemoryError::new_err(python_words(&m)),
+        replay::ReplayError::Run(m) => RunError::new_err(m),
+    }
+}
+
+/// Replays numpy arrays through every variant of a scenario: per sensor a float array
+/// (T, m_i) (an all-NaN row: no reading), and optionally the truth (T, n). Returns what
+/// [`replay_csv`] returns.
+#[pyfunction]
+#[pyo3(signature = (scenario, measurements, truth=None, seed=None, trial=0))]
+pub(crate) fn replay_arrays<'py>(
+    py: Python<'py>,
+    scenario: &str,
+    measurements: Vec<PyReadonlyArray2<'py, f64>>,
+    truth: Option<PyReadonlyArray2<'py, f64>>,
+    seed: Option<u64>,
+    trial: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (text, source) = resolve(scenario)?;
+    // Contiguous row-major copies only where numpy's layout is not (a column slice of a 3-D
+    // array): the replay reads rows.
+    let owned: Vec<(Vec<f64>, usize, usize)> = measurements
+        .iter()
+        .map(|a| {
+            let v = a.as_array();
+            (v.iter().copied().collect(), v.nrows(), v.ncols())
+        })
+        .collect();
+    let truth_owned = truth.map(|t| {
+        let v = t.as_array();
+        (v.iter().copied().collect::<Vec<f64>>(), v.nrows(), v.ncols())
+    });
+    fn matrix((data, rows, cols): &(Vec<f64>, usize, usize)) -> arrays::Matrix<'_> {
+        arrays::Matrix {
+            data,
+            rows: *rows,
+            cols: *cols,
+        }
+    }
+    let input = arrays::Arrays {
+        measurements: owned.iter().map(matrix).collect(),
+        truth: truth_owned.as_ref().map(matrix),
+    };
+    let opts = replay::ReplayOptions {
+        seed,
+        trial,
+        load: build::LoadOptions::default(),
+    };
+    let r = py
+        .allow_threads(|| arrays::replay_arrays(&text, &source, &input, &opts))
+        .map_err(replay_err)?;
+    replay_dict(py, &r)
+}
+
+/// Replays CSV texts (the command line's layout: a pandas DataFrame in long form) through
+/// every variant of a scenario, with the command line's messages (file, line, column).
+#[pyfunction]
+#[pyo3(signature = (scenario, measurements_csv, measurements_name, truth_csv=None, truth_name="truth", seed=None, trial=0))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn replay_csv<'py>(
+    py: Python<'py>,
+    scenario: &str,
+    measurements_csv: &str,
+    measurements_name: &str,
+    truth_csv: Option<&str>,
+    truth_name: &str,
+    seed: Option<u64>,
+    trial: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (text, source) = resolve(scenario)?;
+    let opts = replay::ReplayOptions {
+        seed,
+        trial,
+        load: build::LoadOptions::default(),
+    };
+    let r = py
+        .allow_threads(|| {
+            replay::replay_csv(
+                &text,
+                &source,
+                (measurements_csv, measurements_name),
+                truth_csv.map(|t| (t, truth_name)),
+                &opts,
+            )
+        })
+        .map_err(replay_err)?;
+    replay_dict(py, &r)
+}
+
+/// A replay as a dict: `steps`, `seed`, `notes`, `available` (T, N), `schemes` (per variant:
+/// name, kind, variant, params, mean (T, n), cov (T, n, n), links (T x N names), bits (T, N))
+/// and `summary` (None without truth).
+fn replay_dict<'py>(py: Python<'py>, r: &replay::CsvReplay) -> PyResult<Bound<'py, PyDict>> {
+    let exp = &r.exp;
+    let n = exp.system.state_dim();
+    let ns = exp.system.n_sensors();
+    let bad = replay::non_finite_estimates(exp, &r.replayed);
+    if !bad.is_empty() {
+        return Err(RunError::new_err(format!(
+            "the replay produced estimates that are not finite: {}; rescale the data's units or check the scenario's noise levels",
+            bad.join("; ")
+        )));
+    }
+    let d = PyDict::new(py);
+    d.set_item("steps", exp.steps)?;
+    d.set_item("seed", exp.seed)?;
+    d.set_item("notes", r.notes.clone())?;
+    let mut avail = Array2::from_elem((exp.steps, ns), false);
+    for (k, a) in r.recorded.available.iter().enumerate() {
+        for (i, b) in a.iter().enumerate() {
+            avail[(k, i)] = *b;
+        }
+    }
+    d.set_item("available", avail.into_pyarray(py))?;
+    let schemes = PyList::empty(py);
+    for (v, vr) in r.replayed.variants.iter().enumerate() {
+        let variant = &exp.variants[v];
+        let s = PyDict::new(py);
+        s.set_item("name", &exp.curves[variant.curve].label)?;
+        s.set_item("kind", variant.kind)?;
+        s.set_item("variant", v)?;
+        s.set_item("params", serialize(py, &variant.params)?)?;
+        let (mean, cov) = estimates_arrays(&vr.estimates, n);
+        s.set_item("mean", mean.into_pyarray(py))?;
+        s.set_item("cov", cov.into_pyarray(py))?;
+        let links: Vec<Vec<&str>> = vr
+            .links
+            .iter()
+            .zip(&r.recorded.available)
+            .map(|(l, a)| {
+                l.iter()
+                    .zip(a)
+                    .map(|(l, a)| replay::link_name(*l, *a))
+                    .collect()
+            })
+            .collect();
+        s.set_item("links", links)?;
+        let mut bits = Array2::<u64>::zeros((exp.steps, ns));
+        for (k, b) in vr.bits.iter().enumerate() {
+            for (i, x) in b.iter().enumerate() {
+                bits[(k, i)] = *x;
+            }
+        }
+        s.set_item("bits", bits.into_pyarray(py))?;
+        schemes.append(s)?;
+    }
+    d.set_item("schemes", schemes)?;
+    match &r.replayed.sums {
+        Some(sums) => {
+            let summary = results::summarize(exp, sums);
+            let bad = replay::non_finite(&summary);
+            if !bad.is_empty() {
+                return Err(RunError::new_err(format!(
+                    "the replay produced numbers that are not finite:\n  {}",
+                    bad.join("\n  ")
+                )));
+            }
+            d.set_item("summary", serialize(py, &summary)?)?;
+        }
+        None => d.set_item("summary", py.None())?,
+    }
+    Ok(d)
+}
