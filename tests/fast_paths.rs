@@ -1,16 +1,16 @@
-//! The fast trials of the linear-Gaussian schemes (`Scheme::run_trial_fast`) give the generic
-//! per-step loop's numbers bit for bit: every fused mean, covariance and traffic count, at every
-//! step, for every variant of the Dormann et al. sweep (centralized KF at random rates, Algorithm 1
-//! random and event-based, Algorithm 2 over alpha x b) and of the peers' centralized KF, on the
-//! same data and coin streams — the variants of a trial sharing one `TrialCache` as the runner
-//! shares it.
+//! The fast trials of the linear-Gaussian schemes (`LockstepFastPath::run_trial_fast`, reached
+//! through `Scheme::fast_path`) give the generic per-step loop's numbers bit for bit: every fused
+//! mean, covariance and traffic count, at every step, for every variant of the Dormann et al.
+//! sweep (centralized KF at random rates, Algorithm 1 random and event-based, Algorithm 2 over
+//! alpha x b) and of the peers' centralized KF, on the same data and coin streams — the variants
+//! of a trial sharing one `TrialCache` as the runner shares it.
 use hushfuse::engine::runner;
 use hushfuse::filter::Gaussian;
 use hushfuse::linalg::LinalgError;
 use hushfuse::network::{self, Traffic};
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::scheme::{StepSink, TrialCache};
+use hushfuse::scheme::fast_path::{StepSink, TrialCache};
 
 type Steps = Vec<(Vec<u64>, Vec<u64>, Traffic)>;
 
@@ -64,7 +64,10 @@ fn check(exp: &build::Experiment, trials: usize) {
         for v in 0..exp.variants.len() {
             let mut rng = runner::trial_rng(exp.seed, trial as u64, 1 + v as u64);
             let mut sink = Collect(Vec::new());
-            let Some(r) = exp.variants[v].scheme.run_trial_fast(
+            let Some(fast) = exp.variants[v].scheme.fast_path() else {
+                continue;
+            };
+            let Some(r) = fast.run_trial_fast(
                 &data.measurements,
                 exp.steps,
                 &mut rng,

@@ -312,10 +312,10 @@ impl Drop for PooledWorker<'_, '_> {
 
 /// Runs the trials of one block, adding into `sums` (one per variant): one trial at a time,
 /// every variant on its data (the variants of a trial share work through its cache), or, when
-/// every variant runs batches ([`crate::scheme::Scheme::batches`]), all the block's trials
-/// drawn first and each variant run on them in lockstep. `on_trial` is called after each
-/// trial (after the block, for a batch); `stop` is checked before each trial (before the
-/// block) and ends the block early with `Ok(false)`.
+/// every variant runs batches ([`crate::scheme::fast_path::LockstepFastPath::batches`]), all
+/// the block's trials drawn first and each variant run on them in lockstep. `on_trial` is
+/// called after each trial (after the block, for a batch); `stop` is checked before each trial
+/// (before the block) and ends the block early with `Ok(false)`.
 fn run_block<'e>(
     exp: &'e Experiment,
     trials: std::ops::Range<usize>,
@@ -324,8 +324,11 @@ fn run_block<'e>(
     stop: &dyn Fn() -> bool,
     on_trial: &dyn Fn(usize),
 ) -> Result<bool, RunError> {
-    let batch =
-        (2..=BLOCK).contains(&trials.len()) && exp.variants.iter().all(|v| v.scheme.batches());
+    let batch = (2..=BLOCK).contains(&trials.len())
+        && exp
+            .variants
+            .iter()
+            .all(|v| v.scheme.fast_path().is_some_and(|f| f.batches()));
     if !batch {
         for trial in trials {
             if stop() {
@@ -371,12 +374,15 @@ fn run_block<'e>(
             truths: &truths[..n],
             sums: s,
         };
-        let outcome = scheme.run_batch_fast(
-            measurements,
-            exp.steps,
-            worker.scratch.batch_cache(),
-            &mut recorder,
-        );
+        // Every variant batches, so each has a fast path (one virtual call per block).
+        let outcome = scheme.fast_path().and_then(|fast| {
+            fast.run_batch_fast(
+                measurements,
+                exp.steps,
+                worker.scratch.batch_cache(),
+                &mut recorder,
+            )
+        });
         match outcome {
             Some(Ok(())) => recorder.finish(),
             // Not for this data, or failed: one trial at a time from this block's start (the
@@ -413,7 +419,7 @@ impl BatchRecorder<'_, '_> {
     }
 }
 
-impl crate::scheme::BatchSink for BatchRecorder<'_, '_> {
+impl crate::scheme::fast_path::BatchSink for BatchRecorder<'_, '_> {
     fn step(
         &mut self,
         j: usize,
@@ -505,12 +511,12 @@ impl Observer for SumsObserver<'_, '_> {
         Ok(())
     }
 
-    fn fast_sink(&mut self) -> Option<&mut dyn crate::scheme::StepSink> {
+    fn fast_sink(&mut self) -> Option<&mut dyn crate::scheme::fast_path::StepSink> {
         Some(self)
     }
 }
 
-impl crate::scheme::StepSink for SumsObserver<'_, '_> {
+impl crate::scheme::fast_path::StepSink for SumsObserver<'_, '_> {
     fn step(
         &mut self,
         k: usize,

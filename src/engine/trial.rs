@@ -5,9 +5,10 @@
 //! replay of recorded data and the report's error bands all run their trials here, seeded by
 //! [`crate::engine::seeding`]; an [`Observer`] sees every fused step.
 //!
-//! A scheme's lockstep fast path ([`Scheme::run_trial_fast`]) is a hook of this loop: taken
-//! when the observer can take its report ([`Observer::fast_sink`]) and every reading exists,
-//! with the same numbers as the loop (the bit-for-bit tests are in `tests/fast_paths.rs`).
+//! A scheme's lockstep fast path ([`LockstepFastPath::run_trial_fast`], offered by
+//! [`Scheme::fast_path`]) is a hook of this loop: taken when the observer can take its report
+//! ([`Observer::fast_sink`]) and every reading exists, with the same numbers as the loop (the
+//! bit-for-bit tests are in `tests/fast_paths.rs`).
 use crate::engine::seeding::coins;
 use crate::filter::Gaussian;
 use crate::linalg::{LinalgError, Vector};
@@ -15,8 +16,11 @@ use crate::link::{Received, Transmission};
 use crate::network::{self, Schedule, Traffic};
 use crate::scenario::experiment::Experiment;
 #[cfg(doc)]
+use crate::scheme::fast_path::LockstepFastPath;
+use crate::scheme::fast_path::{FastTrialError, StepSink, TrialCache};
+#[cfg(doc)]
 use crate::scheme::Scheme;
-use crate::scheme::{FastTrialError, SchemeError, StepSink, TrialCache};
+use crate::scheme::SchemeError;
 
 /// What one sensor did at one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -163,13 +167,10 @@ pub fn run_trial(
     let variant = &exp.variants[spec.variant];
     let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
     if spec.available.is_none() {
-        if let Some(sink) = observer.fast_sink() {
+        // One virtual call per trial: the scheme's hook, then its whole trial.
+        if let (Some(fast), Some(sink)) = (variant.scheme.fast_path(), observer.fast_sink()) {
             let cache = buffers.cache_for(spec.trial, measurements);
-            if let Some(r) =
-                variant
-                    .scheme
-                    .run_trial_fast(measurements, exp.steps, &mut rng, cache, sink)
-            {
+            if let Some(r) = fast.run_trial_fast(measurements, exp.steps, &mut rng, cache, sink) {
                 return r.map_err(|e| match e {
                     FastTrialError::Scheme { k, source } => LoopError::Scheme { k, source },
                     FastTrialError::Sink { k, source } => LoopError::Covariance { k, source },

@@ -1,6 +1,7 @@
 //! Baselines: the centralized Kalman filter that receives raw measurements — all of them (the
 //! bound every scheme is measured against), or each with probability `rate` (Dormann et al.
 //! Section V: a measurement not sent is lost for good).
+use super::fast_path::{BatchSink, FastTrialError, LockstepFastPath, StepSink, TrialCache};
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::fixed;
@@ -494,7 +495,7 @@ fn schedule_step(system: &System, prev: &Matrix) -> Option<ScheduledStep> {
     })
 }
 
-/// The all-data trial of [`CentralizedScheme::run_trial_fast`].
+/// The all-data trial of [`LockstepFastPath::run_trial_fast`] for [`CentralizedScheme`].
 struct AllData<'a> {
     sys: &'a System,
     /// Per sensor: measurement dimension and H^T R^{-1}.
@@ -517,8 +518,8 @@ impl AllData<'_> {
         self,
         trials: &[&[Vec<Vector>]],
         steps: usize,
-        sink: &mut dyn super::BatchSink,
-    ) -> Option<Result<(), super::FastTrialError>> {
+        sink: &mut dyn BatchSink,
+    ) -> Option<Result<(), FastTrialError>> {
         match self.sys.state_dim() {
             1 => self.batch::<1>(trials, steps, sink),
             2 => self.batch::<2>(trials, steps, sink),
@@ -535,8 +536,8 @@ impl AllData<'_> {
         self,
         trials: &[&[Vec<Vector>]],
         steps: usize,
-        sink: &mut dyn super::BatchSink,
-    ) -> Option<Result<(), super::FastTrialError>> {
+        sink: &mut dyn BatchSink,
+    ) -> Option<Result<(), FastTrialError>> {
         let sys = self.sys;
         let sched = self.schedule.through(sys, steps)?;
         let traffic = all_sent_traffic(sys);
@@ -559,17 +560,17 @@ impl AllData<'_> {
             est.cov.as_mut_slice().copy_from_slice(step.cov.as_slice());
             let factor = step.nees_factor.as_deref();
             if let Err(source) = sink.step_shared(k, xs.as_flattened(), est, factor, traffic) {
-                return Some(Err(super::FastTrialError::Sink { k, source }));
+                return Some(Err(FastTrialError::Sink { k, source }));
             }
         }
         Some(Ok(()))
     }
 }
 
-/// A [`StepSink`](super::StepSink) as the sink of a batch of one trial.
-struct OneTrial<'a>(&'a mut dyn super::StepSink);
+/// A [`StepSink`] as the sink of a batch of one trial.
+struct OneTrial<'a>(&'a mut dyn StepSink);
 
-impl super::BatchSink for OneTrial<'_> {
+impl BatchSink for OneTrial<'_> {
     fn step(
         &mut self,
         _j: usize,
@@ -719,7 +720,7 @@ impl CentralizedScheme {
     }
 }
 
-impl Scheme for CentralizedScheme {
+impl LockstepFastPath for CentralizedScheme {
     /// The all-data KF (rate 1, linear sensors) runs several trials in lockstep.
     fn batches(&self) -> bool {
         self.schedule.is_some()
@@ -729,9 +730,9 @@ impl Scheme for CentralizedScheme {
         &self,
         trials: &[&[Vec<Vector>]],
         steps: usize,
-        cache: &mut super::TrialCache,
-        sink: &mut dyn super::BatchSink,
-    ) -> Option<Result<(), super::FastTrialError>> {
+        cache: &mut TrialCache,
+        sink: &mut dyn BatchSink,
+    ) -> Option<Result<(), FastTrialError>> {
         let schedule = self.schedule.as_ref()?;
         let linear = self.linear.as_ref()?;
         if !trials.iter().all(|m| self.covers(m, steps)) {
@@ -755,9 +756,9 @@ impl Scheme for CentralizedScheme {
         measurements: &[Vec<Vector>],
         steps: usize,
         rng: &mut dyn RngCore,
-        cache: &mut super::TrialCache,
-        sink: &mut dyn super::StepSink,
-    ) -> Option<Result<(), super::FastTrialError>> {
+        cache: &mut TrialCache,
+        sink: &mut dyn StepSink,
+    ) -> Option<Result<(), FastTrialError>> {
         let sys = &self.system;
         let ns = sys.n_sensors();
         let linear = self.linear.as_ref()?;
@@ -796,7 +797,7 @@ impl Scheme for CentralizedScheme {
             })
             .collect();
         let mut arrived: Vec<Option<&Vector>> = Vec::with_capacity(ns);
-        let mut run = || -> Result<(), super::FastTrialError> {
+        let mut run = || -> Result<(), FastTrialError> {
             for (k, zs) in (1..=steps).zip(measurements) {
                 arrived.clear();
                 let mut traffic = crate::network::Traffic::default();
@@ -814,15 +815,17 @@ impl Scheme for CentralizedScheme {
                 }
                 center
                     .step_linear(&arrived)
-                    .map_err(|source| super::FastTrialError::Scheme { k, source })?;
+                    .map_err(|source| FastTrialError::Scheme { k, source })?;
                 sink.step(k, center.estimate(), traffic)
-                    .map_err(|source| super::FastTrialError::Sink { k, source })?;
+                    .map_err(|source| FastTrialError::Sink { k, source })?;
             }
             Ok(())
         };
         Some(run())
     }
+}
 
+impl Scheme for CentralizedScheme {
     fn build(&self) -> Result<SchemeInstance, SchemeError> {
         Ok(SchemeInstance {
             sensors: (0..self.system.n_sensors())
@@ -833,6 +836,11 @@ impl Scheme for CentralizedScheme {
                 None => CentralizedKf::new(self.system.clone()),
             }),
         })
+    }
+
+    /// The all-data KF's lockstep trials and the forwarding sensors' coins without the loop.
+    fn fast_path(&self) -> Option<&dyn LockstepFastPath> {
+        Some(self)
     }
 }
 

@@ -24,7 +24,8 @@ use crate::linalg::fixed;
 use crate::linalg::Vector;
 use crate::link::Message;
 use crate::network::Traffic;
-use crate::scheme::{FastTrialError, SchemeError, StepSink, TrialCache};
+use crate::scheme::fast_path::{FastTrialError, StepSink, TrialCache};
+use crate::scheme::SchemeError;
 use rand::{Rng, RngCore};
 use std::sync::Arc;
 

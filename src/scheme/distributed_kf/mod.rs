@@ -19,6 +19,7 @@ pub use plan::GlobalizedPlan;
 pub use sensor::{DkfSensor, Trigger};
 
 use crate::linalg::Matrix;
+use crate::scheme::fast_path::{FastTrialError, LockstepFastPath, StepSink, TrialCache};
 use crate::scheme::{Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use std::sync::Arc;
 
@@ -176,14 +177,20 @@ impl Scheme for DistributedKfScheme {
         Ok(SchemeInstance { sensors, center })
     }
 
+    fn fast_path(&self) -> Option<&dyn LockstepFastPath> {
+        Some(self)
+    }
+}
+
+impl LockstepFastPath for DistributedKfScheme {
     fn run_trial_fast(
         &self,
         measurements: &[Vec<crate::linalg::Vector>],
         steps: usize,
         rng: &mut dyn rand::RngCore,
-        cache: &mut crate::scheme::TrialCache,
-        sink: &mut dyn crate::scheme::StepSink,
-    ) -> Option<Result<(), crate::scheme::FastTrialError>> {
+        cache: &mut TrialCache,
+        sink: &mut dyn StepSink,
+    ) -> Option<Result<(), FastTrialError>> {
         fast::run(self, measurements, steps, rng, cache, sink)
     }
 }

@@ -1,0 +1,188 @@
+//! The engine's lockstep fast path: a scheme whose whole trial (or a block of trials) can run
+//! without the generic per-step loop of [`crate::engine::trial`], with the same numbers. A
+//! scheme author never needs it; a [`Scheme`] offers it through [`Scheme::fast_path`].
+use crate::filter::Gaussian;
+use crate::linalg::{LinalgError, Vector};
+#[cfg(doc)]
+use crate::scheme::Scheme;
+use crate::scheme::SchemeError;
+use rand::RngCore;
+
+/// An engine hook: a scheme whose whole trial can run without the generic per-step loop,
+/// reporting each step to a sink with the numbers that loop gives. Offered by
+/// [`Scheme::fast_path`]; the engine makes one virtual call per trial (per batch) through it.
+pub trait LockstepFastPath: Send + Sync {
+    /// Runs one whole trial on `measurements` (`measurements[k - 1][i]` = z_k^i, k = 1..=steps)
+    /// without the generic per-step loop, reporting each step's fused estimate and traffic to
+    /// `sink`, with the same coin draws from `rng` and the same numbers as that loop gives.
+    /// `cache` lives for one trial and is shared by its variants (work that depends on the
+    /// data but not on the variant is done once). `None`: no fast path for this scheme or this
+    /// data (nothing has been drawn from `rng`; the generic loop runs).
+    fn run_trial_fast(
+        &self,
+        measurements: &[Vec<Vector>],
+        steps: usize,
+        rng: &mut dyn RngCore,
+        cache: &mut TrialCache,
+        sink: &mut dyn StepSink,
+    ) -> Option<Result<(), FastTrialError>> {
+        let _ = (measurements, steps, rng, cache, sink);
+        None
+    }
+    /// Whether [`LockstepFastPath::run_batch_fast`] may take several trials at once (the
+    /// runner then draws a block's trials before running them).
+    fn batches(&self) -> bool {
+        false
+    }
+    /// Runs several trials in lockstep (`trials[j][k - 1][i]` = z_k^i of trial j), reporting
+    /// every trial's step k to `sink` in trial order before any trial's step k + 1: the
+    /// numbers of [`LockstepFastPath::run_trial_fast`] on each trial, while the dependent
+    /// chains of different trials (divisions, square roots) overlap in the processor. Only for
+    /// schemes whose trial draws no coins. `None`: not for this data (nothing was reported; the
+    /// runner runs the trials one at a time). After an error the runner reruns the trials
+    /// one at a time, so that the run fails with the error the one-at-a-time loop reports.
+    fn run_batch_fast(
+        &self,
+        trials: &[&[Vec<Vector>]],
+        steps: usize,
+        cache: &mut TrialCache,
+        sink: &mut dyn BatchSink,
+    ) -> Option<Result<(), FastTrialError>> {
+        let _ = (trials, steps, cache, sink);
+        None
+    }
+}
+
+/// Receives the steps of a [`LockstepFastPath::run_batch_fast`] batch.
+pub trait BatchSink {
+    /// The fused estimate of batch trial `j` after step `k` (1-based), with the Cholesky
+    /// factor of its covariance when the scheme has it (see [`StepSink::step_factored`]).
+    fn step(
+        &mut self,
+        j: usize,
+        k: usize,
+        estimate: &Gaussian,
+        factor: Option<&[f64]>,
+        traffic: crate::network::Traffic,
+    ) -> Result<(), LinalgError>;
+
+    /// Step `k` of every trial of the batch at once, when their estimates share one
+    /// covariance: `shared.cov` (with its factor when the scheme has it) and trial j's mean
+    /// `means[j * n..(j + 1) * n]` (`shared.mean` is work space). The default hands the
+    /// trials to [`BatchSink::step`] one by one, in order.
+    fn step_shared(
+        &mut self,
+        k: usize,
+        means: &[f64],
+        shared: &mut Gaussian,
+        factor: Option<&[f64]>,
+        traffic: crate::network::Traffic,
+    ) -> Result<(), LinalgError> {
+        let n = shared.mean.len();
+        for (j, mean) in means.chunks_exact(n).enumerate() {
+            shared.mean.as_mut_slice().copy_from_slice(mean);
+            self.step(j, k, shared, factor, traffic)?;
+        }
+        Ok(())
+    }
+}
+
+/// Receives the steps of a [`LockstepFastPath::run_trial_fast`] trial.
+pub trait StepSink {
+    /// The fused estimate after step `k` (1-based) and the traffic of the step.
+    fn step(
+        &mut self,
+        k: usize,
+        estimate: &Gaussian,
+        traffic: crate::network::Traffic,
+    ) -> Result<(), LinalgError>;
+
+    /// [`StepSink::step`] with the Cholesky factor of the estimate's covariance, when the
+    /// scheme has it at hand (a covariance shared by every trial): `factor` is the dirty
+    /// column-major lower factor that `fixed::nees_factor` computes from exactly these
+    /// covariance bits, so a sink that needs NEES need not factor the covariance again.
+    fn step_factored(
+        &mut self,
+        k: usize,
+        estimate: &Gaussian,
+        factor: &[f64],
+        traffic: crate::network::Traffic,
+    ) -> Result<(), LinalgError> {
+        let _ = factor;
+        self.step(k, estimate, traffic)
+    }
+}
+
+/// Why a fast trial stopped: the scheme failed at step `k`, or the sink refused step `k`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FastTrialError {
+    Scheme { k: usize, source: SchemeError },
+    Sink { k: usize, source: LinalgError },
+}
+
+/// Per-trial memory shared by the variants of one trial, by key (see
+/// [`LockstepFastPath::run_trial_fast`]). A few entries at most: a linear search.
+///
+/// It also keeps work space that outlives the trial ([`TrialCache::scratch`]): buffers a fast
+/// trial would otherwise allocate every trial.
+#[derive(Default)]
+pub struct TrialCache {
+    entries: Vec<(CacheKey, Box<dyn std::any::Any + Send>)>,
+    scratch: Vec<(CacheKey, Box<dyn std::any::Any + Send>)>,
+}
+
+/// Key of a [`TrialCache`] entry: which shared object (an address) and which data.
+pub type CacheKey = (usize, usize);
+
+impl TrialCache {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The entry of `key`, made by `make` if absent (or of another type).
+    pub fn get_or_insert_with<T: std::any::Any + Send>(
+        &mut self,
+        key: CacheKey,
+        make: impl FnOnce() -> T,
+    ) -> &mut T {
+        let pos = self
+            .entries
+            .iter()
+            .position(|(k, v)| *k == key && v.is::<T>());
+        let pos = pos.unwrap_or_else(|| {
+            self.entries.push((key, Box::new(make())));
+            self.entries.len() - 1
+        });
+        self.entries[pos]
+            .1
+            .downcast_mut::<T>()
+            .expect("checked type")
+    }
+
+    /// Forgets every entry (a new trial); the scratch space stays.
+    pub fn clear(&mut self) {
+        self.entries.clear();
+    }
+
+    /// Work space of `key`, made by `make` if absent, kept from trial to trial (and from
+    /// variant to variant: it must hold buffers only, whose contents a trial overwrites before
+    /// it reads them, never results).
+    pub fn scratch<T: std::any::Any + Send>(
+        &mut self,
+        key: CacheKey,
+        make: impl FnOnce() -> T,
+    ) -> &mut T {
+        let pos = self
+            .scratch
+            .iter()
+            .position(|(k, v)| *k == key && v.is::<T>());
+        let pos = pos.unwrap_or_else(|| {
+            self.scratch.push((key, Box::new(make())));
+            self.scratch.len() - 1
+        });
+        self.scratch[pos]
+            .1
+            .downcast_mut::<T>()
+            .expect("checked type")
+    }
+}
