@@ -2,8 +2,8 @@
 //! objects (never JSON or CSV text in between), and the engine's own run layer
 //! ([`hushfuse::engine::run`]) for output folders, resuming and shards.
 use crate::{
-    estimates_arrays, load, python_words, resolve, vectors_to_array2, DataError,
-    RunError, ScenarioError,
+    estimates_arrays, load, python_words, resolve, vectors_to_array2, DataError, RunError,
+    ScenarioError,
 };
 use hushfuse::engine::replay::{self, arrays};
 use hushfuse::engine::run as engine_run;
@@ -49,7 +49,10 @@ pub(crate) fn to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bou
     })
 }
 
-pub(crate) fn serialize<'py>(py: Python<'py>, x: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+pub(crate) fn serialize<'py>(
+    py: Python<'py>,
+    x: &impl serde::Serialize,
+) -> PyResult<Bound<'py, PyAny>> {
     let v = serde_json::to_value(x).map_err(|e| RunError::new_err(e.to_string()))?;
     to_py(py, &v)
 }
@@ -83,9 +86,9 @@ fn run_failure(e: engine_run::RunFailure) -> PyErr {
         engine_run::RunFailure::Input(m) => ScenarioError::new_err(python_words(&m)),
         engine_run::RunFailure::TooLarge(m) => PyMemoryError::new_err(python_words(&m)),
         engine_run::RunFailure::Run(m) => RunError::new_err(m),
-        stopped @ engine_run::RunFailure::Interrupted { .. } => RunError::new_err(format!(
-            "{stopped}; continue with run(..., resume=True)"
-        )),
+        stopped @ engine_run::RunFailure::Interrupted { .. } => {
+            RunError::new_err(format!("{stopped}; continue with run(..., resume=True)"))
+        }
     }
 }
 
@@ -232,7 +235,11 @@ pub(crate) fn replay_arrays<'py>(
         .collect();
     let truth_owned = truth.map(|t| {
         let v = t.as_array();
-        (v.iter().copied().collect::<Vec<f64>>(), v.nrows(), v.ncols())
+        (
+            v.iter().copied().collect::<Vec<f64>>(),
+            v.nrows(),
+            v.ncols(),
+        )
     });
     fn matrix((data, rows, cols): &(Vec<f64>, usize, usize)) -> arrays::Matrix<'_> {
         arrays::Matrix {

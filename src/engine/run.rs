@@ -186,8 +186,7 @@ pub fn execute(req: &Request, hooks: &Hooks) -> Result<Outcome, RunFailure> {
         ),
         None => None,
     };
-    let needed =
-        limits::output_bytes(exp.groups.len(), exp.variants.len(), exp.steps, exp.trials);
+    let needed = limits::output_bytes(exp.groups.len(), exp.variants.len(), exp.steps, exp.trials);
     output::check_free_space(&dir, needed).map_err(RunFailure::Input)?;
     let start = Instant::now();
     let checkpoint = dir.join(durable::checkpoint_file_name(req.shard));

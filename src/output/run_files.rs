@@ -144,11 +144,15 @@ fn stage_part(
         Part::Summary => {
             if let Some(summary) = r.summary {
                 let name = format!("{prefix}summary.json");
-                out_dir.stage_with(&name, |w| match r.paper {
-                    Some(paper) => serde_json::to_writer_pretty(w, &SummaryFile { summary, paper }),
-                    None => serde_json::to_writer_pretty(w, summary),
-                }
-                .map_err(std::io::Error::from))?;
+                out_dir.stage_with(&name, |w| {
+                    match r.paper {
+                        Some(paper) => {
+                            serde_json::to_writer_pretty(w, &SummaryFile { summary, paper })
+                        }
+                        None => serde_json::to_writer_pretty(w, summary),
+                    }
+                    .map_err(std::io::Error::from)
+                })?;
                 names.push(name);
             }
         }
@@ -191,7 +195,11 @@ fn stage_part(
 }
 
 /// `report.html` of a run (not of a calibrated arena, whose page carries its tables).
-pub fn report_page(exp: &Experiment, summary: &Summary, scenario_text: &str) -> Result<String, String> {
+pub fn report_page(
+    exp: &Experiment,
+    summary: &Summary,
+    scenario_text: &str,
+) -> Result<String, String> {
     html::render(&html::Input {
         exp,
         summary,

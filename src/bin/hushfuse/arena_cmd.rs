@@ -282,8 +282,8 @@ fn write_arena_files(
     for (b, s) in out.summaries.iter().enumerate() {
         let sub = format!("budget-{}/", calibrate::dir_label(budgets[b]));
         // The budget's scenario as run, rebuilt: the same files as a run of it would write.
-        let exp =
-            build::load_with(&out.texts[b], source, load).map_err(|e| Failure::Run(e.to_string()))?;
+        let exp = build::load_with(&out.texts[b], source, load)
+            .map_err(|e| Failure::Run(e.to_string()))?;
         let results = run_files::Results {
             exp: &exp,
             summary: Some(s),

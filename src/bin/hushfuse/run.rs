@@ -198,10 +198,9 @@ pub(crate) fn failure(e: engine_run::RunFailure) -> Failure {
     match e {
         engine_run::RunFailure::Input(m) | engine_run::RunFailure::TooLarge(m) => Failure::Input(m),
         engine_run::RunFailure::Run(m) => Failure::Run(m),
-        stopped @ engine_run::RunFailure::Interrupted { .. } => Failure::Interrupted(format!(
-            "{stopped}\ncontinue with: {}",
-            resume_command()
-        )),
+        stopped @ engine_run::RunFailure::Interrupted { .. } => {
+            Failure::Interrupted(format!("{stopped}\ncontinue with: {}", resume_command()))
+        }
     }
 }
 

@@ -78,7 +78,9 @@ pub fn replay_arrays(
         )));
     }
     if steps == 0 {
-        return Err(data("measurements: the arrays have no rows (no steps)".into()));
+        return Err(data(
+            "measurements: the arrays have no rows (no steps)".into(),
+        ));
     }
     if let Some(t) = &arrays.truth {
         if t.rows != steps || t.data.len() != t.rows * t.cols {
@@ -149,12 +151,16 @@ pub fn replay_arrays(
                     t.cols
                 )));
             }
-            Some((0..steps).map(|k| Vector::from_row_slice(t.row(k))).collect())
+            Some(
+                (0..steps)
+                    .map(|k| Vector::from_row_slice(t.row(k)))
+                    .collect(),
+            )
         }
     };
     // The remaining checks (finite truth, one reading per sensor) are the CSV path's own.
-    let recorded =
-        Recorded::from_parts(&exp, per_step, truth).map_err(|m| data(format!("measurements: {m}")))?;
+    let recorded = Recorded::from_parts(&exp, per_step, truth)
+        .map_err(|m| data(format!("measurements: {m}")))?;
     let replayed = replay(&exp, &recorded, opts.trial).map_err(ReplayError::Run)?;
     Ok(CsvReplay {
         exp,
