@@ -34,6 +34,30 @@ pub fn center_seed(seed: u64, trial: u64, stream: u64) -> u64 {
     splitmix64(trial_seed(seed, trial, stream) ^ 0xC3A5_C85C_97CB_3127)
 }
 
+/// The stream of the network link's draws (packet losses, delays, Gilbert–Elliott states; see
+/// `crate::network::channel`). The link has a stream of its own, far from the data stream (0) and
+/// the coin streams (1 + v), so adding or changing a channel changes no other draw: the truth, the
+/// measurements and every variant's coins stay exactly what they were without a channel.
+pub const LINK_STREAM: u64 = u64::MAX - 1;
+
+/// The generator of one link slot: sensor `sensor`, step `step`, uplink (`downlink = false`) or
+/// feedback link (`downlink = true`) of trial `trial`. Derived from the trial's seed on
+/// [`LINK_STREAM`] by further splitmix steps, one per coordinate, so each slot's draws depend only
+/// on (seed, trial, sensor, step, direction): every scheme that sends in a slot meets the same
+/// fate, whichever schemes ran and in whatever order the slots are visited.
+pub fn slot_rng(
+    seed: u64,
+    trial: u64,
+    sensor: usize,
+    step: usize,
+    downlink: bool,
+) -> Xoshiro256PlusPlus {
+    let link = trial_seed(seed, trial, LINK_STREAM);
+    let s =
+        splitmix64(splitmix64(splitmix64(link ^ sensor as u64) ^ step as u64) ^ downlink as u64);
+    Xoshiro256PlusPlus::seed_from_u64(s)
+}
+
 fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
     splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream)
 }

@@ -2,6 +2,8 @@
 //! counts messages and bits, so no scheme can forget to count.
 use crate::link::{Received, Transmission};
 
+pub mod channel;
+
 /// Counters of one delivery round (one time step).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Traffic {

@@ -1,0 +1,458 @@
+//! The fate of every (sensor, step) slot of a trial, drawn once before any scheme runs: whether
+//! a packet sent in that slot is lost and, if not, how many steps it takes. Drawing the table up
+//! front from generators of the link's own stream ([`seeding::slot_rng`]) means every scheme that
+//! sends in a slot meets the same fate (a paired comparison across schemes), and no fate depends
+//! on which schemes ran, how often they sent, or in which order.
+use rand::Rng;
+use rand_distr::Distribution;
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+use super::spec::{ChannelKind, ChannelSpec, Delay};
+use crate::engine::seeding;
+
+/// The step index given to [`seeding::slot_rng`] for a sensor's Gilbert–Elliott state chain.
+/// No real step reaches it, so the chain's generator is distinct from every slot's, and the
+/// chain (which must be drawn in order) does not shift any slot's draws.
+pub const CHAIN_STEP: usize = usize::MAX;
+
+/// What happens to a packet sent in one slot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Fate {
+    /// The packet never arrives.
+    pub lost: bool,
+    /// Steps between sending and arrival (0 = same step). 0 when `lost`.
+    pub delay: u32,
+}
+
+/// The fates of all slots of one trial and one direction, sensor-major.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FateTable {
+    sensors: usize,
+    steps: usize,
+    fates: Vec<Fate>,
+}
+
+impl FateTable {
+    /// Draws the fates of `specs.len()` sensors over steps `1..=steps` of trial `trial`.
+    /// With `downlink = false` the table is the uplink's (each sensor's own spec); with
+    /// `downlink = true` it is the feedback link's, using each spec's `downlink` model (absent =
+    /// ideal), drawn from the generators of the downlink slots.
+    ///
+    /// The specs are expected to have passed [`ChannelSpec::validate`]; out-of-range values are
+    /// clamped into range rather than trusted (a NaN probability counts as 0).
+    pub fn draw(
+        specs: &[ChannelSpec],
+        steps: usize,
+        seed: u64,
+        trial: u64,
+        downlink: bool,
+    ) -> FateTable {
+        let mut fates = Vec::with_capacity(specs.len() * steps);
+        for (sensor, spec) in specs.iter().enumerate() {
+            let spec = if downlink {
+                spec.downlink_spec()
+            } else {
+                spec.clone()
+            };
+            let slot = |step: usize| seeding::slot_rng(seed, trial, sensor, step, downlink);
+            draw_sensor(&spec, steps, slot, &mut fates);
+        }
+        FateTable {
+            sensors: specs.len(),
+            steps,
+            fates,
+        }
+    }
+
+    /// The fate of a packet sent by `sensor` at step `step` (1-based, as in the engine's
+    /// [`crate::network::Schedule::allows`]). Panics outside the drawn table: that is a bug in
+    /// the caller, not a property of the input.
+    pub fn get(&self, sensor: usize, step: usize) -> Fate {
+        assert!(
+            sensor < self.sensors && (1..=self.steps).contains(&step),
+            "slot (sensor {sensor}, step {step}) outside the fate table ({} sensors, steps 1..={})",
+            self.sensors,
+            self.steps
+        );
+        self.fates[sensor * self.steps + (step - 1)]
+    }
+
+    /// Number of sensors in the table.
+    pub fn sensors(&self) -> usize {
+        self.sensors
+    }
+
+    /// Number of steps in the table (steps run 1..=steps).
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+}
+
+/// Appends the fates of one sensor's steps `1..=steps`. `slot(k)` is the generator of slot k;
+/// each slot's loss coin and delay come from its own generator.
+fn draw_sensor(
+    spec: &ChannelSpec,
+    steps: usize,
+    slot: impl Fn(usize) -> Xoshiro256PlusPlus,
+    out: &mut Vec<Fate>,
+) {
+    let delay = spec.delay();
+    match spec.kind {
+        ChannelKind::Ideal => {
+            for k in 1..=steps {
+                out.push(fate(false, &delay, &mut slot(k)));
+            }
+        }
+        ChannelKind::Bernoulli => {
+            let loss = clamp_probability(spec.loss.unwrap_or(0.0));
+            for k in 1..=steps {
+                let mut rng = slot(k);
+                let lost = rng.random::<f64>() < loss;
+                out.push(fate(lost, &delay, &mut rng));
+            }
+        }
+        ChannelKind::GilbertElliott => {
+            let chain = GilbertElliott::from_spec(spec);
+            // The state is a Markov chain, so it is drawn in order from one generator per sensor
+            // (the slot generator of step CHAIN_STEP); the slot generators then only decide the
+            // loss given the state, and the delay.
+            let mut chain_rng = slot(CHAIN_STEP);
+            let mut bad = chain.initial_bad(&mut chain_rng);
+            for k in 1..=steps {
+                bad = chain.transition(bad, &mut chain_rng);
+                let mut rng = slot(k);
+                let lost = rng.random::<f64>() < chain.loss(bad);
+                out.push(fate(lost, &delay, &mut rng));
+            }
+        }
+    }
+}
+
+/// A slot's fate: its delay is drawn even when the packet is lost so that a slot's generator is
+/// always used the same way, then reported as 0 for a lost packet.
+fn fate(lost: bool, delay: &Delay, rng: &mut Xoshiro256PlusPlus) -> Fate {
+    let d = draw_delay(delay, rng);
+    Fate {
+        lost,
+        delay: if lost { 0 } else { d },
+    }
+}
+
+/// A delay in steps. Geometric with mean μ: the number of failures before the first success of
+/// trials with success probability p = 1/(1+μ), whose mean is (1−p)/p = μ; μ = 0 gives 0.
+fn draw_delay(delay: &Delay, rng: &mut Xoshiro256PlusPlus) -> u32 {
+    match delay {
+        Delay::Fixed(d) => *d,
+        Delay::Geometric(g) => {
+            let mean = if g.mean.is_finite() {
+                g.mean.max(0.0)
+            } else {
+                0.0
+            };
+            if mean == 0.0 {
+                return 0;
+            }
+            match rand_distr::Geometric::new(1.0 / (1.0 + mean)) {
+                Ok(geo) => u32::try_from(geo.sample(rng)).unwrap_or(u32::MAX),
+                // Unreachable for a finite mean > 0 (p lies in (0, 1)); no delay is the safe
+                // reading of a value validation should have rejected.
+                Err(_) => 0,
+            }
+        }
+    }
+}
+
+/// The parameters of a Gilbert–Elliott chain.
+#[derive(Debug, Clone, Copy)]
+struct GilbertElliott {
+    p_gb: f64,
+    p_bg: f64,
+    loss_good: f64,
+    loss_bad: f64,
+}
+
+impl GilbertElliott {
+    fn from_spec(spec: &ChannelSpec) -> Self {
+        Self {
+            p_gb: clamp_probability(spec.p_gb.unwrap_or(0.0)),
+            p_bg: clamp_probability(spec.p_bg.unwrap_or(0.0)),
+            loss_good: clamp_probability(spec.loss_good()),
+            loss_bad: clamp_probability(spec.loss_bad()),
+        }
+    }
+
+    /// Stationary probability of the bad state, π_bad = p_gb / (p_gb + p_bg); 0 when both are 0
+    /// (the chain never moves, and it is taken to start good).
+    fn stationary_bad(&self) -> f64 {
+        let total = self.p_gb + self.p_bg;
+        if total > 0.0 {
+            self.p_gb / total
+        } else {
+            0.0
+        }
+    }
+
+    /// The state before step 1, from the stationary distribution, so the link is in its long-run
+    /// regime from the first step on (no warm-up transient in short trials).
+    fn initial_bad(&self, rng: &mut Xoshiro256PlusPlus) -> bool {
+        rng.random::<f64>() < self.stationary_bad()
+    }
+
+    /// One step of the chain.
+    fn transition(&self, bad: bool, rng: &mut Xoshiro256PlusPlus) -> bool {
+        let u = rng.random::<f64>();
+        if bad {
+            u >= self.p_bg
+        } else {
+            u < self.p_gb
+        }
+    }
+
+    fn loss(&self, bad: bool) -> f64 {
+        if bad {
+            self.loss_bad
+        } else {
+            self.loss_good
+        }
+    }
+}
+
+fn clamp_probability(p: f64) -> f64 {
+    if p.is_nan() {
+        0.0
+    } else {
+        p.clamp(0.0, 1.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::spec::{DelayKind, GeometricDelay};
+    use super::*;
+
+    const SEED: u64 = 0x5EED_CAFE;
+
+    fn bernoulli(loss: f64) -> ChannelSpec {
+        ChannelSpec {
+            kind: ChannelKind::Bernoulli,
+            loss: Some(loss),
+            ..ChannelSpec::default()
+        }
+    }
+
+    fn gilbert_elliott(p_gb: f64, p_bg: f64, loss_good: f64, loss_bad: f64) -> ChannelSpec {
+        ChannelSpec {
+            kind: ChannelKind::GilbertElliott,
+            p_gb: Some(p_gb),
+            p_bg: Some(p_bg),
+            loss_good: Some(loss_good),
+            loss_bad: Some(loss_bad),
+            ..ChannelSpec::default()
+        }
+    }
+
+    fn geometric(mean: f64) -> Delay {
+        Delay::Geometric(GeometricDelay {
+            kind: DelayKind::Geometric,
+            mean,
+        })
+    }
+
+    /// Every fate of the table, sensor-major.
+    fn all(t: &FateTable) -> impl Iterator<Item = Fate> + '_ {
+        (0..t.sensors()).flat_map(move |i| (1..=t.steps()).map(move |k| t.get(i, k)))
+    }
+
+    fn loss_rate(t: &FateTable) -> f64 {
+        all(t).filter(|f| f.lost).count() as f64 / (t.sensors() * t.steps()) as f64
+    }
+
+    #[test]
+    fn ideal_loses_nothing_and_has_no_delay() {
+        let t = FateTable::draw(&vec![ChannelSpec::default(); 3], 500, SEED, 0, false);
+        assert!(all(&t).all(|f| f == Fate::default()));
+        // An absent downlink is ideal even when the uplink is not.
+        let t = FateTable::draw(&[bernoulli(0.9)], 500, SEED, 0, true);
+        assert!(all(&t).all(|f| f == Fate::default()));
+    }
+
+    #[test]
+    fn fixed_delay_applies_to_every_delivered_packet() {
+        let spec = ChannelSpec {
+            delay: Some(Delay::Fixed(3)),
+            ..bernoulli(0.5)
+        };
+        let t = FateTable::draw(&[spec], 1000, SEED, 0, false);
+        assert!(all(&t).all(|f| if f.lost { f.delay == 0 } else { f.delay == 3 }));
+    }
+
+    #[test]
+    fn bernoulli_loss_rate_matches() {
+        let p = 0.3;
+        let t = FateTable::draw(&vec![bernoulli(p); 20], 10_000, SEED, 7, false);
+        let n = (t.sensors() * t.steps()) as f64;
+        // Independent slots: SE = sqrt(p(1−p)/n) ≈ 0.00102 for n = 2·10^5; tolerance 4 SE.
+        let se = (p * (1.0 - p) / n).sqrt();
+        let rate = loss_rate(&t);
+        assert!((rate - p).abs() < 4.0 * se, "rate {rate}, p {p}, se {se}");
+    }
+
+    #[test]
+    fn gilbert_elliott_long_run_loss_rate_matches() {
+        let (p_gb, p_bg, lg, lb) = (0.05, 0.2, 0.05, 0.9);
+        let t = FateTable::draw(
+            &vec![gilbert_elliott(p_gb, p_bg, lg, lb); 50],
+            4_000,
+            SEED,
+            3,
+            false,
+        );
+        let pi_bad = p_gb / (p_gb + p_bg);
+        let expected = (1.0 - pi_bad) * lg + pi_bad * lb;
+        // Losses are correlated through the state, whose autocorrelation at lag j is λ^j with
+        // λ = 1 − p_gb − p_bg. Per-slot variance of the mean, long-run: the binomial part
+        // E[ℓ(1−ℓ)] plus (lb − lg)² π_bad π_good (1+λ)/(1−λ) from the state. With these numbers
+        // SE ≈ sqrt(0.865 / 2·10^5) ≈ 0.0021; tolerance 4 SE.
+        let lambda = 1.0 - p_gb - p_bg;
+        let binomial = (1.0 - pi_bad) * lg * (1.0 - lg) + pi_bad * lb * (1.0 - lb);
+        let state = (lb - lg).powi(2) * pi_bad * (1.0 - pi_bad) * (1.0 + lambda) / (1.0 - lambda);
+        let n = (t.sensors() * t.steps()) as f64;
+        let se = ((binomial + state) / n).sqrt();
+        let rate = loss_rate(&t);
+        assert!(
+            (rate - expected).abs() < 4.0 * se,
+            "rate {rate}, expected {expected}, se {se}"
+        );
+    }
+
+    #[test]
+    fn gilbert_elliott_mean_burst_is_one_over_p_bg() {
+        // loss_good = 0, loss_bad = 1: a run of losses is exactly a stay in the bad state, whose
+        // length is geometric on {1, 2, …} with mean 1/p_bg and variance (1 − p_bg)/p_bg².
+        let (p_gb, p_bg) = (0.05, 0.2);
+        let t = FateTable::draw(
+            &vec![gilbert_elliott(p_gb, p_bg, 0.0, 1.0); 50],
+            4_000,
+            SEED,
+            11,
+            false,
+        );
+        let mut bursts = Vec::new();
+        for i in 0..t.sensors() {
+            let mut run = 0usize;
+            for k in 1..=t.steps() {
+                if t.get(i, k).lost {
+                    run += 1;
+                } else if run > 0 {
+                    bursts.push(run as f64);
+                    run = 0;
+                }
+            }
+            // A run still open at the last step is cut short; it is left out. (A run open at
+            // step 1 is not biased: the stay's remaining length is memoryless.)
+        }
+        let m = bursts.len() as f64;
+        let mean = bursts.iter().sum::<f64>() / m;
+        // About 8000 bursts: SE = sqrt((1 − p_bg)/p_bg² / m) ≈ 0.05; tolerance 4 SE.
+        let se = ((1.0 - p_bg) / (p_bg * p_bg) / m).sqrt();
+        assert!(
+            (mean - 1.0 / p_bg).abs() < 4.0 * se,
+            "mean burst {mean}, expected {}, se {se}, {m} bursts",
+            1.0 / p_bg
+        );
+    }
+
+    #[test]
+    fn geometric_delay_mean_matches() {
+        let mu = 2.5;
+        let spec = ChannelSpec {
+            delay: Some(geometric(mu)),
+            ..ChannelSpec::default()
+        };
+        let t = FateTable::draw(&vec![spec; 20], 10_000, SEED, 5, false);
+        let n = (t.sensors() * t.steps()) as f64;
+        let mean = all(&t).map(|f| f.delay as f64).sum::<f64>() / n;
+        // Geometric (failures before success) with p = 1/(1+μ): variance (1−p)/p² = μ(1+μ).
+        // SE = sqrt(8.75 / 2·10^5) ≈ 0.0066; tolerance 4 SE.
+        let se = (mu * (1.0 + mu) / n).sqrt();
+        assert!(
+            (mean - mu).abs() < 4.0 * se,
+            "mean {mean}, mu {mu}, se {se}"
+        );
+        // Mean 0 means no delay at all.
+        let spec = ChannelSpec {
+            delay: Some(geometric(0.0)),
+            ..ChannelSpec::default()
+        };
+        let t = FateTable::draw(&[spec], 1000, SEED, 5, false);
+        assert!(all(&t).all(|f| f.delay == 0));
+    }
+
+    #[test]
+    fn same_seed_same_table_and_sensors_differ() {
+        let specs = vec![
+            bernoulli(0.5),
+            bernoulli(0.5),
+            gilbert_elliott(0.3, 0.3, 0.1, 0.9),
+        ];
+        let a = FateTable::draw(&specs, 300, SEED, 2, false);
+        let b = FateTable::draw(&specs, 300, SEED, 2, false);
+        assert_eq!(a, b);
+        let lost =
+            |t: &FateTable, i: usize| (1..=300).map(|k| t.get(i, k).lost).collect::<Vec<_>>();
+        assert_ne!(lost(&a, 0), lost(&a, 1), "same spec, different sensors");
+        let other_trial = FateTable::draw(&specs, 300, SEED, 3, false);
+        assert_ne!(lost(&a, 0), lost(&other_trial, 0), "different trials");
+        let other_seed = FateTable::draw(&specs, 300, SEED + 1, 2, false);
+        assert_ne!(lost(&a, 0), lost(&other_seed, 0), "different seeds");
+    }
+
+    #[test]
+    fn fates_do_not_depend_on_other_sensors_or_horizon() {
+        // A sensor's fates depend only on its own slots: adding a sensor or lengthening the
+        // trial changes none of the existing fates (the Gilbert–Elliott chain included).
+        let specs = vec![gilbert_elliott(0.1, 0.3, 0.0, 1.0), bernoulli(0.4)];
+        let short = FateTable::draw(&specs[..1], 200, SEED, 1, false);
+        let long = FateTable::draw(&specs, 400, SEED, 1, false);
+        for k in 1..=200 {
+            assert_eq!(short.get(0, k), long.get(0, k));
+        }
+    }
+
+    #[test]
+    fn downlink_uses_its_own_model_and_draws() {
+        let spec = ChannelSpec {
+            downlink: Some(Box::new(bernoulli(0.5))),
+            ..bernoulli(0.5)
+        };
+        let up = FateTable::draw(std::slice::from_ref(&spec), 2000, SEED, 0, false);
+        let down = FateTable::draw(std::slice::from_ref(&spec), 2000, SEED, 0, true);
+        assert_ne!(
+            up, down,
+            "the two directions draw from different generators"
+        );
+        let rate = loss_rate(&down);
+        // SE = sqrt(0.25/2000) ≈ 0.011; tolerance 4 SE.
+        assert!(
+            (rate - 0.5).abs() < 4.0 * (0.25f64 / 2000.0).sqrt(),
+            "{rate}"
+        );
+    }
+
+    #[test]
+    fn degenerate_chains() {
+        // Both transition probabilities 0: π_bad = 0, the chain stays good forever.
+        let t = FateTable::draw(&[gilbert_elliott(0.0, 0.0, 0.0, 1.0)], 500, SEED, 0, false);
+        assert!(all(&t).all(|f| !f.lost));
+        // p_gb = 1, p_bg = 0: bad from step 1 on, every packet lost.
+        let t = FateTable::draw(&[gilbert_elliott(1.0, 0.0, 0.0, 1.0)], 500, SEED, 0, false);
+        assert!(all(&t).all(|f| f.lost));
+    }
+
+    #[test]
+    #[should_panic(expected = "outside the fate table")]
+    fn step_zero_is_outside_the_table() {
+        let t = FateTable::draw(&[ChannelSpec::default()], 10, SEED, 0, false);
+        let _ = t.get(0, 0);
+    }
+}

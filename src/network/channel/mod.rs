@@ -1,0 +1,14 @@
+//! The link model between sensors and the fusion center: which packets are lost and how late the
+//! others arrive. Not yet wired into the engine.
+//!
+//! - [`spec`]: the `[channel]` scenario keys and their validation;
+//! - [`fate`]: the fate of every (sensor, step) slot of a trial, drawn once from the link's own
+//!   random stream so that every scheme meets the same losses;
+//! - [`stability`]: the classical stability checks of Kalman filtering with intermittent
+//!   observations (Sinopoli et al. 2004), used to sanity-check a scenario's link.
+pub mod fate;
+pub mod spec;
+pub mod stability;
+
+pub use fate::{Fate, FateTable};
+pub use spec::{resolve, Arq, ChannelKind, ChannelSpec, Delay, DelayKind, GeometricDelay};

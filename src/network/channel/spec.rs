@@ -1,0 +1,524 @@
+//! The scenario keys of a link model: the `[channel]` table of a scenario (and of a sensor that
+//! overrides it). Parsing accepts every key as optional so that `[channel]` with only
+//! `kind = "ideal"` parses; [`ChannelSpec::validate`] then checks that the keys present fit the
+//! kind and that every probability is one.
+use serde::{Deserialize, Serialize};
+
+/// The loss model of a link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ChannelKind {
+    /// Every packet arrives.
+    #[default]
+    Ideal,
+    /// Each packet is lost independently with probability `loss`.
+    Bernoulli,
+    /// A two-state Markov chain (good, bad) with a loss probability per state: bursty losses
+    /// (Gilbert 1960, Elliott 1963).
+    GilbertElliott,
+}
+
+impl ChannelKind {
+    /// The name used in the scenario file.
+    pub fn name(self) -> &'static str {
+        match self {
+            ChannelKind::Ideal => "ideal",
+            ChannelKind::Bernoulli => "bernoulli",
+            ChannelKind::GilbertElliott => "gilbert-elliott",
+        }
+    }
+}
+
+/// The tag of a random delay table (`delay = { kind = "geometric", mean = … }`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DelayKind {
+    /// Geometric number of steps (failures before a success), see [`Delay::Geometric`].
+    Geometric,
+}
+
+/// A random delay: `{ kind = "geometric", mean = … }`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct GeometricDelay {
+    /// Always `"geometric"`.
+    pub kind: DelayKind,
+    /// The mean delay in steps (finite, ≥ 0).
+    pub mean: f64,
+}
+
+/// How many steps a delivered packet takes: an integer, or a geometric table.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+#[serde(
+    expecting = "a delay: a non-negative integer number of steps or { kind = \"geometric\", mean = … }"
+)]
+pub enum Delay {
+    /// Every packet takes exactly this many steps.
+    Fixed(u32),
+    /// Geometric number of steps with the given mean (see `fate`).
+    Geometric(GeometricDelay),
+}
+
+impl Default for Delay {
+    fn default() -> Self {
+        Delay::Fixed(0)
+    }
+}
+
+impl Delay {
+    /// Whether every packet takes zero steps.
+    pub fn is_zero(&self) -> bool {
+        match self {
+            Delay::Fixed(d) => *d == 0,
+            Delay::Geometric(g) => g.mean == 0.0,
+        }
+    }
+}
+
+/// Automatic repeat request on a link (parsed and validated only; not yet simulated).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Arq {
+    /// Retransmissions allowed after the first attempt.
+    pub max_retries: u32,
+}
+
+/// A link model: the `[channel]` table of a scenario or of one sensor.
+///
+/// Every key is optional at parse time; [`ChannelSpec::validate`] enforces which keys each
+/// `kind` needs and allows. `loss_good` and `loss_bad` default to 0 and 1
+/// ([`ChannelSpec::loss_good`], [`ChannelSpec::loss_bad`]); they stay `Option` here so that a key
+/// given for the wrong kind can be reported.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelSpec {
+    /// The loss model (default `"ideal"`).
+    #[serde(default)]
+    pub kind: ChannelKind,
+    /// Bernoulli: probability that a packet is lost.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss: Option<f64>,
+    /// Gilbert–Elliott: per-step transition probability good → bad.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p_gb: Option<f64>,
+    /// Gilbert–Elliott: per-step transition probability bad → good.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p_bg: Option<f64>,
+    /// Gilbert–Elliott: loss probability in the good state (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_good: Option<f64>,
+    /// Gilbert–Elliott: loss probability in the bad state (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_bad: Option<f64>,
+    /// Delay of a delivered packet, in steps (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay: Option<Delay>,
+    /// The feedback link (fusion center → sensors); `None` = ideal downlink.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub downlink: Option<Box<ChannelSpec>>,
+    /// Retransmissions (parsed and validated only for now).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arq: Option<Arq>,
+}
+
+impl ChannelSpec {
+    /// Gilbert–Elliott loss probability in the good state (default 0).
+    pub fn loss_good(&self) -> f64 {
+        self.loss_good.unwrap_or(0.0)
+    }
+
+    /// Gilbert–Elliott loss probability in the bad state (default 1).
+    pub fn loss_bad(&self) -> f64 {
+        self.loss_bad.unwrap_or(1.0)
+    }
+
+    /// The delay (default 0).
+    pub fn delay(&self) -> Delay {
+        self.delay.unwrap_or_default()
+    }
+
+    /// The downlink model (`None` in the file means ideal).
+    pub fn downlink_spec(&self) -> ChannelSpec {
+        self.downlink.as_deref().cloned().unwrap_or_default()
+    }
+
+    /// Whether the link changes nothing: ideal kind, zero delay (a geometric delay of mean 0 is
+    /// zero too), an ideal or absent downlink and no `arq` table.
+    pub fn is_ideal(&self) -> bool {
+        self.kind == ChannelKind::Ideal
+            && self.delay().is_zero()
+            && self.downlink.as_deref().is_none_or(ChannelSpec::is_ideal)
+            && self.arq.is_none()
+    }
+
+    /// Checks the table found at `channel`; see [`ChannelSpec::validate_at`].
+    pub fn validate(&self) -> Result<(), String> {
+        self.validate_at("channel")
+    }
+
+    /// Checks the keys against the kind and the values against their ranges. `path` names the
+    /// table in messages (`"channel"`, `"sensors[2].channel"`, …) so the user can find the key.
+    pub fn validate_at(&self, path: &str) -> Result<(), String> {
+        self.check_keys_fit_kind(path)?;
+        match self.kind {
+            ChannelKind::Ideal => {}
+            ChannelKind::Bernoulli => {
+                probability(path, "loss", required(path, self.kind, "loss", self.loss)?)?;
+            }
+            ChannelKind::GilbertElliott => {
+                probability(path, "p_gb", required(path, self.kind, "p_gb", self.p_gb)?)?;
+                probability(path, "p_bg", required(path, self.kind, "p_bg", self.p_bg)?)?;
+                probability(path, "loss_good", self.loss_good())?;
+                probability(path, "loss_bad", self.loss_bad())?;
+            }
+        }
+        if let Some(Delay::Geometric(g)) = &self.delay {
+            if !(g.mean.is_finite() && g.mean >= 0.0) {
+                return Err(format!(
+                    "{path}.delay.mean = {} must be a finite number of steps >= 0",
+                    g.mean
+                ));
+            }
+        }
+        if let Some(down) = &self.downlink {
+            // A feedback link has no feedback link of its own.
+            if down.downlink.is_some() {
+                return Err(format!(
+                    "{path}.downlink.downlink is not allowed: a downlink has no downlink"
+                ));
+            }
+            down.validate_at(&format!("{path}.downlink"))?;
+        }
+        Ok(())
+    }
+
+    /// Rejects keys of another kind: a `loss` under `kind = "gilbert-elliott"` would otherwise be
+    /// silently ignored, and the user would believe it was used.
+    fn check_keys_fit_kind(&self, path: &str) -> Result<(), String> {
+        let keys: [(&str, bool, ChannelKind); 5] = [
+            ("loss", self.loss.is_some(), ChannelKind::Bernoulli),
+            ("p_gb", self.p_gb.is_some(), ChannelKind::GilbertElliott),
+            ("p_bg", self.p_bg.is_some(), ChannelKind::GilbertElliott),
+            (
+                "loss_good",
+                self.loss_good.is_some(),
+                ChannelKind::GilbertElliott,
+            ),
+            (
+                "loss_bad",
+                self.loss_bad.is_some(),
+                ChannelKind::GilbertElliott,
+            ),
+        ];
+        for (key, present, owner) in keys {
+            if present && owner != self.kind {
+                return Err(format!(
+                    "{path}.{key} belongs to kind = \"{}\", not \"{}\"",
+                    owner.name(),
+                    self.kind.name()
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The value of a key the kind needs, or an error naming it.
+fn required(path: &str, kind: ChannelKind, key: &str, value: Option<f64>) -> Result<f64, String> {
+    value.ok_or_else(|| format!("{path}.kind = \"{}\" needs `{key}`", kind.name()))
+}
+
+/// Checks that `value` is a probability; NaN fails the range test and is rejected too.
+fn probability(path: &str, key: &str, value: f64) -> Result<(), String> {
+    if (0.0..=1.0).contains(&value) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{path}.{key} = {value} is not a probability in [0, 1]"
+        ))
+    }
+}
+
+/// The link model of each sensor: sensor i's own table if it has one, else the scenario's
+/// `[channel]`, else ideal. A per-sensor table REPLACES the global one as a whole; it is not
+/// merged key by key (a sensor that overrides `kind` must not inherit, say, a `loss` that only
+/// made sense for the global kind). One entry per element of `per_sensor`.
+pub fn resolve(
+    global: Option<&ChannelSpec>,
+    per_sensor: &[Option<ChannelSpec>],
+) -> Vec<ChannelSpec> {
+    per_sensor
+        .iter()
+        .map(|own| match own {
+            Some(spec) => spec.clone(),
+            None => global.cloned().unwrap_or_default(),
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Parses the body of a `[channel]` table.
+    fn parse(body: &str) -> Result<ChannelSpec, String> {
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Doc {
+            channel: ChannelSpec,
+        }
+        toml::from_str::<Doc>(&format!("[channel]\n{body}"))
+            .map(|d| d.channel)
+            .map_err(|e| e.to_string())
+    }
+
+    fn parse_ok(body: &str) -> ChannelSpec {
+        match parse(body) {
+            Ok(s) => s,
+            Err(e) => panic!("{body:?} should parse: {e}"),
+        }
+    }
+
+    fn invalid(body: &str) -> String {
+        match parse_ok(body).validate() {
+            Ok(()) => panic!("{body:?} should be invalid"),
+            Err(e) => e,
+        }
+    }
+
+    #[test]
+    fn parses_ideal_and_empty_table() {
+        let s = parse_ok("kind = \"ideal\"");
+        assert_eq!(s, ChannelSpec::default());
+        assert!(s.is_ideal());
+        assert_eq!(s.validate(), Ok(()));
+        assert_eq!(parse_ok(""), ChannelSpec::default());
+    }
+
+    #[test]
+    fn parses_bernoulli() {
+        let s = parse_ok("kind = \"bernoulli\"\nloss = 0.25");
+        assert_eq!(s.kind, ChannelKind::Bernoulli);
+        assert_eq!(s.loss, Some(0.25));
+        assert_eq!(s.validate(), Ok(()));
+        assert!(!s.is_ideal());
+    }
+
+    #[test]
+    fn parses_gilbert_elliott_with_defaults() {
+        let s = parse_ok("kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.4");
+        assert_eq!(s.kind, ChannelKind::GilbertElliott);
+        assert_eq!((s.p_gb, s.p_bg), (Some(0.1), Some(0.4)));
+        assert_eq!((s.loss_good(), s.loss_bad()), (0.0, 1.0));
+        assert_eq!(s.validate(), Ok(()));
+        let s = parse_ok(
+            "kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.4\nloss_good = 0.02\nloss_bad = 0.8",
+        );
+        assert_eq!((s.loss_good(), s.loss_bad()), (0.02, 0.8));
+        assert_eq!(s.validate(), Ok(()));
+    }
+
+    #[test]
+    fn parses_both_delay_forms() {
+        let s = parse_ok("delay = 3");
+        assert_eq!(s.delay, Some(Delay::Fixed(3)));
+        assert!(!s.is_ideal());
+        let s = parse_ok("delay = { kind = \"geometric\", mean = 1.5 }");
+        assert_eq!(
+            s.delay,
+            Some(Delay::Geometric(GeometricDelay {
+                kind: DelayKind::Geometric,
+                mean: 1.5
+            }))
+        );
+        assert_eq!(s.validate(), Ok(()));
+        // Zero delay in either form leaves the link ideal.
+        assert!(parse_ok("delay = 0").is_ideal());
+        assert!(parse_ok("delay = { kind = \"geometric\", mean = 0.0 }").is_ideal());
+    }
+
+    #[test]
+    fn rejects_malformed_delays() {
+        assert!(parse("delay = -1").is_err());
+        assert!(parse("delay = 1.5").is_err());
+        assert!(parse("delay = { kind = \"uniform\", mean = 1.0 }").is_err());
+        assert!(parse("delay = { kind = \"geometric\", mean = 1.0, max = 3 }").is_err());
+        let e = parse("delay = \"soon\"").unwrap_err();
+        assert!(e.contains("a delay"), "{e}");
+    }
+
+    #[test]
+    fn parses_downlink_and_arq() {
+        let s = parse_ok(
+            "kind = \"bernoulli\"\nloss = 0.1\ndownlink = { kind = \"bernoulli\", loss = 0.3 }\narq = { max_retries = 2 }",
+        );
+        let down = s.downlink.as_deref().expect("downlink parsed");
+        assert_eq!(down.kind, ChannelKind::Bernoulli);
+        assert_eq!(down.loss, Some(0.3));
+        assert_eq!(s.arq, Some(Arq { max_retries: 2 }));
+        assert_eq!(s.validate(), Ok(()));
+        // Sub-table syntax works too.
+        let toml = "[channel]\nkind = \"ideal\"\n[channel.downlink]\nkind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.5\n";
+        #[derive(Deserialize)]
+        struct Doc {
+            channel: ChannelSpec,
+        }
+        let doc: Doc = toml::from_str(toml).expect("sub-table parses");
+        assert_eq!(
+            doc.channel.downlink_spec().kind,
+            ChannelKind::GilbertElliott
+        );
+        assert!(!doc.channel.is_ideal());
+    }
+
+    #[test]
+    fn is_ideal_needs_every_part_ideal() {
+        assert!(parse_ok("downlink = { kind = \"ideal\" }").is_ideal());
+        assert!(!parse_ok("downlink = { delay = 1 }").is_ideal());
+        assert!(!parse_ok("arq = { max_retries = 0 }").is_ideal());
+        assert!(ChannelSpec::default().downlink_spec().is_ideal());
+    }
+
+    #[test]
+    fn rejects_unknown_keys() {
+        assert!(parse("kind = \"ideal\"\nlos = 0.1").is_err());
+        assert!(parse("kind = \"erasure\"").is_err());
+        assert!(parse("arq = { max_retries = 1, timeout = 2 }").is_err());
+        assert!(parse("downlink = { kind = \"ideal\", extra = 1 }").is_err());
+        assert!(parse("arq = { max_retries = -1 }").is_err());
+    }
+
+    #[test]
+    fn validation_names_missing_keys() {
+        assert_eq!(
+            invalid("kind = \"bernoulli\""),
+            "channel.kind = \"bernoulli\" needs `loss`"
+        );
+        assert_eq!(
+            invalid("kind = \"gilbert-elliott\"\np_bg = 0.5"),
+            "channel.kind = \"gilbert-elliott\" needs `p_gb`"
+        );
+        assert_eq!(
+            invalid("kind = \"gilbert-elliott\"\np_gb = 0.5"),
+            "channel.kind = \"gilbert-elliott\" needs `p_bg`"
+        );
+    }
+
+    #[test]
+    fn validation_rejects_non_probabilities() {
+        assert_eq!(
+            invalid("kind = \"bernoulli\"\nloss = 1.5"),
+            "channel.loss = 1.5 is not a probability in [0, 1]"
+        );
+        assert_eq!(
+            invalid("kind = \"bernoulli\"\nloss = -0.1"),
+            "channel.loss = -0.1 is not a probability in [0, 1]"
+        );
+        assert_eq!(
+            invalid("kind = \"bernoulli\"\nloss = nan"),
+            "channel.loss = NaN is not a probability in [0, 1]"
+        );
+        let ge = "kind = \"gilbert-elliott\"\n";
+        assert_eq!(
+            invalid(&format!("{ge}p_gb = 2.0\np_bg = 0.5")),
+            "channel.p_gb = 2 is not a probability in [0, 1]"
+        );
+        assert_eq!(
+            invalid(&format!("{ge}p_gb = 0.2\np_bg = nan")),
+            "channel.p_bg = NaN is not a probability in [0, 1]"
+        );
+        assert_eq!(
+            invalid(&format!("{ge}p_gb = 0.2\np_bg = 0.5\nloss_good = -1.0")),
+            "channel.loss_good = -1 is not a probability in [0, 1]"
+        );
+        assert_eq!(
+            invalid(&format!("{ge}p_gb = 0.2\np_bg = 0.5\nloss_bad = 1.01")),
+            "channel.loss_bad = 1.01 is not a probability in [0, 1]"
+        );
+    }
+
+    #[test]
+    fn validation_rejects_keys_of_another_kind() {
+        assert_eq!(
+            invalid("kind = \"bernoulli\"\nloss = 0.1\np_gb = 0.2"),
+            "channel.p_gb belongs to kind = \"gilbert-elliott\", not \"bernoulli\""
+        );
+        assert_eq!(
+            invalid("kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.2\nloss = 0.3"),
+            "channel.loss belongs to kind = \"bernoulli\", not \"gilbert-elliott\""
+        );
+        assert_eq!(
+            invalid("loss = 0.3"),
+            "channel.loss belongs to kind = \"bernoulli\", not \"ideal\""
+        );
+        assert_eq!(
+            invalid("loss_bad = 0.3"),
+            "channel.loss_bad belongs to kind = \"gilbert-elliott\", not \"ideal\""
+        );
+        assert_eq!(
+            invalid("kind = \"bernoulli\"\nloss = 0.1\nloss_good = 0.0"),
+            "channel.loss_good belongs to kind = \"gilbert-elliott\", not \"bernoulli\""
+        );
+    }
+
+    #[test]
+    fn validation_rejects_bad_geometric_mean() {
+        assert_eq!(
+            invalid("delay = { kind = \"geometric\", mean = -1.0 }"),
+            "channel.delay.mean = -1 must be a finite number of steps >= 0"
+        );
+        assert_eq!(
+            invalid("delay = { kind = \"geometric\", mean = inf }"),
+            "channel.delay.mean = inf must be a finite number of steps >= 0"
+        );
+        assert_eq!(
+            invalid("delay = { kind = \"geometric\", mean = nan }"),
+            "channel.delay.mean = NaN must be a finite number of steps >= 0"
+        );
+    }
+
+    #[test]
+    fn validation_descends_into_downlink() {
+        assert_eq!(
+            invalid("downlink = { kind = \"bernoulli\" }"),
+            "channel.downlink.kind = \"bernoulli\" needs `loss`"
+        );
+        assert_eq!(
+            invalid("downlink = { kind = \"bernoulli\", loss = 3.0 }"),
+            "channel.downlink.loss = 3 is not a probability in [0, 1]"
+        );
+        assert_eq!(
+            invalid("downlink = { downlink = { kind = \"ideal\" } }"),
+            "channel.downlink.downlink is not allowed: a downlink has no downlink"
+        );
+        let s = parse_ok("kind = \"bernoulli\"");
+        assert_eq!(
+            s.validate_at("sensors[2].channel"),
+            Err("sensors[2].channel.kind = \"bernoulli\" needs `loss`".to_string())
+        );
+    }
+
+    #[test]
+    fn serializes_back_to_the_same_table() {
+        let s = parse_ok(
+            "kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.4\ndelay = { kind = \"geometric\", mean = 2.0 }\ndownlink = { kind = \"bernoulli\", loss = 0.3 }",
+        );
+        let text = toml::to_string(&s).expect("serializes");
+        let back: ChannelSpec = toml::from_str(&text).expect("reparses");
+        assert_eq!(back, s);
+    }
+
+    #[test]
+    fn per_sensor_table_replaces_global() {
+        let global = parse_ok("kind = \"bernoulli\"\nloss = 0.2\ndelay = 2");
+        let own = parse_ok("kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.5");
+        let specs = resolve(Some(&global), &[None, Some(own.clone()), None]);
+        assert_eq!(specs, vec![global.clone(), own.clone(), global.clone()]);
+        // Replaced, not merged: the global delay is not inherited.
+        assert_eq!(specs[1].delay, None);
+        let specs = resolve(None, &[None, Some(own.clone())]);
+        assert_eq!(specs, vec![ChannelSpec::default(), own]);
+        assert!(resolve(Some(&global), &[]).is_empty());
+    }
+}
