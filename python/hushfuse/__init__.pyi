@@ -28,6 +28,12 @@ def run(
     trials: Optional[int] = None,
     seed: Optional[int] = None,
     threads: int = 0,
+    out: Optional[Union[str, "PathLike[str]"]] = None,
+    resume: bool = False,
+    shard: Union[None, str, Sequence[int]] = None,
+    report: bool = False,
+    reproduce: bool = False,
+    checkpoint_every: float = 10.0,
 ) -> Dict[str, Any]: ...
 def simulate(scenario: ScenarioLike, trial: int = 0, seed: Optional[int] = None) -> Dict[str, Any]: ...
 def variants(scenario: ScenarioLike) -> List[Dict[str, Any]]: ...

@@ -18,9 +18,18 @@ class DataError(InputError):
 class RunError(RuntimeError):
     """A scheme could not take a step (names the scheme and the step)."""
 
-def run_json(
-    scenario: str, trials: Optional[int] = None, seed: Optional[int] = None, threads: int = 0
-) -> str: ...
+def run(
+    scenario: str,
+    trials: Optional[int] = None,
+    seed: Optional[int] = None,
+    threads: int = 0,
+    out: Optional[str] = None,
+    resume: bool = False,
+    shard: Optional[str] = None,
+    report: bool = False,
+    reproduce: bool = False,
+    checkpoint_every: float = 10.0,
+) -> Dict[str, Any]: ...
 def simulate(scenario: str, trial: int = 0, seed: Optional[int] = None) -> Dict[str, Any]: ...
 def replay_csv(
     scenario: str,
@@ -30,9 +39,15 @@ def replay_csv(
     truth_name: str = "truth",
     seed: Optional[int] = None,
     trial: int = 0,
-    n_arrays: Optional[int] = None,
 ) -> Dict[str, Any]: ...
-def variants(scenario: str) -> List[Tuple[str, str, str]]: ...
+def replay_arrays(
+    scenario: str,
+    measurements: Sequence[npt.NDArray[np.float64]],
+    truth: Optional[npt.NDArray[np.float64]] = None,
+    seed: Optional[int] = None,
+    trial: int = 0,
+) -> Dict[str, Any]: ...
+def variants(scenario: str) -> List[Tuple[str, str, Dict[str, Any]]]: ...
 def builtins() -> List[Tuple[str, str]]: ...
 
 class Transmission:

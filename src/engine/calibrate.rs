@@ -360,6 +360,18 @@ fn prepare<'a>(
     // Validate the whole scenario first (errors name the original file and field).
     let mut spec =
         build::parse(&toml::to_string(&base).expect("table"), file).map_err(|e| e.to_string())?;
+    if spec.every_scheme {
+        // Knobs are set on an explicit list: the registry's applicable kinds, written out.
+        build::expand_every_scheme(&mut spec, file).map_err(|e| e.to_string())?;
+        base.remove("every_scheme");
+        let list = spec
+            .schemes
+            .iter()
+            .cloned()
+            .map(toml::Value::Table)
+            .collect();
+        base.insert("schemes".into(), toml::Value::Array(list));
+    }
     let full = build::build_with(with_load(spec.clone(), &opts.load), file, &opts.load)
         .map_err(|e| e.to_string())?;
     spec.schemes.clear();

@@ -121,6 +121,19 @@ pub fn parse(text: &str, file: &str) -> Result<ScenarioFile, ScenarioError> {
     })
 }
 
+/// Turns an `every_scheme` scenario into the plain one it stands for: `schemes` gets every
+/// applicable registry kind ([`crate::scenario::every_scheme`]) and the flag is cleared.
+/// Calibration uses it to set knobs on an explicit list.
+pub fn expand_every_scheme(spec: &mut ScenarioFile, file: &str) -> Result<(), ScenarioError> {
+    if spec.every_scheme {
+        let ctx = Ctx { file };
+        let parts = crate::scenario::system::build_system(&ctx, spec)?;
+        spec.schemes = crate::scenario::every_scheme::expand(&ctx, &spec.schemes, &parts.system)?;
+        spec.every_scheme = false;
+    }
+    Ok(())
+}
+
 /// Parses and validates a scenario with the default limits.
 pub fn load(text: &str, file: &str) -> Result<Experiment, ScenarioError> {
     load_with(text, file, &LoadOptions::default())
@@ -170,7 +183,7 @@ fn threads(opts: &LoadOptions) -> usize {
 
 /// Validates every field and builds the runtime objects.
 pub fn build_with(
-    file_spec: ScenarioFile,
+    mut file_spec: ScenarioFile,
     file: &str,
     opts: &LoadOptions,
 ) -> Result<Experiment, ScenarioError> {
@@ -203,6 +216,10 @@ pub fn build_with(
     }
     let parts = crate::scenario::system::build_system(&ctx, &file_spec)?;
     let system = Arc::new(parts.system);
+    if file_spec.every_scheme {
+        file_spec.schemes =
+            crate::scenario::every_scheme::expand(&ctx, &file_spec.schemes, &system)?;
+    }
 
     // What the run needs before any scheme precomputes anything for `steps`.
     let workers = threads(opts);

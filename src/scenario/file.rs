@@ -97,7 +97,13 @@ pub struct ScenarioFile {
     pub groups: toml::Table,
     /// Schemes to compare; each a table with `kind`, its parameters, and optionally `label`,
     /// `sweep` and `frontier`. Kept as raw tables until each sweep point is expanded.
+    #[serde(default)]
     pub schemes: Vec<toml::Table>,
+    /// Run every scheme of the registry that applies to the system (the arenas); `schemes`
+    /// then lists only the entries that differ from the registry's examples
+    /// (`scenario::every_scheme`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub every_scheme: bool,
     /// Published numbers and claims to check (`hushfuse reproduce`).
     #[serde(default)]
     pub paper: Option<PaperSpec>,

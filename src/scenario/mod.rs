@@ -3,6 +3,7 @@
 pub mod build;
 pub mod builtin;
 pub mod error;
+pub mod every_scheme;
 pub mod experiment;
 pub mod file;
 pub mod limits;
