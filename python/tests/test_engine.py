@@ -38,7 +38,7 @@ def test_shards_from_python_merge_to_the_unsharded_run(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     for i in (1, 2):
         r = hushfuse.run("pf.toml", out="shards", shard=(i, 2))
-        assert r["shard"].endswith(f"shard-{i}-of-2.hfshard") and r["done"] is False
+        assert r["shard"].endswith(f"shard-{i:04d}-of-0002.hfshard") and r["done"] is False
     again = hushfuse.run("pf.toml", out="shards", shard="2/2", resume=True)
     assert again["done"] is True
     merged = cli("merge", "shards", "--out", "merged", cwd=tmp_path)

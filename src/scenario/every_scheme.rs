@@ -9,9 +9,12 @@ use crate::scheme::System;
 
 /// The entry table of a registry kind from its example (required parameters only).
 fn example_table(entry: &SchemeEntry) -> toml::Table {
-    let mut t: toml::Table = toml::from_str(entry.example)
+    let params: toml::Table = toml::from_str(entry.example)
         .unwrap_or_else(|e| panic!("the registry example of {} does not parse: {e}", entry.kind));
+    // `kind` first, as a file writes it (the calibrated arenas write these tables out).
+    let mut t = toml::Table::new();
     t.insert("kind".into(), toml::Value::String(entry.kind.into()));
+    t.extend(params);
     t
 }
 

@@ -90,6 +90,13 @@ pub fn replay_arrays(
             )));
         }
     }
+    // Rows partly NaN or with an infinity are refused first: the data's own faults, whatever
+    // the scenario.
+    for (i, m) in arrays.measurements.iter().enumerate() {
+        for k in 0..steps {
+            reading(m, i, k)?;
+        }
+    }
     let limits = opts.load.limits.unwrap_or_default();
     let rows = arrays.measurements.len() * steps;
     let readings = Readings {
