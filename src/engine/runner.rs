@@ -325,6 +325,9 @@ fn run_block<'e>(
     on_trial: &dyn Fn(usize),
 ) -> Result<bool, RunError> {
     let batch = (2..=BLOCK).contains(&trials.len())
+        // A lossy link is applied by the generic loop only (the fast paths assume every
+        // packet arrives).
+        && exp.channel.is_none()
         && exp
             .variants
             .iter()

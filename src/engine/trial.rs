@@ -13,6 +13,7 @@ use crate::engine::seeding::coins;
 use crate::filter::Gaussian;
 use crate::linalg::{LinalgError, Vector};
 use crate::link::{Received, Transmission};
+use crate::network::channel::FateTable;
 use crate::network::{self, Schedule, Traffic};
 use crate::scenario::experiment::Experiment;
 #[cfg(doc)]
@@ -25,9 +26,16 @@ use crate::scheme::SchemeError;
 /// What one sensor did at one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Link {
+    /// Sent, and the packet arrived.
     Sent,
     Silent,
     NotScheduled,
+    /// Sent (its bits and frame were spent), and the link lost the packet: the fusion center
+    /// saw a silence.
+    Lost,
+    /// Sent, and the link delivers it late: dropped at the center for now (its bits spent),
+    /// which saw a silence.
+    Late,
 }
 
 /// One fused step, as an [`Observer`] sees it.
@@ -166,7 +174,12 @@ pub fn run_trial(
     let n_sensors = exp.system.n_sensors();
     let variant = &exp.variants[spec.variant];
     let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
-    if spec.available.is_none() {
+    // The link's fates of this trial, from its own stream: every scheme meets the same losses.
+    let fates = exp.channel.as_deref().map(|specs| LinkFates {
+        up: FateTable::draw(specs, exp.steps, exp.seed, spec.trial as u64, false),
+        down: FateTable::draw(specs, exp.steps, exp.seed, spec.trial as u64, true),
+    });
+    if spec.available.is_none() && fates.is_none() {
         // One virtual call per trial: the scheme's hook, then its whole trial.
         if let (Some(fast), Some(sink)) = (variant.scheme.fast_path(), observer.fast_sink()) {
             let cache = buffers.cache_for(spec.trial, measurements);
@@ -193,7 +206,26 @@ pub fn run_trial(
     } = buffers;
     // What the fusion center tells the sensors before the first measurement.
     let mut feedback = inst.center.feedback();
+    // Behind a lossy downlink each sensor keeps the last feedback that reached it. The first
+    // one (made from the prior, which every sensor knows) counts as received.
+    let mut held = match &fates {
+        Some(_) => vec![feedback.clone(); n_sensors],
+        None => Vec::new(),
+    };
     for k in 1..=exp.steps {
+        let mut downlink_lost = 0;
+        if let Some(f) = &fates {
+            for (i, h) in held.iter_mut().enumerate() {
+                if k == 1 {
+                    continue;
+                }
+                if f.down.get(i, k).lost {
+                    downlink_lost += 1;
+                } else {
+                    h.clone_from(&feedback);
+                }
+            }
+        }
         let scheduled = |i: usize| {
             schedule.allows(k, i, n_sensors) && spec.available.is_none_or(|a| a[k - 1][i])
         };
@@ -201,8 +233,12 @@ pub fn run_trial(
         links.clear();
         bits.clear();
         for (i, node) in inst.sensors.iter_mut().enumerate() {
+            let fb = match &fates {
+                Some(_) => held[i].as_ref(),
+                None => feedback.as_ref(),
+            };
             let t = if scheduled(i) {
-                node.step(k, &measurements[k - 1][i], feedback.as_ref(), &mut rng)
+                node.step(k, &measurements[k - 1][i], fb, &mut rng)
                     .map_err(|source| LoopError::Scheme { k, source })?
             } else {
                 Transmission::Silent
@@ -210,7 +246,10 @@ pub fn run_trial(
             if with_links {
                 let (link, b) = match &t {
                     _ if !scheduled(i) => (Link::NotScheduled, 0),
-                    Transmission::Send(m) => (Link::Sent, m.bits()),
+                    Transmission::Send(m) => (
+                        fates.as_ref().map_or(Link::Sent, |f| f.link(i, k)),
+                        m.bits(),
+                    ),
                     Transmission::Silent => (Link::Silent, 0),
                 };
                 links.push(link);
@@ -220,6 +259,10 @@ pub fn run_trial(
         }
         let mut traffic = network::deliver(transmissions.drain(..), inbox);
         traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
+        if let Some(f) = &fates {
+            f.apply(k, inbox, &mut traffic);
+            traffic.downlink_lost = downlink_lost;
+        }
         if schedule != Schedule::All || spec.available.is_some() {
             for (i, r) in inbox.iter_mut().enumerate() {
                 if !scheduled(i) {
@@ -246,4 +289,41 @@ pub fn run_trial(
             })?;
     }
     Ok(())
+}
+
+/// The fates of one trial's link slots: uplink (sensor to center) and downlink (feedback).
+struct LinkFates {
+    up: FateTable,
+    down: FateTable,
+}
+
+impl LinkFates {
+    /// What became of sensor `i`'s packet sent at step `k`.
+    fn link(&self, i: usize, k: usize) -> Link {
+        let fate = self.up.get(i, k);
+        if fate.lost {
+            Link::Lost
+        } else if fate.delay > 0 {
+            Link::Late
+        } else {
+            Link::Sent
+        }
+    }
+
+    /// Step `k`'s packets through the link: a lost or late one reaches the center as a
+    /// silence (by default the center cannot tell the two apart), counted in `traffic`; the
+    /// bits and frames stay counted, since they were sent.
+    fn apply(&self, k: usize, inbox: &mut [Received], traffic: &mut Traffic) {
+        for (i, r) in inbox.iter_mut().enumerate() {
+            if matches!(r, Received::Silent | Received::NotScheduled) {
+                continue;
+            }
+            match self.link(i, k) {
+                Link::Lost => traffic.lost += 1,
+                Link::Late => traffic.late += 1,
+                _ => continue,
+            }
+            *r = Received::Silent;
+        }
+    }
 }

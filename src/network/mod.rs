@@ -15,6 +15,12 @@ pub struct Traffic {
     pub frame_bits: u64,
     /// Bits the fusion center sent back to sensors (feedback).
     pub downlink_bits: u64,
+    /// Messages sent (and counted above) that the link lost.
+    pub lost: u64,
+    /// Messages sent that the link delivers late (dropped at the center for now).
+    pub late: u64,
+    /// Feedback packets the downlink lost (one per sensor that missed this step's feedback).
+    pub downlink_lost: u64,
 }
 
 /// Which sensors may talk at a step.

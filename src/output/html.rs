@@ -500,6 +500,8 @@ fn timeline(input: &Input, tr: &trace::Trace, sel: &[usize]) -> String {
                 let fill = match st {
                     Link::Sent => Some("#1f77b4"),
                     Link::Silent => Some("#d9d9d9"),
+                    // Sent, and lost or late on the link: the bits were spent.
+                    Link::Lost | Link::Late => Some("#d62728"),
                     Link::NotScheduled => None,
                 };
                 if let Some(f) = fill {

@@ -216,6 +216,7 @@ pub fn build_with(
     }
     let parts = crate::scenario::system::build_system(&ctx, &file_spec)?;
     let system = Arc::new(parts.system);
+    let channel = crate::scenario::channel::build_channel(&ctx, &file_spec, system.n_sensors())?;
     if file_spec.every_scheme {
         file_spec.schemes =
             crate::scenario::every_scheme::expand(&ctx, &file_spec.schemes, &system)?;
@@ -273,5 +274,6 @@ pub fn build_with(
         seed: file_spec.seed,
         steady_from,
         paper: file_spec.paper,
+        channel,
     })
 }

@@ -44,4 +44,6 @@ pub struct Experiment {
     /// First step (1-based) of the steady-state averages.
     pub steady_from: usize,
     pub paper: Option<PaperSpec>,
+    /// Each sensor's link model; `None`: every link is ideal.
+    pub channel: Option<Vec<crate::network::channel::ChannelSpec>>,
 }

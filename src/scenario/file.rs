@@ -104,6 +104,10 @@ pub struct ScenarioFile {
     /// (`scenario::every_scheme`).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub every_scheme: bool,
+    /// The link between the sensors and the fusion center (default: ideal), for every sensor
+    /// without a `channel` of its own (`scenario::channel`).
+    #[serde(default)]
+    pub channel: Option<crate::network::channel::ChannelSpec>,
     /// Published numbers and claims to check (`hushfuse reproduce`).
     #[serde(default)]
     pub paper: Option<PaperSpec>,
@@ -235,6 +239,9 @@ pub struct SensorSpec {
     pub r: Option<Vec<Vec<f64>>>,
     #[serde(default, rename = "R_diag")]
     pub r_diag: Option<Vec<f64>>,
+    /// This sensor's link, replacing the scenario's `[channel]` as a whole.
+    #[serde(default)]
+    pub channel: Option<crate::network::channel::ChannelSpec>,
 }
 
 /// A field of placed sensors of one kind.

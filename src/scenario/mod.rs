@@ -2,6 +2,7 @@
 //! their errors; `build` turns a file into an [`build::Experiment`].
 pub mod build;
 pub mod builtin;
+pub mod channel;
 pub mod error;
 pub mod every_scheme;
 pub mod experiment;

@@ -330,6 +330,8 @@ pub fn link_name(link: Link, available: bool) -> &'static str {
         (Link::Sent, _) => "sent",
         (Link::Silent, _) => "silent",
         (Link::NotScheduled, _) => "not_scheduled",
+        (Link::Lost, _) => "lost",
+        (Link::Late, _) => "late",
     }
 }
 

@@ -112,6 +112,7 @@ fn records_hand_computed_errors_and_merges() {
         bits: 96,
         frame_bits: 400,
         downlink_bits: 64,
+        ..Traffic::default()
     };
     t.record(1, &truth, &est, traffic).unwrap();
     t.record(2, &truth, &est, traffic).unwrap();

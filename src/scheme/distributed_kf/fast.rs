@@ -221,7 +221,7 @@ fn run_variant(
             messages,
             bits: messages * msg_bits,
             frame_bits: messages * msg_frame_bits,
-            downlink_bits: 0,
+            ..Traffic::default()
         };
         match factor {
             Some(f) => sink.step_factored(k, &est, f, traffic),

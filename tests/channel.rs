@@ -1,0 +1,161 @@
+//! The link model in the engine: lost packets reach the center as silences but cost their
+//! bits; every scheme meets the same fate in a slot; a channel changes no other draw; and the
+//! Kalman filter's variance under losses is the data-free recursion given the arrivals
+//! (Sinopoli et al. 2004), exactly.
+use hushfuse::engine::replay::{self, Recorded};
+use hushfuse::engine::runner;
+use hushfuse::engine::trace::{self, Link};
+use hushfuse::metrics::results;
+use hushfuse::network::channel::{stability, FateTable};
+use hushfuse::scenario::build;
+
+/// The scalar system of Sinopoli et al.: x' = a x + w, y = x + v, q = r = 1, a = 1.2.
+fn scalar(channel: &str, schemes: &str, trials: usize) -> String {
+    format!(
+        r#"
+name = "scalar"
+trials = {trials}
+steps = 60
+seed = 2004
+[model]
+kind = "matrix"
+F = [[1.2]]
+Q = [[1.0]]
+[prior]
+mean = [0.0]
+cov_diag = [1.0]
+[[sensors]]
+H = [[1.0]]
+R = [[1.0]]
+{channel}
+{schemes}
+"#
+    )
+}
+
+const KF: &str = "[[schemes]]\nkind = \"centralized-kf\"\n";
+
+fn summary(text: &str) -> results::Summary {
+    let exp = build::load(text, "scalar.toml").unwrap();
+    let sums = runner::run(&exp, runner::RunOptions { threads: 2 }, &|_| {}).unwrap();
+    results::summarize(&exp, &sums)
+}
+
+#[test]
+fn a_link_that_loses_nothing_changes_no_number() {
+    let ideal = summary(&scalar("", KF, 40));
+    let zero = summary(&scalar(
+        "[channel]\nkind = \"bernoulli\"\nloss = 0.0\n",
+        KF,
+        40,
+    ));
+    let a = serde_json::to_value(&ideal.schemes).unwrap();
+    let b = serde_json::to_value(&zero.schemes).unwrap();
+    assert_eq!(a, b);
+}
+
+#[test]
+fn the_kalman_variance_under_losses_is_the_data_free_recursion_of_the_arrivals() {
+    let channel = "[channel]\nkind = \"bernoulli\"\nloss = 0.4\n";
+    let text = scalar(channel, KF, 50);
+    let exp = build::load(&text, "scalar.toml").unwrap();
+    let s = summary(&text);
+    // The same arrivals, drawn independently of the engine from the link's own stream.
+    let specs = exp.channel.as_deref().unwrap();
+    let mut mean_post = vec![0.0; exp.steps];
+    for trial in 0..exp.trials {
+        let fates = FateTable::draw(specs, exp.steps, exp.seed, trial as u64, false);
+        let arrivals: Vec<bool> = (1..=exp.steps).map(|k| !fates.get(0, k).lost).collect();
+        // Prior of step 1 is a^2 P0 + q; the path gives the priors, the posterior follows.
+        let priors = stability::prior_variance_path(1.2, 1.0, 1.0, 1.44 + 1.0, &arrivals);
+        for k in 0..exp.steps {
+            let p = priors[k];
+            let post = if arrivals[k] {
+                p - p * p / (p + 1.0)
+            } else {
+                p
+            };
+            mean_post[k] += post / exp.trials as f64;
+        }
+    }
+    for (k, (got, want)) in s.schemes[0].trace.iter().zip(&mean_post).enumerate() {
+        assert!(
+            (got - want).abs() <= 1e-9 * want.abs(),
+            "step {}: the run's mean variance {got}, the recursion's {want}",
+            k + 1
+        );
+    }
+    // And far from the ideal link's steady state: losses are not silences for free.
+    let ideal = summary(&scalar("", KF, 50));
+    assert!(s.schemes[0].steady_state.trace > 1.2 * ideal.schemes[0].steady_state.trace);
+}
+
+#[test]
+fn every_scheme_meets_the_same_fate_in_a_slot_and_losses_cost_their_bits() {
+    let schemes = format!("{KF}[[schemes]]\nkind = \"send-on-delta\"\ndelta = 1.0\n");
+    let text = scalar("[channel]\nkind = \"bernoulli\"\nloss = 0.3\n", &schemes, 1);
+    let exp = build::load(&text, "scalar.toml").unwrap();
+    let mut sent = 0usize;
+    let mut lost = 0usize;
+    let mut both = 0usize;
+    for trial in 0..200 {
+        let t = trace::trace(&exp, trial, false).unwrap();
+        for k in 0..exp.steps {
+            let (a, b) = (t.variants[0].links[k][0], t.variants[1].links[k][0]);
+            // The all-data KF sends at every step: its links are the link's fates.
+            assert!(matches!(a, Link::Sent | Link::Lost));
+            sent += 1;
+            lost += usize::from(a == Link::Lost);
+            if matches!(b, Link::Sent | Link::Lost) {
+                assert_eq!(a, b, "trial {trial}, step {}: different fates", k + 1);
+                both += 1;
+            }
+        }
+    }
+    assert!(both > 100, "send-on-delta sent only {both} times");
+    // 12000 slots at p = 0.3: SE = sqrt(0.3 * 0.7 / 12000) = 0.0042; 4 SE.
+    let rate = lost as f64 / sent as f64;
+    assert!((rate - 0.3).abs() < 4.0 * 0.0042, "loss rate {rate}");
+    // A lost packet was sent: its payload bits count.
+    let data = runner::draw_trial(&exp, 0);
+    let r = replay::replay(&exp, &Recorded::from_trial(&data), 0).unwrap();
+    let links = &r.variants[0].links;
+    let bits = &r.variants[0].bits;
+    let lost_bits: u64 = (0..exp.steps)
+        .filter(|&k| links[k][0] == Link::Lost)
+        .map(|k| bits[k][0])
+        .sum();
+    assert!(lost_bits > 0);
+}
+
+#[test]
+fn bad_channel_tables_are_refused_naming_the_key() {
+    let cases = [
+        (
+            "[channel]\nkind = \"bernoulli\"\n",
+            "channel",
+            "needs `loss`",
+        ),
+        (
+            "[channel]\nkind = \"bernoulli\"\nloss = 1.5\n",
+            "channel",
+            "not a probability",
+        ),
+        ("[channel]\nkind = \"lossy\"\n", "", "lossy"),
+    ];
+    for (channel, field, words) in cases {
+        let e = build::load(&scalar(channel, KF, 2), "scalar.toml").unwrap_err();
+        assert!(
+            e.field.starts_with(field) && e.to_string().contains(words),
+            "{channel}: {e}"
+        );
+    }
+    // A sensor's own table, named by its index.
+    let text = scalar("", KF, 2).replace(
+        "R = [[1.0]]",
+        "R = [[1.0]]\nchannel = { kind = \"gilbert-elliott\", p_gb = 0.1 }",
+    );
+    let e = build::load(&text, "scalar.toml").unwrap_err();
+    assert_eq!(e.field, "sensors[0].channel");
+    assert!(e.to_string().contains("needs `p_bg`"), "{e}");
+}
