@@ -21,8 +21,8 @@ use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"HUSHFUSE";
 /// Version of the file layout and of [`State`]; files of another version are refused.
-/// 2: `Sums::per_trial` flat.
-pub const FORMAT: u32 = 2;
+/// 2: `Sums::per_trial` flat. 3: `Sums::link` (the link's per-step counts).
+pub const FORMAT: u32 = 3;
 const HEADER: usize = 8 + 4 + 8 + 32;
 
 /// What a run is, for telling whether a checkpoint or shard belongs to it, and how to rebuild
@@ -630,6 +630,13 @@ pub fn validate_sums(
                     format!("{expected} ({what})"),
                 );
             }
+        }
+        if !(s.link.is_empty() || s.link.len() == e.steps) {
+            return bad(
+                "link",
+                format!("{} steps long", s.link.len()),
+                format!("empty or {} steps", e.steps),
+            );
         }
         if s.trials != trials {
             return bad(

@@ -220,7 +220,8 @@ pub fn run_trial(
                     continue;
                 }
                 if f.down.get(i, k).lost {
-                    downlink_lost += 1;
+                    // Only a packet that was sent can be lost.
+                    downlink_lost += u64::from(feedback.is_some());
                 } else {
                     h.clone_from(&feedback);
                 }

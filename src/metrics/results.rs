@@ -110,6 +110,9 @@ pub struct SchemeSummary {
     /// Effective sample size of particle-filter fusion centers (absent for other schemes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ess: Option<EssSummary>,
+    /// What the link did to the messages (absent for an ideal link).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<crate::metrics::link::LinkSummary>,
     /// Statistics of the NEES that a few collapsed trials cannot ruin.
     pub consistency: Consistency,
     pub steady_state: SteadyState,
@@ -303,6 +306,10 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                     f64::NAN
                 },
                 ess,
+                link: exp
+                    .channel
+                    .as_ref()
+                    .map(|_| crate::metrics::link::summarize(s, exp.trials, col(Layout::MESSAGES))),
                 consistency,
                 per_trial: s.per_trial_rows().map(<[f64]>::to_vec).collect(),
                 steady_state: SteadyState {
@@ -441,7 +448,11 @@ fn write_csv_header(
     for g in &summary.group_order {
         write!(out, ",rmse_{g},rmse_{g}_se")?;
     }
-    out.write_all(b",mse,mse_se,trace,trace_se,anees,anees_se,rate,rate_se,payload_bits,payload_bits_se,frame_bits,frame_bits_se,downlink_bits,downlink_bits_se\n")
+    out.write_all(b",mse,mse_se,trace,trace_se,anees,anees_se,rate,rate_se,payload_bits,payload_bits_se,frame_bits,frame_bits_se,downlink_bits,downlink_bits_se")?;
+    if summary.schemes.iter().any(|s| s.link.is_some()) {
+        out.write_all(crate::metrics::link::CSV_HEADER.as_bytes())?;
+    }
+    out.write_all(b"\n")
 }
 
 /// The rows of one scheme variant in `per_step.csv`, one per step.
@@ -477,6 +488,9 @@ fn write_csv_rows(
             (t.downlink_bits[k], t.downlink_bits_se[k]),
         ] {
             write!(out, ",{v},{se}")?;
+        }
+        if let Some(l) = &s.link {
+            out.write_all(crate::metrics::link::csv_fields(l, k).as_bytes())?;
         }
         out.write_all(b"\n")?;
     }

@@ -130,20 +130,13 @@ R = [[2.0]]
 
     #[test]
     fn a_listed_kind_that_does_not_apply_is_refused_by_name() {
-        // A 2-component sensor: the scalar-only schemes do not apply.
-        let text = HEAD.replace(
-            "H = [[1.0, 0.0]]\nR = [[1.0]]",
-            "H = [[1.0, 0.0], [0.0, 1.0]]\nR = [[1.0, 0.0], [0.0, 1.0]]",
-        ) + "\n[[schemes]]\nkind = \"quantized-innovation\"\n";
+        // 2-component sensors: the scalar-only schemes do not apply.
+        let text = two_d() + "\n[[schemes]]\nkind = \"quantized-innovation\"\n";
         let e = build::load(&text, "t.toml").unwrap_err();
         assert_eq!(e.field, "schemes[0].kind");
         assert!(e.message.contains("does not apply"), "{e}");
         // Without it, the scalar-only kinds are left out and the rest run.
-        let text = HEAD.replace(
-            "H = [[1.0, 0.0]]\nR = [[1.0]]",
-            "H = [[1.0, 0.0], [0.0, 1.0]]\nR = [[1.0, 0.0], [0.0, 1.0]]",
-        );
-        let exp = build::load(&text, "t.toml").unwrap();
+        let exp = build::load(&two_d(), "t.toml").unwrap();
         assert!(exp
             .variants
             .iter()

@@ -51,6 +51,10 @@ pub struct Sums {
     pub has_ess: bool,
     /// Steady-state NEES / n of every (trial, step).
     pub nees_hist: NeesHistogram,
+    /// Per step, summed over trials: messages the link lost, messages it delivered late, and
+    /// feedback packets the downlink lost. Empty until a link loses something (an ideal link
+    /// costs nothing here); integers, so the order of additions changes nothing.
+    pub link: Vec<[u64; 3]>,
 }
 
 /// Observer of one trial of one variant: accumulates into a [`Sums`] as the trial runs.
@@ -119,7 +123,19 @@ impl Sums {
             ess_min: vec![f64::INFINITY; steps],
             has_ess: false,
             nees_hist: NeesHistogram::new(),
+            link: Vec::new(),
         }
+    }
+
+    /// Adds step `k`'s (1-based) link counts of one trial.
+    fn add_link(&mut self, k: usize, traffic: &Traffic) {
+        if self.link.is_empty() {
+            self.link = vec![[0; 3]; self.steps];
+        }
+        let row = &mut self.link[k - 1];
+        row[0] += traffic.lost;
+        row[1] += traffic.late;
+        row[2] += traffic.downlink_lost;
     }
 
     /// Heap bytes of these sums before any trial is added (the per-step rows, the whole-run
@@ -202,6 +218,7 @@ impl Sums {
         self.ess_min.fill(f64::INFINITY);
         self.has_ess = false;
         self.nees_hist.clear();
+        self.link.clear();
     }
 
     /// Adds another block's sums (same shape).
@@ -228,6 +245,16 @@ impl Sums {
         }
         self.has_ess |= o.has_ess;
         self.nees_hist.merge(&o.nees_hist);
+        if !o.link.is_empty() {
+            if self.link.is_empty() {
+                self.link = vec![[0; 3]; self.steps];
+            }
+            for (a, b) in self.link.iter_mut().zip(&o.link) {
+                for (x, y) in a.iter_mut().zip(b) {
+                    *x += y;
+                }
+            }
+        }
     }
 
     /// Sum of entry `field` at step index `s` (0-based).
@@ -309,6 +336,9 @@ impl TrialState<'_> {
             *e = m - t;
         }
         let err: &[f64] = err;
+        if traffic.lost + traffic.late + traffic.downlink_lost > 0 {
+            sums.add_link(k, &traffic);
+        }
         let recorded = self.nees(err, est, factor).map(|(nees, degenerate)| {
             // The traffic of a step is usually the last step's: its conversions are kept.
             if self.traffic.0 != traffic {

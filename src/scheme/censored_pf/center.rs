@@ -73,6 +73,8 @@ pub struct CensoredPfCenter {
     /// Scratch: the replicas' predicted covariances and the silent sensors of a step.
     p_pred: Vec<Matrix>,
     silent: Vec<usize>,
+    /// Scratch: the log weights before a silence's band factor (loss-aware fusion).
+    before_band: Vec<f64>,
 }
 
 impl CensoredPfCenter {
@@ -121,8 +123,8 @@ impl CensoredPfCenter {
             system,
             last_prop3_log_factor: 0.0,
             plan: None,
-
             silent: Vec::with_capacity(n),
+            before_band: Vec::new(),
         })
     }
 
@@ -160,6 +162,38 @@ impl CensoredPfCenter {
                 }
                 *l -= 0.5 * q;
             }
+        }
+        Ok(())
+    }
+
+    /// The likelihood of "nothing arrived" from sensor `i`: the band probability of
+    /// [`Self::add_band`] (the published CFwMD likelihood) or, when the center assumes a lossy
+    /// link (`link_loss` = p > 0), the exact likelihood of nothing arriving,
+    /// P(silent | x) + p P(sent | x) = p + (1 - p) P(silent | x): a silence, or a message the
+    /// link lost. A Gilbert-Elliott link is taken at its stationary loss rate (the channel
+    /// state is not carried in the particles).
+    fn add_silence(
+        &mut self,
+        i: usize,
+        x_ref: &Vector,
+        s: &Matrix,
+        eta: f64,
+    ) -> Result<(), SchemeError> {
+        let p = self.options.link_loss;
+        if p == 0.0 {
+            return self.add_band(i, x_ref, s, eta);
+        }
+        self.before_band.clear();
+        self.before_band.extend_from_slice(self.cloud.log_weights());
+        self.add_band(i, x_ref, s, eta)?;
+        for (l, before) in self
+            .cloud
+            .log_weights_mut()
+            .iter_mut()
+            .zip(&self.before_band)
+        {
+            let log_silent = *l - before;
+            *l = before + (p + (1.0 - p) * log_silent.exp()).ln();
         }
         Ok(())
     }
@@ -431,7 +465,7 @@ impl FusionCenter for CensoredPfCenter {
                                 s
                             }
                         };
-                        self.add_band(i, &x_ref, &s, eta)?;
+                        self.add_silence(i, &x_ref, &s, eta)?;
                     }
                 }
             }
@@ -540,6 +574,7 @@ mod tests {
             resample_policy: ResamplePolicy::Always,
             band: BandMethod::Exact,
             prop3_samples: 1,
+            link_loss: 0.0,
         };
         let protocol = Protocol::new(
             super::super::SendRule::Nis { eta: 1.4 },

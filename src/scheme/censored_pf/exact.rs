@@ -560,6 +560,7 @@ mod tests {
             resample_policy: ResamplePolicy::EssBelow(0.0),
             band: BandMethod::Exact,
             prop3_samples: 1,
+            link_loss: 0.0,
         }
     }
 

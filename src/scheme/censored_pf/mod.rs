@@ -43,6 +43,7 @@
 //!     resample_policy: ResamplePolicy::Always,
 //!     band: BandMethod::Exact,
 //!     prop3_samples: 200,
+//!     link_loss: 0.0, // the published likelihood: every missing packet is a silence
 //! };
 //! let scheme = CensoredPfScheme::new(system, protocol, options)?.with_horizon(20)?;
 //! let mut inst = scheme.build_with_seed(1)?;
@@ -247,6 +248,10 @@ pub struct PfOptions {
     pub band: BandMethod,
     /// Monte Carlo draws for the Prop. 3 / 6 integral (at least 1).
     pub prop3_samples: usize,
+    /// Probability that the center assumes the link lost a packet (loss-aware fusion of
+    /// silences, in [0, 1)); 0: the published likelihood, which reads every missing packet
+    /// as a silence.
+    pub link_loss: f64,
 }
 
 /// Zheng et al.'s (2014) scheme: censoring sensors + particle-filter fusion center.

@@ -46,6 +46,8 @@ pub struct CensoredPfParams {
     pub band_samples: Option<usize>,
     #[serde(default = "default_prop3_samples")]
     pub prop3_samples: usize,
+    #[serde(default)]
+    pub link_loss: f64,
 }
 
 fn default_policy() -> Policy {
@@ -99,6 +101,12 @@ impl CensoredPfParams {
                 ));
             }
         }
+        if !(0.0..1.0).contains(&self.link_loss) {
+            return Err(ParamError::at(
+                "link_loss",
+                format!("expected a probability in [0, 1), got {}", self.link_loss),
+            ));
+        }
         let resample_policy = match self.ess_threshold {
             None => ResamplePolicy::Always,
             Some(t) if (0.0..=1.0).contains(&t) => ResamplePolicy::EssBelow(t),
@@ -134,6 +142,7 @@ impl CensoredPfParams {
             resample_policy,
             band,
             prop3_samples: self.prop3_samples,
+            link_loss: self.link_loss,
         })
     }
 }
@@ -202,6 +211,12 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
             values: "integer in 1..=10^6",
             default: "200",
             meaning: "Monte Carlo draws of the Prop. 3 / 6 integral (no feedback)",
+        },
+        ParamDoc {
+            name: "link_loss",
+            values: "number in [0, 1)",
+            default: "0",
+            meaning: "loss-aware fusion (beyond the paper): the loss probability the center assumes, so that nothing arriving has likelihood P(silent | x) + link_loss P(sent | x); 0: the published likelihood (a missing packet is a silence)",
         },
     ],
     knob: Some(registry::Knob::rising(

@@ -37,6 +37,7 @@ fn options(fusion: Fusion) -> PfOptions {
         resample_policy: crate::filter::particle::ResamplePolicy::Always,
         band: BandMethod::Exact,
         prop3_samples: 50,
+        link_loss: 0.0,
     }
 }
 
