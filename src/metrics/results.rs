@@ -530,19 +530,16 @@ pub fn table(summary: &Summary) -> String {
     let any_ess = summary.schemes.iter().any(|s| s.ess.is_some());
     let mut header = vec!["scheme".to_string(), "params".to_string()];
     header.extend(groups.iter().map(|g| format!("RMSE {g}")));
-    header.extend(
-        [
-            "MSE(ss)",
-            "±se",
-            "trace(ss)",
-            "ANEES",
-            "NEES med",
-            "NEES<95%",
-            "NEES<99%",
-        ]
-        .iter()
-        .map(|s| s.to_string()),
-    );
+    let accuracy = [
+        "MSE(ss)",
+        "±se",
+        "trace(ss)",
+        "ANEES",
+        "NEES med",
+        "NEES<95%",
+        "NEES<99%",
+    ];
+    header.extend(accuracy.map(String::from));
     if any_diverged {
         header.push("diverged".to_string());
     }
@@ -552,17 +549,19 @@ pub fn table(summary: &Summary) -> String {
     if any_ess {
         header.push("ESS mean/min".to_string());
     }
-    header.extend(
-        [
-            "rate",
-            "tx/step",
-            "bits/step",
-            "frame bits/step",
-            "downlink/step",
-        ]
-        .iter()
-        .map(|s| s.to_string()),
-    );
+    let traffic = [
+        "rate",
+        "tx/step",
+        "bits/step",
+        "frame bits/step",
+        "downlink/step",
+    ];
+    header.extend(traffic.map(String::from));
+    // Sent messages the link lost (they are in tx/step and the bits: they were sent).
+    let any_link = summary.schemes.iter().any(|s| s.link.is_some());
+    if any_link {
+        header.push("lost/step".to_string());
+    }
     let mut rows = vec![header];
     for s in &summary.schemes {
         let mut r = vec![s.name.clone(), params_text(&s.params)];
@@ -604,6 +603,13 @@ pub fn table(summary: &Summary) -> String {
         r.push(format!("{:.0}", s.bits_per_step));
         r.push(format!("{:.0}", s.frame_bits_per_step));
         r.push(format!("{:.0}", s.downlink_bits_per_step));
+        if any_link {
+            r.push(
+                s.link
+                    .as_ref()
+                    .map_or("-".into(), |l| format!("{:.2}", l.lost)),
+            );
+        }
         rows.push(r);
     }
     let mut out = text_table(&rows, 2);

@@ -252,6 +252,9 @@ pub struct SchemeEntry {
     /// reference system: a 1-D constant-velocity target with two scalar linear sensors of the
     /// position. Shown by `list-schemes`; a test builds every kind from it.
     pub example: &'static str,
+    /// How the fusion center treats a packet that did not arrive (the link lost it), which it
+    /// cannot tell from a silence: shown by `list-schemes`.
+    pub missing_packet: &'static str,
 }
 
 impl std::fmt::Debug for SchemeEntry {
@@ -325,6 +328,7 @@ pub fn describe() -> String {
             ));
         }
         out.push_str(&format!("  applies to: {}\n", e.applies.text()));
+        out.push_str(&format!("  a lost packet: {}\n", e.missing_packet));
         for p in e.params {
             out.push_str(&format!(
                 "  {:<16} {:<34} default {:<12} {}\n",
@@ -392,6 +396,7 @@ pub fn markdown() -> String {
         if let Some(k) = e.knob {
             out.push_str(&format!("\nBandwidth knob: `{}`.\n", k.name));
         }
+        out.push_str(&format!("\nA lost packet: {}.\n", e.missing_packet));
         let example = e.example.trim().replace('\n', ", ");
         out.push_str(&format!(
             "\nMinimal entry: `kind = \"{}\"{}{}`\n",

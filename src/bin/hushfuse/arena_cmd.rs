@@ -67,6 +67,7 @@ pub(crate) fn arena_run(
     args: &RunArgs,
 ) -> Result<(calibrate::Outcome, PathBuf), Failure> {
     let (text, source) = scenario_text(scenario)?;
+    let text = with_loss(text, &source, args.loss)?;
     let budgets = budgets_of(args)?;
     let early_dir = early_out_dir(args, &text)?;
     let axis = calibrate::Axis::parse(budget_axis(args)).map_err(Failure::Input)?;

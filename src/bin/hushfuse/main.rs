@@ -93,6 +93,10 @@ struct RunArgs {
     /// write OUT/shard-I-of-N.hfshard; `hushfuse merge` turns the N shards into the outputs.
     #[arg(long, value_name = "I/N")]
     shard: Option<String>,
+    /// Run over a lossy link: every packet is lost with probability P (a Bernoulli
+    /// `[channel]` replacing the scenario's), the same losses for every scheme.
+    #[arg(long, value_name = "P")]
+    loss: Option<f64>,
     /// Seconds between checkpoints of finished trial blocks (0: after every window of blocks).
     #[arg(long, default_value_t = 10.0, value_name = "SECS")]
     checkpoint_every: f64,
@@ -290,4 +294,23 @@ fn print_out(text: &str) {
 /// Text and source name of a scenario given as a path or a built-in name.
 fn scenario_text(scenario: &str) -> Result<(String, String), Failure> {
     builtin::resolve(scenario, false).map_err(Failure::Input)
+}
+
+/// The scenario text with `--loss P` written in as its `[channel]` (unchanged without it).
+fn with_loss(text: String, source: &str, loss: Option<f64>) -> Result<String, Failure> {
+    let Some(p) = loss else {
+        return Ok(text);
+    };
+    if !(0.0..=1.0).contains(&p) {
+        return Err(Failure::Input(format!(
+            "--loss: expected a probability in [0, 1], got {p}"
+        )));
+    }
+    let mut table: toml::Table =
+        toml::from_str(&text).map_err(|e| Failure::Input(format!("{source}: {}", e.message())))?;
+    let mut channel = toml::Table::new();
+    channel.insert("kind".into(), toml::Value::String("bernoulli".into()));
+    channel.insert("loss".into(), toml::Value::Float(p));
+    table.insert("channel".into(), toml::Value::Table(channel));
+    toml::to_string(&table).map_err(|e| Failure::Input(format!("{source}: {e}")))
 }

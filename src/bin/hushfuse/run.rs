@@ -78,6 +78,7 @@ pub(crate) fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(),
         }
         return table_report(&text, &source, args);
     }
+    let text = with_loss(text, &source, args.loss)?;
     // From here on Ctrl-C stops the run cleanly (a signal before the first trial: a checkpoint
     // of nothing, and exit 130).
     install_stop_handler();

@@ -227,4 +227,5 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     applies: registry::Applies::Any,
     build: registry::parse_and_build::<CensoredPfParams>,
     example: "l = 1.0\nparticles = 200",
+    missing_packet: "a missing packet is a silence: the published likelihood (CFwMD) reads it as an innovation inside the band; with link_loss = p the likelihood is P(silent | x) + p P(sent | x)",
 };

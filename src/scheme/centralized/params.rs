@@ -44,6 +44,7 @@ pub const ALL: SchemeEntry = SchemeEntry {
     applies: registry::Applies::Any,
     build: registry::parse_and_build::<AllParams>,
     example: "",
+    missing_packet: "a missing measurement is a step without it (time update only): with every sensor sending, a loss costs information but misleads nothing",
 };
 
 pub const RANDOM: SchemeEntry = SchemeEntry {
@@ -65,4 +66,5 @@ pub const RANDOM: SchemeEntry = SchemeEntry {
     applies: registry::Applies::Any,
     build: registry::parse_and_build::<RandomParams>,
     example: "rate = 0.5",
+    missing_packet: "a missing measurement is a step without it (time update only); the random choice to send carries no information, so neither does a loss",
 };

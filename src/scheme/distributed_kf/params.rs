@@ -111,6 +111,7 @@ pub const FULL_RATE: SchemeEntry = SchemeEntry {
     applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<FullRateParams>,
     example: "",
+    missing_packet: "a missing estimate is an omission (Dormann et al.): the center uses its own prediction of the local estimate in its place; Algorithm 1 is exact for one omitted step only, so two missing in a row stop the run with an error",
 };
 
 pub const ALG1_RANDOM: SchemeEntry = SchemeEntry {
@@ -131,6 +132,7 @@ pub const ALG1_RANDOM: SchemeEntry = SchemeEntry {
     applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<Alg1RandomParams>,
     example: "rate = 0.75",
+    missing_packet: "a missing estimate is an omission: the center predicts the local estimate (Alg. 1); random omissions carry no information, so a loss misleads nothing; two missing in a row stop the run with an error (Algorithm 1 is exact for one omitted step)",
 };
 
 pub const ALG1_EVENT: SchemeEntry = SchemeEntry {
@@ -142,6 +144,7 @@ pub const ALG1_EVENT: SchemeEntry = SchemeEntry {
     applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<Alg1EventParams>,
     example: "alpha = 0.3",
+    missing_packet: "a missing estimate is an omission: the center predicts the local estimate (Alg. 1), which with event-based omission assumes the local estimate stayed close; a loss breaks that assumption, and two missing in a row stop the run with an error",
 };
 
 pub const ALG2_EVENT: SchemeEntry = SchemeEntry {
@@ -167,4 +170,5 @@ pub const ALG2_EVENT: SchemeEntry = SchemeEntry {
     applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<Alg2EventParams>,
     example: "alpha = 0.4\nb = 10.0",
+    missing_packet: "a missing estimate is an omission: the center predicts the local estimate and inflates its covariance by the event bound (Alg. 2), which assumes the local estimate stayed within the bound; a loss breaks that assumption",
 };

@@ -53,6 +53,7 @@ pub const CI: SchemeEntry = SchemeEntry {
     applies: registry::Applies::Any,
     build: build_ci,
     example: "",
+    missing_packet: "a missing estimate: the center predicts that sensor's last estimate forward",
 };
 
 pub const NAIVE: SchemeEntry = SchemeEntry {
@@ -64,4 +65,5 @@ pub const NAIVE: SchemeEntry = SchemeEntry {
     applies: registry::Applies::Any,
     build: build_naive,
     example: "",
+    missing_packet: "a missing estimate: the center predicts that sensor's last estimate forward",
 };

@@ -127,6 +127,7 @@ pub const INNOVATION: SchemeEntry = SchemeEntry {
     applies: registry::Applies::Any,
     build: registry::parse_and_build::<InnovationTriggerParams>,
     example: "delta = 1.0",
+    missing_packet: "a missing packet is a silence: the center updates with the trigger's information that the innovation stayed below delta (Wu et al. 2013), which a loss makes wrong",
 };
 
 pub const STOCHASTIC_OPEN: SchemeEntry = SchemeEntry {
@@ -138,6 +139,7 @@ pub const STOCHASTIC_OPEN: SchemeEntry = SchemeEntry {
     applies: registry::Applies::Any,
     build: build_open,
     example: "tau = 1.0",
+    missing_packet: "a missing packet is a silence: the center updates with the stochastic trigger's likelihood of not sending (Han et al. 2015), which a loss makes wrong",
 };
 
 pub const STOCHASTIC_CLOSED: SchemeEntry = SchemeEntry {
@@ -149,6 +151,7 @@ pub const STOCHASTIC_CLOSED: SchemeEntry = SchemeEntry {
     applies: registry::Applies::Any,
     build: build_closed,
     example: "tau = 1.0",
+    missing_packet: "a missing packet is a silence: the center updates with the stochastic trigger's likelihood of not sending (Han et al. 2015), which a loss makes wrong",
 };
 
 pub const SEND_ON_DELTA: SchemeEntry = SchemeEntry {
@@ -173,4 +176,5 @@ pub const SEND_ON_DELTA: SchemeEntry = SchemeEntry {
     applies: registry::Applies::Any,
     build: registry::parse_and_build::<SendOnDeltaParams>,
     example: "delta = 1.0",
+    missing_packet: "a missing packet is a silence: the center treats the reading as within delta of the last one it received, which a loss makes wrong",
 };

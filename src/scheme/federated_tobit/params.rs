@@ -300,6 +300,7 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<FtkfParams>,
     example: "tau = 5.0",
+    missing_packet: "a missing reading keeps the zero-order hold (Geng et al., eq. (4)): the last reading that arrived is used again",
 };
 
 pub const ROUND_ROBIN_KF: SchemeEntry = SchemeEntry {
@@ -312,4 +313,6 @@ pub const ROUND_ROBIN_KF: SchemeEntry = SchemeEntry {
     applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<RoundRobinKfParams>,
     example: "",
+    missing_packet:
+        "a missing reading keeps the zero-order hold: the last reading that arrived is used again",
 };

@@ -186,4 +186,5 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     applies: registry::Applies::ScalarMeasurements,
     build: registry::parse_and_build::<QuantizedParams>,
     example: "quantizer = \"zhang\"\nbits = 1",
+    missing_packet: "a missing frame is read as the quantizer's silent level (a small innovation, Zhang et al.): a loss looks like a reading near the prediction",
 };

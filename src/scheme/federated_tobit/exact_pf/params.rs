@@ -119,4 +119,5 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<TobitPfParams>,
     example: "tau = 5.0\nparticles = 200",
+    missing_packet: "a missing reading is skipped (no likelihood term): the held value carries no new information",
 };
