@@ -14,9 +14,10 @@ fn late_packets_and_a_lossy_downlink_are_counted() {
         "[channel]\nkind = \"ideal\"\ndelay = 2\ndownlink = { kind = \"bernoulli\", loss = 0.5 }\n";
     let s = summary(&scalar(channel, KF, 20));
     let link = s.schemes[0].link.as_ref().unwrap();
-    // Every message is late (a fixed delay), so none is delivered in time.
+    // Every message is two steps late (within the horizon of a fixed delay: none dropped).
     assert_eq!(link.late, 1.0);
     assert_eq!(link.delivered, 0.0);
+    assert_eq!(link.dropped_late, 0.0);
     // The all-data KF sends no feedback: nothing on the downlink to lose.
     assert_eq!(link.downlink_lost, 0.0);
     // A center with feedback (Zheng et al.'s CFwMD) loses half its feedback packets from step
@@ -234,4 +235,53 @@ fn the_loss_aware_censored_pf_center_is_consistent_where_the_published_one_is_no
         aware.anees,
         aware.anees_se
     );
+}
+
+/// A message two steps late is fused when it arrives: the center's estimate at every step is
+/// the in-order Kalman filter on the measurements that have arrived by then.
+#[test]
+fn late_packets_are_re_fused_into_the_in_order_filter() {
+    use hushfuse::link::Received;
+    let text = scalar("[channel]\nkind = \"ideal\"\ndelay = 2\n", KF, 1);
+    let exp = build::load(&text, "scalar.toml").unwrap();
+    for trial in 0..3 {
+        let t = trace::trace(&exp, trial, false).unwrap();
+        let data = runner::draw_trial(&exp, trial);
+        for k in 1..=exp.steps {
+            // A fresh all-data KF fed z_1..z_{k-2} and silences at k-1 and k.
+            let mut inst = exp.variants[0].scheme.build_with_seed(0).unwrap();
+            for j in 1..=k {
+                let inbox = if j + 2 <= k {
+                    vec![Received::Measurement(data.measurements[j - 1][0].clone())]
+                } else {
+                    vec![Received::Silent]
+                };
+                inst.center.step(j, &inbox).unwrap();
+            }
+            let (got, want) = (&t.variants[0].estimates[k - 1], inst.center.estimate());
+            let d_mean = (&got.mean - &want.mean).abs().max();
+            let d_cov = (&got.cov - &want.cov).abs().max();
+            assert!(
+                d_mean <= 1e-12 && d_cov <= 1e-12,
+                "trial {trial}, step {k}: re-fused estimate differs by {d_mean:e} (mean), {d_cov:e} (cov)"
+            );
+        }
+    }
+}
+
+#[test]
+fn packets_later_than_the_horizon_are_dropped_and_counted() {
+    // Geometric delays of mean 3 with a horizon of 1 step: P(delay = 0) = 1/4,
+    // P(delay = 1) = 3/16, the rest (9/16) is dropped. 60 x 400 slots: SE <= 0.0033; 4 SE.
+    let channel =
+        "[channel]\nkind = \"ideal\"\ndelay = { kind = \"geometric\", mean = 3.0, horizon = 1 }\n";
+    let s = summary(&scalar(channel, KF, 400));
+    let link = s.schemes[0].link.as_ref().unwrap();
+    for (got, want) in [
+        (link.delivered, 0.25),
+        (link.late, 3.0 / 16.0),
+        (link.dropped_late, 9.0 / 16.0),
+    ] {
+        assert!((got - want).abs() < 4.0 * 0.0033, "{got} vs {want}");
+    }
 }

@@ -2,6 +2,7 @@
 //! the trial-0 trace, replay of recorded data and calibration to bit budgets.
 pub mod calibrate;
 pub mod durable;
+pub mod link_layer;
 pub mod replay;
 pub mod run;
 pub mod runner;

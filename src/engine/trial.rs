@@ -9,11 +9,12 @@
 //! [`Scheme::fast_path`]) is a hook of this loop: taken when the observer can take its report
 //! ([`Observer::fast_sink`]) and every reading exists, with the same numbers as the loop (the
 //! bit-for-bit tests are in `tests/fast_paths.rs`).
+pub use crate::engine::link_layer::Link;
+use crate::engine::link_layer::LinkLayer;
 use crate::engine::seeding::coins;
 use crate::filter::Gaussian;
 use crate::linalg::{LinalgError, Vector};
 use crate::link::{Received, Transmission};
-use crate::network::channel::FateTable;
 use crate::network::{self, Schedule, Traffic};
 use crate::scenario::experiment::Experiment;
 #[cfg(doc)]
@@ -22,21 +23,6 @@ use crate::scheme::fast_path::{FastTrialError, StepSink, TrialCache};
 #[cfg(doc)]
 use crate::scheme::Scheme;
 use crate::scheme::SchemeError;
-
-/// What one sensor did at one step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Link {
-    /// Sent, and the packet arrived.
-    Sent,
-    Silent,
-    NotScheduled,
-    /// Sent (its bits and frame were spent), and the link lost the packet: the fusion center
-    /// saw a silence.
-    Lost,
-    /// Sent, and the link delivers it late: dropped at the center for now (its bits spent),
-    /// which saw a silence.
-    Late,
-}
 
 /// One fused step, as an [`Observer`] sees it.
 #[derive(Debug)]
@@ -174,12 +160,8 @@ pub fn run_trial(
     let n_sensors = exp.system.n_sensors();
     let variant = &exp.variants[spec.variant];
     let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
-    // The link's fates of this trial, from its own stream: every scheme meets the same losses.
-    let fates = exp.channel.as_deref().map(|specs| LinkFates {
-        up: FateTable::draw(specs, exp.steps, exp.seed, spec.trial as u64, false),
-        down: FateTable::draw(specs, exp.steps, exp.seed, spec.trial as u64, true),
-    });
-    if spec.available.is_none() && fates.is_none() {
+    // A lossy link is the generic loop's (the fast paths assume every packet arrives).
+    if spec.available.is_none() && exp.channel.is_none() {
         // One virtual call per trial: the scheme's hook, then its whole trial.
         if let (Some(fast), Some(sink)) = (variant.scheme.fast_path(), observer.fast_sink()) {
             let cache = buffers.cache_for(spec.trial, measurements);
@@ -206,27 +188,10 @@ pub fn run_trial(
     } = buffers;
     // What the fusion center tells the sensors before the first measurement.
     let mut feedback = inst.center.feedback();
-    // Behind a lossy downlink each sensor keeps the last feedback that reached it. The first
-    // one (made from the prior, which every sensor knows) counts as received.
-    let mut held = match &fates {
-        Some(_) => vec![feedback.clone(); n_sensors],
-        None => Vec::new(),
-    };
+    // The link's fates of this trial, from its own stream: every scheme meets the same ones.
+    let mut link = LinkLayer::new(exp, spec.trial, &feedback);
     for k in 1..=exp.steps {
-        let mut downlink_lost = 0;
-        if let Some(f) = &fates {
-            for (i, h) in held.iter_mut().enumerate() {
-                if k == 1 {
-                    continue;
-                }
-                if f.down.get(i, k).lost {
-                    // Only a packet that was sent can be lost.
-                    downlink_lost += u64::from(feedback.is_some());
-                } else {
-                    h.clone_from(&feedback);
-                }
-            }
-        }
+        let downlink_lost = link.as_mut().map_or(0, |l| l.downlink(k, &feedback));
         let scheduled = |i: usize| {
             schedule.allows(k, i, n_sensors) && spec.available.is_none_or(|a| a[k - 1][i])
         };
@@ -234,8 +199,8 @@ pub fn run_trial(
         links.clear();
         bits.clear();
         for (i, node) in inst.sensors.iter_mut().enumerate() {
-            let fb = match &fates {
-                Some(_) => held[i].as_ref(),
+            let fb = match &link {
+                Some(l) => l.feedback(i),
                 None => feedback.as_ref(),
             };
             let t = if scheduled(i) {
@@ -247,10 +212,9 @@ pub fn run_trial(
             if with_links {
                 let (link, b) = match &t {
                     _ if !scheduled(i) => (Link::NotScheduled, 0),
-                    Transmission::Send(m) => (
-                        fates.as_ref().map_or(Link::Sent, |f| f.link(i, k)),
-                        m.bits(),
-                    ),
+                    Transmission::Send(m) => {
+                        (link.as_ref().map_or(Link::Sent, |l| l.link(i, k)), m.bits())
+                    }
                     Transmission::Silent => (Link::Silent, 0),
                 };
                 links.push(link);
@@ -260,8 +224,8 @@ pub fn run_trial(
         }
         let mut traffic = network::deliver(transmissions.drain(..), inbox);
         traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
-        if let Some(f) = &fates {
-            f.apply(k, inbox, &mut traffic);
+        if let Some(l) = &mut link {
+            l.uplink(k, inbox, &mut traffic);
             traffic.downlink_lost = downlink_lost;
         }
         if schedule != Schedule::All || spec.available.is_some() {
@@ -271,9 +235,21 @@ pub fn run_trial(
                 }
             }
         }
-        inst.center
-            .step(k, inbox)
-            .map_err(|source| LoopError::Scheme { k, source })?;
+        match &mut link {
+            Some(l) => l
+                .fuse(
+                    k,
+                    inbox,
+                    &mut inst.center,
+                    variant.scheme.as_ref(),
+                    center_seed,
+                )
+                .map_err(|(k, source)| LoopError::Scheme { k, source })?,
+            None => inst
+                .center
+                .step(k, inbox)
+                .map_err(|source| LoopError::Scheme { k, source })?,
+        }
         feedback = inst.center.feedback();
         observer
             .step(&StepOutput {
@@ -290,41 +266,4 @@ pub fn run_trial(
             })?;
     }
     Ok(())
-}
-
-/// The fates of one trial's link slots: uplink (sensor to center) and downlink (feedback).
-struct LinkFates {
-    up: FateTable,
-    down: FateTable,
-}
-
-impl LinkFates {
-    /// What became of sensor `i`'s packet sent at step `k`.
-    fn link(&self, i: usize, k: usize) -> Link {
-        let fate = self.up.get(i, k);
-        if fate.lost {
-            Link::Lost
-        } else if fate.delay > 0 {
-            Link::Late
-        } else {
-            Link::Sent
-        }
-    }
-
-    /// Step `k`'s packets through the link: a lost or late one reaches the center as a
-    /// silence (by default the center cannot tell the two apart), counted in `traffic`; the
-    /// bits and frames stay counted, since they were sent.
-    fn apply(&self, k: usize, inbox: &mut [Received], traffic: &mut Traffic) {
-        for (i, r) in inbox.iter_mut().enumerate() {
-            if matches!(r, Received::Silent | Received::NotScheduled) {
-                continue;
-            }
-            match self.link(i, k) {
-                Link::Lost => traffic.lost += 1,
-                Link::Late => traffic.late += 1,
-                _ => continue,
-            }
-            *r = Received::Silent;
-        }
-    }
 }

@@ -1,6 +1,6 @@
 //! What the link did to a scheme's messages, for `summary.json` and `per_step.csv`: per step
-//! (means over trials) the messages sent, delivered, lost and late, and the feedback packets
-//! the downlink lost. Present only for a scenario with a `[channel]`.
+//! (means over trials) the messages sent, delivered in time, lost, late (fused on arrival) and
+//! dropped as too late, and the feedback packets the downlink lost. Only with a `[channel]`.
 use crate::metrics::Sums;
 use serde::{Deserialize, Serialize};
 
@@ -12,13 +12,17 @@ pub struct LinkSummary {
     pub sent_per_step: Vec<f64>,
     pub delivered_per_step: Vec<f64>,
     pub lost_per_step: Vec<f64>,
+    /// Delivered late, within the horizon: fused when they arrived.
     pub late_per_step: Vec<f64>,
+    /// Later than the horizon: dropped.
+    pub dropped_late_per_step: Vec<f64>,
     pub downlink_lost_per_step: Vec<f64>,
     /// Time averages of the per-step means.
     pub sent: f64,
     pub delivered: f64,
     pub lost: f64,
     pub late: f64,
+    pub dropped_late: f64,
     pub downlink_lost: f64,
     /// Lost / sent over the whole run (NaN when nothing was sent).
     pub loss_fraction: f64,
@@ -32,11 +36,10 @@ pub fn summarize(sums: &Sums, trials: usize, sent_per_step: Vec<f64>) -> LinkSum
             .map(|k| sums.link.get(k).map_or(0.0, |r| r[c] as f64) / trials as f64)
             .collect()
     };
-    let (lost, late, downlink_lost) = (column(0), column(1), column(2));
-    let delivered: Vec<f64> = sent_per_step
-        .iter()
-        .zip(lost.iter().zip(&late))
-        .map(|(s, (l, d))| s - l - d)
+    let (lost, late, dropped, downlink_lost) = (column(0), column(1), column(2), column(3));
+    // Delivered in time: neither lost nor late nor dropped.
+    let delivered: Vec<f64> = (0..steps)
+        .map(|k| sent_per_step[k] - lost[k] - late[k] - dropped[k])
         .collect();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / steps.max(1) as f64;
     let (sent_mean, lost_mean) = (mean(&sent_per_step), mean(&lost));
@@ -45,6 +48,7 @@ pub fn summarize(sums: &Sums, trials: usize, sent_per_step: Vec<f64>) -> LinkSum
         delivered: mean(&delivered),
         lost: lost_mean,
         late: mean(&late),
+        dropped_late: mean(&dropped),
         downlink_lost: mean(&downlink_lost),
         loss_fraction: if sent_mean > 0.0 {
             lost_mean / sent_mean
@@ -55,21 +59,23 @@ pub fn summarize(sums: &Sums, trials: usize, sent_per_step: Vec<f64>) -> LinkSum
         delivered_per_step: delivered,
         lost_per_step: lost,
         late_per_step: late,
+        dropped_late_per_step: dropped,
         downlink_lost_per_step: downlink_lost,
     }
 }
 
 /// The extra header of `per_step.csv` when the scenario has a link.
-pub const CSV_HEADER: &str = ",sent,delivered,lost,late,downlink_lost";
+pub const CSV_HEADER: &str = ",sent,delivered,lost,late,dropped_late,downlink_lost";
 
 /// Step `k`'s (0-based) extra fields of `per_step.csv`.
 pub fn csv_fields(l: &LinkSummary, k: usize) -> String {
     format!(
-        ",{},{},{},{},{}",
+        ",{},{},{},{},{},{}",
         l.sent_per_step[k],
         l.delivered_per_step[k],
         l.lost_per_step[k],
         l.late_per_step[k],
+        l.dropped_late_per_step[k],
         l.downlink_lost_per_step[k]
     )
 }

@@ -17,8 +17,11 @@ pub struct Traffic {
     pub downlink_bits: u64,
     /// Messages sent (and counted above) that the link lost.
     pub lost: u64,
-    /// Messages sent that the link delivers late (dropped at the center for now).
+    /// Messages sent that the link delivers late, within the center's horizon (fused when
+    /// they arrive).
     pub late: u64,
+    /// Messages sent that the link delivers later than the horizon: dropped.
+    pub dropped_late: u64,
     /// Feedback packets the downlink lost (one per sensor that missed this step's feedback).
     pub downlink_lost: u64,
 }

@@ -51,10 +51,11 @@ pub struct Sums {
     pub has_ess: bool,
     /// Steady-state NEES / n of every (trial, step).
     pub nees_hist: NeesHistogram,
-    /// Per step, summed over trials: messages the link lost, messages it delivered late, and
-    /// feedback packets the downlink lost. Empty until a link loses something (an ideal link
-    /// costs nothing here); integers, so the order of additions changes nothing.
-    pub link: Vec<[u64; 3]>,
+    /// Per step, summed over trials: messages the link lost, messages it delivered late
+    /// (fused on arrival), messages later than the horizon (dropped), and feedback packets the
+    /// downlink lost. Empty until a link does any of this (an ideal link costs nothing here);
+    /// integers, so the order of additions changes nothing.
+    pub link: Vec<[u64; 4]>,
 }
 
 /// Observer of one trial of one variant: accumulates into a [`Sums`] as the trial runs.
@@ -130,12 +131,13 @@ impl Sums {
     /// Adds step `k`'s (1-based) link counts of one trial.
     fn add_link(&mut self, k: usize, traffic: &Traffic) {
         if self.link.is_empty() {
-            self.link = vec![[0; 3]; self.steps];
+            self.link = vec![[0; 4]; self.steps];
         }
         let row = &mut self.link[k - 1];
         row[0] += traffic.lost;
         row[1] += traffic.late;
-        row[2] += traffic.downlink_lost;
+        row[2] += traffic.dropped_late;
+        row[3] += traffic.downlink_lost;
     }
 
     /// Heap bytes of these sums before any trial is added (the per-step rows, the whole-run
@@ -247,7 +249,7 @@ impl Sums {
         self.nees_hist.merge(&o.nees_hist);
         if !o.link.is_empty() {
             if self.link.is_empty() {
-                self.link = vec![[0; 3]; self.steps];
+                self.link = vec![[0; 4]; self.steps];
             }
             for (a, b) in self.link.iter_mut().zip(&o.link) {
                 for (x, y) in a.iter_mut().zip(b) {
@@ -336,7 +338,7 @@ impl TrialState<'_> {
             *e = m - t;
         }
         let err: &[f64] = err;
-        if traffic.lost + traffic.late + traffic.downlink_lost > 0 {
+        if traffic.lost + traffic.late + traffic.dropped_late + traffic.downlink_lost > 0 {
             sums.add_link(k, &traffic);
         }
         let recorded = self.nees(err, est, factor).map(|(nees, degenerate)| {

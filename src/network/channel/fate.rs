@@ -255,6 +255,7 @@ mod tests {
         Delay::Geometric(GeometricDelay {
             kind: DelayKind::Geometric,
             mean,
+            horizon: None,
         })
     }
 

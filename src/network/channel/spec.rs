@@ -45,6 +45,10 @@ pub struct GeometricDelay {
     pub kind: DelayKind,
     /// The mean delay in steps (finite, ≥ 0).
     pub mean: f64,
+    /// How many steps the fusion center keeps to re-fuse late packets; later ones are dropped
+    /// and counted. Default: the delay's 99.9% quantile.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub horizon: Option<u32>,
 }
 
 /// How many steps a delivered packet takes: an integer, or a geometric table.
@@ -67,6 +71,22 @@ impl Default for Delay {
 }
 
 impl Delay {
+    /// Steps the fusion center keeps to re-fuse a late packet: the fixed delay itself, or a
+    /// geometric delay's `horizon` (default: its 99.9% quantile, the smallest n with
+    /// P(delay > n) = (1 - p)^(n + 1) <= 0.001, p = 1 / (1 + mean)).
+    pub fn horizon(&self) -> u32 {
+        match self {
+            Delay::Fixed(d) => *d,
+            Delay::Geometric(g) => g.horizon.unwrap_or_else(|| {
+                if g.mean <= 0.0 {
+                    return 0;
+                }
+                let q = g.mean / (1.0 + g.mean);
+                ((0.001f64.ln() / q.ln()).ceil() - 1.0).clamp(0.0, 1e6) as u32
+            }),
+        }
+    }
+
     /// Whether every packet takes zero steps.
     pub fn is_zero(&self) -> bool {
         match self {
@@ -329,9 +349,16 @@ mod tests {
             s.delay,
             Some(Delay::Geometric(GeometricDelay {
                 kind: DelayKind::Geometric,
-                mean: 1.5
+                mean: 1.5,
+                horizon: None,
             }))
         );
+        // The horizon: the fixed delay, or the geometric delay's 99.9% quantile unless given.
+        assert_eq!(Delay::Fixed(3).horizon(), 3);
+        // mean 1.5: q = 0.6, ln(0.001) / ln(0.6) = 13.52..., so n = 13: 0.6^14 = 0.00078.
+        assert_eq!(s.delay().horizon(), 13);
+        let h = parse_ok("delay = { kind = \"geometric\", mean = 1.5, horizon = 4 }");
+        assert_eq!(h.delay().horizon(), 4);
         assert_eq!(s.validate(), Ok(()));
         // Zero delay in either form leaves the link ideal.
         assert!(parse_ok("delay = 0").is_ideal());
