@@ -285,3 +285,24 @@ fn packets_later_than_the_horizon_are_dropped_and_counted() {
         assert!((got - want).abs() < 4.0 * 0.0033, "{got} vs {want}");
     }
 }
+
+/// A replay of trial K's data meets trial K's link, so it reproduces the run's trial K, and a
+/// Gilbert-Elliott link loses at its stationary rate in the engine too.
+#[test]
+fn a_replay_meets_the_runs_link_and_bursts_lose_at_the_stationary_rate() {
+    let channel = "[channel]\nkind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.3\n";
+    let schemes = format!("{KF}[[schemes]]\nkind = \"send-on-delta\"\ndelta = 1.0\n");
+    let text = scalar(channel, &schemes, 1);
+    let exp = build::load(&text, "scalar.toml").unwrap();
+    let run = runner::run(&exp, runner::RunOptions { threads: 1 }, &|_| {}).unwrap();
+    let data = runner::draw_trial(&exp, 0);
+    let replayed = replay::replay(&exp, &Recorded::from_trial(&data), 0).unwrap();
+    assert_eq!(replayed.sums.as_deref(), Some(run.as_slice()));
+    // pi_bad = p_gb / (p_gb + p_bg) = 0.25, every packet lost there: the KF (which always
+    // sends) loses 25%. Bursts correlate the slots: with lambda = 1 - p_gb - p_bg = 0.6 the
+    // variance of the mean over n slots is about pi (1 - pi) (1 + lambda) / (1 - lambda) / n;
+    // 400 trials x 60 steps: SE = 0.0056; 4 SE.
+    let s = summary(&scalar(channel, KF, 400));
+    let lost = s.schemes[0].link.as_ref().unwrap().loss_fraction;
+    assert!((lost - 0.25).abs() < 4.0 * 0.0056, "{lost}");
+}
