@@ -84,6 +84,8 @@ pub struct KnobRange {
     /// `None`: a threshold without an upper end (found by quadrupling).
     pub hi: Option<f64>,
     pub integer: bool,
+    /// Bisect at the geometric midpoint ([`registry::Scale::Log`]).
+    pub log: bool,
 }
 
 /// The range of `kind`'s knob on a system of `n_sensors` sensors: the registry's
@@ -94,6 +96,7 @@ pub fn knob_range(kind: &str, n_sensors: usize) -> Option<KnobRange> {
         lo: k.lo.at(n_sensors)?,
         hi: k.hi.at(n_sensors),
         integer: k.integer,
+        log: k.scale == registry::Scale::Log,
     })
 }
 
@@ -612,6 +615,16 @@ fn choose_continuous(
     Ok(chosen)
 }
 
+/// The point a bisection of `[a, c]` tries next: the arithmetic midpoint, or on a log-scale
+/// knob the geometric one (the arithmetic one where an end is not positive).
+fn midpoint(a: f64, c: f64, log: bool) -> f64 {
+    if log && a > 0.0 && c > 0.0 {
+        (a * c).sqrt()
+    } else {
+        0.5 * (a + c)
+    }
+}
+
 /// Bisects `[lo, hi]` towards budget `b` from the nearer end `best` (at most 40 halvings).
 fn bisect(
     ev: &mut Evaluator,
@@ -628,7 +641,7 @@ fn bisect(
         if (axis.of(&best.1) - b).abs() <= tol * b {
             break;
         }
-        let mid = 0.5 * (a + c);
+        let mid = midpoint(a, c, p.range.log);
         let Ok(s) = p.eval(ev, mid) else { break };
         let f = axis.of(&s);
         if (f - b).abs() < (axis.of(&best.1) - b).abs() {

@@ -123,7 +123,8 @@ impl Bound {
 pub enum Scale {
     /// Bisection at the arithmetic midpoint (integer knobs: every integer of the range).
     Linear,
-    /// Bisection at the geometric midpoint (declared for completeness: no knob uses it yet).
+    /// Bisection at the geometric midpoint, for knobs whose effect spans decades (no built-in
+    /// knob uses it yet).
     Log,
 }
 

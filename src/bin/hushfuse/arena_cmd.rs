@@ -80,6 +80,14 @@ pub(crate) fn arena_run(
             .then(hushfuse::scenario::limits::Limits::none),
     };
     check_arena_room(&early_dir, &text, &source, &load, budgets.len())?;
+    if let (Some(p), Ok(exp)) = (args.pilot_trials, build::load_with(&text, &source, &load)) {
+        if p > exp.trials {
+            eprintln!(
+                "note: --pilot-trials {p} is more than the run's {} trials: the pilot runs use {}",
+                exp.trials, exp.trials
+            );
+        }
+    }
     let opts = calibrate::Options {
         axis,
         pilot_trials: args.pilot_trials,

@@ -130,3 +130,18 @@ fn declared_knob_directions_agree_with_the_measured_ones() {
     }
     assert!(checked >= 40, "only {checked} knobs checked");
 }
+
+#[test]
+fn a_log_scale_knob_bisects_at_the_geometric_midpoint() {
+    assert_eq!(midpoint(1.0, 100.0, true), 10.0);
+    assert_eq!(midpoint(1.0, 100.0, false), 50.5);
+    // An end at 0 has no geometric midpoint: the arithmetic one.
+    assert_eq!(midpoint(0.0, 4.0, true), 2.0);
+    // Every built-in knob is linear (a change of scale would move calibrated numbers).
+    for e in crate::scheme::SCHEMES {
+        if let Some(k) = e.knob {
+            assert_eq!(k.scale, registry::Scale::Linear, "{}", e.kind);
+            assert!(!knob_range(e.kind, 4).unwrap().log);
+        }
+    }
+}
