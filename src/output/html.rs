@@ -451,7 +451,8 @@ fn trajectory_1d(
 }
 
 #[allow(clippy::needless_range_loop)] // i indexes sensors across the per-step rows
-/// Per selected scheme, a row per sensor and a cell per step: sent, silent, not scheduled.
+/// Per selected scheme, a row per sensor and a cell per step: sent, silent, not scheduled, and
+/// with a lossy link lost or late.
 fn timeline(input: &Input, tr: &trace::Trace, sel: &[usize]) -> String {
     let steps = input.exp.steps;
     let n = input.exp.system.n_sensors();
@@ -468,8 +469,18 @@ fn timeline(input: &Input, tr: &trace::Trace, sel: &[usize]) -> String {
     let _ = writeln!(
         s,
         "<rect x=\"{left}\" y=\"8\" width=\"12\" height=\"12\" fill=\"#1f77b4\"/><text x=\"{}\" y=\"18\">sent</text><rect x=\"{}\" y=\"8\" width=\"12\" height=\"12\" fill=\"#d9d9d9\"/><text x=\"{}\" y=\"18\">silent</text><rect x=\"{}\" y=\"8\" width=\"12\" height=\"12\" fill=\"#ffffff\" stroke=\"#999\"/><text x=\"{}\" y=\"18\">not scheduled</text><text x=\"{}\" y=\"18\">steps 1..{steps}, one row per sensor</text>",
-        left + 16.0, left + 60.0, left + 76.0, left + 130.0, left + 146.0, left + 260.0
+        left + 16.0, left + 60.0, left + 76.0, left + 130.0, left + 146.0,
+        // With a lossy link the legend has one more entry, and the note moves right.
+        left + if input.exp.channel.is_some() { 350.0 } else { 260.0 }
     );
+    if input.exp.channel.is_some() {
+        let _ = writeln!(
+            s,
+            r##"<rect x="{}" y="8" width="12" height="12" fill="#d62728"/><text x="{}" y="18">lost / late</text>"##,
+            left + 250.0,
+            left + 266.0
+        );
+    }
     for (j, &v) in sel.iter().enumerate() {
         let y0 = 36.0 + block * j as f64;
         let _ = writeln!(
