@@ -79,8 +79,11 @@ pub(crate) fn arena_run(
             .allow_large
             .then(hushfuse::scenario::limits::Limits::none),
     };
-    check_arena_room(&early_dir, &text, &source, &load, budgets.len())?;
-    if let (Some(p), Ok(exp)) = (args.pilot_trials, build::load_with(&text, &source, &load)) {
+    // The scenario as run, loaded once for the checks before the first pilot run (one that does
+    // not load is reported by the calibration with its full message).
+    let loaded = build::load_with(&text, &source, &load).ok();
+    check_arena_room(&early_dir, loaded.as_ref(), budgets.len())?;
+    if let (Some(p), Some(exp)) = (args.pilot_trials, &loaded) {
         if p > exp.trials {
             eprintln!(
                 "note: --pilot-trials {p} is more than the run's {} trials: the pilot runs use {}",
@@ -177,14 +180,11 @@ fn early_out_dir(args: &RunArgs, text: &str) -> Result<Option<OutputDir>, Failur
 /// early output folder.
 fn check_arena_room(
     early_dir: &Option<OutputDir>,
-    text: &str,
-    source: &str,
-    load: &build::LoadOptions,
+    exp: Option<&build::Experiment>,
     budget_count: usize,
 ) -> Result<(), Failure> {
-    // Room for one run's output per budget, checked before the first pilot run (a scenario
-    // that does not load is reported by the calibration with its full message).
-    if let (Some(d), Ok(exp)) = (early_dir, build::load_with(text, source, load)) {
+    // Room for one run's output per budget, checked before the first pilot run.
+    if let (Some(d), Some(exp)) = (early_dir, exp) {
         let per_budget = hushfuse::scenario::limits::output_bytes(
             exp.groups.len(),
             exp.variants.len(),

@@ -90,11 +90,12 @@ pub fn replay_arrays(
             )));
         }
     }
-    // Rows partly NaN or with an infinity are refused first: the data's own faults, whatever
-    // the scenario.
+    // The readings, step-major. Rows partly NaN or with an infinity are refused here, first:
+    // the data's own faults, whatever the scenario.
+    let mut per_step = vec![Vec::with_capacity(arrays.measurements.len()); steps];
     for (i, m) in arrays.measurements.iter().enumerate() {
-        for k in 0..steps {
-            reading(m, i, k)?;
+        for (k, row) in per_step.iter_mut().enumerate() {
+            row.push(reading(m, i, k)?);
         }
     }
     let limits = opts.load.limits.unwrap_or_default();
@@ -137,16 +138,6 @@ pub fn replay_arrays(
                 m.cols
             )));
         }
-    }
-    let mut per_step = Vec::with_capacity(steps);
-    for k in 0..steps {
-        let row = arrays
-            .measurements
-            .iter()
-            .enumerate()
-            .map(|(i, m)| reading(m, i, k))
-            .collect::<Result<Vec<_>, _>>()?;
-        per_step.push(row);
     }
     let truth = match &arrays.truth {
         None => None,
