@@ -507,7 +507,7 @@ fn csv_field(s: &str) -> String {
 }
 
 /// A number for the table: fixed decimals, scientific beyond 1e6, "overflow" if not finite.
-fn num(v: f64, decimals: usize) -> String {
+pub fn num(v: f64, decimals: usize) -> String {
     if !v.is_finite() {
         "overflow".to_string()
     } else if v.abs() >= 1e6 {

@@ -644,6 +644,8 @@ fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), Strin
             "status".into(),
             format!("mean RMSE {group}"),
             "ANEES".into(),
+            "NEES<99%".into(),
+            "diverged".into(),
             "payload bits".into(),
             "frame bits".into(),
             "downlink bits".into(),
@@ -659,7 +661,9 @@ fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), Strin
                 format!("{:.1}", c.achieved),
                 c.status.text().into(),
                 format!("{:.4}", c.result.mean_rmse[group]),
-                format!("{:.3}", c.result.anees),
+                crate::metrics::results::num(c.result.anees, 3),
+                format!("{:.3}", c.result.nees_coverage_99),
+                format!("{:.1}%", 100.0 * c.result.diverged_fraction),
                 format!("{:.1}", c.result.bits_per_step),
                 format!("{:.1}", c.result.frame_bits_per_step),
                 format!("{:.1}", c.result.downlink_bits_per_step),
@@ -694,6 +698,9 @@ fn results_section(h: &mut String, input: &Input) {
             "MSE(ss)",
             "±se",
             "ANEES",
+            "NEES<95%",
+            "NEES<99%",
+            "diverged",
             "rate",
             "payload bits/step",
             "frame bits/step",
@@ -701,6 +708,11 @@ fn results_section(h: &mut String, input: &Input) {
         ]
         .map(String::from),
     );
+    // With a link: what it lost, so a row's accuracy can be read against its losses.
+    let with_link = s.schemes.iter().any(|r| r.link.is_some());
+    if with_link {
+        rows[0].push("lost/step".into());
+    }
     for r in &s.schemes {
         let mut row = vec![r.name.clone(), params_text(&r.params)];
         row.extend(
@@ -711,12 +723,22 @@ fn results_section(h: &mut String, input: &Input) {
         row.extend([
             format!("{:.4}", r.steady_state.mse),
             format!("{:.4}", r.steady_state.mse_se),
-            format!("{:.3}", r.anees),
+            crate::metrics::results::num(r.anees, 3),
+            format!("{:.3}", r.nees_coverage_95),
+            format!("{:.3}", r.nees_coverage_99),
+            format!("{:.1}%", 100.0 * r.diverged_fraction),
             format!("{:.3}", r.rate),
             format!("{:.1}", r.bits_per_step),
             format!("{:.1}", r.frame_bits_per_step),
             format!("{:.1}", r.downlink_bits_per_step),
         ]);
+        if with_link {
+            row.push(
+                r.link
+                    .as_ref()
+                    .map_or("—".into(), |l| format!("{:.2}", l.lost)),
+            );
+        }
         rows.push(row);
     }
     if let Some(b) = &s.pcrb {
@@ -734,6 +756,15 @@ fn results_section(h: &mut String, input: &Input) {
         rows.push(row);
     }
     h.push_str(&html_table(&rows));
+    let _ = writeln!(h, "<p>NEES&lt;95%, NEES&lt;99%: share of steps whose NEES lies below the chi-square quantile (a consistent filter: 0.95, 0.99); diverged: share of trials whose NEES stayed above the 99.9% quantile for {} steps in a row.</p>", crate::metrics::DIVERGENCE_RUN);
+    let warnings = crate::metrics::results::warnings(s);
+    if !warnings.is_empty() {
+        let _ = writeln!(h, "<h3>Warnings</h3>\n<ul class=\"warnings\">");
+        for w in &warnings {
+            let _ = writeln!(h, "<li>{}</li>", esc(w));
+        }
+        h.push_str("</ul>\n");
+    }
 }
 
 /// Whether an HTML text refers to anything outside itself: `src=` or `href=` attributes (any

@@ -8,6 +8,7 @@ pub mod every_scheme;
 pub mod experiment;
 pub mod file;
 pub mod limits;
+pub mod lossy;
 pub mod paper_check;
 pub mod schemes;
 pub mod sweep;

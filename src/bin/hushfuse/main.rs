@@ -94,7 +94,8 @@ struct RunArgs {
     #[arg(long, value_name = "I/N")]
     shard: Option<String>,
     /// Run over a lossy link: every packet is lost with probability P (a Bernoulli
-    /// `[channel]` replacing the scenario's), the same losses for every scheme.
+    /// `[channel]` replacing the scenario's), the same losses for every scheme; every scheme
+    /// with a loss-aware center also runs loss-aware ("… (loss-aware)", link_loss = P).
     #[arg(long, value_name = "P")]
     loss: Option<f64>,
     /// Seconds between checkpoints of finished trial blocks (0: after every window of blocks).
@@ -296,21 +297,13 @@ fn scenario_text(scenario: &str) -> Result<(String, String), Failure> {
     builtin::resolve(scenario, false).map_err(Failure::Input)
 }
 
-/// The scenario text with `--loss P` written in as its `[channel]` (unchanged without it).
+/// The scenario text with `--loss P` written in: a Bernoulli `[channel]` for every sensor and a
+/// loss-aware copy of every scheme that has one ([`hushfuse::scenario::lossy::with_loss`]);
+/// unchanged without `--loss`.
 fn with_loss(text: String, source: &str, loss: Option<f64>) -> Result<String, Failure> {
-    let Some(p) = loss else {
-        return Ok(text);
-    };
-    if !(0.0..=1.0).contains(&p) {
-        return Err(Failure::Input(format!(
-            "--loss: expected a probability in [0, 1], got {p}"
-        )));
+    match loss {
+        None => Ok(text),
+        Some(p) => hushfuse::scenario::lossy::with_loss(&text, source, p)
+            .map_err(|e| Failure::Input(e.to_string())),
     }
-    let mut table: toml::Table =
-        toml::from_str(&text).map_err(|e| Failure::Input(format!("{source}: {}", e.message())))?;
-    let mut channel = toml::Table::new();
-    channel.insert("kind".into(), toml::Value::String("bernoulli".into()));
-    channel.insert("loss".into(), toml::Value::Float(p));
-    table.insert("channel".into(), toml::Value::Table(channel));
-    toml::to_string(&table).map_err(|e| Failure::Input(format!("{source}: {e}")))
 }
