@@ -29,6 +29,7 @@ def run(
     report: bool = False,
     reproduce: bool = False,
     checkpoint_every: float = 10.0,
+    loss: Optional[float] = None,
 ) -> Dict[str, Any]: ...
 def simulate(scenario: str, trial: int = 0, seed: Optional[int] = None) -> Dict[str, Any]: ...
 def replay_csv(

@@ -72,13 +72,28 @@ pub(crate) fn resolve(scenario: &str) -> PyResult<(String, String)> {
     builtin::resolve(scenario, true).map_err(ScenarioError::new_err)
 }
 
+/// A scenario's text and source, with `loss` written in as `--loss P` writes it (a Bernoulli
+/// link for every sensor and the loss-aware copies of the schemes that have one).
+pub(crate) fn resolve_with_loss(scenario: &str, loss: Option<f64>) -> PyResult<(String, String)> {
+    let (text, source) = resolve(scenario)?;
+    match loss {
+        None => Ok((text, source)),
+        Some(p) => {
+            let text =
+                hushfuse::scenario::lossy::with_loss(&text, &source, p).map_err(scenario_err)?;
+            Ok((text, source))
+        }
+    }
+}
+
 pub(crate) fn load(
     scenario: &str,
     trials: Option<usize>,
     seed: Option<u64>,
     threads: usize,
+    loss: Option<f64>,
 ) -> PyResult<build::Experiment> {
-    let (text, source) = resolve(scenario)?;
+    let (text, source) = resolve_with_loss(scenario, loss)?;
     let kind = build::file_kind(&text, &source).map_err(scenario_err)?;
     if kind == build::FileKind::TableReport {
         return Err(ScenarioError::new_err(format!(
@@ -506,7 +521,7 @@ fn variants<'py>(
     py: Python<'py>,
     scenario: &str,
 ) -> PyResult<Vec<(String, String, Bound<'py, PyAny>)>> {
-    let exp = load(scenario, None, None, 0)?;
+    let exp = load(scenario, None, None, 0, None)?;
     exp.variants
         .iter()
         .map(|v| {

@@ -2,8 +2,8 @@
 //! objects (never JSON or CSV text in between), and the engine's own run layer
 //! ([`hushfuse::engine::run`]) for output folders, resuming and shards.
 use crate::{
-    estimates_arrays, load, python_words, resolve, vectors_to_array2, DataError, RunError,
-    ScenarioError,
+    estimates_arrays, load, python_words, resolve, resolve_with_loss, vectors_to_array2, DataError,
+    RunError, ScenarioError,
 };
 use hushfuse::engine::replay::{self, arrays};
 use hushfuse::engine::run as engine_run;
@@ -99,7 +99,7 @@ fn run_failure(e: engine_run::RunFailure) -> PyErr {
 /// `hushfuse merge`). Returns a dict; with `out`, also `out` and `files` (or, for a shard,
 /// only `shard`, `blocks` and `done`).
 #[pyfunction]
-#[pyo3(signature = (scenario, trials=None, seed=None, threads=0, out=None, resume=false, shard=None, report=false, reproduce=false, checkpoint_every=10.0))]
+#[pyo3(signature = (scenario, trials=None, seed=None, threads=0, out=None, resume=false, shard=None, report=false, reproduce=false, checkpoint_every=10.0, loss=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run<'py>(
     py: Python<'py>,
@@ -113,6 +113,7 @@ pub(crate) fn run<'py>(
     report: bool,
     reproduce: bool,
     checkpoint_every: f64,
+    loss: Option<f64>,
 ) -> PyResult<Bound<'py, PyAny>> {
     if out.is_none() && (resume || shard.is_some() || report) {
         return Err(pyo3::exceptions::PyValueError::new_err(
@@ -120,7 +121,7 @@ pub(crate) fn run<'py>(
         ));
     }
     let Some(out) = out else {
-        let exp = load(scenario, trials, seed, threads)?;
+        let exp = load(scenario, trials, seed, threads, loss)?;
         let sums = py
             .allow_threads(|| runner::run(&exp, runner::RunOptions { threads }, &|_| {}))
             .map_err(|e| RunError::new_err(e.to_string()))?;
@@ -128,7 +129,7 @@ pub(crate) fn run<'py>(
         check_finite(results::non_finite(&summary))?;
         return summary_object(py, &exp, &summary);
     };
-    let (text, source) = resolve(scenario)?;
+    let (text, source) = resolve_with_loss(scenario, loss)?;
     let shard = shard
         .map(durable::parse_shard)
         .transpose()
@@ -182,7 +183,7 @@ pub(crate) fn simulate<'py>(
     trial: usize,
     seed: Option<u64>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let exp = load(scenario, None, seed, 0)?;
+    let exp = load(scenario, None, seed, 0, None)?;
     let data = runner::draw_trial(&exp, trial);
     let d = PyDict::new(py);
     d.set_item(

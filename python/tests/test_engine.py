@@ -105,3 +105,16 @@ def test_run_options_that_need_a_folder_are_refused():
         hushfuse.run("dormann-fig1", trials=2, resume=True)
     with pytest.raises(ValueError, match="shard"):
         hushfuse.run("dormann-fig1", trials=2, out="x", shard="3/2")
+
+
+def test_loss_runs_as_the_command_lines_loss_with_loss_aware_copies(tmp_path):
+    out = cli("run", "zheng-fig1", "--trials", "4", "--loss", "0.3", "--out", "cli", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    got = hushfuse.run("zheng-fig1", trials=4, loss=0.3, out=tmp_path / "py")
+    same_files(tmp_path / "cli", tmp_path / "py")
+    names = [s["name"] for s in got["schemes"]]
+    assert "CFwMD (loss-aware)" in names and "CFwMD" in names
+    aware = next(s for s in got["schemes"] if s["name"] == "CFwMD (loss-aware)")
+    assert aware["params"]["link_loss"] == 0.3 and aware["link"]["lost"] > 0
+    with pytest.raises(hushfuse.ScenarioError, match="--loss"):
+        hushfuse.run("zheng-fig1", trials=4, loss=1.5)

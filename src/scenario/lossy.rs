@@ -69,7 +69,8 @@ pub fn with_loss(text: &str, file: &str, p: f64) -> Result<String, ScenarioError
 /// is outside `link_loss`'s range: nothing ever arrives, so there is nothing to weigh).
 fn loss_aware_copy(entry: &toml::Table, p: f64) -> Option<toml::Table> {
     let kind = entry.get("kind")?.as_str()?;
-    if !(p > 0.0 && p < 1.0) || !has_loss_aware(kind) || entry.contains_key(LOSS_AWARE_PARAM) {
+    let aware = p > 0.0 && p < 1.0 && has_loss_aware(kind);
+    if !aware || entry.contains_key(LOSS_AWARE_PARAM) {
         return None;
     }
     let label = match entry.get("label").and_then(toml::Value::as_str) {
