@@ -240,6 +240,7 @@ pub fn build_with(
         &file_spec.schemes,
         &system,
         file_spec.steps,
+        &channel.clone().map(std::sync::Arc::new),
     )?;
     let estimate = limits::with_schemes(
         limits::baseline(

@@ -9,6 +9,7 @@ pub mod experiment;
 pub mod file;
 pub mod limits;
 pub mod paper_check;
+pub mod scheme_link;
 pub mod schemes;
 pub mod sweep;
 pub mod system;
