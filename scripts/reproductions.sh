@@ -9,7 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 all=(dormann-fig1 geng-oscillator geng-tracking zhang-fig4 zhang-fig5 zheng-fig1
      zheng-fig2-table1 zheng-fig3 zheng-fig4 zheng-fig5-table2 zheng-fig6 zheng-fig8 zheng-fig9
-     zheng-fig10-table3 zheng-nofb-n4)
+     zheng-fig10-table3 zheng-nofb-n4 sinopoli-critical gilbert-elliott-stability)
 rerun=("$@")
 if [ ${#rerun[@]} -eq 0 ]; then
     rerun=("${all[@]}")

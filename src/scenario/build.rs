@@ -258,7 +258,14 @@ pub fn build_with(
     );
     limits::check(&estimate, &limits, file)?;
     if let Some(paper) = &file_spec.paper {
-        crate::scenario::paper_check::check(&ctx, paper, &curves, &variants, &parts.groups)?;
+        crate::scenario::paper_check::check(
+            &ctx,
+            paper,
+            &curves,
+            &variants,
+            &parts.groups,
+            &system,
+        )?;
     }
 
     Ok(Experiment {

@@ -7,6 +7,7 @@ pub mod error;
 pub mod every_scheme;
 pub mod experiment;
 pub mod file;
+pub mod intermittent;
 pub mod limits;
 pub mod paper_check;
 pub mod scheme_link;

@@ -108,9 +108,7 @@ impl PointLink {
     ) -> Result<u32, ScenarioError> {
         match &self.sequence_bits {
             None => Ok(0),
-            Some(toml::Value::Integer(n)) if (0..=MAX_SEQUENCE_BITS).contains(n) => {
-                Ok(*n as u32)
-            }
+            Some(toml::Value::Integer(n)) if (0..=MAX_SEQUENCE_BITS).contains(n) => Ok(*n as u32),
             Some(v) => Err(ctx.err(
                 format!("{entry}.sequence_bits{note}"),
                 format!("expected an integer number of bits in 0..={MAX_SEQUENCE_BITS}, got {v}"),

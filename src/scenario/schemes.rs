@@ -2,8 +2,8 @@
 //! variant, parsed and built by the scheme's registry entry. This file knows no scheme by name.
 use crate::network::channel::ChannelSpec;
 use crate::scenario::error::{Ctx, ScenarioError};
-use crate::scenario::scheme_link::PointLink;
 use crate::scenario::experiment::{Curve, Variant};
+use crate::scenario::scheme_link::PointLink;
 use crate::scenario::sweep;
 use crate::scenario::{FrontierSpec, ParamValue, Params};
 use crate::scheme::registry::{self, BuildContext};
@@ -82,7 +82,8 @@ pub(crate) fn build_schemes(
             let at = format!("{field}{note}");
             let mut params = params_of(&t);
             link.params(&mut params);
-            let variant_channel = link.channel(ctx, (&field, &note), system.n_sensors(), channel)?;
+            let variant_channel =
+                link.channel(ctx, (&field, &note), system.n_sensors(), channel)?;
             let sequence_bits = link.sequence_bits(ctx, (&field, &note))?;
             let cx = BuildContext { system, steps };
             let scheme = (entry.build)(t, &cx).map_err(|e| match &e.field {
