@@ -36,6 +36,8 @@ Measured on the 2-core development machine with the full trial counts of the bui
 
 Verdicts near the z = -2 line are Monte Carlo outcomes, not properties of the method: with 200 trials (zheng-fig8, -fig9, -fig10-table3, as in the paper) and in heavy-tailed settings (zheng-nofb-n4 at l = 1) they change with the seed; the scenario notes say by how much and how many trials settle them.
 
+The two stability reproductions (`sinopoli-critical`, `gilbert-elliott-stability`) use `intermittent` claims (docs/scenarios.md): the filter's steady-state trace and MSE against an independent computation of the data-free variance recursion (the claim checker's own arrival sequences), Sinopoli's bounds mapped to the posterior, and, at and beyond the critical value, the tail index of the per-trial errors. Their thresholds are family-wise (Bonferroni over a claim's points); where the stationary error has infinite variance no standard error is used (ranks instead, not counted), and a divergence is judged by the tail, since no Monte Carlo mean can show an infinite expectation.
+
 Also reproduced exactly (computed, not simulated): `hushfuse reproduce zhang-tables` (18 of 18 printed values of Zhang et al. (2016), Tables 2, 4, 5, 6) and `hushfuse reproduce zhang-table7` (6 of 6 values of Table 7 to the printed 4 decimals).
 
 HEAD

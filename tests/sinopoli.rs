@@ -1,5 +1,5 @@
 //! The two stability reproductions (Sinopoli et al. 2004; Gilbert–Elliott bursts, Huang and Dey
-//! 2007) through the library at a reduced trial count: their `intermittent` claims hold where
+//! 2007) through the library at half their trial count: their `intermittent` claims hold where
 //! they must, and the plumbing under them (a scheme entry's own link, swept by a dotted name,
 //! in the variant's params) behaves.
 use hushfuse::engine::runner;
@@ -26,9 +26,9 @@ fn run(id: &str, trials: usize) -> (Experiment, Summary, Vec<ClaimResult>) {
 
 #[test]
 fn sinopoli_critical_claims_hold() {
-    let (exp, summary, claims) = run("sinopoli-critical", 500);
+    let (exp, summary, claims) = run("sinopoli-critical", 2000);
     // Every variant has its own Bernoulli link, and its swept loss is in its params.
-    assert_eq!(exp.variants.len(), 12);
+    assert_eq!(exp.variants.len(), 13);
     for (v, s) in exp.variants.iter().zip(&summary.schemes) {
         let specs = v.channel.as_deref().expect("a lossy link");
         assert_eq!(specs.len(), 1);
@@ -37,7 +37,7 @@ fn sinopoli_critical_claims_hold() {
             other => panic!("channel.loss not in params: {other:?}"),
         };
         assert_eq!(specs[0].loss, Some(loss));
-        // The link delivered at its rate (2 SE over 500 x 400 slots is below 0.003).
+        // The link delivered at its rate (3 SE over 2000 x 120 slots is below 0.004).
         let l = s.link.as_ref().expect("a link summary");
         assert!(
             (l.lost / l.sent - loss).abs() < 0.006,
@@ -54,7 +54,7 @@ fn sinopoli_critical_claims_hold() {
 
 #[test]
 fn gilbert_elliott_claims_hold() {
-    let (_, summary, claims) = run("gilbert-elliott-stability", 500);
+    let (_, summary, claims) = run("gilbert-elliott-stability", 2000);
     assert!(summary
         .schemes
         .iter()

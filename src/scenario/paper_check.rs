@@ -233,55 +233,16 @@ pub(crate) fn check(
                 }
                 s.one_of(&at("metric"), metric, &["transmissions_per_step", "rate"])?;
             }
-            ClaimSpec::Intermittent {
-                scheme,
-                check: what,
-                within,
-                sequences,
-                range,
-                ..
-            } => {
+            ClaimSpec::Intermittent { scheme, .. } => {
                 let ci = s.curve(&at("scheme"), scheme)?;
-                if let Some([lo, hi]) = range {
-                    if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-                        return Err(ctx.err(
-                            at("range"),
-                            format!("expected [lo, hi] with lo <= hi, got [{lo}, {hi}]"),
-                        ));
-                    }
-                }
-                let range = range.unwrap_or([f64::NEG_INFINITY, f64::INFINITY]);
-                check_intermittent(
-                    ctx,
-                    &at,
-                    (ci, &curves[ci]),
-                    variants,
-                    system,
-                    (*what, range),
-                )?;
-                if let Some(w) = within {
-                    if !(w.is_finite() && *w > 0.0 && *w <= 1.0) {
-                        return Err(ctx.err(
-                            at("within"),
-                            format!("expected a relative resolution in (0, 1], got {w}"),
-                        ));
-                    }
-                }
-                if let Some(n) = sequences {
-                    if !(100..=10_000_000).contains(n) {
-                        return Err(ctx.err(
-                            at("sequences"),
-                            format!("expected 100 to 10000000 arrival sequences, got {n}"),
-                        ));
-                    }
-                }
+                check_intermittent(ctx, &at, (ci, &curves[ci]), variants, system, c)?;
             }
         }
     }
     Ok(())
 }
 
-/// An `intermittent` claim needs the all-data Kalman filter on a scalar system, every variant's
+/// An `intermittent` claim needs sensible `range`, `within` and `sequences`, the all-data Kalman filter on a scalar system, every variant's
 /// link a Bernoulli or a lose-all-when-bad Gilbert–Elliott one (Bernoulli only for `bounds`),
 /// and at least one variant on the side of the critical value the check is about.
 fn check_intermittent(
@@ -290,8 +251,43 @@ fn check_intermittent(
     (ci, curve): (usize, &Curve),
     variants: &[Variant],
     system: &System,
-    (what, [lo, hi]): (IntermittentCheck, [f64; 2]),
+    claim: &ClaimSpec,
 ) -> Result<(), ScenarioError> {
+    let ClaimSpec::Intermittent {
+        check: what,
+        within,
+        sequences,
+        range,
+        ..
+    } = *claim
+    else {
+        return Ok(());
+    };
+    if let Some([lo, hi]) = range {
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(ctx.err(
+                at("range"),
+                format!("expected [lo, hi] with lo <= hi, got [{lo}, {hi}]"),
+            ));
+        }
+    }
+    let [lo, hi] = range.unwrap_or([f64::NEG_INFINITY, f64::INFINITY]);
+    if let Some(w) = within {
+        if !(w.is_finite() && w > 0.0 && w <= 1.0) {
+            return Err(ctx.err(
+                at("within"),
+                format!("expected a relative resolution in (0, 1], got {w}"),
+            ));
+        }
+    }
+    if let Some(n) = sequences {
+        if !(100..=10_000_000).contains(&n) {
+            return Err(ctx.err(
+                at("sequences"),
+                format!("expected 100 to 10000000 arrival sequences, got {n}"),
+            ));
+        }
+    }
     if curve.kind != intermittent::FILTER_KIND {
         return Err(ctx.err(
             at("scheme"),
