@@ -320,6 +320,13 @@ fn finite(
         // Means are not comparable by standard errors here: compare the per-trial squared
         // errors with the independent ones by ranks.
         let per_trial: Vec<f64> = p.summary.per_trial.iter().map(|r| r[0]).collect();
+        if per_trial.is_empty() {
+            return Outcome {
+                verdict: None,
+                need: None,
+                words: format!("{x}: heavy tail, and no per-trial values to compare (not counted)"),
+            };
+        }
         let z = rank_sum_z(&per_trial, &sim.squared_error);
         let fails = z.abs() > z_fail;
         return Outcome {

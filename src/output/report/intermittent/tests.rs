@@ -151,21 +151,3 @@ fn hill_on_the_recursion_separates_the_two_sides() {
     let (hi, hi_se) = idx(0.6);
     assert!(hi - 2.0 * hi_se > 1.0, "γ = 0.6: {hi} ± {hi_se}");
 }
-
-#[test]
-#[ignore = "exploration: prints the tail index and the means at each arrival rate"]
-fn explore() {
-    for gamma in [
-        0.2, 0.25, 0.3, 0.32, 0.35, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95,
-    ] {
-        let sim = simulate(&M, &Arrivals::Bernoulli { gamma }, 400, 101, 1000, 6);
-        let big = simulate(&M, &Arrivals::Bernoulli { gamma }, 400, 101, 20000, 7);
-        let (mu, se) = mean_se(&big.trace);
-        let (lo, hi) = posterior_bounds(&M, gamma);
-        let h = hill(&sim.squared_error, 100);
-        let h50 = hill(&sim.squared_error, 50);
-        let h200 = hill(&sim.squared_error, 200);
-        let (m1, s1) = mean_se(&sim.trace);
-        println!("γ {gamma}: mean {mu:.4} ± {se:.4} (1000: {m1:.4} ± {s1:.4}) bounds {lo:?} {hi:?} hill100 {h:?} hill50 {h50:?} hill200 {h200:?}");
-    }
-}
