@@ -56,11 +56,16 @@ pub(crate) struct LinkLayer {
 }
 
 impl LinkLayer {
-    /// The link of trial `trial` of `exp` (`None` for an ideal one); `initial` is the center's
-    /// feedback before the first step, which every sensor holds (it is made from the prior,
-    /// which they know).
-    pub(crate) fn new(exp: &Experiment, trial: usize, initial: &Option<Feedback>) -> Option<Self> {
-        let specs = exp.channel.as_deref()?;
+    /// The link of trial `trial` of variant `variant` of `exp` (`None` for an ideal one);
+    /// `initial` is the center's feedback before the first step, which every sensor holds (it
+    /// is made from the prior, which they know).
+    pub(crate) fn new(
+        exp: &Experiment,
+        variant: usize,
+        trial: usize,
+        initial: &Option<Feedback>,
+    ) -> Option<Self> {
+        let specs = exp.variants[variant].channel.as_deref()?;
         let horizon = specs.iter().map(|s| s.delay().horizon()).max().unwrap_or(0);
         Some(Self {
             up: FateTable::draw(specs, exp.steps, exp.seed, trial as u64, false),

@@ -327,11 +327,9 @@ fn run_block<'e>(
     let batch = (2..=BLOCK).contains(&trials.len())
         // A lossy link is applied by the generic loop only (the fast paths assume every
         // packet arrives).
-        && exp.channel.is_none()
-        && exp
-            .variants
-            .iter()
-            .all(|v| v.scheme.fast_path().is_some_and(|f| f.batches()));
+        && exp.variants.iter().all(|v| {
+            v.channel.is_none() && v.scheme.fast_path().is_some_and(|f| f.batches())
+        });
     if !batch {
         for trial in trials {
             if stop() {

@@ -161,7 +161,7 @@ pub fn run_trial(
     let variant = &exp.variants[spec.variant];
     let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
     // A lossy link is the generic loop's (the fast paths assume every packet arrives).
-    if spec.available.is_none() && exp.channel.is_none() {
+    if spec.available.is_none() && variant.channel.is_none() {
         // One virtual call per trial: the scheme's hook, then its whole trial.
         if let (Some(fast), Some(sink)) = (variant.scheme.fast_path(), observer.fast_sink()) {
             let cache = buffers.cache_for(spec.trial, measurements);
@@ -189,7 +189,7 @@ pub fn run_trial(
     // What the fusion center tells the sensors before the first measurement.
     let mut feedback = inst.center.feedback();
     // The link's fates of this trial, from its own stream: every scheme meets the same ones.
-    let mut link = LinkLayer::new(exp, spec.trial, &feedback);
+    let mut link = LinkLayer::new(exp, spec.variant, spec.trial, &feedback);
     for k in 1..=exp.steps {
         let downlink_lost = link.as_mut().map_or(0, |l| l.downlink(k, &feedback));
         let scheduled = |i: usize| {

@@ -306,7 +306,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                     f64::NAN
                 },
                 ess,
-                link: exp
+                link: v
                     .channel
                     .as_ref()
                     .map(|_| crate::metrics::link::summarize(s, exp.trials, col(Layout::MESSAGES))),

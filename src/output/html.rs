@@ -463,6 +463,7 @@ fn timeline(input: &Input, tr: &trace::Trace, sel: &[usize]) -> String {
     // Wide enough for the legend line even when there are few steps.
     let width = (left + cw * steps as f64 + 20.0).max(left + 560.0);
     let height = 40.0 + block * sel.len() as f64;
+    let lossy = input.exp.variants.iter().any(|v| v.channel.is_some());
     let mut s = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{height:.0}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
     );
@@ -471,9 +472,9 @@ fn timeline(input: &Input, tr: &trace::Trace, sel: &[usize]) -> String {
         "<rect x=\"{left}\" y=\"8\" width=\"12\" height=\"12\" fill=\"#1f77b4\"/><text x=\"{}\" y=\"18\">sent</text><rect x=\"{}\" y=\"8\" width=\"12\" height=\"12\" fill=\"#d9d9d9\"/><text x=\"{}\" y=\"18\">silent</text><rect x=\"{}\" y=\"8\" width=\"12\" height=\"12\" fill=\"#ffffff\" stroke=\"#999\"/><text x=\"{}\" y=\"18\">not scheduled</text><text x=\"{}\" y=\"18\">steps 1..{steps}, one row per sensor</text>",
         left + 16.0, left + 60.0, left + 76.0, left + 130.0, left + 146.0,
         // With a lossy link the legend has one more entry, and the note moves right.
-        left + if input.exp.channel.is_some() { 350.0 } else { 260.0 }
+        left + if lossy { 350.0 } else { 260.0 }
     );
-    if input.exp.channel.is_some() {
+    if lossy {
         let _ = writeln!(
             s,
             r##"<rect x="{}" y="8" width="12" height="12" fill="#d62728"/><text x="{}" y="18">lost / late</text>"##,

@@ -319,7 +319,141 @@ pub fn write_all(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Vec<
         )?;
         written.push(f);
     }
+    if let Some(f) = stability(exp, summary, dir)? {
+        written.push(f);
+    }
     Ok(written)
+}
+
+/// Sequences of the independent recursion drawn for the stability figure.
+const STABILITY_SEQUENCES: usize = 5000;
+
+/// `stability.svg`, for a scenario with an `intermittent` claim: the steady-state error variance
+/// of its curve (our trace and MSE, the independent recursion's mean) against the arrival rate γ
+/// (or p_bg), on a log axis, with the critical value as a vertical line and Sinopoli's bounds
+/// (posterior equivalents) as curves where they are finite. Below the critical value the points
+/// are sample means of a variable without a mean: finite, and set by the longest loss run drawn.
+fn stability(exp: &Experiment, summary: &Summary, dir: &Path) -> Result<Option<String>, String> {
+    use crate::output::report::intermittent as im;
+    use crate::scenario::intermittent::{Arrivals, ScalarModel};
+    let Some(scheme) = exp
+        .paper
+        .iter()
+        .flat_map(|p| &p.claims)
+        .find_map(|c| match c {
+            crate::scenario::ClaimSpec::Intermittent { scheme, .. } => Some(scheme),
+            _ => None,
+        })
+    else {
+        return Ok(None);
+    };
+    let (Ok(m), Ok(pts)) = (
+        ScalarModel::of(&exp.system),
+        im::points(exp, summary, scheme),
+    ) else {
+        return Ok(None);
+    };
+    let Some(first) = pts.first() else {
+        return Ok(None);
+    };
+    let bernoulli = matches!(first.arrivals, Arrivals::Bernoulli { .. });
+    let x_name = if bernoulli {
+        "arrival rate γ"
+    } else {
+        "p_bg (bad → good)"
+    };
+    let mut ours = Vec::new();
+    let mut mse = Vec::new();
+    let mut recursion = Vec::new();
+    for p in &pts {
+        let x = p.arrivals.abscissa();
+        ours.push((x, p.summary.steady_state.trace));
+        mse.push((x, p.summary.steady_state.mse));
+        let sim = im::simulate_variant(exp, &m, p, STABILITY_SEQUENCES);
+        recursion.push((x, im::mean_se(&sim.trace).0));
+    }
+    let all_y = ours.iter().chain(&mse).chain(&recursion).map(|p| p.1);
+    let (y_lo, y_hi) = all_y.fold((f64::INFINITY, 0.0f64), |(a, b), y| (a.min(y), b.max(y)));
+    let critical = crate::network::channel::stability::critical_arrival_rate(m.a);
+    let mut data = vec![
+        Line {
+            name: format!("{scheme}: steady-state trace P(k|k)"),
+            points: ours,
+            dashed: false,
+            color: 0,
+            markers: true,
+        },
+        Line {
+            name: format!("{scheme}: steady-state MSE"),
+            points: mse,
+            dashed: false,
+            color: 2,
+            markers: true,
+        },
+        Line {
+            name: format!("independent recursion ({STABILITY_SEQUENCES} sequences)"),
+            points: recursion,
+            dashed: true,
+            color: 1,
+            markers: true,
+        },
+    ];
+    if bernoulli {
+        // The bounds on a fine grid from γ_c to the largest γ run, cut where they leave the
+        // decades of the data (the lower bound falls to 0 at γ = 1).
+        let x_hi = pts
+            .iter()
+            .map(|p| p.arrivals.abscissa())
+            .fold(critical, f64::max);
+        let grid: Vec<f64> = (1..=400)
+            .map(|i| critical + (x_hi - critical) * i as f64 / 400.0)
+            .collect();
+        let curve = |upper: bool| -> Vec<(f64, f64)> {
+            grid.iter()
+                .filter_map(|&g| {
+                    let (lo, hi) = im::posterior_bounds(&m, g);
+                    let v = if upper { hi } else { lo }?;
+                    (v >= y_lo / 3.0 && v <= 10.0 * y_hi).then_some((g, v))
+                })
+                .collect()
+        };
+        data.push(Line {
+            name: "Sinopoli lower bound (posterior)".into(),
+            points: curve(false),
+            dashed: true,
+            color: 3,
+            markers: false,
+        });
+        data.push(Line {
+            name: "Sinopoli upper bound (posterior)".into(),
+            points: curve(true),
+            dashed: true,
+            color: 4,
+            markers: false,
+        });
+    }
+    data.push(Line {
+        name: format!(
+            "critical {} = 1 - 1/a² = {critical:.4}",
+            if bernoulli { "γ_c" } else { "p_bg" }
+        ),
+        points: vec![(critical, 0.5 * y_lo), (critical, 2.0 * y_hi)],
+        dashed: false,
+        color: 10,
+        markers: false,
+    });
+    let f = "stability.svg".to_string();
+    lines(
+        &dir.join(&f),
+        &format!(
+            "{}: steady-state error variance against {x_name} (a = {})",
+            summary.scenario, m.a
+        ),
+        &format!("{x_name} (left of the line: no finite expectation; points are sample means)"),
+        "steady-state error variance (log)",
+        &data,
+    )?;
+    Ok(Some(f))
 }
 
 /// RMSE of one state group per step: every variant on one figure when that stays readable;

@@ -240,6 +240,7 @@ pub fn build_with(
         &file_spec.schemes,
         &system,
         file_spec.steps,
+        &channel.clone().map(std::sync::Arc::new),
     )?;
     let estimate = limits::with_schemes(
         limits::baseline(
@@ -257,7 +258,14 @@ pub fn build_with(
     );
     limits::check(&estimate, &limits, file)?;
     if let Some(paper) = &file_spec.paper {
-        crate::scenario::paper_check::check(&ctx, paper, &curves, &variants, &parts.groups)?;
+        crate::scenario::paper_check::check(
+            &ctx,
+            paper,
+            &curves,
+            &variants,
+            &parts.groups,
+            &system,
+        )?;
     }
 
     Ok(Experiment {

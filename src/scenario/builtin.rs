@@ -93,6 +93,16 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/geng-tracking.toml"),
     ),
     (
+        "sinopoli-critical",
+        "Sinopoli et al. (2004): scalar Kalman filter with intermittent observations, arrival rate swept across the critical 1 - 1/a^2, against the bounds and an independent recursion",
+        include_str!("../../scenarios/sinopoli-critical.toml"),
+    ),
+    (
+        "gilbert-elliott-stability",
+        "Huang and Dey (2007), scalar: Kalman filter over Gilbert-Elliott bursts, p_bg swept across the critical 1 - 1/a^2",
+        include_str!("../../scenarios/gilbert-elliott-stability.toml"),
+    ),
+    (
         "arena-1d",
         "Arena: 1-D constant velocity, 4 scalar linear sensors, every scheme of the registry (--budget, --budgets)",
         include_str!("../../scenarios/arena-1d.toml"),

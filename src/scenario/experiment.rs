@@ -1,5 +1,6 @@
 //! A validated experiment: the system, the schemes' variants and the run's size, ready to run.
 use crate::filter::Gaussian;
+use crate::network::channel::ChannelSpec;
 use crate::scenario::file::{FrontierSpec, PaperSpec, Params};
 use crate::scheme::{Scheme, System};
 use std::sync::Arc;
@@ -14,6 +15,13 @@ pub struct Variant {
     /// The scheme's `kind`, as registered.
     pub kind: &'static str,
     pub scheme: Box<dyn Scheme>,
+    /// Each sensor's link for this variant: the entry's own `channel` (the same for every
+    /// sensor), else the scenario's `[channel]` and the sensors' own; `None`: every link is
+    /// ideal (the engine then runs exactly as without a channel).
+    pub channel: Option<Arc<Vec<ChannelSpec>>>,
+    /// Bits of the sequence number carried by every packet (`sequence_bits`, 0..=32; 0: none).
+    /// Their bits are counted; what the link layer does with them is its own.
+    pub sequence_bits: u32,
 }
 
 /// One `[[schemes]]` entry: a curve of one or more variants.
@@ -44,6 +52,8 @@ pub struct Experiment {
     /// First step (1-based) of the steady-state averages.
     pub steady_from: usize,
     pub paper: Option<PaperSpec>,
-    /// Each sensor's link model; `None`: every link is ideal.
-    pub channel: Option<Vec<crate::network::channel::ChannelSpec>>,
+    /// Each sensor's link model from the scenario's `[channel]` and the sensors' own; `None`:
+    /// every link is ideal. A scheme entry's own `channel` replaces it for that entry's variants:
+    /// the engine reads [`Variant::channel`].
+    pub channel: Option<Vec<ChannelSpec>>,
 }

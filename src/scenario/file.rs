@@ -398,6 +398,45 @@ pub enum ClaimSpec {
         #[serde(default = "ours")]
         tolerance_source: String,
     },
+    /// Kalman filtering with intermittent observations (Sinopoli et al. 2004; Gilbert–Elliott
+    /// bursts: Huang and Dey 2007) on a scalar system, checked at every variant of curve
+    /// `scheme` (the all-data Kalman filter, each variant with its own link) against an
+    /// independent computation: the data-free variance recursion over arrival sequences drawn
+    /// by the claim checker from its own generator (`crate::scenario::intermittent`).
+    Intermittent {
+        text: String,
+        scheme: String,
+        check: IntermittentCheck,
+        /// Relative resolution of the `trace-recursion`, `mse-recursion` and `bounds` checks: a
+        /// point holds only when the Monte Carlo noise could have seen a difference this large
+        /// (default 0.05, ours).
+        #[serde(default)]
+        within: Option<f64>,
+        /// Arrival sequences of the independent computation (default 20000).
+        #[serde(default)]
+        sequences: Option<usize>,
+        /// Only the variants whose γ (Bernoulli) or p_bg (Gilbert–Elliott) lies in [lo, hi].
+        #[serde(default, deserialize_with = "exact_opt")]
+        range: Option<[f64; 2]>,
+    },
+}
+
+/// What an `intermittent` claim checks.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum IntermittentCheck {
+    /// Where the mean is finite: the steady-state posterior variance (the filter's `trace`)
+    /// between the posterior equivalents of Sinopoli's lower and upper bounds (Bernoulli only).
+    Bounds,
+    /// Where the mean is finite: the steady-state `trace` equals the independent recursion's
+    /// expectation.
+    TraceRecursion,
+    /// Where the mean is finite: the steady-state MSE (actual squared error) equals the
+    /// independent recursion's expectation (the filter is consistent under loss).
+    MseRecursion,
+    /// At and beyond the critical value: the expected error diverges, judged by the tail of
+    /// the per-trial errors.
+    Diverges,
 }
 
 fn ours() -> String {

@@ -3,7 +3,9 @@
 //! exists, tolerances and ranges make sense. A typo is an error, never a `FAILS` or a `null`.
 use crate::scenario::error::{Ctx, ScenarioError};
 use crate::scenario::experiment::{Curve, Variant};
-use crate::scenario::{ClaimSpec, PaperSpec, Params};
+use crate::scenario::intermittent::{self, Arrivals, Regime, ScalarModel};
+use crate::scenario::{ClaimSpec, IntermittentCheck, PaperSpec, Params};
+use crate::scheme::System;
 
 struct Scope<'a> {
     ctx: &'a Ctx<'a>,
@@ -101,6 +103,7 @@ pub(crate) fn check(
     curves: &[Curve],
     variants: &[Variant],
     groups: &[(String, Vec<usize>)],
+    system: &System,
 ) -> Result<(), ScenarioError> {
     let s = Scope {
         ctx,
@@ -230,7 +233,98 @@ pub(crate) fn check(
                 }
                 s.one_of(&at("metric"), metric, &["transmissions_per_step", "rate"])?;
             }
+            ClaimSpec::Intermittent { scheme, .. } => {
+                let ci = s.curve(&at("scheme"), scheme)?;
+                check_intermittent(ctx, &at, (ci, &curves[ci]), variants, system, c)?;
+            }
         }
+    }
+    Ok(())
+}
+
+/// An `intermittent` claim needs sensible `range`, `within` and `sequences`, the all-data Kalman filter on a scalar system, every variant's
+/// link a Bernoulli or a lose-all-when-bad Gilbert–Elliott one (Bernoulli only for `bounds`),
+/// and at least one variant on the side of the critical value the check is about.
+fn check_intermittent(
+    ctx: &Ctx,
+    at: &dyn Fn(&str) -> String,
+    (ci, curve): (usize, &Curve),
+    variants: &[Variant],
+    system: &System,
+    claim: &ClaimSpec,
+) -> Result<(), ScenarioError> {
+    let ClaimSpec::Intermittent {
+        check: what,
+        within,
+        sequences,
+        range,
+        ..
+    } = *claim
+    else {
+        return Ok(());
+    };
+    if let Some([lo, hi]) = range {
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(ctx.err(
+                at("range"),
+                format!("expected [lo, hi] with lo <= hi, got [{lo}, {hi}]"),
+            ));
+        }
+    }
+    let [lo, hi] = range.unwrap_or([f64::NEG_INFINITY, f64::INFINITY]);
+    if let Some(w) = within {
+        if !(w.is_finite() && w > 0.0 && w <= 1.0) {
+            return Err(ctx.err(
+                at("within"),
+                format!("expected a relative resolution in (0, 1], got {w}"),
+            ));
+        }
+    }
+    if let Some(n) = sequences {
+        if !(100..=10_000_000).contains(&n) {
+            return Err(ctx.err(
+                at("sequences"),
+                format!("expected 100 to 10000000 arrival sequences, got {n}"),
+            ));
+        }
+    }
+    if curve.kind != intermittent::FILTER_KIND {
+        return Err(ctx.err(
+            at("scheme"),
+            format!(
+                "{:?} is a {} curve; the theory is about the Kalman filter on every measurement that arrives (kind = \"{}\")",
+                curve.label,
+                curve.kind,
+                intermittent::FILTER_KIND
+            ),
+        ));
+    }
+    let m = ScalarModel::of(system).map_err(|e| ctx.err(at("scheme"), e))?;
+    let mut in_scope = 0;
+    for v in variants.iter().filter(|v| v.curve == ci) {
+        let arrivals = Arrivals::of(v.channel.as_deref().map(|c| &c[0]))
+            .map_err(|e| ctx.err(at("scheme"), format!("{:?}: {e}", curve.label)))?;
+        if what == IntermittentCheck::Bounds && !matches!(arrivals, Arrivals::Bernoulli { .. }) {
+            return Err(ctx.err(
+                at("check"),
+                "Sinopoli's bounds are for Bernoulli arrivals; this curve has a Gilbert–Elliott link",
+            ));
+        }
+        let diverges = intermittent::regime(m.a, &arrivals) == Regime::Diverges;
+        let x = arrivals.abscissa();
+        in_scope += usize::from(
+            diverges == (what == IntermittentCheck::Diverges) && x >= lo - 1e-12 && x <= hi + 1e-12,
+        );
+    }
+    if in_scope == 0 {
+        return Err(ctx.err(
+            at("check"),
+            format!(
+                "no variant of {:?} in the claim's range is {} the critical value, where this check applies",
+                curve.label,
+                if what == IntermittentCheck::Diverges { "at or beyond" } else { "on the stable side of" }
+            ),
+        ));
     }
     Ok(())
 }

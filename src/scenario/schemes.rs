@@ -1,7 +1,9 @@
 //! Scheme construction: each `[[schemes]]` entry is one curve; each point of its sweep one
 //! variant, parsed and built by the scheme's registry entry. This file knows no scheme by name.
+use crate::network::channel::ChannelSpec;
 use crate::scenario::error::{Ctx, ScenarioError};
 use crate::scenario::experiment::{Curve, Variant};
+use crate::scenario::scheme_link::PointLink;
 use crate::scenario::sweep;
 use crate::scenario::{FrontierSpec, ParamValue, Params};
 use crate::scheme::registry::{self, BuildContext};
@@ -11,12 +13,14 @@ use std::sync::Arc;
 /// Most variants a scenario may define (every variant runs every trial).
 pub const MAX_VARIANTS: usize = 10_000;
 
-/// Builds every curve and variant of the `[[schemes]]` entries.
+/// Builds every curve and variant of the `[[schemes]]` entries; a variant without a `channel`
+/// of its own takes `channel`, the scenario's link.
 pub(crate) fn build_schemes(
     ctx: &Ctx,
     tables: &[toml::Table],
     system: &Arc<System>,
     steps: usize,
+    channel: &Option<Arc<Vec<ChannelSpec>>>,
 ) -> Result<(Vec<Curve>, Vec<Variant>), ScenarioError> {
     if tables.is_empty() {
         return Err(ctx.err("schemes", "expected at least one [[schemes]] entry"));
@@ -64,15 +68,23 @@ pub(crate) fn build_schemes(
             let mut t = base.clone();
             let mut desc = Vec::new();
             for (k, v) in &point {
-                t.insert(k.clone(), v.clone());
+                if !k.starts_with(sweep::CHANNEL_PREFIX) {
+                    t.insert(k.clone(), v.clone());
+                }
                 desc.push(format!("{k} = {v}"));
             }
-            let at = if desc.is_empty() {
-                field.clone()
+            let link = PointLink::take(&mut t, &point);
+            let note = if desc.is_empty() {
+                String::new()
             } else {
-                format!("{field} (sweep point {})", desc.join(", "))
+                format!(" (sweep point {})", desc.join(", "))
             };
-            let params = params_of(&t);
+            let at = format!("{field}{note}");
+            let mut params = params_of(&t);
+            link.params(&mut params);
+            let variant_channel =
+                link.channel(ctx, (&field, &note), system.n_sensors(), channel)?;
+            let sequence_bits = link.sequence_bits(ctx, (&field, &note))?;
             let cx = BuildContext { system, steps };
             let scheme = (entry.build)(t, &cx).map_err(|e| match &e.field {
                 Some(f) => ctx.err(format!("{at}.{f}"), e.message.clone()),
@@ -83,6 +95,8 @@ pub(crate) fn build_schemes(
                 params,
                 kind: entry.kind,
                 scheme,
+                channel: variant_channel,
+                sequence_bits,
             });
         }
         curves.push(Curve {

@@ -1,11 +1,15 @@
 //! Sweep expansion: a `[[schemes]]` entry with `sweep = { p = [v1, v2], ... }` becomes one
 //! variant per point of the cartesian product, in file order. A sweep may not touch what
 //! identifies the curve (`kind`, `label`), may not shadow a base value, and may not list a
-//! value twice.
+//! value twice. A key of the entry's own link is swept by its dotted name,
+//! `sweep."channel.loss" = [..]` (the entry must have a `channel` table).
 use crate::scenario::error::{Ctx, ScenarioError};
 
 /// Keys of a scheme table that are not scheme parameters.
-pub const RESERVED: &[&str] = &["kind", "label", "sweep", "frontier"];
+pub const RESERVED: &[&str] = &["kind", "label", "sweep", "frontier", "channel"];
+
+/// The prefix of a swept key of the entry's own link (`channel.loss`).
+pub const CHANNEL_PREFIX: &str = "channel.";
 
 /// One point of a sweep: the parameter values it sets, in file order.
 pub type Point = Vec<(String, toml::Value)>;
@@ -33,10 +37,32 @@ pub(crate) fn parse(
         if RESERVED.contains(&k.as_str()) {
             return Err(ctx.err(
                 at,
-                format!("`{k}` cannot be swept: one [[schemes]] entry is one curve of one kind; write one entry per {k}"),
+                if k == "channel" {
+                    "`channel` cannot be swept as a whole; sweep its keys by their dotted names, e.g. sweep.\"channel.loss\" = [0.1, 0.2]".to_string()
+                } else {
+                    format!("`{k}` cannot be swept: one [[schemes]] entry is one curve of one kind; write one entry per {k}")
+                },
             ));
         }
-        if base.contains_key(&k) {
+        if let Some(sub) = k.strip_prefix(CHANNEL_PREFIX) {
+            let Some(toml::Value::Table(link)) = base.get("channel") else {
+                return Err(ctx.err(
+                    at,
+                    format!("`{k}` is swept but the entry has no `channel` table; give one, e.g. channel = {{ kind = \"bernoulli\" }}"),
+                ));
+            };
+            if link.contains_key(sub) {
+                return Err(ctx.err(
+                    at,
+                    format!("`{k}` has a base value (in `channel`) and a sweep; give one of them"),
+                ));
+            }
+        } else if k.contains('.') {
+            return Err(ctx.err(
+                at,
+                format!("`{k}`: only the keys of the entry's own link may be swept by a dotted name (`channel.<key>`)"),
+            ));
+        } else if base.contains_key(&k) {
             return Err(ctx.err(
                 at,
                 format!("`{k}` has a base value and a sweep; give one of them"),
