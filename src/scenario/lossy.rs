@@ -25,7 +25,8 @@ pub fn has_loss_aware(kind: &str) -> bool {
 /// expanded to its explicit list first (so that the copies do not replace the kind's registry
 /// example). Entries that already set `link_loss`, and `p = 0` (where the copies would equal
 /// the published schemes), get no copy. Per-sensor `channel` tables are removed: `--loss` is one
-/// link for every sensor.
+/// link for every sensor. A `[[schemes]]` entry with a `channel` of its own keeps it (its link
+/// is what that entry is about, e.g. a sweep of the loss).
 pub fn with_loss(text: &str, file: &str, p: f64) -> Result<String, ScenarioError> {
     let ctx = Ctx { file };
     if !(0.0..=1.0).contains(&p) {

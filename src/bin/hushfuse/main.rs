@@ -95,7 +95,8 @@ struct RunArgs {
     shard: Option<String>,
     /// Run over a lossy link: every packet is lost with probability P (a Bernoulli
     /// `[channel]` replacing the scenario's), the same losses for every scheme; every scheme
-    /// with a loss-aware center also runs loss-aware ("… (loss-aware)", link_loss = P).
+    /// with a loss-aware center also runs loss-aware ("… (loss-aware)", link_loss = P). A
+    /// `[[schemes]]` entry with a `channel` of its own keeps it.
     #[arg(long, value_name = "P")]
     loss: Option<f64>,
     /// Seconds between checkpoints of finished trial blocks (0: after every window of blocks).
