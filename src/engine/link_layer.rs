@@ -12,9 +12,14 @@
 //! packet's step are the ones it made the first time). It costs a replay of the trial so far
 //! per step with an arrival: fine for the delays a link has, not for long trials with many
 //! late packets. A packet later than the horizon is dropped and counted.
-use crate::link::Received;
+//!
+//! With retransmission (`arq`) a slot's fate already holds its attempts (drawn with the slot,
+//! [`crate::network::channel::fate`]): the packet is lost only when every attempt was, every
+//! attempt costs its bits and frame, and the acknowledgements, retries and duplicates are
+//! counted ([`LinkLayer::deliver`]). The center fuses one copy, as without ARQ.
+use crate::link::{Received, Transmission};
 use crate::network::channel::FateTable;
-use crate::network::Traffic;
+use crate::network::{self, Traffic};
 use crate::scenario::experiment::Experiment;
 use crate::scheme::{Feedback, FusionCenter, Scheme, SchemeError};
 
@@ -104,6 +109,17 @@ impl LinkLayer {
         } else {
             Link::Sent
         }
+    }
+
+    /// Step `k`'s transmissions into `inbox`, counted with every attempt the link's fates give
+    /// them ([`network::deliver_attempts`]); [`LinkLayer::uplink`] then applies the fates.
+    pub(crate) fn deliver(
+        &self,
+        k: usize,
+        transmissions: impl IntoIterator<Item = Transmission>,
+        inbox: &mut Vec<Received>,
+    ) -> Traffic {
+        network::deliver_attempts(transmissions, inbox, |i| self.up.get(i, k))
     }
 
     /// Step `k`'s packets through the link: a lost or late one becomes a silence in `inbox`,

@@ -222,7 +222,10 @@ pub fn run_trial(
             }
             transmissions.push(t);
         }
-        let mut traffic = network::deliver(transmissions.drain(..), inbox);
+        let mut traffic = match &link {
+            Some(l) => l.deliver(k, transmissions.drain(..), inbox),
+            None => network::deliver(transmissions.drain(..), inbox),
+        };
         traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
         if let Some(l) = &mut link {
             l.uplink(k, inbox, &mut traffic);
