@@ -236,8 +236,8 @@ mod tests {
         let mut inbox = Vec::new();
         let t = deliver_attempts([z(), Transmission::Silent, z()], &mut inbox, |i| fates[i]);
         assert_eq!(t.messages, 2);
-        // 2 + 3 attempts of 32 payload bits in a 13-octet frame.
-        assert_eq!((t.bits, t.frame_bits), (5 * 32, 5 * 8 * 13));
+        // 2 + 3 attempts of 32 payload bits in a 15-octet frame (11 + 4).
+        assert_eq!((t.bits, t.frame_bits), (5 * 32, 5 * 8 * 15));
         assert_eq!((t.retransmissions, t.duplicates, t.ack_frames), (3, 2, 4));
         assert_eq!(t.ack_bits, 4 * 88);
         // No retransmission: deliver's counts.
