@@ -23,6 +23,17 @@ use crate::network::{self, Traffic};
 use crate::scenario::experiment::Experiment;
 use crate::scheme::{Feedback, FusionCenter, Scheme, SchemeError};
 
+/// Whether `exp` runs as if its links were ideal: no channel, or one whose every link is
+/// lossless ([`crate::network::channel::ChannelSpec::is_lossless`]: nothing lost, late or
+/// retransmitted, in either direction). Its trials then take the fast paths, which give the
+/// generic loop's numbers, and its link counters are all zero, as the generic loop would count
+/// them; `summary.json` still has the `link` section of a scenario with a channel.
+pub(crate) fn lossless(exp: &Experiment) -> bool {
+    exp.channel
+        .as_deref()
+        .is_none_or(|specs| specs.iter().all(|s| s.is_lossless()))
+}
+
 /// What one sensor did at one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Link {
@@ -50,8 +61,10 @@ struct InFlight {
 /// (with delays) every inbox fused so far.
 pub(crate) struct LinkLayer {
     up: FateTable,
-    down: FateTable,
-    /// The last feedback that reached each sensor.
+    /// `None` when every downlink is lossless: nothing to draw, every feedback arrives.
+    down: Option<FateTable>,
+    /// The last feedback that reached each sensor; one entry, shared by all, when every
+    /// downlink is lossless (`down` is `None`).
     held: Vec<Option<Feedback>>,
     /// Steps a late packet may take and still be fused.
     horizon: usize,
@@ -67,10 +80,13 @@ impl LinkLayer {
     pub(crate) fn new(exp: &Experiment, trial: usize, initial: &Option<Feedback>) -> Option<Self> {
         let specs = exp.channel.as_deref()?;
         let horizon = specs.iter().map(|s| s.delay().horizon()).max().unwrap_or(0);
+        let down = (!specs.iter().all(|s| s.downlink_spec().is_lossless()))
+            .then(|| FateTable::draw(specs, exp.steps, exp.seed, trial as u64, true));
+        let holders = if down.is_some() { specs.len() } else { 1 };
         Some(Self {
             up: FateTable::draw(specs, exp.steps, exp.seed, trial as u64, false),
-            down: FateTable::draw(specs, exp.steps, exp.seed, trial as u64, true),
-            held: vec![initial.clone(); specs.len()],
+            down,
+            held: vec![initial.clone(); holders],
             horizon: horizon as usize,
             in_flight: Vec::new(),
             history: Vec::new(),
@@ -85,7 +101,7 @@ impl LinkLayer {
         }
         let mut lost = 0;
         for (i, h) in self.held.iter_mut().enumerate() {
-            if self.down.get(i, k).lost {
+            if self.down.as_ref().is_some_and(|d| d.get(i, k).lost) {
                 lost += u64::from(feedback.is_some());
             } else {
                 h.clone_from(feedback);
@@ -96,7 +112,10 @@ impl LinkLayer {
 
     /// The feedback sensor `i` holds.
     pub(crate) fn feedback(&self, i: usize) -> Option<&Feedback> {
-        self.held[i].as_ref()
+        match self.down {
+            Some(_) => self.held[i].as_ref(),
+            None => self.held[0].as_ref(),
+        }
     }
 
     /// What became of sensor `i`'s packet sent at step `k`.

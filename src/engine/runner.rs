@@ -327,7 +327,7 @@ fn run_block<'e>(
     let batch = (2..=BLOCK).contains(&trials.len())
         // A lossy link is applied by the generic loop only (the fast paths assume every
         // packet arrives).
-        && exp.channel.is_none()
+        && crate::engine::link_layer::lossless(exp)
         && exp
             .variants
             .iter()

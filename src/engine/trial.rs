@@ -161,7 +161,7 @@ pub fn run_trial(
     let variant = &exp.variants[spec.variant];
     let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
     // A lossy link is the generic loop's (the fast paths assume every packet arrives).
-    if spec.available.is_none() && exp.channel.is_none() {
+    if spec.available.is_none() && crate::engine::link_layer::lossless(exp) {
         // One virtual call per trial: the scheme's hook, then its whole trial.
         if let (Some(fast), Some(sink)) = (variant.scheme.fast_path(), observer.fast_sink()) {
             let cache = buffers.cache_for(spec.trial, measurements);

@@ -97,12 +97,12 @@ impl FateTable {
     ) -> FateTable {
         let mut fates = Vec::with_capacity(specs.len() * steps);
         for (sensor, spec) in specs.iter().enumerate() {
-            let slot = |step: usize| seeding::slot_rng(seed, trial, sensor, step, downlink);
+            let slot = seeding::sensor_slots(seed, trial, sensor, downlink);
             if downlink {
                 draw_sensor(&spec.downlink_spec(), steps, slot, None, &mut fates);
             } else {
                 let arq = spec.arq.map(|arq| {
-                    let down = |step: usize| seeding::slot_rng(seed, trial, sensor, step, true);
+                    let down = seeding::sensor_slots(seed, trial, sensor, true);
                     Retries {
                         max: arq.max_retries.min(Arq::MAX_RETRIES),
                         ack_loss: loss_path(&spec.downlink_spec(), steps, down),
@@ -165,7 +165,14 @@ fn draw_sensor(
         ChannelKind::Ideal => {
             // No loss coin: the first attempt always arrives (retries only follow lost ACKs).
             for k in 1..=steps {
-                out.push(fate(false, 0.0, &delay, &mut slot(k), arq_at(k)));
+                match (delay, arq) {
+                    // Nothing to draw: the slot's generator is not even made.
+                    (Delay::Fixed(d), None) => out.push(Fate {
+                        delay: d,
+                        ..Fate::default()
+                    }),
+                    _ => out.push(fate(false, 0.0, &delay, &mut slot(k), arq_at(k))),
+                }
             }
         }
         ChannelKind::Bernoulli => {
@@ -611,6 +618,20 @@ mod tests {
         ChannelSpec {
             arq: Some(Arq { max_retries }),
             ..spec
+        }
+    }
+
+    #[test]
+    fn a_sensors_slots_are_the_slot_generators() {
+        for (sensor, downlink) in [(0, false), (3, true)] {
+            let slots = seeding::sensor_slots(SEED, 5, sensor, downlink);
+            for step in [1, 2, 77, CHAIN_STEP] {
+                let (mut a, mut b) = (
+                    slots(step),
+                    seeding::slot_rng(SEED, 5, sensor, step, downlink),
+                );
+                assert_eq!(a.random::<u64>(), b.random::<u64>());
+            }
         }
     }
 

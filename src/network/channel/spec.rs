@@ -183,6 +183,26 @@ impl ChannelSpec {
             && self.arq.is_none()
     }
 
+    /// Whether every packet of this link arrives at once and nothing is counted but what an
+    /// ideal link counts: an ideal kind, a Bernoulli link of loss 0 or a Gilbert–Elliott link
+    /// that loses nothing in either state; zero delay; no `arq` (whose acknowledgements are
+    /// counted); and a downlink that is lossless too. Such a link draws no fate that changes a
+    /// number, so the engine may run it as an ideal one (its fast paths included).
+    pub fn is_lossless(&self) -> bool {
+        let loses = match self.kind {
+            ChannelKind::Ideal => false,
+            ChannelKind::Bernoulli => self.loss.unwrap_or(0.0) != 0.0,
+            ChannelKind::GilbertElliott => self.loss_good() != 0.0 || self.loss_bad() != 0.0,
+        };
+        !loses
+            && self.delay().is_zero()
+            && self.arq.is_none()
+            && self
+                .downlink
+                .as_deref()
+                .is_none_or(ChannelSpec::is_lossless)
+    }
+
     /// Checks the table found at `channel`; see [`ChannelSpec::validate_at`].
     pub fn validate(&self) -> Result<(), String> {
         self.validate_at("channel")
@@ -431,6 +451,29 @@ mod tests {
         assert!(!parse_ok("downlink = { delay = 1 }").is_ideal());
         assert!(!parse_ok("arq = { max_retries = 0 }").is_ideal());
         assert!(ChannelSpec::default().downlink_spec().is_ideal());
+    }
+
+    #[test]
+    fn lossless_links() {
+        for body in [
+            "",
+            "kind = \"bernoulli\"\nloss = 0.0",
+            "kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.2\nloss_bad = 0.0",
+            "downlink = { kind = \"bernoulli\", loss = 0.0 }",
+            "delay = { kind = \"geometric\", mean = 0.0 }",
+        ] {
+            assert!(parse_ok(body).is_lossless(), "{body:?}");
+        }
+        for body in [
+            "kind = \"bernoulli\"\nloss = 0.01",
+            "kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.2",
+            "kind = \"gilbert-elliott\"\np_gb = 0.0\np_bg = 0.2\nloss_good = 0.1\nloss_bad = 0.0",
+            "downlink = { kind = \"bernoulli\", loss = 0.5 }",
+            "delay = 1",
+            "arq = { max_retries = 0 }",
+        ] {
+            assert!(!parse_ok(body).is_lossless(), "{body:?}");
+        }
     }
 
     #[test]
