@@ -28,6 +28,27 @@ fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
+/// CPU seconds of this process so far (user + system, every thread), from `/proc/self/stat`
+/// (NaN where there is none): on a machine shared with other work, the CPU time of a run
+/// varies much less than its wall time.
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return f64::NAN;
+    };
+    // Fields after the command name in parentheses; utime and stime are the 14th and 15th.
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .map_or("", |(_, rest)| rest)
+        .split_whitespace()
+        .collect();
+    let ticks = |i: usize| fields.get(i).and_then(|v| v.parse::<f64>().ok());
+    match (ticks(11), ticks(12)) {
+        // Clock ticks of 1/100 s (USER_HZ on Linux).
+        (Some(u), Some(s)) => (u + s) / 100.0,
+        _ => f64::NAN,
+    }
+}
+
 /// The entries run by default.
 const DEFAULT: &str = "kfmc@1,dormann-fig1@1,dormann-fig1@2,zhang-fig5@1,zhang-fig5@2";
 /// Entries run only when a filter names them: the cost of a link.
@@ -79,20 +100,23 @@ fn main() {
             exp.trials = 2;
         }
         let mut times = Vec::new();
+        let mut cpu = Vec::new();
         for _ in 0..if quick { 1 } else { repeats } {
-            let t = Instant::now();
+            let (t, c) = (Instant::now(), cpu_seconds());
             let sums = runner::run(&exp, runner::RunOptions { threads }, &|_| {}).unwrap();
             times.push(t.elapsed().as_secs_f64());
+            cpu.push(cpu_seconds() - c);
             std::hint::black_box(sums);
         }
         times.sort_by(f64::total_cmp);
+        cpu.sort_by(f64::total_cmp);
         // Trial-steps: one trial's step of every variant (the data drawn once) counts once;
         // variant-trial-steps count each variant's step.
         let trial_steps = (exp.trials * exp.steps) as f64;
         let variant_steps = trial_steps * exp.variants.len() as f64;
         println!(
             "{name}: {} variants x {} trials x {} steps, threads={}: min {:.4} s, median {:.4} s over {} runs; \
-             {:.3e} trial-steps/s, {:.3e} variant-trial-steps/s (at the min)",
+             {:.3e} trial-steps/s, {:.3e} variant-trial-steps/s (at the min); CPU min {:.2} s, median {:.2} s",
             exp.variants.len(),
             exp.trials,
             exp.steps,
@@ -102,6 +126,8 @@ fn main() {
             times.len(),
             trial_steps / times[0],
             variant_steps / times[0],
+            cpu[0],
+            cpu[cpu.len() / 2],
         );
     }
 }
