@@ -52,7 +52,10 @@ fn cpu_seconds() -> f64 {
 /// The entries run by default.
 const DEFAULT: &str = "kfmc@1,dormann-fig1@1,dormann-fig1@2,zhang-fig5@1,zhang-fig5@2";
 /// Entries run only when a filter names them: the cost of a link.
-const EXTRA: &str = "arena-1d@1,arena-1d+loss0@1,kfmc+loss0@1";
+/// `+loss0` is a lossless link, which the engine runs as an ideal one; `+loss1e-12` is a link
+/// that does its work (fate tables, the generic loop) and in practice loses nothing.
+const EXTRA: &str =
+    "arena-1d@1,arena-1d+loss0@1,arena-1d+loss1e-12@1,kfmc+loss0@1,kfmc+loss1e-12@1";
 
 /// The text of entry `name`: a built-in scenario, the peers' workload, or `S+lossP`.
 fn scenario_text(name: &str) -> String {

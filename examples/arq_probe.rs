@@ -12,7 +12,8 @@ fn cpu() -> f64 {
 }
 fn main() {
     let text = builtin::get("arena-1d").unwrap();
-    let lossy = format!("{text}\n[channel]\nkind = \"bernoulli\"\nloss = 0.0\n");
+    let loss = std::env::var("PROBE_LOSS").unwrap_or("0.0".into());
+    let lossy = format!("{text}\n[channel]\nkind = \"bernoulli\"\nloss = {loss}\n");
     let reps: usize = std::env::args().nth(1).map_or(3, |s| s.parse().unwrap());
     let a = build::load(text, "a").unwrap();
     let n = a.variants.len();

@@ -18,13 +18,13 @@
 //! attempt costs its bits and frame, and the acknowledgements, retries and duplicates are
 //! counted ([`LinkLayer::deliver`]). The center fuses one copy, as without ARQ.
 use crate::link::{Received, Transmission};
-use crate::network::channel::FateTable;
+use crate::network::channel::{ChannelSpec, FateTable};
 use crate::network::{self, Traffic};
 use crate::scenario::experiment::Experiment;
 use crate::scheme::{Feedback, FusionCenter, Scheme, SchemeError};
 
 /// Whether `exp` runs as if its links were ideal: no channel, or one whose every link is
-/// lossless ([`crate::network::channel::ChannelSpec::is_lossless`]: nothing lost, late or
+/// lossless ([`ChannelSpec::is_lossless`]: nothing lost, late or
 /// retransmitted, in either direction). Its trials then take the fast paths, which give the
 /// generic loop's numbers, and its link counters are all zero, as the generic loop would count
 /// them; `summary.json` still has the `link` section of a scenario with a channel.
@@ -77,8 +77,14 @@ impl LinkLayer {
     /// The link of trial `trial` of `exp` (`None` for an ideal one); `initial` is the center's
     /// feedback before the first step, which every sensor holds (it is made from the prior,
     /// which they know).
+    ///
+    /// A lossless channel (every link [`ChannelSpec::is_lossless`]) has no link layer either:
+    /// it would change nothing and count nothing.
     pub(crate) fn new(exp: &Experiment, trial: usize, initial: &Option<Feedback>) -> Option<Self> {
         let specs = exp.channel.as_deref()?;
+        if specs.iter().all(ChannelSpec::is_lossless) {
+            return None;
+        }
         let horizon = specs.iter().map(|s| s.delay().horizon()).max().unwrap_or(0);
         let down = (!specs.iter().all(|s| s.downlink_spec().is_lossless()))
             .then(|| FateTable::draw(specs, exp.steps, exp.seed, trial as u64, true));
