@@ -19,12 +19,18 @@ fn main() {
     let n = a.variants.len();
     let mut best = vec![(f64::INFINITY, f64::INFINITY); n];
     let only = std::env::args().nth(2);
-    let which: Vec<usize> = std::env::args().nth(3).map_or(vec![0, 1], |s| vec![s.parse().unwrap()]);
+    let which: Vec<usize> = std::env::args()
+        .nth(3)
+        .map_or(vec![0, 1], |s| vec![s.parse().unwrap()]);
     for _ in 0..reps {
         for v in 0..n {
-            if only.as_deref().is_some_and(|o| o != a.variants[v].kind) { continue; }
+            if only.as_deref().is_some_and(|o| o != a.variants[v].kind) {
+                continue;
+            }
             for (j, t) in [text, lossy.as_str()].iter().enumerate() {
-                if !which.contains(&j) { continue; }
+                if !which.contains(&j) {
+                    continue;
+                }
                 let mut e = build::load(t, "a").unwrap();
                 let keep = e.variants.swap_remove(v);
                 e.variants = vec![keep];
@@ -34,15 +40,35 @@ fn main() {
                 let dt = cpu() - c0;
                 std::hint::black_box(s);
                 let b = &mut best[v];
-                if b.0.is_infinite() { *b = (0.0, 0.0) } if j == 0 { b.0 += dt } else { b.1 += dt }
+                if b.0.is_infinite() {
+                    *b = (0.0, 0.0)
+                }
+                if j == 0 {
+                    b.0 += dt
+                } else {
+                    b.1 += dt
+                }
             }
         }
     }
     let (mut ta, mut tb) = (0.0, 0.0);
     for v in 0..n {
         let (x, y) = best[v];
-        ta += x; tb += y;
-        println!("{:28} {:8.4} {:8.4} {:+6.1}%", a.variants[v].kind, x, y, 100.0 * (y / x - 1.0));
+        ta += x;
+        tb += y;
+        println!(
+            "{:28} {:8.4} {:8.4} {:+6.1}%",
+            a.variants[v].kind,
+            x,
+            y,
+            100.0 * (y / x - 1.0)
+        );
     }
-    println!("{:28} {:8.4} {:8.4} {:+6.1}%", "total", ta, tb, 100.0 * (tb / ta - 1.0));
+    println!(
+        "{:28} {:8.4} {:8.4} {:+6.1}%",
+        "total",
+        ta,
+        tb,
+        100.0 * (tb / ta - 1.0)
+    );
 }

@@ -53,7 +53,9 @@ fn link(s: &results::Summary) -> &LinkSummary {
 #[test]
 fn bernoulli_retries_deliver_at_the_binomial_rate() {
     for (p, n) in [(0.5f64, 2u32), (0.3, 1)] {
-        let channel = format!("[channel]\nkind = \"bernoulli\"\nloss = {p:?}\narq = {{ max_retries = {n} }}\n");
+        let channel = format!(
+            "[channel]\nkind = \"bernoulli\"\nloss = {p:?}\narq = {{ max_retries = {n} }}\n"
+        );
         let s = summary(&scalar(0.95, 1, &channel, KF, 200));
         let l = link(&s);
         // The all-data KF sends once per step: 200 x 60 independent slots.
@@ -110,7 +112,10 @@ fn acknowledgements_are_counted_bit_for_bit() {
     assert_eq!((l.retransmissions, l.duplicates), (0.0, 0.0));
     assert_eq!((l.ack_frames, l.ack_bits), (2.0, 176.0));
     assert_eq!((sc.bits_per_step, sc.frame_bits_per_step), (64.0, 240.0));
-    assert_eq!(sc.downlink_bits_per_step, 0.0, "ACKs are not the scheme's feedback");
+    assert_eq!(
+        sc.downlink_bits_per_step, 0.0,
+        "ACKs are not the scheme's feedback"
+    );
     assert!(l.ack_bits_per_step.iter().all(|&b| b == 176.0));
 
     let deaf = "[channel]\nkind = \"ideal\"\ndownlink = { kind = \"bernoulli\", loss = 1.0 }\narq = { max_retries = 2 }\n";
@@ -138,7 +143,11 @@ fn acknowledgements_are_counted_bit_for_bit() {
         "{csv}"
     );
     let plain = results::per_step_csv(&ideal);
-    assert!(plain.lines().next().unwrap().ends_with(",downlink_bits,downlink_bits_se"));
+    assert!(plain
+        .lines()
+        .next()
+        .unwrap()
+        .ends_with(",downlink_bits,downlink_bits_se"));
 }
 
 /// The first attempt draws exactly what a link without `arq` draws: its loss coin is the first
@@ -167,17 +176,29 @@ fn the_first_attempt_keeps_its_draw() {
                     rescued += usize::from(!f.lost);
                     assert!(f.retries >= 1);
                 } else {
-                    assert_eq!(f, hushfuse::network::channel::Fate { acks: 1, ..fa.get(i, k) });
+                    assert_eq!(
+                        f,
+                        hushfuse::network::channel::Fate {
+                            acks: 1,
+                            ..fa.get(i, k)
+                        }
+                    );
                 }
             }
         }
     }
-    assert!(first_lost > 50 && rescued > 0, "{first_lost} lost, {rescued} rescued");
+    assert!(
+        first_lost > 50 && rescued > 0,
+        "{first_lost} lost, {rescued} rescued"
+    );
 
     // In the engine: where the plain link delivered, the ARQ link delivers too; and a link that
     // loses nothing gives every number of the ideal run with ARQ on (one attempt a packet).
     for trial in 0..4 {
-        let (ta, tb) = (trace::trace(&a, trial, false).unwrap(), trace::trace(&b, trial, false).unwrap());
+        let (ta, tb) = (
+            trace::trace(&a, trial, false).unwrap(),
+            trace::trace(&b, trial, false).unwrap(),
+        );
         for (la, lb) in ta.variants[0].links.iter().zip(&tb.variants[0].links) {
             for (x, y) in la.iter().zip(lb) {
                 assert!(*x == Link::Lost || x == y, "{x:?} became {y:?}");
@@ -194,7 +215,10 @@ fn the_first_attempt_keeps_its_draw() {
     ));
     let mut z = serde_json::to_value(&zero.schemes).unwrap();
     let l = z[0].as_object_mut().unwrap().remove("link").unwrap();
-    assert_eq!((l["retransmissions"].as_f64(), l["ack_frames"].as_f64()), (Some(0.0), Some(2.0)));
+    assert_eq!(
+        (l["retransmissions"].as_f64(), l["ack_frames"].as_f64()),
+        (Some(0.0), Some(2.0))
+    );
     assert_eq!(serde_json::to_value(&ideal.schemes).unwrap(), z);
 }
 
@@ -216,7 +240,11 @@ fn the_kalman_variance_follows_the_arrivals_after_retries() {
         let priors = stability::prior_variance_path(1.2, 1.0, 1.0, 1.44 + 1.0, &arrivals);
         for k in 0..exp.steps {
             let p = priors[k];
-            let post = if arrivals[k] { p - p * p / (p + 1.0) } else { p };
+            let post = if arrivals[k] {
+                p - p * p / (p + 1.0)
+            } else {
+                p
+            };
             mean_post[k] += post / exp.trials as f64;
         }
     }
@@ -241,9 +269,19 @@ fn the_kalman_variance_follows_the_arrivals_after_retries() {
 fn bursts_defeat_retries() {
     let ge = "[channel]\nkind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.3\nloss_good = 0.0\nloss_bad = 1.0\n";
     let plain = summary(&scalar(0.95, 1, ge, KF, 100));
-    let arq = summary(&scalar(0.95, 1, &format!("{ge}arq = {{ max_retries = 3 }}\n"), KF, 100));
+    let arq = summary(&scalar(
+        0.95,
+        1,
+        &format!("{ge}arq = {{ max_retries = 3 }}\n"),
+        KF,
+        100,
+    ));
     let (lp, la) = (link(&plain), link(&arq));
-    assert!(lp.lost > 0.1, "the chain spends time in the bad state: {}", lp.lost);
+    assert!(
+        lp.lost > 0.1,
+        "the chain spends time in the bad state: {}",
+        lp.lost
+    );
     assert_eq!(la.lost_per_step, lp.lost_per_step);
     for (r, l) in la.retransmissions_per_step.iter().zip(&la.lost_per_step) {
         assert!((r - 3.0 * l).abs() < 1e-12, "{r} retries for {l} lost");
@@ -263,8 +301,9 @@ fn a_censoring_sensor_keeps_the_last_feedback_it_received() {
     let ideal = build::load(&ideal_text, "scalar.toml").unwrap();
     let mut differ = [0usize; 2];
     for (d, loss) in [0.5f64, 1.0].into_iter().enumerate() {
-        let channel =
-            format!("[channel]\nkind = \"ideal\"\ndownlink = {{ kind = \"bernoulli\", loss = {loss:?} }}\n");
+        let channel = format!(
+            "[channel]\nkind = \"ideal\"\ndownlink = {{ kind = \"bernoulli\", loss = {loss:?} }}\n"
+        );
         let exp = build::load(&scalar(0.95, 2, &channel, pf, 1), "scalar.toml").unwrap();
         let specs = exp.channel.as_deref().unwrap();
         for trial in 0..4 {
@@ -273,8 +312,7 @@ fn a_censoring_sensor_keeps_the_last_feedback_it_received() {
             let data = runner::draw_trial(&exp, trial);
             let down = FateTable::draw(specs, exp.steps, exp.seed, trial as u64, true);
             // The loop by hand: variant 0's coins and center seed, as the engine seeds them.
-            let (mut rng, center_seed) =
-                seeding::coins(exp.seed, trial, seeding::coin_stream(0));
+            let (mut rng, center_seed) = seeding::coins(exp.seed, trial, seeding::coin_stream(0));
             let mut inst = exp.variants[0].scheme.build_with_seed(center_seed).unwrap();
             let mut held = vec![inst.center.feedback(); 2];
             assert!(held[0].is_some(), "the scheme feeds back");

@@ -657,7 +657,10 @@ mod tests {
                 retried += 1;
                 rescued += usize::from(!y.lost);
             } else {
-                assert!(!y.lost && y.delay == x.delay && y.acks >= 1, "step {k}: {y:?}");
+                assert!(
+                    !y.lost && y.delay == x.delay && y.acks >= 1,
+                    "step {k}: {y:?}"
+                );
             }
             assert!(y.retries <= 3 && y.acks <= y.attempts());
             assert_eq!(y.lost, y.acks == 0);
