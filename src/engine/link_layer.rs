@@ -12,11 +12,28 @@
 //! packet's step are the ones it made the first time). It costs a replay of the trial so far
 //! per step with an arrival: fine for the delays a link has, not for long trials with many
 //! late packets. A packet later than the horizon is dropped and counted.
-use crate::link::Received;
-use crate::network::channel::FateTable;
-use crate::network::Traffic;
-use crate::scenario::experiment::Experiment;
+//!
+//! With retransmission (`arq`) a slot's fate already holds its attempts (drawn with the slot,
+//! [`crate::network::channel::fate`]): the packet is lost only when every attempt was, every
+//! attempt costs its bits and frame, and the acknowledgements, retries and duplicates are
+//! counted ([`LinkLayer::deliver`]). The center fuses one copy, as without ARQ.
+use crate::link::{Received, Transmission};
+use crate::network::channel::{ChannelSpec, FateTable};
+use crate::network::{self, Traffic};
+use crate::scenario::experiment::{Experiment, Variant};
 use crate::scheme::{Feedback, FusionCenter, Scheme, SchemeError};
+
+/// Whether a variant runs as if its links were ideal: no channel, or one whose every link is
+/// lossless ([`ChannelSpec::is_lossless`]: nothing lost, late or
+/// retransmitted, in either direction). Its trials then take the fast paths, which give the
+/// generic loop's numbers, and its link counters are all zero, as the generic loop would count
+/// them; `summary.json` still has the `link` section of a scenario with a channel.
+pub(crate) fn lossless(variant: &Variant) -> bool {
+    variant
+        .channel
+        .as_deref()
+        .is_none_or(|specs| specs.iter().all(|s| s.is_lossless()))
+}
 
 /// What one sensor did at one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -45,8 +62,10 @@ struct InFlight {
 /// (with delays) every inbox fused so far.
 pub(crate) struct LinkLayer {
     up: FateTable,
-    down: FateTable,
-    /// The last feedback that reached each sensor.
+    /// `None` when every downlink is lossless: nothing to draw, every feedback arrives.
+    down: Option<FateTable>,
+    /// The last feedback that reached each sensor; one entry, shared by all, when every
+    /// downlink is lossless (`down` is `None`).
     held: Vec<Option<Feedback>>,
     /// Steps a late packet may take and still be fused.
     horizon: usize,
@@ -59,6 +78,9 @@ impl LinkLayer {
     /// The link of trial `trial` of variant `variant` of `exp` (`None` for an ideal one);
     /// `initial` is the center's feedback before the first step, which every sensor holds (it
     /// is made from the prior, which they know).
+    ///
+    /// A lossless channel (every link [`ChannelSpec::is_lossless`]) has no link layer either:
+    /// it would change nothing and count nothing.
     pub(crate) fn new(
         exp: &Experiment,
         variant: usize,
@@ -66,11 +88,17 @@ impl LinkLayer {
         initial: &Option<Feedback>,
     ) -> Option<Self> {
         let specs = exp.variants[variant].channel.as_deref()?;
+        if specs.iter().all(ChannelSpec::is_lossless) {
+            return None;
+        }
         let horizon = specs.iter().map(|s| s.delay().horizon()).max().unwrap_or(0);
+        let down = (!specs.iter().all(|s| s.downlink_spec().is_lossless()))
+            .then(|| FateTable::draw(specs, exp.steps, exp.seed, trial as u64, true));
+        let holders = if down.is_some() { specs.len() } else { 1 };
         Some(Self {
             up: FateTable::draw(specs, exp.steps, exp.seed, trial as u64, false),
-            down: FateTable::draw(specs, exp.steps, exp.seed, trial as u64, true),
-            held: vec![initial.clone(); specs.len()],
+            down,
+            held: vec![initial.clone(); holders],
             horizon: horizon as usize,
             in_flight: Vec::new(),
             history: Vec::new(),
@@ -85,7 +113,7 @@ impl LinkLayer {
         }
         let mut lost = 0;
         for (i, h) in self.held.iter_mut().enumerate() {
-            if self.down.get(i, k).lost {
+            if self.down.as_ref().is_some_and(|d| d.get(i, k).lost) {
                 lost += u64::from(feedback.is_some());
             } else {
                 h.clone_from(feedback);
@@ -96,7 +124,10 @@ impl LinkLayer {
 
     /// The feedback sensor `i` holds.
     pub(crate) fn feedback(&self, i: usize) -> Option<&Feedback> {
-        self.held[i].as_ref()
+        match self.down {
+            Some(_) => self.held[i].as_ref(),
+            None => self.held[0].as_ref(),
+        }
     }
 
     /// What became of sensor `i`'s packet sent at step `k`.
@@ -109,6 +140,17 @@ impl LinkLayer {
         } else {
             Link::Sent
         }
+    }
+
+    /// Step `k`'s transmissions into `inbox`, counted with every attempt the link's fates give
+    /// them ([`network::deliver_attempts`]); [`LinkLayer::uplink`] then applies the fates.
+    pub(crate) fn deliver(
+        &self,
+        k: usize,
+        transmissions: impl IntoIterator<Item = Transmission>,
+        inbox: &mut Vec<Received>,
+    ) -> Traffic {
+        network::deliver_attempts(transmissions, inbox, |i| self.up.get(i, k))
     }
 
     /// Step `k`'s packets through the link: a lost or late one becomes a silence in `inbox`,

@@ -328,7 +328,8 @@ fn run_block<'e>(
         // A lossy link is applied by the generic loop only (the fast paths assume every
         // packet arrives).
         && exp.variants.iter().all(|v| {
-            v.channel.is_none() && v.scheme.fast_path().is_some_and(|f| f.batches())
+            crate::engine::link_layer::lossless(v)
+                && v.scheme.fast_path().is_some_and(|f| f.batches())
         });
     if !batch {
         for trial in trials {

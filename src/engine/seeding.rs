@@ -52,10 +52,23 @@ pub fn slot_rng(
     step: usize,
     downlink: bool,
 ) -> Xoshiro256PlusPlus {
-    let link = trial_seed(seed, trial, LINK_STREAM);
-    let s =
-        splitmix64(splitmix64(splitmix64(link ^ sensor as u64) ^ step as u64) ^ downlink as u64);
-    Xoshiro256PlusPlus::seed_from_u64(s)
+    sensor_slots(seed, trial, sensor, downlink)(step)
+}
+
+/// [`slot_rng`] of every step of one sensor and direction: the same generators, with the
+/// coordinates shared by the steps derived once (a trial's fate table makes one per slot).
+pub fn sensor_slots(
+    seed: u64,
+    trial: u64,
+    sensor: usize,
+    downlink: bool,
+) -> impl Fn(usize) -> Xoshiro256PlusPlus {
+    let sensor_seed = splitmix64(trial_seed(seed, trial, LINK_STREAM) ^ sensor as u64);
+    move |step| {
+        Xoshiro256PlusPlus::seed_from_u64(splitmix64(
+            splitmix64(sensor_seed ^ step as u64) ^ downlink as u64,
+        ))
+    }
 }
 
 fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {

@@ -161,7 +161,7 @@ pub fn run_trial(
     let variant = &exp.variants[spec.variant];
     let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
     // A lossy link is the generic loop's (the fast paths assume every packet arrives).
-    if spec.available.is_none() && variant.channel.is_none() {
+    if spec.available.is_none() && crate::engine::link_layer::lossless(variant) {
         // One virtual call per trial: the scheme's hook, then its whole trial.
         if let (Some(fast), Some(sink)) = (variant.scheme.fast_path(), observer.fast_sink()) {
             let cache = buffers.cache_for(spec.trial, measurements);
@@ -222,7 +222,10 @@ pub fn run_trial(
             }
             transmissions.push(t);
         }
-        let mut traffic = network::deliver(transmissions.drain(..), inbox);
+        let mut traffic = match &link {
+            Some(l) => l.deliver(k, transmissions.drain(..), inbox),
+            None => network::deliver(transmissions.drain(..), inbox),
+        };
         traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
         if let Some(l) = &mut link {
             l.uplink(k, inbox, &mut traffic);

@@ -1,17 +1,26 @@
 //! Delivery between sensors and the fusion center. The network wraps every transmission and
 //! counts messages and bits, so no scheme can forget to count.
+use crate::link::codec802154::ACK_PPDU_BITS;
 use crate::link::{Received, Transmission};
 
 pub mod channel;
 
+use channel::Fate;
+
 /// Counters of one delivery round (one time step).
+///
+/// With retransmission (`arq`), `messages` stays the packets the sensors decided to send (one
+/// per sensor that sent: the scheme's rate), while `bits` and `frame_bits` count every attempt
+/// (each went on air, and the radio paid for it); the attempts after the first are
+/// `retransmissions`. The acknowledgements are the receiver's frames, counted apart
+/// (`ack_frames`, `ack_bits`) and not in `downlink_bits`, which stays the scheme's feedback.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Traffic {
-    /// Number of sensors that sent a message.
+    /// Number of sensors that sent a message (packets, not attempts).
     pub messages: u64,
-    /// Payload bits of those messages.
+    /// Payload bits of those messages, once per attempt.
     pub bits: u64,
-    /// Bits of the 802.15.4 MAC frames that carry them.
+    /// Bits of the 802.15.4 MAC frames that carry them, once per attempt.
     pub frame_bits: u64,
     /// Bits the fusion center sent back to sensors (feedback).
     pub downlink_bits: u64,
@@ -24,6 +33,16 @@ pub struct Traffic {
     pub dropped_late: u64,
     /// Feedback packets the downlink lost (one per sensor that missed this step's feedback).
     pub downlink_lost: u64,
+    /// ARQ: attempts after the first, over all messages.
+    pub retransmissions: u64,
+    /// ARQ: attempts that arrived after the message had already arrived (their ACK was lost);
+    /// the center discards them.
+    pub duplicates: u64,
+    /// ARQ: acknowledgment frames the center sent, one per attempt that arrived.
+    pub ack_frames: u64,
+    /// ARQ: bits of those acknowledgments on air, 802.15.4 PHY headers included
+    /// ([`crate::link::codec802154::ACK_PPDU_BITS`] = 88 each).
+    pub ack_bits: u64,
 }
 
 /// Which sensors may talk at a step.
@@ -59,6 +78,35 @@ pub fn deliver(
             traffic.messages += 1;
             traffic.bits += m.bits();
             traffic.frame_bits += m.frame_bits();
+        }
+        inbox.push(t.into());
+    }
+    traffic
+}
+
+/// [`deliver`] over a link whose slot of sensor i has the fate `fate(i)`: a message that went on
+/// air [`Fate::attempts`] times costs its bits and frame that many times, and its retries,
+/// duplicates and acknowledgements are counted (see [`Traffic`]). Which messages the center
+/// receives is the link layer's business; here every message is put in the inbox. With fates
+/// of no retransmission (`arq` absent) the counts are [`deliver`]'s.
+pub fn deliver_attempts(
+    transmissions: impl IntoIterator<Item = Transmission>,
+    inbox: &mut Vec<Received>,
+    fate: impl Fn(usize) -> Fate,
+) -> Traffic {
+    inbox.clear();
+    let mut traffic = Traffic::default();
+    for (i, t) in transmissions.into_iter().enumerate() {
+        if let Transmission::Send(m) = &t {
+            let f = fate(i);
+            let attempts = u64::from(f.attempts());
+            traffic.messages += 1;
+            traffic.bits += attempts * m.bits();
+            traffic.frame_bits += attempts * m.frame_bits();
+            traffic.retransmissions += u64::from(f.retries);
+            traffic.duplicates += u64::from(f.duplicates());
+            traffic.ack_frames += u64::from(f.acks);
+            traffic.ack_bits += u64::from(f.acks) * ACK_PPDU_BITS;
         }
         inbox.push(t.into());
     }
@@ -165,6 +213,36 @@ mod tests {
         // (9 + 2) octets of MAC header and footer around 8 and 24 payload octets.
         assert_eq!(t.frame_bits, 8 * (11 + 8) + 8 * (11 + 24));
         assert_eq!(inbox[0], Received::Silent);
+    }
+
+    #[test]
+    fn every_attempt_is_counted() {
+        let z = || Transmission::Send(Message::Measurement(Vector::zeros(1)));
+        let fates = [
+            // Through at the second attempt, ACK heard.
+            Fate {
+                retries: 1,
+                acks: 1,
+                ..Fate::default()
+            },
+            Fate::default(),
+            // Three attempts arrived, the first two ACKs were lost: two duplicates.
+            Fate {
+                retries: 2,
+                acks: 3,
+                ..Fate::default()
+            },
+        ];
+        let mut inbox = Vec::new();
+        let t = deliver_attempts([z(), Transmission::Silent, z()], &mut inbox, |i| fates[i]);
+        assert_eq!(t.messages, 2);
+        // 2 + 3 attempts of 32 payload bits in a 15-octet frame (11 + 4).
+        assert_eq!((t.bits, t.frame_bits), (5 * 32, 5 * 8 * 15));
+        assert_eq!((t.retransmissions, t.duplicates, t.ack_frames), (3, 2, 4));
+        assert_eq!(t.ack_bits, 4 * 88);
+        // No retransmission: deliver's counts.
+        let plain = deliver_attempts([z(), Transmission::Silent], &mut inbox, |_| Fate::default());
+        assert_eq!(plain, deliver([z(), Transmission::Silent], &mut inbox));
     }
 
     #[test]

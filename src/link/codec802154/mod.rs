@@ -103,6 +103,16 @@ pub const SFD_OCTETS: usize = 1;
 pub const PHR_OCTETS: usize = 1;
 /// Whole PHY packet.
 pub const PPDU_OCTETS: usize = PREAMBLE_OCTETS + SFD_OCTETS + PHR_OCTETS + MPDU_OCTETS;
+/// Acknowledgment frame (§7.2.2.3 [§5.2.2.3], the immediate acknowledgement of a data frame
+/// with its ACK Request subfield set): Frame Control 2 (frame type 010) + Sequence Number 1
+/// (copied from the acknowledged frame) + FCS 2; no addressing fields, no payload.
+pub const ACK_MPDU_OCTETS: usize = FRAME_CONTROL_OCTETS + SEQUENCE_NUMBER_OCTETS + FCS_OCTETS;
+/// The acknowledgment frame on air: preamble, SFD and PHR (§6.3, 2450 MHz O-QPSK) around its
+/// 5-octet MPDU = 11 octets.
+pub const ACK_PPDU_OCTETS: usize = PREAMBLE_OCTETS + SFD_OCTETS + PHR_OCTETS + ACK_MPDU_OCTETS;
+/// Bits of one acknowledgment on air ([`ACK_PPDU_OCTETS`] x 8 = 88), what the network's ARQ
+/// counts per ACK (`crate::network::Traffic::ack_bits`).
+pub const ACK_PPDU_BITS: u64 = 8 * ACK_PPDU_OCTETS as u64;
 /// Broadcast short address / PAN id (§7.2.1.3, §7.2.1.4).
 pub const BROADCAST: u16 = 0xffff;
 /// Short address meaning "associated but no short address allocated" (`macShortAddress`,

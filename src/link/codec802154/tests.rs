@@ -339,3 +339,16 @@ fn random_corruption_is_almost_always_detected() {
     }
     assert!(undetected <= 10, "{undetected} corruptions undetected");
 }
+
+#[test]
+fn acknowledgement_frame_sizes() {
+    // The standard's example acknowledgment frame (2006 §7.2.1.9): a 3-octet MHR (Frame
+    // Control 0x0002, Sequence Number 0x6a) and the 2-octet FCS, nothing else.
+    let mhr = [0x02u8, 0x00, 0x6a];
+    let fcs = crc16_kermit(&mhr).to_le_bytes();
+    assert_eq!(ACK_MPDU_OCTETS, mhr.len() + fcs.len());
+    assert_eq!(ACK_MPDU_OCTETS, 5);
+    // On air with the 4-octet preamble, SFD and PHR: 11 octets, 88 bits.
+    assert_eq!(ACK_PPDU_OCTETS, 11);
+    assert_eq!(ACK_PPDU_BITS, 88);
+}

@@ -51,11 +51,42 @@ pub struct Sums {
     pub has_ess: bool,
     /// Steady-state NEES / n of every (trial, step).
     pub nees_hist: NeesHistogram,
-    /// Per step, summed over trials: messages the link lost, messages it delivered late
-    /// (fused on arrival), messages later than the horizon (dropped), and feedback packets the
-    /// downlink lost. Empty until a link does any of this (an ideal link costs nothing here);
-    /// integers, so the order of additions changes nothing.
-    pub link: Vec<[u64; 4]>,
+    /// Per step, summed over trials, the link's counters of [`LINK_COUNTERS`] (in that order):
+    /// messages the link lost, messages it delivered late (fused on arrival), messages later
+    /// than the horizon (dropped), feedback packets the downlink lost, and with ARQ the
+    /// retransmissions, duplicates, acknowledgment frames and their bits. Empty until a link
+    /// does any of this (an ideal link costs nothing here); integers, so the order of additions
+    /// changes nothing.
+    pub link: Vec<[u64; LINK_FIELDS]>,
+}
+
+/// Number of counters in a row of [`Sums::link`].
+pub const LINK_FIELDS: usize = 8;
+
+/// The names of the counters of a row of [`Sums::link`], in order (as in [`Traffic`]).
+pub const LINK_COUNTERS: [&str; LINK_FIELDS] = [
+    "lost",
+    "late",
+    "dropped_late",
+    "downlink_lost",
+    "retransmissions",
+    "duplicates",
+    "ack_frames",
+    "ack_bits",
+];
+
+/// The link's counters of one step's traffic, in the order of [`LINK_COUNTERS`].
+pub fn link_counts(t: &Traffic) -> [u64; LINK_FIELDS] {
+    [
+        t.lost,
+        t.late,
+        t.dropped_late,
+        t.downlink_lost,
+        t.retransmissions,
+        t.duplicates,
+        t.ack_frames,
+        t.ack_bits,
+    ]
 }
 
 /// Observer of one trial of one variant: accumulates into a [`Sums`] as the trial runs.
@@ -128,16 +159,14 @@ impl Sums {
         }
     }
 
-    /// Adds step `k`'s (1-based) link counts of one trial.
-    fn add_link(&mut self, k: usize, traffic: &Traffic) {
+    /// Adds step `k`'s (1-based) link counts of one trial, `counts` from [`link_counts`].
+    fn add_link(&mut self, k: usize, counts: [u64; LINK_FIELDS]) {
         if self.link.is_empty() {
-            self.link = vec![[0; 4]; self.steps];
+            self.link = vec![[0; LINK_FIELDS]; self.steps];
         }
-        let row = &mut self.link[k - 1];
-        row[0] += traffic.lost;
-        row[1] += traffic.late;
-        row[2] += traffic.dropped_late;
-        row[3] += traffic.downlink_lost;
+        for (a, b) in self.link[k - 1].iter_mut().zip(counts) {
+            *a += b;
+        }
     }
 
     /// Heap bytes of these sums before any trial is added (the per-step rows, the whole-run
@@ -249,7 +278,7 @@ impl Sums {
         self.nees_hist.merge(&o.nees_hist);
         if !o.link.is_empty() {
             if self.link.is_empty() {
-                self.link = vec![[0; 4]; self.steps];
+                self.link = vec![[0; LINK_FIELDS]; self.steps];
             }
             for (a, b) in self.link.iter_mut().zip(&o.link) {
                 for (x, y) in a.iter_mut().zip(b) {
@@ -338,8 +367,9 @@ impl TrialState<'_> {
             *e = m - t;
         }
         let err: &[f64] = err;
-        if traffic.lost + traffic.late + traffic.dropped_late + traffic.downlink_lost > 0 {
-            sums.add_link(k, &traffic);
+        let link = link_counts(&traffic);
+        if link.iter().any(|&c| c > 0) {
+            sums.add_link(k, link);
         }
         let recorded = self.nees(err, est, factor).map(|(nees, degenerate)| {
             // The traffic of a step is usually the last step's: its conversions are kept.

@@ -186,3 +186,37 @@ fn second_moments_and_whole_run_averages_give_hand_computed_standard_errors() {
     assert_eq!(m2.per_step_sq, s.per_step_sq);
     assert_eq!(m2.whole_run, s.whole_run);
 }
+
+#[test]
+fn link_counters_are_summed_per_step_and_merge() {
+    let groups = vec![("x".to_string(), vec![0])];
+    let truth = Vector::from_vec(vec![0.0]);
+    let est = Gaussian::new(Vector::from_vec(vec![0.5]), Matrix::identity(1, 1));
+    let mut s = Sums::new(1, 2, 1);
+    let mut t = s.trial(&groups, 1);
+    // Step 1: nothing for the link to count. Step 2: an ARQ step.
+    t.record(1, &truth, &est, Traffic::default()).unwrap();
+    let arq = Traffic {
+        messages: 2,
+        lost: 1,
+        retransmissions: 3,
+        duplicates: 1,
+        ack_frames: 2,
+        ack_bits: 176,
+        ..Traffic::default()
+    };
+    t.record(2, &truth, &est, arq).unwrap();
+    t.finish();
+    assert_eq!(LINK_COUNTERS[4], "retransmissions");
+    assert_eq!(s.link, vec![[0; LINK_FIELDS], [1, 0, 0, 0, 3, 1, 2, 176]]);
+    let mut m = s.clone();
+    m.merge(&s);
+    assert_eq!(m.link[1], [2, 0, 0, 0, 6, 2, 4, 352]);
+    // Sums that never saw the link merge into ones that did, and the other way round.
+    let mut empty = Sums::new(1, 2, 1);
+    empty.merge(&s);
+    assert_eq!(empty.link, s.link);
+    let mut m2 = s.clone();
+    m2.merge(&Sums::new(1, 2, 1));
+    assert_eq!(m2.link, s.link);
+}

@@ -3,11 +3,36 @@
 //! front from generators of the link's own stream ([`seeding::slot_rng`]) means every scheme that
 //! sends in a slot meets the same fate (a paired comparison across schemes), and no fate depends
 //! on which schemes ran, how often they sent, or in which order.
+//!
+//! # Retransmission (`arq`)
+//!
+//! With `arq = { max_retries = n }` a packet is sent up to 1 + n times within its step, as the
+//! IEEE 802.15.4 MAC does: each attempt draws its own loss; after an attempt that arrives the
+//! receiver sends an acknowledgment (ACK) frame on the downlink, which the downlink's model may
+//! lose too (an absent `downlink` is ideal); a sender that hears no ACK tries again while it has
+//! retries left. An attempt whose data arrived but whose ACK was lost makes the sender repeat a
+//! packet the center already has: a duplicate, which the center discards (counted).
+//!
+//! The draws of a slot with ARQ, all from the slot's own generator: first the first attempt's
+//! loss coin and the delay, exactly as without `arq` (a slot drawn without `arq` is the same
+//! slot's first attempt with it); then, attempt after attempt, further numbers of the same
+//! generator: the ACK's loss coin after an attempt that arrived, the next attempt's loss coin
+//! before a retry. The numbers depend on the slot only, so every scheme that sends in a slot
+//! meets the same attempts too. The delay, one per slot, applies to the attempt that arrived.
+//!
+//! - Bernoulli: each retry is an independent coin with the link's `loss`, so a packet is lost
+//!   with probability p^(1+n) and a sent packet takes p (1 − p^n) / (1 − p) retries on average
+//!   (ideal ACKs).
+//! - Gilbert–Elliott: the retries of a step see the step's channel state (the chain moves once
+//!   a step, the MAC retries within milliseconds). In the bad state with `loss_bad = 1` every
+//!   retry fails: bursts defeat ARQ, which only helps against the losses within a state.
+//! - ACKs on a Gilbert–Elliott downlink see the downlink chain's state of that step (the same
+//!   chain that decides the feedback's fate), each ACK with its own coin.
 use rand::Rng;
 use rand_distr::Distribution;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use super::spec::{ChannelKind, ChannelSpec, Delay};
+use super::spec::{Arq, ChannelKind, ChannelSpec, Delay};
 use crate::engine::seeding;
 
 /// The step index given to [`seeding::slot_rng`] for a sensor's Gilbert–Elliott state chain.
@@ -22,6 +47,24 @@ pub struct Fate {
     pub lost: bool,
     /// Steps between sending and arrival (0 = same step). 0 when `lost`.
     pub delay: u32,
+    /// ARQ: attempts after the first (0 without `arq`).
+    pub retries: u32,
+    /// ARQ: acknowledgment frames the receiver sent, one per attempt that arrived (0 without
+    /// `arq`); every one after the first acknowledges a duplicate.
+    pub acks: u32,
+}
+
+impl Fate {
+    /// Times the packet went on air: the first attempt and the retries.
+    pub fn attempts(&self) -> u32 {
+        1 + self.retries
+    }
+
+    /// Attempts that arrived after one had already arrived (their ACK was lost): copies the
+    /// center discards.
+    pub fn duplicates(&self) -> u32 {
+        self.acks.saturating_sub(1)
+    }
 }
 
 /// The fates of all slots of one trial and one direction, sensor-major.
@@ -38,8 +81,13 @@ impl FateTable {
     /// `downlink = true` it is the feedback link's, using each spec's `downlink` model (absent =
     /// ideal), drawn from the generators of the downlink slots.
     ///
+    /// An uplink with `arq` also draws its retransmissions (see the module's documentation);
+    /// the losses of its ACKs follow the downlink's model, whose Gilbert–Elliott state is the
+    /// downlink table's. A downlink has no retransmission.
+    ///
     /// The specs are expected to have passed [`ChannelSpec::validate`]; out-of-range values are
-    /// clamped into range rather than trusted (a NaN probability counts as 0).
+    /// clamped into range rather than trusted (a NaN probability counts as 0, `max_retries`
+    /// above [`Arq::MAX_RETRIES`] counts as the maximum).
     pub fn draw(
         specs: &[ChannelSpec],
         steps: usize,
@@ -49,13 +97,19 @@ impl FateTable {
     ) -> FateTable {
         let mut fates = Vec::with_capacity(specs.len() * steps);
         for (sensor, spec) in specs.iter().enumerate() {
-            let spec = if downlink {
-                spec.downlink_spec()
+            let slot = seeding::sensor_slots(seed, trial, sensor, downlink);
+            if downlink {
+                draw_sensor(&spec.downlink_spec(), steps, slot, None, &mut fates);
             } else {
-                spec.clone()
-            };
-            let slot = |step: usize| seeding::slot_rng(seed, trial, sensor, step, downlink);
-            draw_sensor(&spec, steps, slot, &mut fates);
+                let arq = spec.arq.map(|arq| {
+                    let down = seeding::sensor_slots(seed, trial, sensor, true);
+                    Retries {
+                        max: arq.max_retries.min(Arq::MAX_RETRIES),
+                        ack_loss: loss_path(&spec.downlink_spec(), steps, down),
+                    }
+                });
+                draw_sensor(spec, steps, slot, arq.as_ref(), &mut fates);
+            }
         }
         FateTable {
             sensors: specs.len(),
@@ -88,19 +142,37 @@ impl FateTable {
     }
 }
 
+/// The retransmission rule of an uplink: at most `max` retries, and the probability that the
+/// ACK of an attempt at step k is lost, `ack_loss[k - 1]`.
+struct Retries {
+    max: u32,
+    ack_loss: Vec<f64>,
+}
+
 /// Appends the fates of one sensor's steps `1..=steps`. `slot(k)` is the generator of slot k;
-/// each slot's loss coin and delay come from its own generator.
+/// each slot's loss coin, delay and (with `arq`) retries come from its own generator.
 fn draw_sensor(
     spec: &ChannelSpec,
     steps: usize,
     slot: impl Fn(usize) -> Xoshiro256PlusPlus,
+    arq: Option<&Retries>,
     out: &mut Vec<Fate>,
 ) {
     let delay = spec.delay();
+    // The ARQ of slot k: its retry limit and its ACKs' loss probability.
+    let arq_at = |k: usize| arq.map(|r| (r.max, r.ack_loss[k - 1]));
     match spec.kind {
         ChannelKind::Ideal => {
+            // No loss coin: the first attempt always arrives (retries only follow lost ACKs).
             for k in 1..=steps {
-                out.push(fate(false, &delay, &mut slot(k)));
+                match (delay, arq) {
+                    // Nothing to draw: the slot's generator is not even made.
+                    (Delay::Fixed(d), None) => out.push(Fate {
+                        delay: d,
+                        ..Fate::default()
+                    }),
+                    _ => out.push(fate(false, 0.0, &delay, &mut slot(k), arq_at(k))),
+                }
             }
         }
         ChannelKind::Bernoulli => {
@@ -108,7 +180,7 @@ fn draw_sensor(
             for k in 1..=steps {
                 let mut rng = slot(k);
                 let lost = rng.random::<f64>() < loss;
-                out.push(fate(lost, &delay, &mut rng));
+                out.push(fate(lost, loss, &delay, &mut rng, arq_at(k)));
             }
         }
         ChannelKind::GilbertElliott => {
@@ -116,26 +188,92 @@ fn draw_sensor(
             // The state is a Markov chain, so it is drawn in order from one generator per sensor
             // (the slot generator of step CHAIN_STEP); the slot generators then only decide the
             // loss given the state, and the delay.
-            let mut chain_rng = slot(CHAIN_STEP);
-            let mut bad = chain.initial_bad(&mut chain_rng);
+            let mut states = chain.states(slot(CHAIN_STEP));
             for k in 1..=steps {
-                bad = chain.transition(bad, &mut chain_rng);
+                let loss = chain.loss(states.next_bad());
                 let mut rng = slot(k);
-                let lost = rng.random::<f64>() < chain.loss(bad);
-                out.push(fate(lost, &delay, &mut rng));
+                let lost = rng.random::<f64>() < loss;
+                // Retries within the step see the same state, hence the same loss.
+                out.push(fate(lost, loss, &delay, &mut rng, arq_at(k)));
             }
         }
     }
 }
 
-/// A slot's fate: its delay is drawn even when the packet is lost so that a slot's generator is
-/// always used the same way, then reported as 0 for a lost packet.
-fn fate(lost: bool, delay: &Delay, rng: &mut Xoshiro256PlusPlus) -> Fate {
+/// The loss probability of a packet sent at each step `1..=steps` on the link `spec`: constant
+/// for ideal and Bernoulli links, the state's for Gilbert–Elliott, whose chain is drawn from
+/// `slot(CHAIN_STEP)` exactly as [`draw_sensor`] draws it (so the ACKs of an uplink see the
+/// states that decide its downlink's feedback).
+fn loss_path(
+    spec: &ChannelSpec,
+    steps: usize,
+    slot: impl Fn(usize) -> Xoshiro256PlusPlus,
+) -> Vec<f64> {
+    match spec.kind {
+        ChannelKind::Ideal => vec![0.0; steps],
+        ChannelKind::Bernoulli => vec![clamp_probability(spec.loss.unwrap_or(0.0)); steps],
+        ChannelKind::GilbertElliott => {
+            let chain = GilbertElliott::from_spec(spec);
+            let mut states = chain.states(slot(CHAIN_STEP));
+            (0..steps).map(|_| chain.loss(states.next_bad())).collect()
+        }
+    }
+}
+
+/// A slot's fate. `lost` is the first attempt's coin, already drawn from `rng`; the delay is
+/// drawn next, even when the packet is lost, so that a slot's generator is always used the same
+/// way, then reported as 0 for a lost packet. With `arq = Some((max_retries, ack_loss))` the
+/// retries follow from further numbers of `rng` ([`retransmit`]), each attempt lost with
+/// probability `loss`.
+fn fate(
+    lost: bool,
+    loss: f64,
+    delay: &Delay,
+    rng: &mut Xoshiro256PlusPlus,
+    arq: Option<(u32, f64)>,
+) -> Fate {
     let d = draw_delay(delay, rng);
+    let (lost, retries, acks) = match arq {
+        None => (lost, 0, 0),
+        Some((max_retries, ack_loss)) => retransmit(lost, loss, max_retries, ack_loss, rng),
+    };
     Fate {
         lost,
         delay: if lost { 0 } else { d },
+        retries,
+        acks,
     }
+}
+
+/// The attempts of one packet under ARQ, from the first attempt's outcome (`first_lost`): after
+/// an attempt that arrives the receiver sends an ACK, lost with probability `ack_loss` (one coin
+/// of `rng`); the sender stops at the first ACK it hears, else retries while it has retries left,
+/// each retry lost with probability `loss` (one coin of `rng`). Returns (lost: no attempt
+/// arrived, retries, ACKs sent).
+fn retransmit(
+    first_lost: bool,
+    loss: f64,
+    max_retries: u32,
+    ack_loss: f64,
+    rng: &mut Xoshiro256PlusPlus,
+) -> (bool, u32, u32) {
+    let mut attempt_lost = first_lost;
+    let (mut retries, mut acks) = (0, 0);
+    loop {
+        if !attempt_lost {
+            acks += 1;
+            let ack_lost = rng.random::<f64>() < ack_loss;
+            if !ack_lost {
+                break;
+            }
+        }
+        if retries == max_retries {
+            break;
+        }
+        retries += 1;
+        attempt_lost = rng.random::<f64>() < loss;
+    }
+    (acks == 0, retries, acks)
 }
 
 /// A delay in steps. Geometric with mean μ: the number of failures before the first success of
@@ -198,6 +336,17 @@ impl GilbertElliott {
         rng.random::<f64>() < self.stationary_bad()
     }
 
+    /// The chain's states at steps 1, 2, … drawn from `rng` (the initial state, then one
+    /// transition per step).
+    fn states(&self, mut rng: Xoshiro256PlusPlus) -> States {
+        let bad = self.initial_bad(&mut rng);
+        States {
+            chain: *self,
+            rng,
+            bad,
+        }
+    }
+
     /// One step of the chain.
     fn transition(&self, bad: bool, rng: &mut Xoshiro256PlusPlus) -> bool {
         let u = rng.random::<f64>();
@@ -214,6 +363,21 @@ impl GilbertElliott {
         } else {
             self.loss_good
         }
+    }
+}
+
+/// The states of a Gilbert–Elliott chain, step by step.
+struct States {
+    chain: GilbertElliott,
+    rng: Xoshiro256PlusPlus,
+    bad: bool,
+}
+
+impl States {
+    /// Whether the chain is bad at the next step.
+    fn next_bad(&mut self) -> bool {
+        self.bad = self.chain.transition(self.bad, &mut self.rng);
+        self.bad
     }
 }
 
@@ -448,6 +612,150 @@ mod tests {
         // p_gb = 1, p_bg = 0: bad from step 1 on, every packet lost.
         let t = FateTable::draw(&[gilbert_elliott(1.0, 0.0, 0.0, 1.0)], 500, SEED, 0, false);
         assert!(all(&t).all(|f| f.lost));
+    }
+
+    fn with_arq(spec: ChannelSpec, max_retries: u32) -> ChannelSpec {
+        ChannelSpec {
+            arq: Some(Arq { max_retries }),
+            ..spec
+        }
+    }
+
+    #[test]
+    fn a_sensors_slots_are_the_slot_generators() {
+        for (sensor, downlink) in [(0, false), (3, true)] {
+            let slots = seeding::sensor_slots(SEED, 5, sensor, downlink);
+            for step in [1, 2, 77, CHAIN_STEP] {
+                let (mut a, mut b) = (
+                    slots(step),
+                    seeding::slot_rng(SEED, 5, sensor, step, downlink),
+                );
+                assert_eq!(a.random::<u64>(), b.random::<u64>());
+            }
+        }
+    }
+
+    #[test]
+    fn arq_keeps_the_first_attempts_draws() {
+        // Losses, geometric delays and a lossy ACK path: a slot whose first attempt arrived has
+        // the fate it has without ARQ (same delay), only with its ACKs counted; a slot lost
+        // without ARQ is the one that retries.
+        let plain = ChannelSpec {
+            delay: Some(geometric(1.5)),
+            downlink: Some(Box::new(bernoulli(0.3))),
+            ..bernoulli(0.4)
+        };
+        let arq = with_arq(plain.clone(), 3);
+        let a = FateTable::draw(std::slice::from_ref(&plain), 2000, SEED, 4, false);
+        let b = FateTable::draw(std::slice::from_ref(&arq), 2000, SEED, 4, false);
+        let (mut retried, mut rescued) = (0, 0);
+        for k in 1..=2000 {
+            let (x, y) = (a.get(0, k), b.get(0, k));
+            assert_eq!((x.retries, x.acks), (0, 0), "no ARQ, no attempts counted");
+            if x.lost {
+                assert!(y.retries >= 1, "step {k}: a lost first attempt is retried");
+                retried += 1;
+                rescued += usize::from(!y.lost);
+            } else {
+                assert!(
+                    !y.lost && y.delay == x.delay && y.acks >= 1,
+                    "step {k}: {y:?}"
+                );
+            }
+            assert!(y.retries <= 3 && y.acks <= y.attempts());
+            assert_eq!(y.lost, y.acks == 0);
+        }
+        // A lost first attempt is rescued by one of 3 retries with probability 1 − 0.4³.
+        assert!(retried > 600 && rescued as f64 > 0.85 * retried as f64);
+        // The downlink table does not change with the uplink's ARQ.
+        assert_eq!(
+            FateTable::draw(std::slice::from_ref(&plain), 300, SEED, 4, true),
+            FateTable::draw(std::slice::from_ref(&arq), 300, SEED, 4, true)
+        );
+    }
+
+    #[test]
+    fn retry_draws_follow_the_acknowledgements() {
+        use rand::SeedableRng;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
+        // Every ACK lost on a loss-free uplink: all 1 + 4 attempts arrive, 4 duplicates.
+        let (lost, retries, acks) = retransmit(false, 0.0, 4, 1.0, &mut rng);
+        assert_eq!((lost, retries, acks), (false, 4, 5));
+        // Every attempt lost: no ACK, all retries spent.
+        assert_eq!(retransmit(true, 1.0, 4, 0.0, &mut rng), (true, 4, 0));
+        // First attempt arrives and its ACK too: done.
+        assert_eq!(retransmit(false, 1.0, 4, 0.0, &mut rng), (false, 0, 1));
+        // No retries allowed: the first attempt decides, its ACK is still sent.
+        assert_eq!(retransmit(true, 0.0, 0, 0.0, &mut rng), (true, 0, 0));
+        assert_eq!(retransmit(false, 0.0, 0, 1.0, &mut rng), (false, 0, 1));
+        // Lost once, then through: one retry, one ACK.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
+        assert_eq!(retransmit(true, 0.0, 4, 0.0, &mut rng), (false, 1, 1));
+        // The draws are the slot's: the same generator state gives the same attempts.
+        let spec = with_arq(bernoulli(0.6), 2);
+        let t = FateTable::draw(std::slice::from_ref(&spec), 500, SEED, 9, false);
+        assert_eq!(
+            t,
+            FateTable::draw(std::slice::from_ref(&spec), 500, SEED, 9, false)
+        );
+        assert!(all(&t).any(|f| f.retries == 2 && f.lost));
+        assert!(all(&t).any(|f| f.retries == 1 && !f.lost));
+    }
+
+    #[test]
+    fn bernoulli_retries_are_independent_coins() {
+        // P(lost) = p^(1+n), E[retries] = p (1 − p^n) / (1 − p) with ideal ACKs.
+        let (p, n) = (0.5, 2);
+        let t = FateTable::draw(&vec![with_arq(bernoulli(p), n); 10], 5000, SEED, 1, false);
+        let slots = (t.sensors() * t.steps()) as f64;
+        let lost = p.powi(n as i32 + 1);
+        let se = (lost * (1.0 - lost) / slots).sqrt();
+        assert!((loss_rate(&t) - lost).abs() < 4.0 * se, "{}", loss_rate(&t));
+        let retries = all(&t).map(|f| f.retries as f64).sum::<f64>() / slots;
+        let want = p * (1.0 - p.powi(n as i32)) / (1.0 - p);
+        // Retries take 0, 1, 2 with probabilities 1/2, 1/4, 1/4: variance 11/16.
+        let se = (11.0f64 / 16.0 / slots).sqrt();
+        assert!((retries - want).abs() < 4.0 * se, "{retries} vs {want}");
+        // Ideal ACKs: exactly one per packet that arrived, no duplicates.
+        assert!(all(&t).all(|f| f.acks == u32::from(!f.lost) && f.duplicates() == 0));
+    }
+
+    #[test]
+    fn gilbert_elliott_bursts_defeat_retries() {
+        // loss_good = 0, loss_bad = 1: the first attempt arrives exactly in the good state and
+        // every retry of a bad step fails, so ARQ rescues nothing: the same slots are lost.
+        let ge = gilbert_elliott(0.1, 0.3, 0.0, 1.0);
+        let a = FateTable::draw(std::slice::from_ref(&ge), 3000, SEED, 2, false);
+        let b = FateTable::draw(&[with_arq(ge, 5)], 3000, SEED, 2, false);
+        assert!(all(&a).any(|f| f.lost));
+        for k in 1..=3000 {
+            let (x, y) = (a.get(0, k), b.get(0, k));
+            assert_eq!(x.lost, y.lost, "step {k}");
+            let expected = if x.lost { (5, 0) } else { (0, 1) };
+            assert_eq!((y.retries, y.acks), expected, "step {k}");
+        }
+    }
+
+    #[test]
+    fn acks_see_the_downlink_chain_of_their_step() {
+        // A loss-free uplink whose downlink loses everything in its bad state: the ACKs of a
+        // step are lost exactly when the downlink table loses that step's feedback.
+        let spec = with_arq(
+            ChannelSpec {
+                downlink: Some(Box::new(gilbert_elliott(0.2, 0.2, 0.0, 1.0))),
+                ..ChannelSpec::default()
+            },
+            2,
+        );
+        let up = FateTable::draw(std::slice::from_ref(&spec), 2000, SEED, 6, false);
+        let down = FateTable::draw(std::slice::from_ref(&spec), 2000, SEED, 6, true);
+        assert!(all(&down).any(|f| f.lost) && all(&down).any(|f| !f.lost));
+        for k in 1..=2000 {
+            let f = up.get(0, k);
+            assert!(!f.lost);
+            let expected = if down.get(0, k).lost { (2, 3) } else { (0, 1) };
+            assert_eq!((f.retries, f.acks), expected, "step {k}");
+        }
     }
 
     #[test]

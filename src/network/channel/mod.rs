@@ -1,9 +1,11 @@
 //! The link model between sensors and the fusion center: which packets are lost and how late the
-//! others arrive. Not yet wired into the engine.
+//! others arrive, with acknowledged retransmission (`arq`) if asked. The engine's link layer
+//! (`crate::engine::link_layer`) applies it in the trial loop.
 //!
 //! - [`spec`]: the `[channel]` scenario keys and their validation;
-//! - [`fate`]: the fate of every (sensor, step) slot of a trial, drawn once from the link's own
-//!   random stream so that every scheme meets the same losses;
+//! - [`fate`]: the fate of every (sensor, step) slot of a trial (with ARQ, its attempts and
+//!   acknowledgements), drawn once from the link's own random stream so that every scheme meets
+//!   the same losses;
 //! - [`stability`]: the classical stability checks of Kalman filtering with intermittent
 //!   observations (Sinopoli et al. 2004), used to sanity-check a scenario's link.
 pub mod fate;

@@ -96,12 +96,22 @@ impl Delay {
     }
 }
 
-/// Automatic repeat request on a link (parsed and validated only; not yet simulated).
+/// Acknowledged retransmission on a link, as the IEEE 802.15.4 MAC does it (2006 §7.5.6.4):
+/// after each attempt that arrives the receiver sends an acknowledgment frame on the downlink;
+/// a sender that hears none sends again, up to `max_retries` times, within the step (the MAC
+/// retries within milliseconds, far below a filter step). See `fate` for the draws and
+/// [`crate::network::Traffic`] for what is counted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Arq {
-    /// Retransmissions allowed after the first attempt.
+    /// Retransmissions allowed after the first attempt (`macMaxFrameRetries`, 0..=7).
     pub max_retries: u32,
+}
+
+impl Arq {
+    /// The largest `max_retries`: the range of the MAC PIB attribute `macMaxFrameRetries`
+    /// (IEEE 802.15.4-2006 §7.4.2, Table 86: 0–7, default 3).
+    pub const MAX_RETRIES: u32 = 7;
 }
 
 /// A link model: the `[channel]` table of a scenario or of one sensor.
@@ -137,7 +147,8 @@ pub struct ChannelSpec {
     /// The feedback link (fusion center → sensors); `None` = ideal downlink.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub downlink: Option<Box<ChannelSpec>>,
-    /// Retransmissions (parsed and validated only for now).
+    /// Acknowledged retransmission of the uplink's packets; the acknowledgements travel on
+    /// `downlink`. Not allowed on a downlink itself.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub arq: Option<Arq>,
 }
@@ -172,6 +183,26 @@ impl ChannelSpec {
             && self.arq.is_none()
     }
 
+    /// Whether every packet of this link arrives at once and nothing is counted but what an
+    /// ideal link counts: an ideal kind, a Bernoulli link of loss 0 or a Gilbert–Elliott link
+    /// that loses nothing in either state; zero delay; no `arq` (whose acknowledgements are
+    /// counted); and a downlink that is lossless too. Such a link draws no fate that changes a
+    /// number, so the engine may run it as an ideal one (its fast paths included).
+    pub fn is_lossless(&self) -> bool {
+        let loses = match self.kind {
+            ChannelKind::Ideal => false,
+            ChannelKind::Bernoulli => self.loss.unwrap_or(0.0) != 0.0,
+            ChannelKind::GilbertElliott => self.loss_good() != 0.0 || self.loss_bad() != 0.0,
+        };
+        !loses
+            && self.delay().is_zero()
+            && self.arq.is_none()
+            && self
+                .downlink
+                .as_deref()
+                .is_none_or(ChannelSpec::is_lossless)
+    }
+
     /// Checks the table found at `channel`; see [`ChannelSpec::validate_at`].
     pub fn validate(&self) -> Result<(), String> {
         self.validate_at("channel")
@@ -201,11 +232,26 @@ impl ChannelSpec {
                 ));
             }
         }
+        if let Some(arq) = &self.arq {
+            if arq.max_retries > Arq::MAX_RETRIES {
+                return Err(format!(
+                    "{path}.arq.max_retries = {} is out of range: 0 to {} (macMaxFrameRetries of IEEE 802.15.4)",
+                    arq.max_retries,
+                    Arq::MAX_RETRIES
+                ));
+            }
+        }
         if let Some(down) = &self.downlink {
             // A feedback link has no feedback link of its own.
             if down.downlink.is_some() {
                 return Err(format!(
                     "{path}.downlink.downlink is not allowed: a downlink has no downlink"
+                ));
+            }
+            // Feedback is not retransmitted: the downlink carries the uplink's acknowledgements.
+            if down.arq.is_some() {
+                return Err(format!(
+                    "{path}.downlink.arq is not allowed: retransmission applies to the uplink (its acknowledgements travel on the downlink)"
                 ));
             }
             down.validate_at(&format!("{path}.downlink"))?;
@@ -408,6 +454,29 @@ mod tests {
     }
 
     #[test]
+    fn lossless_links() {
+        for body in [
+            "",
+            "kind = \"bernoulli\"\nloss = 0.0",
+            "kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.2\nloss_bad = 0.0",
+            "downlink = { kind = \"bernoulli\", loss = 0.0 }",
+            "delay = { kind = \"geometric\", mean = 0.0 }",
+        ] {
+            assert!(parse_ok(body).is_lossless(), "{body:?}");
+        }
+        for body in [
+            "kind = \"bernoulli\"\nloss = 0.01",
+            "kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.2",
+            "kind = \"gilbert-elliott\"\np_gb = 0.0\np_bg = 0.2\nloss_good = 0.1\nloss_bad = 0.0",
+            "downlink = { kind = \"bernoulli\", loss = 0.5 }",
+            "delay = 1",
+            "arq = { max_retries = 0 }",
+        ] {
+            assert!(!parse_ok(body).is_lossless(), "{body:?}");
+        }
+    }
+
+    #[test]
     fn rejects_unknown_keys() {
         assert!(parse("kind = \"ideal\"\nlos = 0.1").is_err());
         assert!(parse("kind = \"erasure\"").is_err());
@@ -502,6 +571,19 @@ mod tests {
         assert_eq!(
             invalid("delay = { kind = \"geometric\", mean = nan }"),
             "channel.delay.mean = NaN must be a finite number of steps >= 0"
+        );
+    }
+
+    #[test]
+    fn arq_retries_are_bounded_and_uplink_only() {
+        assert_eq!(parse_ok("arq = { max_retries = 7 }").validate(), Ok(()));
+        assert_eq!(
+            invalid("arq = { max_retries = 8 }"),
+            "channel.arq.max_retries = 8 is out of range: 0 to 7 (macMaxFrameRetries of IEEE 802.15.4)"
+        );
+        assert!(
+            invalid("downlink = { kind = \"ideal\", arq = { max_retries = 1 } }")
+                .starts_with("channel.downlink.arq is not allowed")
         );
     }
 
