@@ -64,6 +64,10 @@ pub struct Alg2EventParams {
     pub b: Option<f64>,
     #[serde(default, rename = "B")]
     pub b_matrix: Option<Vec<Vec<f64>>>,
+    /// Loss-aware center (beyond the paper): a sensor silent twice or more may have been
+    /// lost, so its extrapolation is inflated by B plus its computed second moment.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub loss_aware: bool,
 }
 
 impl SchemeParams for Alg2EventParams {
@@ -86,12 +90,10 @@ impl SchemeParams for Alg2EventParams {
                 ))
             }
         };
-        Ok(Box::new(DistributedKfScheme::alg2_event(
-            cx.system.clone(),
-            cx.steps,
-            self.alpha,
-            b,
-        )?))
+        Ok(Box::new(
+            DistributedKfScheme::alg2_event(cx.system.clone(), cx.steps, self.alpha, b)?
+                .with_loss_aware(self.loss_aware),
+        ))
     }
 }
 
