@@ -215,7 +215,11 @@ loss_aware = true
         "Algorithm 2 (b = 0.05) at loss 0.3: published ANEES {:.3} ± {:.3}, loss-aware {:.3} ± {:.3}",
         published.anees, published.anees_se, aware.anees, aware.anees_se
     );
-    assert!(aware.anees < 1.0 + 4.0 * aware.anees_se, "loss-aware {}", aware.anees);
+    assert!(
+        aware.anees < 1.0 + 4.0 * aware.anees_se,
+        "loss-aware {}",
+        aware.anees
+    );
     assert!(
         published.anees > 1.0 + 4.0 * published.anees_se,
         "published {} ± {}",

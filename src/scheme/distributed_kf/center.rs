@@ -512,7 +512,17 @@ impl FusionCenter for DkfCenter {
                         let s = k - self.silent_steps[i];
                         let (held, received) = (&self.held[i], &self.received[i]);
                         let out = (&mut self.contribution, &mut self.loss_moment);
-                        if loss_fallback(&self.plan, &self.fusion, streak, i, s, k, held, received, out)? {
+                        if loss_fallback(
+                            &self.plan,
+                            &self.fusion,
+                            streak,
+                            i,
+                            s,
+                            k,
+                            held,
+                            received,
+                            out,
+                        )? {
                             lost += 1;
                         }
                         &self.contribution
@@ -543,8 +553,7 @@ impl FusionCenter for DkfCenter {
         crate::linalg::fixed::chol_solve(&fused.chol, &mut self.est.mean);
         if lost > 0 {
             // The loss fallback's covariance (`super::loss`): C + L G (Σ S) G^T.
-            self.est.cov =
-                loss::inflate(&fused.cov, &m.cbar_p_inv, &self.loss_moment, lost);
+            self.est.cov = loss::inflate(&fused.cov, &m.cbar_p_inv, &self.loss_moment, lost);
         } else {
             self.est.cov.copy_from(&fused.cov);
         }

@@ -172,9 +172,10 @@ impl Streak {
         let delta_e = m.delta_e.get(i).ok_or_else(|| {
             SchemeError::Unsupported("the loss-aware fallback debiases with A^{-1}".into())
         })?;
-        let d = delta_e.clone().try_inverse().ok_or_else(|| {
-            SchemeError::Unsupported("debiasing matrix Δ^e is singular".into())
-        })?;
+        let d = delta_e
+            .clone()
+            .try_inverse()
+            .ok_or_else(|| SchemeError::Unsupported("debiasing matrix Δ^e is singular".into()))?;
         let sigma = table.at(plan, i, s)?;
         let d_sigma = &d * &sigma;
         let mut cov = Matrix::zeros(2 * n, 2 * n);

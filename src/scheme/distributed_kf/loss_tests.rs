@@ -33,8 +33,16 @@ fn one_sensor_lost_from_the_start_leaves_the_pure_prediction() {
         mean *= a;
         var = a * a * var + q;
         let est = inst.center.estimate();
-        assert!((est.mean[0] - mean).abs() < 1e-12 * mean.abs(), "step {k}: {} vs {mean}", est.mean[0]);
-        assert!((est.cov[(0, 0)] - var).abs() < 1e-12 * var, "step {k}: {} vs {var}", est.cov[(0, 0)]);
+        assert!(
+            (est.mean[0] - mean).abs() < 1e-12 * mean.abs(),
+            "step {k}: {} vs {mean}",
+            est.mean[0]
+        );
+        assert!(
+            (est.cov[(0, 0)] - var).abs() < 1e-12 * var,
+            "step {k}: {} vs {var}",
+            est.cov[(0, 0)]
+        );
     }
     // And by the hand values themselves at k = 2 (1.2^2 (1.2^2 3 + 0.5) + 0.5 = 7.4408).
     let mut inst = scheme.build().unwrap();
@@ -69,7 +77,11 @@ fn one_sensor_lost_after_an_arrival_is_the_prediction_of_what_arrived() {
     inst.center.step(3, &[Received::Silent]).unwrap();
     let est = inst.center.estimate();
     let want = a * a * (a * a * p1 + q) + q;
-    assert!((est.cov[(0, 0)] - want).abs() < 1e-12 * want, "{} vs {want}", est.cov[(0, 0)]);
+    assert!(
+        (est.cov[(0, 0)] - want).abs() < 1e-12 * want,
+        "{} vs {want}",
+        est.cov[(0, 0)]
+    );
     assert!((est.mean[0] - a * a * x1[0]).abs() < 1e-12);
 }
 
@@ -82,7 +94,14 @@ fn dormann_system() -> Arc<System> {
         h[(1, b)] = 1.0;
         Arc::new(LinearSensor::new(h, Matrix::identity(2, 2)).unwrap()) as Arc<dyn MeasurementModel>
     };
-    let sensors = vec![pick(0, 3), pick(0, 3), pick(1, 4), pick(1, 4), pick(2, 5), pick(2, 5)];
+    let sensors = vec![
+        pick(0, 3),
+        pick(0, 3),
+        pick(1, 4),
+        pick(1, 4),
+        pick(2, 5),
+        pick(2, 5),
+    ];
     let prior = Gaussian::new(
         Vector::from_vec(vec![1.0, 0.5, 0.1, -2.0, 0.3, 0.0]),
         Matrix::from_diagonal(&Vector::from_vec(vec![4.0, 1.0, 0.5, 4.0, 1.0, 0.5])),
@@ -114,7 +133,9 @@ fn mean_nees(lost: &[usize], from: usize, at: usize, runs: usize, seed: u64) -> 
                     let z = system.sensors[i].sample(&x, &mut rng);
                     let t = inst.sensors[i].step(k, &z, None, &mut rng).unwrap();
                     match t {
-                        Transmission::Send(m) if !(lost.contains(&i) && k >= from) => Transmission::Send(m).into(),
+                        Transmission::Send(m) if !(lost.contains(&i) && k >= from) => {
+                            Transmission::Send(m).into()
+                        }
                         _ => Received::Silent,
                     }
                 })
