@@ -21,8 +21,9 @@ use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"HUSHFUSE";
 /// Version of the file layout and of [`State`]; files of another version are refused.
-/// 2: `Sums::per_trial` flat. 3: `Sums::link` (the link's per-step counts).
-pub const FORMAT: u32 = 3;
+/// 2: `Sums::per_trial` flat. 3: `Sums::link` (the link's per-step counts). 4:
+/// `Sums::failure` (a variant's first failed trial).
+pub const FORMAT: u32 = 4;
 const HEADER: usize = 8 + 4 + 8 + 32;
 
 /// What a run is, for telling whether a checkpoint or shard belongs to it, and how to rebuild
