@@ -64,7 +64,7 @@ impl Scheme for Failing {
             sensors: inst.sensors,
             center: Box::new(FailingCenter {
                 inner: inst.center,
-                fails: seed % 3 == 0,
+                fails: seed.is_multiple_of(3),
             }),
         })
     }
