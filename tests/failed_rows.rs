@@ -1,7 +1,7 @@
 //! A variant whose trial fails becomes a row marked failed (its first failure by trial: trial,
 //! step, message), while the other variants finish; the same failure for any thread count and
 //! any order of merging blocks; its numbers null in summary.json.
-use hushfuse::engine::runner;
+use hushfuse::engine::{durable, runner};
 use hushfuse::filter::Gaussian;
 use hushfuse::link::Received;
 use hushfuse::metrics::{results, Sums};
@@ -113,6 +113,12 @@ fn a_failed_variant_is_a_failed_row_and_the_others_finish() {
             sums
         })
         .collect();
+    // A checkpoint or shard holding them is accepted (a failed variant's counts are those of
+    // its trials up to their failures).
+    for (b, sums) in blocks.iter().enumerate() {
+        let trials = runner::block_trials(b, exp.trials).len();
+        durable::validate_sums(&exp, sums, trials, "block").unwrap();
+    }
     let mut backwards = runner::empty_sums(&exp);
     for b in blocks.iter().rev() {
         runner::fold_block(&mut backwards, b);
