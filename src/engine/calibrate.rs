@@ -249,6 +249,9 @@ impl Evaluator<'_> {
             &|_| {},
         )
         .map_err(|e| e.to_string())?;
+        if let Some(e) = runner::first_failure(&exp, &sums) {
+            return Err(e.to_string());
+        }
         Ok(results::summarize_schemes(&exp, &sums))
     }
 }

@@ -22,8 +22,9 @@ use std::path::{Path, PathBuf};
 const MAGIC: &[u8; 8] = b"HUSHFUSE";
 /// Version of the file layout and of [`State`]; files of another version are refused.
 /// 2: `Sums::per_trial` flat. 3: `Sums::link` (the link's per-step counts). 4: `Sums::link`
-/// rows of 8 counters (ARQ's retransmissions, duplicates, ACK frames and ACK bits added).
-pub const FORMAT: u32 = 4;
+/// rows of 8 counters (ARQ's retransmissions, duplicates, ACK frames and ACK bits added). 5:
+/// `Sums::failure` (a variant's first failed trial).
+pub const FORMAT: u32 = 5;
 const HEADER: usize = 8 + 4 + 8 + 32;
 
 /// What a run is, for telling whether a checkpoint or shard belongs to it, and how to rebuild
@@ -576,6 +577,19 @@ pub fn validate_sums(
                 return bad(field, got.to_string(), expected.to_string());
             }
         }
+        // A variant with a failed trial holds what its trials recorded up to their failures:
+        // its counts are not those of whole trials (and its numbers are not reported).
+        let counted = match &s.failure {
+            None => true,
+            Some(f) if f.trial < exp.trials => false,
+            Some(f) => {
+                return bad(
+                    "failure.trial",
+                    f.trial.to_string(),
+                    format!("below {} (the run's trials)", exp.trials),
+                )
+            }
+        };
         let width = e.layout().width();
         let groups = e.layout_groups;
         let per_trial = trials as u128 * (1 + groups) as u128;
@@ -624,7 +638,8 @@ pub fn validate_sums(
             ),
         ];
         for (field, got, expected, what) in lengths {
-            if got != expected {
+            let per_trial_field = matches!(field, "per_trial" | "per_trial_nees");
+            if got != expected && (counted || !per_trial_field) {
                 return bad(
                     field,
                     format!("{got} values long"),
@@ -638,6 +653,9 @@ pub fn validate_sums(
                 format!("{} steps long", s.link.len()),
                 format!("empty or {} steps", e.steps),
             );
+        }
+        if !counted {
+            continue;
         }
         if s.trials != trials {
             return bad(

@@ -114,6 +114,8 @@ pub struct Finished {
     pub elapsed: f64,
     /// Numbers that are not finite (written as null): such a run's results cannot be trusted.
     pub non_finite: Vec<String>,
+    /// Variants whose trial failed (their rows are marked failed, their numbers null).
+    pub failed: Vec<String>,
 }
 
 /// What [`execute`] did.
@@ -259,6 +261,7 @@ fn write_run(
     manifest.trials = Some(key.trials);
     let files = out_dir.commit(manifest, false).map_err(RunFailure::Run)?;
     let non_finite = results::non_finite(&summary);
+    let failed = results::failed(&summary);
     Ok(Finished {
         exp,
         summary,
@@ -266,6 +269,7 @@ fn write_run(
         files,
         elapsed,
         non_finite,
+        failed,
     })
 }
 

@@ -4,7 +4,7 @@
 //! Trials run in parallel in fixed blocks whose sums are merged in block order, so results are
 //! bit-identical for any number of threads.
 use crate::linalg::Vector;
-use crate::metrics::Sums;
+use crate::metrics::{Sums, TrialFailure};
 use crate::network;
 use crate::scenario::experiment::Experiment;
 pub use crate::scenario::limits::{WINDOW_MAX_BYTES, WINDOW_PER_THREAD};
@@ -54,6 +54,14 @@ pub enum RunError {
     },
     #[error("could not start the thread pool: {0}")]
     Pool(String),
+    /// A variant's trial failed (recorded in its sums, see [`first_failure`]).
+    #[error("trial {trial}: {message}")]
+    Failed {
+        label: String,
+        trial: usize,
+        k: usize,
+        message: String,
+    },
 }
 
 /// Truth and measurements of one trial.
@@ -565,26 +573,38 @@ fn run_variant(
         obs: &mut obs,
         truth: &data.truth,
     };
-    run_trial(exp, &data.measurements, spec, scratch, &mut observer).map_err(|e| match e {
-        LoopError::Scheme { k, source } => RunError::Scheme {
-            label: label.clone(),
-            variant: v,
-            trial,
-            k,
-            source,
-        },
-        LoopError::Covariance { k, source } => RunError::Covariance {
-            label: label.clone(),
-            trial,
-            k,
-            source,
-        },
-        LoopError::Observer { .. } => {
-            unreachable!("the metrics observer fails only on covariances")
+    match run_trial(exp, &data.measurements, spec, scratch, &mut observer) {
+        Ok(()) => obs.finish(),
+        // A failed trial makes the variant a failed row (the first failure, by trial), not
+        // the end of the run: the other variants finish. What the trial recorded before it
+        // failed stays in these sums, which are then not reported.
+        Err(e) => {
+            let step = match &e {
+                LoopError::Scheme { k, .. }
+                | LoopError::Covariance { k, .. }
+                | LoopError::Observer { k, .. } => *k,
+            };
+            sums.record_failure(TrialFailure {
+                trial,
+                step,
+                message: e.describe(label),
+            });
         }
-    })?;
-    obs.finish();
+    }
     Ok(())
+}
+
+/// The first failure of any variant of a run, as the error the run stopped with before failed
+/// variants became failed rows (for callers that need every variant to succeed: calibration).
+pub fn first_failure(exp: &Experiment, sums: &[Sums]) -> Option<RunError> {
+    sums.iter().enumerate().find_map(|(v, s)| {
+        s.failure.as_ref().map(|f| RunError::Failed {
+            label: exp.curves[exp.variants[v].curve].label.clone(),
+            trial: f.trial,
+            k: f.step,
+            message: f.message.clone(),
+        })
+    })
 }
 
 /// Options of a run.

@@ -1,8 +1,10 @@
 //! Metrics as mergeable sums, the summaries computed from them, and the bounds no scheme
 //! can beat.
+mod failed;
 pub mod link;
 pub mod pcrb;
 pub mod results;
 pub mod sums;
 
+pub use failed::summary_json;
 pub use sums::*;

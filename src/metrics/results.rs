@@ -1,4 +1,5 @@
 //! From merged sums to the numbers people read: `summary.json`, `per_step.csv` and the table.
+pub use super::failed::{failed, non_finite};
 use crate::metrics::{Layout, Sums};
 use crate::scenario::build::Experiment;
 use crate::scenario::Params;
@@ -113,6 +114,10 @@ pub struct SchemeSummary {
     /// What the link did to the messages (absent for an ideal link).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link: Option<crate::metrics::link::LinkSummary>,
+    /// The first trial of this variant that failed (the variant's numbers are then not
+    /// reported: null in summary.json, a failed row in the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failed: Option<crate::metrics::TrialFailure>,
     /// Statistics of the NEES that a few collapsed trials cannot ruin.
     pub consistency: Consistency,
     pub steady_state: SteadyState,
@@ -300,16 +305,13 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 nees_coverage_95: covered_95 / steps as f64,
                 nees_coverage_95_se: run_se(Layout::NEES_COVERED_95, 1.0),
                 diverged_fraction: p_div,
-                diverged_fraction_se: if exp.trials > 0 {
-                    (p_div * (1.0 - p_div) / trials).sqrt()
-                } else {
-                    f64::NAN
-                },
+                diverged_fraction_se: binomial_se(p_div, exp.trials),
                 ess,
                 link: v
                     .channel
                     .as_ref()
                     .map(|_| crate::metrics::link::summarize(s, exp.trials, col(Layout::MESSAGES))),
+                failed: s.failure.clone(),
                 consistency,
                 per_trial: s.per_trial_rows().map(<[f64]>::to_vec).collect(),
                 steady_state: SteadyState {
@@ -344,6 +346,15 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
 
 /// Standard error of an RMSE from that of its MSE by the delta method: d sqrt(m) = dm / (2
 /// sqrt(m)). A zero RMSE with a zero spread has a zero standard error.
+/// sqrt(p (1 - p) / trials); NaN without trials.
+fn binomial_se(p: f64, trials: usize) -> f64 {
+    if trials > 0 {
+        (p * (1.0 - p) / trials as f64).sqrt()
+    } else {
+        f64::NAN
+    }
+}
+
 fn rmse_se_of(mse_se: f64, rmse: f64) -> f64 {
     if mse_se == 0.0 {
         0.0
@@ -610,9 +621,15 @@ pub fn table(summary: &Summary) -> String {
                     .map_or("-".into(), |l| format!("{:.2}", l.lost)),
             );
         }
+        if s.failed.is_some() {
+            super::failed::blank_row(&mut r);
+        }
         rows.push(r);
     }
     let mut out = text_table(&rows, 2);
+    for line in super::failed::failed(summary) {
+        let _ = writeln!(out, "failed: {line}");
+    }
     if let Some(s) = summary.schemes.first() {
         let c = &s.consistency;
         let _ = writeln!(
@@ -643,7 +660,8 @@ pub fn table(summary: &Summary) -> String {
 /// change.
 pub fn warnings(summary: &Summary) -> Vec<String> {
     let mut out = Vec::new();
-    for s in &summary.schemes {
+    // A failed variant's numbers are not reported: its failure is said under the table.
+    for s in summary.schemes.iter().filter(|s| s.failed.is_none()) {
         let who = if s.params.is_empty() {
             s.name.clone()
         } else {
@@ -735,56 +753,6 @@ pub fn curve_points(exp: &Experiment, summary: &Summary, curve: usize) -> Vec<Cu
     }
     pts.sort_by(|a, b| a.rate.total_cmp(&b.rate));
     pts
-}
-
-/// Where a summary holds a number that is not finite (an overflow or a collapsed filter):
-/// `scheme (params): metric` for each. A run that produces one must not look like a success.
-pub fn non_finite(summary: &Summary) -> Vec<String> {
-    let mut out = Vec::new();
-    for s in &summary.schemes {
-        let value = serde_json::to_value(s).unwrap_or(serde_json::Value::Null);
-        let mut bad = Vec::new();
-        find_nulls(&value, "", &mut bad);
-        // With one trial no standard error exists: its NaN says so, and is no overflow.
-        if summary.trials < 2 {
-            bad.retain(|path| !path.split('.').any(|seg| seg.contains("_se")));
-        }
-        bad.dedup();
-        if !bad.is_empty() {
-            out.push(format!(
-                "{} ({}): {}",
-                s.name,
-                params_text(&s.params),
-                bad.join(", ")
-            ));
-        }
-    }
-    out
-}
-
-/// JSON has no NaN or infinity: serde writes them as `null`, and nothing else in a scheme's
-/// summary is optional.
-fn find_nulls(v: &serde_json::Value, path: &str, out: &mut Vec<String>) {
-    match v {
-        serde_json::Value::Null => out.push(path.to_string()),
-        serde_json::Value::Object(m) => {
-            for (k, x) in m {
-                let p = if path.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{path}.{k}")
-                };
-                find_nulls(x, &p, out);
-            }
-        }
-        // A per-step or per-trial list is named once, not once per entry.
-        serde_json::Value::Array(a) => {
-            for x in a {
-                find_nulls(x, path, out);
-            }
-        }
-        _ => {}
-    }
 }
 
 /// Rows as an aligned text table: the first `left` columns left-aligned, the others

@@ -144,12 +144,21 @@ fn stage_part(
         Part::Summary => {
             if let Some(summary) = r.summary {
                 let name = format!("{prefix}summary.json");
+                // A failed variant's numbers are written as null (through a JSON value, only
+                // then: every other summary is written as it serializes).
+                let failed = summary.schemes.iter().any(|s| s.failed.is_some());
                 out_dir.stage_with(&name, |w| {
-                    match r.paper {
-                        Some(paper) => {
+                    match (r.paper, failed) {
+                        (Some(paper), false) => {
                             serde_json::to_writer_pretty(w, &SummaryFile { summary, paper })
                         }
-                        None => serde_json::to_writer_pretty(w, summary),
+                        (None, false) => serde_json::to_writer_pretty(w, summary),
+                        (Some(paper), true) => {
+                            crate::metrics::summary_json(&SummaryFile { summary, paper })
+                                .and_then(|v| serde_json::to_writer_pretty(w, &v))
+                        }
+                        (None, true) => crate::metrics::summary_json(summary)
+                            .and_then(|v| serde_json::to_writer_pretty(w, &v)),
                     }
                     .map_err(std::io::Error::from)
                 })?;

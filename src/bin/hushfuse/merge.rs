@@ -10,5 +10,6 @@ pub(crate) fn merge(inputs: &[PathBuf], out: &Path, report: bool) -> Result<(), 
     };
     let done = engine_run::merge(inputs, out, report, &hooks).map_err(failure)?;
     wrote(&done, Vec::new());
+    check_failed(&done.failed)?;
     check_finite(done.non_finite)
 }

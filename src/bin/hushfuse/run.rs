@@ -178,6 +178,7 @@ pub(crate) fn run(scenario: &str, args: &RunArgs, reproduce: bool) -> Result<(),
                 None => Vec::new(),
             };
             wrote(&done, extra);
+            check_failed(&done.failed)?;
             check_finite(done.non_finite)
         }
     }
@@ -203,6 +204,17 @@ pub(crate) fn failure(e: engine_run::RunFailure) -> Failure {
             Failure::Interrupted(format!("{stopped}\ncontinue with: {}", resume_command()))
         }
     }
+}
+
+/// A run with a variant whose trial failed fails (after writing the others' results).
+pub(crate) fn check_failed(failed: &[String]) -> Result<(), Failure> {
+    if !failed.is_empty() {
+        return Err(Failure::Run(format!(
+            "a scheme's trial failed (its row is marked failed, its numbers null in summary.json; the other schemes finished):\n  {}",
+            failed.join("\n  ")
+        )));
+    }
+    Ok(())
 }
 
 /// A run whose numbers are not all finite fails (after writing them, as null).

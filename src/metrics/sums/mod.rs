@@ -58,6 +58,20 @@ pub struct Sums {
     /// does any of this (an ideal link costs nothing here); integers, so the order of additions
     /// changes nothing.
     pub link: Vec<[u64; LINK_FIELDS]>,
+    /// The first trial (in trial order) whose loop failed, if one did: the variant is then
+    /// reported as failed and its numbers are not used. Merging keeps the lowest trial, so the
+    /// failure reported does not depend on threads, checkpoints or shards.
+    #[serde(default)]
+    pub failure: Option<TrialFailure>,
+}
+
+/// Where and why a variant's trial failed.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct TrialFailure {
+    pub trial: usize,
+    /// The step (1-based; 0: building the scheme).
+    pub step: usize,
+    pub message: String,
 }
 
 /// Number of counters in a row of [`Sums::link`].
@@ -156,6 +170,14 @@ impl Sums {
             has_ess: false,
             nees_hist: NeesHistogram::new(),
             link: Vec::new(),
+            failure: None,
+        }
+    }
+
+    /// Records that a trial failed; of several, the lowest trial is kept.
+    pub fn record_failure(&mut self, f: TrialFailure) {
+        if self.failure.as_ref().is_none_or(|g| f.trial < g.trial) {
+            self.failure = Some(f);
         }
     }
 
@@ -250,6 +272,7 @@ impl Sums {
         self.has_ess = false;
         self.nees_hist.clear();
         self.link.clear();
+        self.failure = None;
     }
 
     /// Adds another block's sums (same shape).
@@ -276,6 +299,9 @@ impl Sums {
         }
         self.has_ess |= o.has_ess;
         self.nees_hist.merge(&o.nees_hist);
+        if let Some(f) = &o.failure {
+            self.record_failure(f.clone());
+        }
         if !o.link.is_empty() {
             if self.link.is_empty() {
                 self.link = vec![[0; LINK_FIELDS]; self.steps];

@@ -1,4 +1,5 @@
 //! Fusion center of the globalized distributed KF (Dormann et al.).
+use super::loss::{self, Streak};
 use super::plan::{GlobalizedPlan, PredictedDelta};
 use super::sensor::debiased_extrapolation_into;
 use crate::filter::Gaussian;
@@ -17,12 +18,17 @@ use std::sync::{OnceLock, RwLock};
 #[derive(Debug, Clone, PartialEq)]
 pub enum Fusion {
     /// Algorithm 1, eq. (10)-(11): exact (equal to the centralized KF that received everything
-    /// up to k-1 and the same subset at k) as long as every silent sensor sent at k-1; a sensor
-    /// silent twice in a row is a protocol error.
+    /// up to k-1 and the same subset at k) as long as every silent sensor sent at k-1. Under
+    /// the protocol a sensor is never silent twice in a row, so an estimate missing twice in a
+    /// row was lost by the link: the center then uses the debiased extrapolation of its last
+    /// estimate to arrive and inflates the covariance by that extrapolation's computed second
+    /// moment (the loss fallback of [`super::loss`]).
     OmittedEstimates,
     /// Algorithm 2 (Section IV): silent sensors contribute their debiased extrapolation x̃^{pp,i}
     /// and the covariance is inflated by (N - m - l)^2 C (C̄^p)^{-1} B (C̄^p)^{-1} C^T, which
-    /// keeps the estimate consistent when the sensors use test (13) with the same B.
+    /// keeps the estimate consistent when the sensors use test (13) with the same B and every
+    /// sent estimate arrives. A loss-aware center ([`DkfCenter::set_loss_aware`]) inflates by
+    /// B plus the extrapolation's second moment instead (see [`super::loss`]).
     Bounded { b: Matrix },
 }
 
@@ -164,6 +170,15 @@ pub struct DkfCenter {
     held_delta: Vec<Option<Arc<PredictedDelta>>>,
     /// Per sensor: consecutive silent steps including the current one.
     silent_steps: Vec<usize>,
+    /// Per sensor: the last globalized estimate to arrive, as it arrived (x̄^{e,i}_s).
+    received: Vec<Vector>,
+    /// Per sensor: its run of estimates missing twice or more ([`super::loss`]).
+    streaks: Vec<Option<Streak>>,
+    /// Algorithm 2 only: treat a sensor silent twice or more as possibly lost (B plus the
+    /// extrapolation's second moment) instead of Algorithm 2's B alone.
+    loss_aware: bool,
+    /// Σ of the second moments (plus B) of this step's loss fallbacks.
+    loss_moment: Matrix,
     memo: Arc<CovarianceMemo>,
     /// Per sensor: the first sensor whose information matrix H^T R^{-1} H is bitwise the
     /// same (identical sensors remove identical information, see [`canonical_silence`]).
@@ -216,6 +231,10 @@ impl DkfCenter {
             .collect();
         Self {
             plan,
+            received: held.clone(),
+            streaks: vec![None; sensors.len()],
+            loss_aware: false,
+            loss_moment: Matrix::zeros(n, n),
             sensors,
             fusion,
             est: prior,
@@ -317,6 +336,20 @@ impl DkfCenter {
         })
     }
 
+    /// Algorithm 2's center made loss-aware: a sensor silent twice or more in a row may have
+    /// been lost, so its term is inflated by B plus the computed second moment of its
+    /// extrapolation (see [`super::loss`]). Algorithm 1's center always treats such a sensor
+    /// as lost (the protocol never omits twice), so the flag changes nothing there.
+    pub fn set_loss_aware(&mut self, on: bool) {
+        self.loss_aware = on;
+    }
+
+    /// Whether a sensor silent twice or more is treated as Algorithm 2's bounded omission (B
+    /// alone, as published) rather than by the loss fallback.
+    fn published_bound(&self) -> bool {
+        matches!(self.fusion, Fusion::Bounded { .. }) && !self.loss_aware
+    }
+
     /// The plan the center fuses with.
     pub(super) fn plan(&self) -> &GlobalizedPlan {
         &self.plan
@@ -412,6 +445,8 @@ impl FusionCenter for DkfCenter {
         let mut silent = 0u64;
         // Silent sensors whose extrapolation is not exact (N - m - l of Section IV).
         let mut inexact = 0usize;
+        // Sensors under the loss fallback whose second moment is in `loss_moment`.
+        let mut lost = 0usize;
         for (i, msg) in inbox.iter().enumerate() {
             super::sensor::predict_in_place(a, &mut self.held[i], &mut self.tmp);
             if bounded {
@@ -435,6 +470,8 @@ impl FusionCenter for DkfCenter {
                     crate::linalg::fixed::gemv(&mut self.tmp, &m.cbar_e_inv, x);
                     self.info_vec += &self.tmp;
                     self.held[i].copy_from(x);
+                    self.received[i].copy_from(x);
+                    self.streaks[i] = None;
                     if bounded {
                         self.held_delta[i] = self.plan.delta_head(i, p);
                     }
@@ -453,31 +490,42 @@ impl FusionCenter for DkfCenter {
                     let contribution = if self.silent_steps[i] == 1 {
                         // Sent at k-1: x̄^{pp} = x̄^p, exact (11), second sum.
                         &self.held[i]
+                    } else if self.published_bound() {
+                        // Algorithm 2 (Section IV): the debiased extrapolation, bounded by B.
+                        inexact += 1;
+                        let pd = self.held_delta[i].as_ref().expect("checked invertible");
+                        debiased_extrapolation_into(
+                            &m.delta_p[i],
+                            pd,
+                            self.held[i].as_slice(),
+                            &mut self.tmp2,
+                            &mut self.contribution,
+                        )?;
+                        &self.contribution
                     } else {
-                        match &self.fusion {
-                            Fusion::OmittedEstimates => {
-                                return Err(SchemeError::Protocol {
-                                    sensor: i,
-                                    message: format!(
-                                        "silent for {} steps; Algorithm 1 needs a \
-                                         transmission at least every other step",
-                                        self.silent_steps[i]
-                                    ),
-                                })
-                            }
-                            Fusion::Bounded { .. } => {
-                                inexact += 1;
-                                let pd = self.held_delta[i].as_ref().expect("checked invertible");
-                                debiased_extrapolation_into(
-                                    &m.delta_p[i],
-                                    pd,
-                                    self.held[i].as_slice(),
-                                    &mut self.tmp2,
-                                    &mut self.contribution,
-                                )?;
-                                &self.contribution
-                            }
+                        // Missing twice or more: lost (Algorithm 1) or possibly lost
+                        // (loss-aware Algorithm 2), see `super::loss`.
+                        if lost == 0 {
+                            self.loss_moment.fill(0.0);
                         }
+                        let streak = &mut self.streaks[i];
+                        let s = k - self.silent_steps[i];
+                        let (held, received) = (&self.held[i], &self.received[i]);
+                        let out = (&mut self.contribution, &mut self.loss_moment);
+                        if loss_fallback(
+                            &self.plan,
+                            &self.fusion,
+                            streak,
+                            i,
+                            s,
+                            k,
+                            held,
+                            received,
+                            out,
+                        )? {
+                            lost += 1;
+                        }
+                        &self.contribution
                     };
                     crate::linalg::fixed::gemv(&mut self.tmp, &m.cbar_p_inv, contribution);
                     self.info_vec += &self.tmp;
@@ -503,13 +551,57 @@ impl FusionCenter for DkfCenter {
         };
         self.est.mean.copy_from(&self.info_vec);
         crate::linalg::fixed::chol_solve(&fused.chol, &mut self.est.mean);
-        self.est.cov.copy_from(&fused.cov);
+        if lost > 0 {
+            // The loss fallback's covariance (`super::loss`): C + L G (Σ S) G^T.
+            self.est.cov = loss::inflate(&fused.cov, &m.cbar_p_inv, &self.loss_moment, lost);
+        } else {
+            self.est.cov.copy_from(&fused.cov);
+        }
         Ok(())
     }
 
     fn estimate(&self) -> &Gaussian {
         &self.est
     }
+}
+
+/// Sensor i, whose last estimate to arrive (`received`, x̄^{e,i}_s) was sent at step s, is
+/// missing at step k for the second time or more: its term (the debiased extrapolation) into
+/// `out.0`, and its second moment S (plus B under Algorithm 2) added to `out.1`. Returns
+/// whether it was added; with a singular A there is no debiasing, the term is the plain
+/// extrapolation `held` and nothing is added ([`super::loss`]).
+#[allow(clippy::too_many_arguments)]
+fn loss_fallback(
+    plan: &GlobalizedPlan,
+    fusion: &Fusion,
+    streak: &mut Option<Streak>,
+    i: usize,
+    s: usize,
+    k: usize,
+    held: &Vector,
+    received: &Vector,
+    out: (&mut Vector, &mut Matrix),
+) -> Result<bool, SchemeError> {
+    let (contribution, moment) = out;
+    if plan.a_inv().is_none() {
+        contribution.copy_from(held);
+        return Ok(false);
+    }
+    let table = plan.loss_table();
+    let streak = match streak {
+        Some(st) => st,
+        None => streak.insert(Streak::start(plan, table, i, s, received)?),
+    };
+    while streak.t() + 1 < k {
+        streak.advance(plan, table, i)?;
+    }
+    let (term, second_moment) = streak.term_and_moment(plan, i)?;
+    contribution.copy_from(&term);
+    *moment += &second_moment;
+    if let Fusion::Bounded { b } = fusion {
+        *moment += b;
+    }
+    Ok(true)
 }
 
 /// The silence set that removes the same sequence of information matrices as `silent` (bit i

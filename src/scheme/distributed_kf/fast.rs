@@ -201,12 +201,14 @@ fn run_variant(
                         Fusion::OmittedEstimates => {
                             return Err(err(k)(SchemeError::Protocol {
                                 sensor: i,
+                                // Unreachable: Algorithm 1's sensors never omit twice and
+                                // the fast trial runs on a lossless link only.
                                 message: format!(
-                                    "silent for {} steps; Algorithm 1 needs a \
-                                     transmission at least every other step",
+                                    "silent for {} steps on a lossless link; Algorithm 1's \
+                                     sensors send at least every other step",
                                     st.silent_steps
                                 ),
-                            }))
+                            }));
                         }
                         Fusion::Bounded { .. } => inexact += 1,
                     }

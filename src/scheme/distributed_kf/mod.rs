@@ -8,6 +8,7 @@
 //! its own.
 pub mod center;
 mod fast;
+mod loss;
 pub mod params;
 pub mod plan;
 mod replica;
@@ -36,6 +37,8 @@ pub struct DistributedKfScheme {
     memo: Arc<CovarianceMemo>,
     /// A fresh center (sharing `memo`), for the fast trial's fused covariances.
     proto: Arc<DkfCenter>,
+    /// Algorithm 2's loss-aware center ([`DkfCenter::set_loss_aware`]).
+    loss_aware: bool,
 }
 
 impl DistributedKfScheme {
@@ -80,7 +83,17 @@ impl DistributedKfScheme {
             fusion,
             memo,
             proto,
+            loss_aware: false,
         })
+    }
+
+    /// Algorithm 2's center made loss-aware: a sensor silent twice or more may have been
+    /// lost, and its extrapolation is inflated by B plus its computed second moment (see
+    /// [`DkfCenter::set_loss_aware`]). No effect on Algorithm 1, whose center always treats an
+    /// estimate missing twice as lost.
+    pub fn with_loss_aware(mut self, on: bool) -> Self {
+        self.loss_aware = on && matches!(self.fusion, Fusion::Bounded { .. });
+        self
     }
 
     /// The globalized DKF at full rate (Section II).
@@ -167,13 +180,14 @@ impl Scheme for DistributedKfScheme {
                 )) as Box<dyn SensorNode>
             })
             .collect();
-        let center = Box::new(DkfCenter::with_memo(
+        let mut center = Box::new(DkfCenter::with_memo(
             self.plan.clone(),
             self.system.sensors.clone(),
             self.system.prior.clone(),
             self.fusion.clone(),
             self.memo.clone(),
         ));
+        center.set_loss_aware(self.loss_aware);
         Ok(SchemeInstance { sensors, center })
     }
 
@@ -191,6 +205,10 @@ impl LockstepFastPath for DistributedKfScheme {
         cache: &mut TrialCache,
         sink: &mut dyn StepSink,
     ) -> Option<Result<(), FastTrialError>> {
+        // The fast trial fuses as published (Algorithm 2's B alone).
+        if self.loss_aware {
+            return None;
+        }
         fast::run(self, measurements, steps, rng, cache, sink)
     }
 }
@@ -206,6 +224,8 @@ fn check_alpha(alpha: f64) -> Result<f64, SchemeError> {
     }
 }
 
+#[cfg(test)]
+mod loss_tests;
 #[cfg(test)]
 mod reference;
 #[cfg(test)]

@@ -64,6 +64,10 @@ pub struct Alg2EventParams {
     pub b: Option<f64>,
     #[serde(default, rename = "B")]
     pub b_matrix: Option<Vec<Vec<f64>>>,
+    /// Loss-aware center (beyond the paper): a sensor silent twice or more may have been
+    /// lost, so its extrapolation is inflated by B plus its computed second moment.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub loss_aware: bool,
 }
 
 impl SchemeParams for Alg2EventParams {
@@ -86,12 +90,10 @@ impl SchemeParams for Alg2EventParams {
                 ))
             }
         };
-        Ok(Box::new(DistributedKfScheme::alg2_event(
-            cx.system.clone(),
-            cx.steps,
-            self.alpha,
-            b,
-        )?))
+        Ok(Box::new(
+            DistributedKfScheme::alg2_event(cx.system.clone(), cx.steps, self.alpha, b)?
+                .with_loss_aware(self.loss_aware),
+        ))
     }
 }
 
@@ -111,7 +113,7 @@ pub const FULL_RATE: SchemeEntry = SchemeEntry {
     applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<FullRateParams>,
     example: "",
-    missing_packet: "a missing estimate is an omission (Dormann et al.): the center uses its own prediction of the local estimate in its place; Algorithm 1 is exact for one omitted step only, so two missing in a row stop the run with an error",
+    missing_packet: "a missing estimate is an omission (Dormann et al.): the center uses its prediction of the local estimate (Alg. 1, eq. (10)-(11), exact when the previous estimate arrived); a second one missing in a row can only be a loss: the center then uses the debiased extrapolation of the last estimate to arrive (Section IV) and inflates the covariance by that extrapolation's computed second moment",
 };
 
 pub const ALG1_RANDOM: SchemeEntry = SchemeEntry {
@@ -132,7 +134,7 @@ pub const ALG1_RANDOM: SchemeEntry = SchemeEntry {
     applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<Alg1RandomParams>,
     example: "rate = 0.75",
-    missing_packet: "a missing estimate is an omission: the center predicts the local estimate (Alg. 1); random omissions carry no information, so a loss misleads nothing; two missing in a row stop the run with an error (Algorithm 1 is exact for one omitted step)",
+    missing_packet: "a missing estimate is an omission: the center predicts the local estimate (Alg. 1, exact after an estimate that arrived); random omissions carry no information, so a loss misleads nothing; a second one missing in a row is a loss: debiased extrapolation of the last estimate to arrive, covariance inflated by its computed second moment (exact for one such sensor)",
 };
 
 pub const ALG1_EVENT: SchemeEntry = SchemeEntry {
@@ -144,7 +146,7 @@ pub const ALG1_EVENT: SchemeEntry = SchemeEntry {
     applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<Alg1EventParams>,
     example: "alpha = 0.3",
-    missing_packet: "a missing estimate is an omission: the center predicts the local estimate (Alg. 1), which with event-based omission assumes the local estimate stayed close; a loss breaks that assumption, and two missing in a row stop the run with an error",
+    missing_packet: "a missing estimate is an omission: the center predicts the local estimate (Alg. 1), which with event-based omission assumes the local estimate stayed close; a loss breaks that assumption, and the sensor (no acknowledgement) may omit the next one too; a second one missing in a row is a loss: debiased extrapolation of the last estimate to arrive, covariance inflated by its computed second moment",
 };
 
 pub const ALG2_EVENT: SchemeEntry = SchemeEntry {
@@ -165,10 +167,16 @@ pub const ALG2_EVENT: SchemeEntry = SchemeEntry {
             default: "none",
             meaning: "the bound B as a matrix (give `b` or `B`)",
         },
+        ParamDoc {
+            name: "loss_aware",
+            values: "true | false",
+            default: "false",
+            meaning: "loss-aware fusion (beyond the paper): a sensor silent twice or more may have been lost, so its extrapolation is inflated by B plus its computed second moment; false: Algorithm 2's B alone",
+        },
     ],
     knob: Some(registry::Knob::threshold("alpha")),
     applies: registry::Applies::LinearSensors,
     build: registry::parse_and_build::<Alg2EventParams>,
     example: "alpha = 0.4\nb = 10.0",
-    missing_packet: "a missing estimate is an omission: the center predicts the local estimate and inflates its covariance by the event bound (Alg. 2), which assumes the local estimate stayed within the bound; a loss breaks that assumption",
+    missing_packet: "a missing estimate is an omission: the center predicts the local estimate (debiased) and inflates its covariance by the event bound (Alg. 2), which assumes the sensor's test bounded it; a loss breaks that (the sensor, without acknowledgement, bounds against the estimate it sent); with loss_aware = true the inflation is B plus the extrapolation's computed second moment",
 };

@@ -3,6 +3,7 @@
 //! globalized estimate, the debiasing matrices (eq. (14)) and the gains of the standard KF each
 //! sensor runs beside the globalized one. None of them depends on measurements, so sensors and
 //! fusion center compute them identically; we compute them once and share them.
+use super::loss::EpsilonTable;
 use crate::linalg::{relative_difference, spd_inverse, symmetrize, Matrix};
 use crate::scheme::{SchemeError, System};
 use std::sync::{Arc, Mutex, OnceLock, Weak};
@@ -47,6 +48,9 @@ pub struct GlobalizedPlan {
     n_sensors: usize,
     /// Predicted debiasing matrices, filled on demand (see [`GlobalizedPlan::delta_head`]).
     deltas: Arc<DeltaMemo>,
+    /// Covariances of the globalized estimates' debiased errors, for the center's treatment
+    /// of estimates missing twice in a row ([`super::loss`]), filled on demand.
+    loss: Arc<EpsilonTable>,
 }
 
 /// Δ^{pp,i} = A^j Δ^{e,i}_s A^{-j}: sensor i's debiasing matrix sent at step s, predicted j
@@ -260,6 +264,14 @@ impl GlobalizedPlan {
         } else {
             Vec::new()
         };
+        let loss = EpsilonTable::new(
+            q.clone(),
+            sensors
+                .iter()
+                .map(|s| crate::model::MeasurementModel::noise_cov(*s).clone())
+                .collect(),
+            p0.clone(),
+        );
         Ok(Self {
             steps,
             converged,
@@ -267,6 +279,7 @@ impl GlobalizedPlan {
             a_inv,
             n_sensors: sensors.len(),
             deltas: Arc::new(DeltaMemo { heads, chain }),
+            loss: Arc::new(loss),
         })
     }
 
@@ -337,6 +350,11 @@ impl GlobalizedPlan {
     /// A^{-1}, needed by the debiasing of Algorithm 2; `None` when A is singular.
     pub fn a_inv(&self) -> Option<&Matrix> {
         self.a_inv.as_ref()
+    }
+
+    /// The table of the loss fallback ([`super::loss`]).
+    pub(super) fn loss_table(&self) -> &EpsilonTable {
+        &self.loss
     }
 
     /// Number of sensors N.

@@ -146,14 +146,19 @@ proptest! {
 }
 
 #[test]
-fn algorithm1_rejects_two_silent_steps() {
+fn algorithm1_survives_estimates_missing_twice_in_a_row() {
+    // Under the protocol only a loss makes an estimate miss twice: the center falls back
+    // (see `loss`) instead of stopping.
     let system = dormann_system();
-    let scheme = DistributedKfScheme::new(system.clone(), 3, Trigger::Always, None).unwrap();
+    let scheme = DistributedKfScheme::new(system.clone(), 5, Trigger::Always, None).unwrap();
     let mut inst = scheme.build().unwrap();
     let silent = vec![Received::Silent; 6];
-    inst.center.step(1, &silent).unwrap();
-    let err = inst.center.step(2, &silent).unwrap_err();
-    assert!(err.to_string().contains("every other step"), "{err}");
+    for k in 1..=5 {
+        inst.center.step(k, &silent).unwrap();
+        let est = inst.center.estimate();
+        assert!(est.mean.iter().all(|v| v.is_finite()), "step {k}");
+        crate::linalg::check_spd(&est.cov).unwrap();
+    }
 }
 
 #[test]
