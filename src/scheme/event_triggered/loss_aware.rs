@@ -208,22 +208,51 @@ pub fn no_arrival_variance(delta: f64, m: usize, p: f64) -> f64 {
 /// published). So the center keeps, per sensor, the probability q that the sensor's reference
 /// is still z_r (q = 1 when a message arrives) and reads "nothing arrived" as the mixture of
 ///
-/// - A, "reference z_r and silent": the published uniform reading (z_r with noise R + δ²/3 I),
+/// - A, "reference z_r, silent": the published uniform reading (z_r with noise R + δ²/3 I),
 ///   prior weight q P_in, P_in = P(||z_k - z_r||_∞ <= δ | past);
-/// - B, "no information" (the prediction): prior weight q p (1 - P_in) (sent and lost) +
-///   (1 - q) (p + (1 - p) P_in) (the reference was already stale: silent around it, or lost).
+/// - L, "reference z_r, sent and lost": the prior conditioned on z_k outside the band, prior
+///   weight q p (1 - P_in) (the out-of-band truncated moments, as for Wu et al.'s trigger);
+/// - S, "reference already stale": no information (the prediction: the band around the
+///   sensor's unknown reference cannot be placed), prior weight (1 - q) (p + (1 - p) P_in);
 ///
-/// projected by [`moment_match`]; after it, q = w_A (only A keeps the reference at z_r).
+/// projected on one Gaussian by [`mix`]; after it, q = w_A (only A keeps the reference at z_r).
 ///
-/// Approximations, beyond the uniform reading's own: P_in is the product of the per-component
-/// band probabilities of the predictive N(h(m), H P H^T + R) (the correlation between
-/// components is ignored; exact for one component); with a stale reference the sensor is
-/// taken to stay silent with the same probability P_in (the band around its unknown reference
-/// is as likely to hold z_k as the center's); the history is summarized by q alone.
+/// Approximations, beyond the uniform reading's own: the predictive law of z_k is the Gaussian
+/// N(h(m), H P H^T + R) of the running estimate; P_in is the product of the per-component band
+/// probabilities (the correlation between components is ignored; exact for one component);
+/// the out-of-band component L is exact (given that Gaussian) for a scalar sensor and is the
+/// prediction for a vector one (the complement of a box is not a product set); with a stale
+/// reference the sensor is taken to stay silent with the same probability P_in (the band
+/// around its unknown reference is as likely to hold z_k as the center's); the history is
+/// summarized by q alone.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SendOnDeltaMixture {
     pub delta: f64,
     pub p: f64,
+}
+
+/// The standardized band `((ν_j - δ) / sd_j, (ν_j + δ) / sd_j)` of component j of z_k - ŷ,
+/// where ν = z_r - ŷ and sd_j² = S_jj.
+fn band(inn: &kf::Innovation, delta: f64, j: usize) -> (f64, f64) {
+    let sd = inn.s[(j, j)].sqrt();
+    ((inn.nu[j] - delta) / sd, (inn.nu[j] + delta) / sd)
+}
+
+/// The Gaussian of the moments of a weighted mixture (weights summing to 1): mean Σ w_c m_c,
+/// covariance Σ w_c (P_c + (m_c - mean)(m_c - mean)^T) (the KL projection of the mixture).
+pub fn mix(components: &[(f64, &Gaussian)]) -> Gaussian {
+    let n = components[0].1.dim();
+    let mut mean = Vector::zeros(n);
+    for (w, g) in components {
+        mean += &g.mean * *w;
+    }
+    let mut cov = Matrix::zeros(n, n);
+    for (w, g) in components {
+        let d = &g.mean - &mean;
+        cov += (&g.cov + &d * d.transpose()) * *w;
+    }
+    symmetrize(&mut cov);
+    Gaussian { mean, cov }
 }
 
 impl SendOnDeltaMixture {
@@ -235,23 +264,47 @@ impl SendOnDeltaMixture {
         est: &Gaussian,
         z_r: &Vector,
     ) -> Result<f64, SchemeError> {
-        let inn = kf::innovation(sensor, est, z_r)?;
-        let mut log_p = 0.0;
-        for j in 0..inn.nu.len() {
-            let sd = inn.s[(j, j)].sqrt();
-            // Standardized band of z_j: (z_r - δ - ŷ, z_r + δ - ŷ) / sd, ν = z_r - ŷ.
-            let (a, b) = ((inn.nu[j] - self.delta) / sd, (inn.nu[j] + self.delta) / sd);
-            log_p += if a < b {
-                truncated_normal::log_mass(a, b)
-            } else {
-                f64::NEG_INFINITY
-            };
+        Ok(self.log_in_band_of(&kf::innovation(sensor, est, z_r)?))
+    }
+
+    fn log_in_band_of(&self, inn: &kf::Innovation) -> f64 {
+        (0..inn.nu.len())
+            .map(|j| match band(inn, self.delta, j) {
+                (a, b) if a < b => truncated_normal::log_mass(a, b),
+                _ => f64::NEG_INFINITY,
+            })
+            .sum()
+    }
+
+    /// Component L for a scalar sensor: `est` conditioned on z_k outside the band. With t =
+    /// (z_k - ŷ) / √S ~ N(0, 1) truncated to the two tails (-∞, a) ∪ (b, ∞) (means μ, variances
+    /// v and masses of [`truncated_normal::truncated_standard`] per tail, mixed), x = m + K √S t
+    /// + e with K = P H^T / S and e independent: mean m + P H^T E[t] / √S, covariance P - (1 -
+    /// Var t) P H^T H P / S. `None` when the tails carry no mass.
+    fn out_of_band(&self, est: &Gaussian, inn: &kf::Innovation) -> Option<Gaussian> {
+        let (a, b) = band(inn, self.delta, 0);
+        let left = truncated_normal::truncated_standard(f64::NEG_INFINITY, a);
+        let right = truncated_normal::truncated_standard(b, f64::INFINITY);
+        let (ml, mr) = (left.log_mass.exp(), right.log_mass.exp());
+        let mass = ml + mr;
+        if !(mass > 0.0) {
+            return None;
         }
-        Ok(log_p)
+        let mean_t = (ml * left.mean + mr * right.mean) / mass;
+        let second = (ml * (left.var + left.mean * left.mean)
+            + mr * (right.var + right.mean * right.mean))
+            / mass;
+        let var_t = second - mean_t * mean_t;
+        let s = inn.s[(0, 0)];
+        let pht = &est.cov * inn.h.transpose();
+        let mean = &est.mean + &pht * (mean_t / s.sqrt());
+        let mut cov = &est.cov - (&pht * pht.transpose()) * ((1.0 - var_t) / s);
+        symmetrize(&mut cov);
+        Some(Gaussian { mean, cov })
     }
 
     /// The update of `est` for a sensor whose reference is z_r with probability `q`; `uniform`
-    /// is the published uniform noise R + δ²/3 I. Returns the estimate and the new q.
+    /// is the published uniform noise R + δ²/3 I. Returns the estimate and the new q (w_A).
     pub fn update(
         &self,
         sensor: &dyn MeasurementModel,
@@ -260,16 +313,33 @@ impl SendOnDeltaMixture {
         uniform: &Matrix,
         q: f64,
     ) -> Result<MixtureUpdate, SchemeError> {
-        let p_in = self.log_in_band(sensor, est, z_r)?.exp();
-        let a = q * p_in;
-        let b = q * self.p * (1.0 - p_in) + (1.0 - q) * (self.p + (1.0 - self.p) * p_in);
-        // b >= q p (1 - P_in) + (1 - q) p > 0 unless q = 1 and P_in = 1: then a > 0.
-        let w_a = if a + b > 0.0 { a / (a + b) } else { 0.0 };
-        let mut estimate = update_with_noise(sensor, est.clone(), z_r, uniform)?;
-        moment_match(w_a, est, &mut estimate);
+        let inn = kf::innovation(sensor, est, z_r)?;
+        let p_in = self.log_in_band_of(&inn).exp();
+        let p = self.p;
+        let scalar_lost = if inn.nu.len() == 1 {
+            self.out_of_band(est, &inn)
+        } else {
+            None
+        };
+        let lost = scalar_lost.as_ref().unwrap_or(est);
+        let mut w = [
+            q * p_in,
+            q * p * (1.0 - p_in),
+            (1.0 - q) * (p + (1.0 - p) * p_in),
+        ];
+        // The sum is >= q p (1 - P_in) + (1 - q) p > 0 unless q = 1 and P_in = 1 (then w_A > 0).
+        let total: f64 = w.iter().sum();
+        if !(total > 0.0) {
+            return Ok(MixtureUpdate {
+                estimate: est.clone(),
+                weight: 0.0,
+            });
+        }
+        w.iter_mut().for_each(|x| *x /= total);
+        let a = update_with_noise(sensor, est.clone(), z_r, uniform)?;
         Ok(MixtureUpdate {
-            estimate,
-            weight: w_a,
+            estimate: mix(&[(w[0], &a), (w[1], lost), (w[2], est)]),
+            weight: w[0],
         })
     }
 }
