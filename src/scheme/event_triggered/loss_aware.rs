@@ -343,3 +343,6 @@ impl SendOnDeltaMixture {
         })
     }
 }
+
+#[cfg(test)]
+mod tests;
