@@ -67,14 +67,27 @@ fn consistency(s: &results::SchemeSummary) -> (f64, f64, f64, f64) {
         "{:28} ANEES {:.3} ± {:.3}, 95% coverage {:.3} ± {:.3}, steady-state MSE {:.3}",
         s.name, ss.anees, ss.anees_se, s.nees_coverage_95, s.nees_coverage_95_se, ss.mse
     );
-    (ss.anees, ss.anees_se, s.nees_coverage_95, s.nees_coverage_95_se)
+    (
+        ss.anees,
+        ss.anees_se,
+        s.nees_coverage_95,
+        s.nees_coverage_95_se,
+    )
 }
 
 /// Consistent: ANEES within 4 SE of 1 and the 95% coverage within 4 SE of 0.95.
 fn assert_consistent(s: &results::SchemeSummary) {
     let (anees, se, cov, cov_se) = consistency(s);
-    assert!((anees - 1.0).abs() < 4.0 * se, "{}: ANEES {anees} ± {se}", s.name);
-    assert!((cov - 0.95).abs() < 4.0 * cov_se, "{}: coverage {cov} ± {cov_se}", s.name);
+    assert!(
+        (anees - 1.0).abs() < 4.0 * se,
+        "{}: ANEES {anees} ± {se}",
+        s.name
+    );
+    assert!(
+        (cov - 0.95).abs() < 4.0 * cov_se,
+        "{}: coverage {cov} ± {cov_se}",
+        s.name
+    );
 }
 
 /// Overconfident: ANEES above 1 by more than 4 SE and the 95% coverage below 0.95 by more than
@@ -82,7 +95,11 @@ fn assert_consistent(s: &results::SchemeSummary) {
 fn assert_overconfident(s: &results::SchemeSummary) {
     let (anees, se, cov, cov_se) = consistency(s);
     assert!(anees > 1.0 + 4.0 * se, "{}: ANEES {anees} ± {se}", s.name);
-    assert!(cov < 0.95 - 4.0 * cov_se, "{}: coverage {cov} ± {cov_se}", s.name);
+    assert!(
+        cov < 0.95 - 4.0 * cov_se,
+        "{}: coverage {cov} ± {cov_se}",
+        s.name
+    );
 }
 
 /// Bernoulli loss 0.3, 400 trials of 60 steps (steady state from the scenario's default), the
@@ -165,7 +182,11 @@ fn link_loss_absent_or_zero_is_the_published_center_bit_for_bit() {
 fn a_link_loss_that_is_not_a_probability_below_one_is_refused_naming_the_key() {
     for (kind, knob) in KINDS {
         for bad in ["1.0", "-0.2", "1.5"] {
-            let text = scalar("", &scheme(kind, knob, &format!("link_loss = {bad}\n"), "x"), 2);
+            let text = scalar(
+                "",
+                &scheme(kind, knob, &format!("link_loss = {bad}\n"), "x"),
+                2,
+            );
             let e = build::load(&text, "scalar.toml").unwrap_err();
             assert!(e.to_string().contains("link_loss"), "{kind} {bad}: {e}");
         }
@@ -214,7 +235,11 @@ fn a_lost_reading_is_no_information_for_the_tobit_pf_and_the_federated_tobit_kf(
     let s = summary(&scalar(LOSSY, &schemes, 20));
     for sc in &s.schemes {
         let link = sc.link.as_ref().unwrap();
-        assert!((link.loss_fraction - 0.3).abs() < 0.1, "{}", link.loss_fraction);
+        assert!(
+            (link.loss_fraction - 0.3).abs() < 0.1,
+            "{}",
+            link.loss_fraction
+        );
         assert!(sc.steady_state.anees.is_finite());
     }
 }

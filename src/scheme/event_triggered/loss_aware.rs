@@ -89,7 +89,13 @@ fn silent_weight(p: f64, log_a: f64) -> f64 {
 /// `log det` of an SPD matrix through its Cholesky factor.
 fn log_det(what: &'static str, a: &Matrix) -> Result<f64, SchemeError> {
     let chol = cholesky(a).map_err(|source| SchemeError::Matrix { what, source })?;
-    Ok(2.0 * chol.l_dirty().diagonal().iter().map(|d| d.ln()).sum::<f64>())
+    Ok(2.0
+        * chol
+            .l_dirty()
+            .diagonal()
+            .iter()
+            .map(|d| d.ln())
+            .sum::<f64>())
 }
 
 /// `log det Y^{-1}` of a trigger matrix Y, once per sensor.
@@ -141,7 +147,13 @@ pub fn stochastic_no_arrival(
         what: "innovation covariance of a silence",
         source,
     })?;
-    let log_det_s = 2.0 * chol.l_dirty().diagonal().iter().map(|d| d.ln()).sum::<f64>();
+    let log_det_s = 2.0
+        * chol
+            .l_dirty()
+            .diagonal()
+            .iter()
+            .map(|d| d.ln())
+            .sum::<f64>();
     let quad = inn.nu.dot(&chol.solve(&inn.nu));
     let log_pi = 0.5 * (log_det_y_inv - log_det_s) - 0.5 * quad;
     let w1 = silent_weight(p, log_pi);

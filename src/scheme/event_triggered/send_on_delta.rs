@@ -172,13 +172,15 @@ impl SendOnDeltaCenter {
     /// one.
     pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
         let p = loss_aware::effective_link_loss(link_loss)?;
-        self.loss = p.filter(|_| self.silence == SilenceModel::Uniform).map(|p| {
-            let mixture = loss_aware::SendOnDeltaMixture {
-                delta: self.delta,
-                p,
-            };
-            (mixture, vec![1.0; self.system.n_sensors()])
-        });
+        self.loss = p
+            .filter(|_| self.silence == SilenceModel::Uniform)
+            .map(|p| {
+                let mixture = loss_aware::SendOnDeltaMixture {
+                    delta: self.delta,
+                    p,
+                };
+                (mixture, vec![1.0; self.system.n_sensors()])
+            });
         Ok(self)
     }
 

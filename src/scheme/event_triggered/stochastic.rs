@@ -37,7 +37,8 @@
 //! published information form), then each silence in sensor order. With τ = 0 a silence can
 //! only be a loss (π = 0): the prediction, where the published center refuses it.
 use super::{
-    check_inbox, loss_aware, nonnegative, prediction_feedback, received_measurement, Evidence, Fusion,
+    check_inbox, loss_aware, nonnegative, prediction_feedback, received_measurement, Evidence,
+    Fusion,
 };
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{check_spd, spd_inverse, Matrix, Vector};

@@ -18,7 +18,11 @@ fn gauss(x: f64, m: f64, v: f64) -> f64 {
 }
 
 fn scalar_sensor(r: f64) -> LinearSensor {
-    LinearSensor::new(Matrix::from_element(1, 1, 1.0), Matrix::from_element(1, 1, r)).unwrap()
+    LinearSensor::new(
+        Matrix::from_element(1, 1, 1.0),
+        Matrix::from_element(1, 1, r),
+    )
+    .unwrap()
 }
 
 fn g1(m: f64, p: f64) -> Gaussian {
@@ -100,7 +104,10 @@ fn wu_no_arrival_variance_limits() {
                 super::super::innovation::truncated_variance(delta).to_bits()
             );
             // Between v(δ) (p = 0) and 1 (p -> 1), increasing in p.
-            let (a, b) = (no_arrival_variance(delta, m, 0.2), no_arrival_variance(delta, m, 0.6));
+            let (a, b) = (
+                no_arrival_variance(delta, m, 0.2),
+                no_arrival_variance(delta, m, 0.6),
+            );
             let v = super::super::innovation::truncated_variance(delta);
             assert!(v <= a + 1e-15 && a <= b + 1e-15 && b <= 1.0, "{v} {a} {b}");
         }
@@ -145,8 +152,16 @@ fn han_no_arrival_update_matches_the_numerically_integrated_posterior() {
             p,
         )
         .unwrap();
-        assert!((got.estimate.mean[0] - mean).abs() < 1e-8, "{m} {pv} {pseudo} {p}: {} vs {mean}", got.estimate.mean[0]);
-        assert!((got.estimate.cov[(0, 0)] - var).abs() < 1e-8, "{} vs {var}", got.estimate.cov[(0, 0)]);
+        assert!(
+            (got.estimate.mean[0] - mean).abs() < 1e-8,
+            "{m} {pv} {pseudo} {p}: {} vs {mean}",
+            got.estimate.mean[0]
+        );
+        assert!(
+            (got.estimate.cov[(0, 0)] - var).abs() < 1e-8,
+            "{} vs {var}",
+            got.estimate.cov[(0, 0)]
+        );
         // The weight of the silent component is P(silent | past, nothing) by Bayes.
         let s = pv + r + 1.0 / y;
         let pi = (1.0 / (y * s)).sqrt() * (-0.5 * (pseudo - m).powi(2) / s).exp();
@@ -198,7 +213,9 @@ fn send_on_delta_mixture_by_hand_and_by_integration() {
     let w_a = p_in / (p_in + p * (1.0 - p_in));
     assert!((got.weight - w_a).abs() < 1e-14);
     // The lost component: x given |z - z_r| > δ, z = x + v.
-    let out = |x: f64| 1.0 - (normal::cdf((zr + delta - x) / r.sqrt()) - normal::cdf((zr - delta - x) / r.sqrt()));
+    let out = |x: f64| {
+        1.0 - (normal::cdf((zr + delta - x) / r.sqrt()) - normal::cdf((zr - delta - x) / r.sqrt()))
+    };
     let (lm, lv) = posterior(m, pv, out);
     let a = update_with_noise(&sensor, est.clone(), &zr_v, &uniform).unwrap();
     let want = mix(&[(w_a, &a), (1.0 - w_a, &g1(lm, lv))]);
@@ -207,7 +224,11 @@ fn send_on_delta_mixture_by_hand_and_by_integration() {
     // A stale reference (q = 0.4) adds the prediction with weight (1 - q)(p + (1 - p) P_in).
     let q = 0.4;
     let got = mix_.update(&sensor, &est, &zr_v, &uniform, q).unwrap();
-    let w = [q * p_in, q * p * (1.0 - p_in), (1.0 - q) * (p + (1.0 - p) * p_in)];
+    let w = [
+        q * p_in,
+        q * p * (1.0 - p_in),
+        (1.0 - q) * (p + (1.0 - p) * p_in),
+    ];
     let t: f64 = w.iter().sum();
     let want = mix(&[(w[0] / t, &a), (w[1] / t, &g1(lm, lv)), (w[2] / t, &est)]);
     assert!((got.weight - w[0] / t).abs() < 1e-14);
