@@ -291,15 +291,15 @@ impl SendOnDeltaMixture {
     /// Component L for a scalar sensor: `est` conditioned on z_k outside the band. With t =
     /// (z_k - ŷ) / √S ~ N(0, 1) truncated to the two tails (-∞, a) ∪ (b, ∞) (means μ, variances
     /// v and masses of [`truncated_normal::truncated_standard`] per tail, mixed), x = m + K √S t
-    /// + e with K = P H^T / S and e independent: mean m + P H^T E[t] / √S, covariance P - (1 -
-    /// Var t) P H^T H P / S. `None` when the tails carry no mass.
+    /// plus a part independent of t, K = P H^T / S: mean m + P H^T E[t] / √S, covariance
+    /// P - (1 - Var t) P H^T H P / S. `None` when the tails carry no mass.
     fn out_of_band(&self, est: &Gaussian, inn: &kf::Innovation) -> Option<Gaussian> {
         let (a, b) = band(inn, self.delta, 0);
         let left = truncated_normal::truncated_standard(f64::NEG_INFINITY, a);
         let right = truncated_normal::truncated_standard(b, f64::INFINITY);
         let (ml, mr) = (left.log_mass.exp(), right.log_mass.exp());
         let mass = ml + mr;
-        if !(mass > 0.0) {
+        if mass.is_nan() || mass <= 0.0 {
             return None;
         }
         let mean_t = (ml * left.mean + mr * right.mean) / mass;
@@ -341,7 +341,7 @@ impl SendOnDeltaMixture {
         ];
         // The sum is >= q p (1 - P_in) + (1 - q) p > 0 unless q = 1 and P_in = 1 (then w_A > 0).
         let total: f64 = w.iter().sum();
-        if !(total > 0.0) {
+        if total.is_nan() || total <= 0.0 {
             return Ok(MixtureUpdate {
                 estimate: est.clone(),
                 weight: 0.0,
