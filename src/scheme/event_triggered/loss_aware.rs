@@ -22,9 +22,10 @@
 //! - **Wu et al.'s innovation trigger** ([`no_arrival_variance`]): the second moment of the
 //!   whitened innovation given nothing arrived replaces the truncated variance v(δ) of their
 //!   Theorem 2.
-//! - **Send-on-delta** ([`SendOnDeltaMixture`]): the uniform reading of a silence, mixed with
-//!   "no information" by the probability that the sensor's reference is still the center's
-//!   last received value and its reading in that band.
+//! - **Send-on-delta** ([`SendOnDeltaMixture`]): the uniform reading of a silence (the sensor's
+//!   reference is still the center's last received value and the reading in its band), the
+//!   prior conditioned on the reading outside that band (sent and lost), and no information
+//!   (the reference already went stale), mixed and moment-matched.
 //!
 //! With several silent sensors in one step the mixture updates are applied one sensor after
 //! the other, each projected on a Gaussian before the next (assumed-density filtering), after

@@ -196,11 +196,11 @@ pub const SEND_ON_DELTA: SchemeEntry = SchemeEntry {
             default: "uniform",
             meaning: "uniform: silence is z_last with extra noise delta^2/3; ignore: no measurement",
         },
-        link_loss("loss-aware fusion (uniform silences): the loss probability p the center assumes; nothing arriving mixes the uniform reading (weight: the sensor's reference is still the last received value and z is in its band) with no information; absent or 0: published; no effect with silence = ignore"),
+        link_loss("loss-aware fusion (uniform silences): the loss probability p the center assumes; nothing arriving mixes the uniform reading (the sensor's reference is still the last received value and z in its band), z outside the band and lost, and no information (stale reference); absent or 0: published; no effect with silence = ignore"),
     ],
     knob: Some(registry::Knob::threshold("delta")),
     applies: registry::Applies::Any,
     build: registry::parse_and_build::<SendOnDeltaParams>,
     example: "delta = 1.0",
-    missing_packet: "a missing packet is a silence: the published center treats the reading as within delta of the last one it received, which a loss makes wrong (silence = ignore is not); with link_loss = p it mixes that reading with no information by the probability that the sensor's reference is still the last received value and the reading in band",
+    missing_packet: "a missing packet is a silence: the published center treats the reading as within delta of the last one it received, which a loss makes wrong (silence = ignore is not); with link_loss = p it mixes that reading with outside-the-band-and-lost and reference-gone-stale, weighted by the probability that the sensor's reference is still the last received value",
 };

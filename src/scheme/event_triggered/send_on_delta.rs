@@ -21,7 +21,8 @@
 //! its last received value (it has nothing to widen it with). With `link_loss` = p > 0 the
 //! center carries per sensor the probability q that the two references are still the same,
 //! and reads "nothing arrived" as the mixture of the uniform reading (weight ∝ q P_in, P_in the
-//! predictive probability of the band) and no information, moment-matched
+//! predictive probability of the band), the prior conditioned on the reading outside the band
+//! (sent and lost, weight ∝ q p (1 - P_in)) and no information (stale reference), moment-matched
 //! ([`loss_aware::SendOnDeltaMixture`], where the weights and approximations are written out);
 //! the received measurements are fused first, then each silence in sensor order. With
 //! `silence = "ignore"` a silence is no measurement already, which a loss does not make wrong:
