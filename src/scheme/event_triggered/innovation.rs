@@ -32,8 +32,17 @@
 //! prediction depends on the others' data, so the center feeds back x̂_k^- and P_k^-
 //! ([`Feedback::Prediction`] with the covariance: n + n(n+1)/2 reals, 32 bits each, broadcast
 //! once per step and counted as downlink). The uplink payload is what the paper counts.
+//!
+//! **Loss-aware center (beyond the paper).** With `link_loss` = p > 0 the center reads "nothing
+//! arrived" as {||ε||_∞ <= δ} ∪ {||ε||_∞ > δ and lost}: Cov(ε | nothing) = v_p I with v_p of
+//! [`loss_aware::no_arrival_variance`] (the in-band and out-of-band truncated moments, mixed
+//! with weights P_in and p P_out), and Theorem 2's update runs with β_p = 1 - v_p in place of
+//! β(δ): R_i' = R_i + (1/β_p - 1) Z_i, the mean unmoved. The feedback is assumed to reach the
+//! sensors (a lost downlink packet makes a sensor trigger against an older prediction, which
+//! no center here models).
 use super::{
-    check_inbox, nonnegative, prediction_feedback, received_measurement, Evidence, Fusion,
+    check_inbox, loss_aware, nonnegative, prediction_feedback, received_measurement, Evidence,
+    Fusion,
 };
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{cholesky, Matrix, Vector};
@@ -214,8 +223,10 @@ impl SensorNode for InnovationTriggerSensor {
 #[derive(Debug, Clone)]
 pub struct InnovationTriggerCenter {
     system: Arc<System>,
-    /// β(δ) = 1 - v(δ): the information fraction of a silence.
-    beta: f64,
+    /// Per sensor, β(δ) = 1 - v(δ): the information fraction of a silence (the same for every
+    /// sensor as published; with a loss-aware center, 1 - v_p of
+    /// [`loss_aware::no_arrival_variance`], which depends on the sensor's dimension).
+    betas: Vec<f64>,
     est: Gaussian,
     /// `kf::predict` of `est`: x̂_{k+1}^-, P_{k+1}^-.
     pred: Gaussian,
@@ -284,11 +295,12 @@ impl InnovationTriggerCenter {
                 }
             })
             .collect();
+        let betas = vec![1.0 - truncated_variance(delta); system.n_sensors()];
         Ok(Self {
             fusion: Fusion::new(&system),
             out: est.clone(),
             system,
-            beta: 1.0 - truncated_variance(delta),
+            betas,
             est,
             pred,
             predict_work,
@@ -296,17 +308,40 @@ impl InnovationTriggerCenter {
         })
     }
 
-    /// Whether a silence carries information: β does not underflow (δ not so large that a
-    /// silence says nothing).
-    fn silence_informs(&self) -> bool {
-        !(self.beta.is_nan() || self.beta <= 1e-300)
+    /// The loss-aware center (beyond the paper): "nothing arrived" from sensor i, with the link
+    /// losing a message with probability `link_loss` = p, is read with β_p = 1 - v_p
+    /// ([`loss_aware::no_arrival_variance`], derived there) in Theorem 2's update in place of
+    /// β(δ). `None` or 0: the published center, unchanged.
+    pub fn with_link_loss(
+        mut self,
+        delta: f64,
+        link_loss: Option<f64>,
+    ) -> Result<Self, SchemeError> {
+        if let Some(p) = loss_aware::effective_link_loss(link_loss)? {
+            for (beta, s) in self.betas.iter_mut().zip(&self.system.sensors) {
+                *beta = 1.0 - loss_aware::no_arrival_variance(delta, s.meas_dim(), p);
+            }
+        }
+        Ok(self)
+    }
+
+    /// β of sensor `i`.
+    pub fn beta(&self, i: usize) -> f64 {
+        self.betas[i]
+    }
+
+    /// Whether a silence of sensor `i` carries information: β does not underflow (δ not so
+    /// large, or the loss not so likely, that a silence says nothing).
+    fn silence_informs(&self, i: usize) -> bool {
+        let beta = self.betas[i];
+        !(beta.is_nan() || beta <= 1e-300)
     }
 
     /// The effective noise of a silence of sensor `i` against the prediction:
     /// R' = R + (1/β - 1) Z (module note), or `None` when β underflows (δ so large that a
     /// silence says nothing).
     pub fn silence_noise(&self, i: usize, pred: &Gaussian) -> Option<Matrix> {
-        if !self.silence_informs() {
+        if !self.silence_informs(i) {
             return None;
         }
         let sensor = self.system.sensors[i].as_ref();
@@ -315,7 +350,7 @@ impl InnovationTriggerCenter {
         let (mut hp, mut r) = (Matrix::zeros(m, n), Matrix::zeros(m, m));
         let ht = h.transpose();
         effective_noise(
-            self.beta,
+            self.betas[i],
             &h,
             &ht,
             sensor.noise_cov(),
@@ -334,7 +369,7 @@ impl InnovationTriggerCenter {
             Some(l) => {
                 let w = &mut self.silences[i];
                 crate::linalg::fixed::gemv(&mut w.z, l.h(), &self.pred.mean);
-                let (beta, cov) = (self.beta, &self.pred.cov);
+                let (beta, cov) = (self.betas[i], &self.pred.cov);
                 effective_noise(
                     beta,
                     l.h(),
@@ -359,10 +394,9 @@ impl FusionCenter for InnovationTriggerCenter {
     fn step(&mut self, _k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
         check_inbox(&self.system, inbox)?;
         // The inbox first (its errors before the fusion's), and the silences' evidence.
-        let informs = self.silence_informs();
         for (i, msg) in inbox.iter().enumerate() {
             received_measurement(i, msg)?;
-            if informs && matches!(msg, Received::Silent) {
+            if self.silence_informs(i) && matches!(msg, Received::Silent) {
                 self.form_silence(i);
             }
         }
@@ -370,7 +404,7 @@ impl FusionCenter for InnovationTriggerCenter {
         for (i, msg) in inbox.iter().enumerate() {
             let evidence = match (received_measurement(i, msg)?, msg) {
                 (Some(z), _) => Evidence::Measurement(z),
-                (None, Received::Silent) if informs => {
+                (None, Received::Silent) if self.silence_informs(i) => {
                     let w = &self.silences[i];
                     Evidence::Pseudo { z: &w.z, r: &w.r }
                 }
@@ -406,13 +440,26 @@ impl FusionCenter for InnovationTriggerCenter {
 pub struct InnovationTriggerScheme {
     system: Arc<System>,
     delta: f64,
+    /// The loss probability a loss-aware center assumes (`None`: the published center).
+    link_loss: Option<f64>,
 }
 
 impl InnovationTriggerScheme {
     /// `delta` >= 0 (0: every sensor sends every measurement).
     pub fn new(system: Arc<System>, delta: f64) -> Result<Self, SchemeError> {
         nonnegative("delta", delta)?;
-        Ok(Self { system, delta })
+        Ok(Self {
+            system,
+            delta,
+            link_loss: None,
+        })
+    }
+
+    /// The loss-aware center ([`InnovationTriggerCenter::with_link_loss`]); `None` or 0: the
+    /// published one.
+    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
+        self.link_loss = loss_aware::effective_link_loss(link_loss)?;
+        Ok(self)
     }
 }
 
@@ -426,10 +473,10 @@ impl Scheme for InnovationTriggerScheme {
             .collect::<Result<_, _>>()?;
         Ok(SchemeInstance {
             sensors,
-            center: Box::new(InnovationTriggerCenter::new(
-                self.system.clone(),
-                self.delta,
-            )?),
+            center: Box::new(
+                InnovationTriggerCenter::new(self.system.clone(), self.delta)?
+                    .with_link_loss(self.delta, self.link_loss)?,
+            ),
         })
     }
 }

@@ -24,6 +24,11 @@
 //! deterministic ones). Given x_k the sensors' noises and coins are independent, so the
 //! product of these per-sensor likelihoods is the joint one.
 //!
+//! **Lossy links.** A message the link lost reaches the center as a silence. Every center here
+//! has a loss-aware option beside the published one (`link_loss` = p, [`loss_aware`]), which
+//! reads "nothing arrived" as a silence or a loss; absent (or 0) the published update runs,
+//! bit for bit.
+//!
 //! **Bits.** A sent measurement costs 32 bits per component (uplink payload). Feedback, where
 //! a trigger needs the fused prediction, is counted as downlink by the runner (see
 //! [`crate::scheme::Feedback::bits`]).
@@ -62,6 +67,7 @@
 //! # Ok::<(), hushfuse::scheme::SchemeError>(())
 //! ```
 pub mod innovation;
+pub mod loss_aware;
 pub mod params;
 pub mod send_on_delta;
 pub mod stochastic;

@@ -13,7 +13,21 @@
 //!   and stops the prediction from drifting while a sensor is quiet.
 //!
 //! The knob is δ; δ = 0 sends every (continuous) measurement.
-use super::{check_inbox, nonnegative, received_measurement, Evidence, Fusion};
+//!
+//! **Loss-aware center (beyond the published rule).** Under a lossy link the sensor's reference
+//! (its last *sent* value) and the center's (its last *received* value) part after a lost
+//! send, and the center cannot know the sensor's: the sensor keeps its last sent value as
+//! reference (no acknowledgement; the rule is unchanged), and the center's band stays around
+//! its last received value (it has nothing to widen it with). With `link_loss` = p > 0 the
+//! center carries per sensor the probability q that the two references are still the same,
+//! and reads "nothing arrived" as the mixture of the uniform reading (weight ∝ q P_in, P_in the
+//! predictive probability of the band), the prior conditioned on the reading outside the band
+//! (sent and lost, weight ∝ q p (1 - P_in)) and no information (stale reference), moment-matched
+//! ([`loss_aware::SendOnDeltaMixture`], where the weights and approximations are written out);
+//! the received measurements are fused first, then each silence in sensor order. With
+//! `silence = "ignore"` a silence is no measurement already, which a loss does not make wrong:
+//! `link_loss` changes nothing there.
+use super::{check_inbox, loss_aware, nonnegative, received_measurement, Evidence, Fusion};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{Matrix, Vector};
 use crate::link::{Message, Received, Transmission};
@@ -117,6 +131,9 @@ pub struct SendOnDeltaCenter {
     fusion: Fusion,
     /// The fused estimate of a step, swapped into `est` when the step succeeds.
     out: Gaussian,
+    /// The loss-aware reading (uniform model, p > 0) and, per sensor, the probability q that
+    /// its reference is the last received value; `None`: the published center.
+    loss: Option<(loss_aware::SendOnDeltaMixture, Vec<f64>)>,
 }
 
 impl SendOnDeltaCenter {
@@ -144,11 +161,70 @@ impl SendOnDeltaCenter {
             delta,
             silence,
             est,
+            loss: None,
         };
         center.uniform = (0..center.system.n_sensors())
             .map(|i| center.uniform_noise(i))
             .collect();
         Ok(center)
+    }
+
+    /// The loss-aware center (module note); `None` or 0, or `silence = "ignore"`: the published
+    /// one.
+    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
+        let p = loss_aware::effective_link_loss(link_loss)?;
+        self.loss = p
+            .filter(|_| self.silence == SilenceModel::Uniform)
+            .map(|p| {
+                let mixture = loss_aware::SendOnDeltaMixture {
+                    delta: self.delta,
+                    p,
+                };
+                (mixture, vec![1.0; self.system.n_sensors()])
+            });
+        Ok(self)
+    }
+
+    /// The loss-aware step after the prediction and the inbox's bookkeeping: the received
+    /// measurements in information form, then each silence's mixture update, and q.
+    fn step_loss_aware(
+        &mut self,
+        inbox: &[Received],
+        mixture: loss_aware::SendOnDeltaMixture,
+        q: &mut [f64],
+    ) -> Result<(), SchemeError> {
+        self.fusion.start(&self.pred)?;
+        for (i, msg) in inbox.iter().enumerate() {
+            let evidence = match received_measurement(i, msg)? {
+                Some(z) => Evidence::Measurement(z),
+                None => Evidence::Nothing,
+            };
+            self.fusion.add(&self.system, i, evidence)?;
+        }
+        self.fusion.finish(&mut self.out)?;
+        // The new q of every sensor, committed only when the step succeeds.
+        let mut q_next = q.to_vec();
+        for (i, msg) in inbox.iter().enumerate() {
+            match msg {
+                Received::Measurement(_) => q_next[i] = 1.0,
+                Received::Silent if self.received[i] => {
+                    let sensor = self.system.sensors[i].as_ref();
+                    let u = mixture.update(
+                        sensor,
+                        &self.out,
+                        &self.last_received[i],
+                        &self.uniform[i],
+                        q[i],
+                    )?;
+                    self.out = u.estimate;
+                    q_next[i] = u.weight;
+                }
+                _ => {}
+            }
+        }
+        q.copy_from_slice(&q_next);
+        std::mem::swap(&mut self.est, &mut self.out);
+        Ok(())
     }
 
     /// R + (δ²/3) I, the noise of the uniform reading of a silence of sensor `i`.
@@ -170,6 +246,11 @@ impl FusionCenter for SendOnDeltaCenter {
                 assign(&mut self.last_received[i], z);
                 self.received[i] = true;
             }
+        }
+        if let Some((mixture, mut q)) = self.loss.take() {
+            let r = self.step_loss_aware(inbox, mixture, &mut q);
+            self.loss = Some((mixture, q));
+            return r;
         }
         self.fusion.start(&self.pred)?;
         for (i, msg) in inbox.iter().enumerate() {
@@ -203,6 +284,8 @@ pub struct SendOnDeltaScheme {
     system: Arc<System>,
     delta: f64,
     silence: SilenceModel,
+    /// The loss probability a loss-aware center assumes (`None`: the published center).
+    link_loss: Option<f64>,
 }
 
 impl SendOnDeltaScheme {
@@ -217,7 +300,15 @@ impl SendOnDeltaScheme {
             system,
             delta,
             silence,
+            link_loss: None,
         })
+    }
+
+    /// The loss-aware center ([`SendOnDeltaCenter::with_link_loss`]); `None` or 0: the
+    /// published one.
+    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
+        self.link_loss = loss_aware::effective_link_loss(link_loss)?;
+        Ok(self)
     }
 }
 
@@ -234,11 +325,10 @@ impl Scheme for SendOnDeltaScheme {
             .collect::<Result<_, _>>()?;
         Ok(SchemeInstance {
             sensors,
-            center: Box::new(SendOnDeltaCenter::new(
-                self.system.clone(),
-                self.delta,
-                self.silence,
-            )?),
+            center: Box::new(
+                SendOnDeltaCenter::new(self.system.clone(), self.delta, self.silence)?
+                    .with_link_loss(self.link_loss)?,
+            ),
         })
     }
 }

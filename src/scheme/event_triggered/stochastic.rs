@@ -28,8 +28,17 @@
 //!
 //! The coin ζ_k comes from the `rng` given to [`SensorNode::step`] and is drawn at every step,
 //! so the coin stream does not depend on the knob (common random numbers across knob values).
+//!
+//! **Loss-aware center (beyond the paper).** With `link_loss` = p > 0, P(nothing arrived | z) =
+//! φ + p (1 - φ) = p + (1 - p) φ: the posterior is the two-component mixture of the prediction
+//! (weight ∝ p) and the published silence update above (weight ∝ (1 - p) π, π the probability
+//! of a silence given the past), with exact weights, moment-matched to one Gaussian
+//! ([`loss_aware::stochastic_no_arrival`]). The received measurements are fused first (the
+//! published information form), then each silence in sensor order. With τ = 0 a silence can
+//! only be a loss (π = 0): the prediction, where the published center refuses it.
 use super::{
-    check_inbox, nonnegative, prediction_feedback, received_measurement, Evidence, Fusion,
+    check_inbox, loss_aware, nonnegative, prediction_feedback, received_measurement, Evidence,
+    Fusion,
 };
 use crate::filter::{kf, Gaussian};
 use crate::linalg::{check_spd, spd_inverse, Matrix, Vector};
@@ -233,6 +242,9 @@ pub struct StochasticTriggerCenter {
     out: Gaussian,
     /// Per sensor, the pseudo-measurement of a silence: 0 (open loop) or C_i x̂_k^- (closed).
     pseudo: Vec<Vector>,
+    /// The loss-aware center: the loss probability p > 0 and, per sensor, log det Y_i^{-1}
+    /// (`None` for τ = 0); `None`: the published center.
+    loss: Option<(f64, Vec<Option<f64>>)>,
 }
 
 impl StochasticTriggerCenter {
@@ -253,7 +265,62 @@ impl StochasticTriggerCenter {
             trigger,
             est,
             pseudo,
+            loss: None,
         }
+    }
+
+    /// The loss-aware center (module note, [`loss_aware::stochastic_no_arrival`]); `None` or 0:
+    /// the published one.
+    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
+        self.loss = match loss_aware::effective_link_loss(link_loss)? {
+            None => None,
+            Some(p) => {
+                let log_dets = (0..self.system.n_sensors())
+                    .map(|i| self.trigger.y(i).map(loss_aware::log_det_y_inv).transpose())
+                    .collect::<Result<_, _>>()?;
+                Some((p, log_dets))
+            }
+        };
+        Ok(self)
+    }
+
+    /// The loss-aware step after the prediction and the pseudo-measurements: the received
+    /// measurements in information form, then each silence's mixture update.
+    fn step_loss_aware(
+        &mut self,
+        inbox: &[Received],
+        p: f64,
+        log_dets: &[Option<f64>],
+    ) -> Result<(), SchemeError> {
+        self.fusion.start(&self.pred)?;
+        for (i, msg) in inbox.iter().enumerate() {
+            let evidence = match received_measurement(i, msg)? {
+                Some(z) => Evidence::Measurement(z),
+                None => Evidence::Nothing,
+            };
+            self.fusion.add(&self.system, i, evidence)?;
+        }
+        self.fusion.finish(&mut self.out)?;
+        for (i, msg) in inbox.iter().enumerate() {
+            // τ = 0 always sends: nothing arriving is a loss, which says nothing.
+            let (Received::Silent, Some(log_det), Some(noise)) =
+                (msg, log_dets[i], self.trigger.silence_noise(i))
+            else {
+                continue;
+            };
+            let sensor = self.system.sensors[i].as_ref();
+            self.out = loss_aware::stochastic_no_arrival(
+                sensor,
+                &self.out,
+                &self.pseudo[i],
+                noise,
+                log_det,
+                p,
+            )?
+            .estimate;
+        }
+        std::mem::swap(&mut self.est, &mut self.out);
+        Ok(())
     }
 }
 
@@ -269,7 +336,7 @@ impl FusionCenter for StochasticTriggerCenter {
             if !matches!(msg, Received::Silent) {
                 continue;
             }
-            if self.trigger.silence_noise(i).is_none() {
+            if self.trigger.silence_noise(i).is_none() && self.loss.is_none() {
                 return Err(SchemeError::Protocol {
                     sensor: i,
                     message: "silent although Y = infinity (tau = 0) always sends".into(),
@@ -284,6 +351,11 @@ impl FusionCenter for StochasticTriggerCenter {
                     None => self.pseudo[i] = sensor.predict(&self.pred.mean),
                 }
             }
+        }
+        if let Some((p, log_dets)) = self.loss.take() {
+            let r = self.step_loss_aware(inbox, p, &log_dets);
+            self.loss = Some((p, log_dets));
+            return r;
         }
         self.fusion.start(&self.pred)?;
         for (i, msg) in inbox.iter().enumerate() {
@@ -322,11 +394,24 @@ impl FusionCenter for StochasticTriggerCenter {
 pub struct StochasticTriggerScheme {
     system: Arc<System>,
     trigger: StochasticTrigger,
+    /// The loss probability a loss-aware center assumes (`None`: the published center).
+    link_loss: Option<f64>,
 }
 
 impl StochasticTriggerScheme {
     pub fn new(system: Arc<System>, trigger: StochasticTrigger) -> Self {
-        Self { system, trigger }
+        Self {
+            system,
+            trigger,
+            link_loss: None,
+        }
+    }
+
+    /// The loss-aware center ([`StochasticTriggerCenter::with_link_loss`]); `None` or 0: the
+    /// published one.
+    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
+        self.link_loss = loss_aware::effective_link_loss(link_loss)?;
+        Ok(self)
     }
 }
 
@@ -342,10 +427,10 @@ impl Scheme for StochasticTriggerScheme {
                     )) as Box<dyn SensorNode>
                 })
                 .collect(),
-            center: Box::new(StochasticTriggerCenter::new(
-                self.system.clone(),
-                self.trigger.clone(),
-            )),
+            center: Box::new(
+                StochasticTriggerCenter::new(self.system.clone(), self.trigger.clone())
+                    .with_link_loss(self.link_loss)?,
+            ),
         })
     }
 }

@@ -24,7 +24,11 @@
 //! estimator: that value was already used when it arrived, so it carries no new information
 //! and is not weighed again. The runner delivers it as [`Received::NotScheduled`] and the
 //! center skips it; a scheduled sensor that sent nothing ([`Received::Silent`], which
-//! [`super::RoundRobinSensor`] never does) is skipped as well.
+//! [`super::RoundRobinSensor`] never does) is skipped as well. That silence is what a packet the
+//! link lost becomes, and skipping it is exact: a scheduled sensor always sends, so P(silent |
+//! xi) = 0 and the likelihood of nothing arriving is the link's loss probability p, the same
+//! for every particle (no information, whatever p; a lost reading is neither an error nor a
+//! fresh reading; `tests/channel_loss_aware.rs` checks it).
 //! Every measurement that does arrive is used, whatever the schedule: the readings are
 //! conditionally independent given the state, so the filter stays exact under
 //! [`Schedule::All`] too.

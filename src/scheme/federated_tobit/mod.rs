@@ -27,6 +27,10 @@
 //!   `C xi_{m, k-l}` with `xi_{m, k-l}` the local filter's own *filtered* estimate at the step
 //!   l the value was measured (the paper's `xi_{k-l}` after Lemma 1, read as the local one); it
 //!   enters only the censoring probabilities recorded for the Theorem 4 bounds.
+//! * **A packet the link lost** reaches the center as `Received::Silent`: not fresh, so the
+//!   hold keeps the last reading that arrived and that sensor's local filter only predicts, as
+//!   for a held value (Geng et al.'s published behaviour). A scheduled sensor always sends, so
+//!   nothing arriving is a loss and carries no information: this is also the exact update.
 //! * Before a sensor's first transmission its hold is empty and its filter only predicts (the
 //!   paper's `z_{m,0}` does not exist in the simulation).
 //!

@@ -300,7 +300,7 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<FtkfParams>,
     example: "tau = 5.0",
-    missing_packet: "a missing reading keeps the zero-order hold (Geng et al., eq. (4)): the last reading that arrived is used again",
+    missing_packet: "a missing reading keeps the zero-order hold (Geng et al., eq. (4), as published): the last reading that arrived stays held and, held, is not fused again (that sensor's local filter only predicts); a scheduled sensor always sends, so nothing arriving is a loss, which carries no information: the exact reading of a loss too",
 };
 
 pub const ROUND_ROBIN_KF: SchemeEntry = SchemeEntry {
@@ -313,6 +313,5 @@ pub const ROUND_ROBIN_KF: SchemeEntry = SchemeEntry {
     applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<RoundRobinKfParams>,
     example: "",
-    missing_packet:
-        "a missing reading keeps the zero-order hold: the last reading that arrived is used again",
+    missing_packet: "a missing reading keeps the zero-order hold: the last reading that arrived stays held and is not fused again (a scheduled sensor always sends, so nothing arriving is a loss, which carries no information)",
 };

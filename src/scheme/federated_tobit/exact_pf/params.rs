@@ -119,5 +119,5 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
     applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<TobitPfParams>,
     example: "tau = 5.0\nparticles = 200",
-    missing_packet: "a missing reading is skipped (no likelihood term): the held value carries no new information",
+    missing_packet: "a missing reading (a lost packet arrives as a silence) is skipped, no likelihood term: under round-robin a scheduled sensor always sends, so P(silent | x) = 0 and nothing arriving has the constant likelihood p (the link's loss), which carries no information; the held value is not weighed again",
 };
