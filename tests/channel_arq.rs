@@ -131,7 +131,7 @@ fn acknowledgements_are_counted_bit_for_bit() {
     assert_eq!(sc.trace, ideal.schemes[0].trace);
 
     // per_step.csv carries the counters with a channel, and not without one.
-    let csv = results::per_step_csv(&s);
+    let csv = hushfuse::metrics::per_step_csv::per_step_csv(&s);
     let mut lines = csv.lines();
     let header = lines.next().unwrap();
     assert!(
@@ -142,7 +142,7 @@ fn acknowledgements_are_counted_bit_for_bit() {
         lines.next().unwrap().ends_with(",2,2,0,0,0,0,4,4,6,528"),
         "{csv}"
     );
-    let plain = results::per_step_csv(&ideal);
+    let plain = hushfuse::metrics::per_step_csv::per_step_csv(&ideal);
     assert!(plain
         .lines()
         .next()

@@ -253,10 +253,18 @@ fn check(text: &str) -> Result<(), String> {
         };
         let summary = results::summarize(&exp, &sums);
         let bad = results::non_finite(&summary);
+        // A failed variant's numbers are null in summary.json by design (its row is marked
+        // failed and the run exits 1), so the check reads the variants that did not fail.
+        let failed = results::failed(&summary);
+        let mut finished = summary.clone();
+        finished.schemes.retain(|s| s.failed.is_none());
         // The CLI turns these into exit code 1; here the function must find them.
-        let json = serde_json::to_string(&summary).unwrap();
+        let json = serde_json::to_string(&finished).unwrap();
         if bad.is_empty() && json.contains("null") {
             return Err("a non-finite number that non_finite() missed".into());
+        }
+        if failed.is_empty() && summary.schemes.iter().any(|s| s.failed.is_some()) {
+            return Err("a failed variant that failed() missed".into());
         }
         Ok(())
     }));

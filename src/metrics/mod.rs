@@ -3,6 +3,7 @@
 mod failed;
 pub mod link;
 pub mod pcrb;
+pub mod per_step_csv;
 pub mod results;
 pub mod sums;
 

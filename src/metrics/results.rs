@@ -1,5 +1,4 @@
 //! From merged sums to the numbers people read: `summary.json`, `per_step.csv` and the table.
-pub use super::failed::{failed, non_finite};
 use crate::metrics::{Layout, Sums};
 use crate::scenario::build::Experiment;
 use crate::scenario::Params;
@@ -411,112 +410,6 @@ pub fn params_text(p: &Params) -> String {
         .join(", ")
 }
 
-/// `per_step.csv`: one row per scheme variant and step, in tidy form. Each scheme parameter
-/// has its own column `param_<name>` (the union over all variants, empty where a scheme has
-/// no such parameter); every mean over trials is followed by its standard error (`*_se`).
-pub fn per_step_csv(summary: &Summary) -> String {
-    let mut out = Vec::new();
-    write_per_step_csv(summary, &mut out).expect("writing to memory cannot fail");
-    String::from_utf8(out).expect("CSV of UTF-8 names and numbers")
-}
-
-/// [`per_step_csv`] streamed into `out`: the file of a large run is several megabytes, which
-/// need not exist in memory at once beside the summary they are written from.
-pub fn write_per_step_csv(summary: &Summary, out: &mut dyn std::io::Write) -> std::io::Result<()> {
-    let params = param_names(summary);
-    write_csv_header(summary, &params, out)?;
-    for s in &summary.schemes {
-        write_csv_rows(summary, s, &params, out)?;
-    }
-    Ok(())
-}
-
-/// The union of the variants' parameter names, in order of first appearance.
-fn param_names(summary: &Summary) -> Vec<&String> {
-    let mut params: Vec<&String> = Vec::new();
-    for s in &summary.schemes {
-        for k in s.params.keys() {
-            if !params.contains(&k) {
-                params.push(k);
-            }
-        }
-    }
-    params
-}
-
-/// The header row of `per_step.csv`.
-fn write_csv_header(
-    summary: &Summary,
-    params: &[&String],
-    out: &mut dyn std::io::Write,
-) -> std::io::Result<()> {
-    out.write_all(b"scheme,kind")?;
-    for p in params {
-        // Prefixed: a parameter may share a name with a metric column (`rate`, `bits`).
-        write!(out, ",{}", csv_field(&format!("param_{p}")))?;
-    }
-    out.write_all(b",step")?;
-    for g in &summary.group_order {
-        write!(out, ",rmse_{g},rmse_{g}_se")?;
-    }
-    out.write_all(b",mse,mse_se,trace,trace_se,anees,anees_se,rate,rate_se,payload_bits,payload_bits_se,frame_bits,frame_bits_se,downlink_bits,downlink_bits_se")?;
-    if summary.schemes.iter().any(|s| s.link.is_some()) {
-        out.write_all(crate::metrics::link::CSV_HEADER.as_bytes())?;
-    }
-    out.write_all(b"\n")
-}
-
-/// The rows of one scheme variant in `per_step.csv`, one per step.
-fn write_csv_rows(
-    summary: &Summary,
-    s: &SchemeSummary,
-    params: &[&String],
-    out: &mut dyn std::io::Write,
-) -> std::io::Result<()> {
-    let mut lead = format!("{},{}", csv_field(&s.name), csv_field(&s.kind));
-    for p in params {
-        // Numbers in full (shortest round-trip form), not the table's six decimals.
-        let v = match s.params.get(*p) {
-            Some(crate::scenario::ParamValue::Number(x)) => format!("{x}"),
-            Some(v) => v.to_string(),
-            None => String::new(),
-        };
-        let _ = write!(lead, ",{}", csv_field(&v));
-    }
-    let t = &s.traffic_per_step;
-    for k in 0..summary.steps {
-        write!(out, "{lead},{}", k + 1)?;
-        for g in &summary.group_order {
-            write!(out, ",{},{}", s.rmse[g][k], s.rmse_se[g][k])?;
-        }
-        for (v, se) in [
-            (s.mse[k], s.mse_se[k]),
-            (s.trace[k], s.trace_se[k]),
-            (s.anees_per_step[k], s.anees_per_step_se[k]),
-            (t.rate[k], t.rate_se[k]),
-            (t.payload_bits[k], t.payload_bits_se[k]),
-            (t.frame_bits[k], t.frame_bits_se[k]),
-            (t.downlink_bits[k], t.downlink_bits_se[k]),
-        ] {
-            write!(out, ",{v},{se}")?;
-        }
-        if let Some(l) = &s.link {
-            out.write_all(crate::metrics::link::csv_fields(l, k).as_bytes())?;
-        }
-        out.write_all(b"\n")?;
-    }
-    Ok(())
-}
-
-/// A CSV field, quoted (with doubled quotes) when it holds a comma, a quote or a line break.
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
-
 /// A number for the table: fixed decimals, scientific beyond 1e6, "overflow" if not finite.
 pub fn num(v: f64, decimals: usize) -> String {
     if !v.is_finite() {
@@ -627,7 +520,7 @@ pub fn table(summary: &Summary) -> String {
         rows.push(r);
     }
     let mut out = text_table(&rows, 2);
-    for line in super::failed::failed(summary) {
+    for line in failed(summary) {
         let _ = writeln!(out, "failed: {line}");
     }
     if let Some(s) = summary.schemes.first() {
@@ -864,5 +757,77 @@ mod tests {
         let (mean, se) = t.mean_se(3);
         assert!((mean / 2e300 - 1.0).abs() < 1e-12);
         assert!(se.is_nan());
+    }
+}
+
+/// One line per variant whose trial failed: `scheme (params): trial t, step k: message` (the
+/// first failure, by trial). A run with one fails (exit 1) after writing its results.
+pub fn failed(summary: &Summary) -> Vec<String> {
+    summary
+        .schemes
+        .iter()
+        .filter_map(|s| {
+            let f = s.failed.as_ref()?;
+            let who = if s.params.is_empty() {
+                s.name.clone()
+            } else {
+                format!("{} ({})", s.name, params_text(&s.params))
+            };
+            Some(format!(
+                "{who}: trial {}, step {}: {}",
+                f.trial, f.step, f.message
+            ))
+        })
+        .collect()
+}
+
+/// Where a summary holds a number that is not finite (an overflow or a collapsed filter):
+/// `scheme (params): metric` for each. A run that produces one must not look like a success.
+pub fn non_finite(summary: &Summary) -> Vec<String> {
+    let mut out = Vec::new();
+    // A failed variant's numbers are null by design; [`failed`] reports it.
+    for s in summary.schemes.iter().filter(|s| s.failed.is_none()) {
+        let value = serde_json::to_value(s).unwrap_or(serde_json::Value::Null);
+        let mut bad = Vec::new();
+        find_nulls(&value, "", &mut bad);
+        // With one trial no standard error exists: its NaN says so, and is no overflow.
+        if summary.trials < 2 {
+            bad.retain(|path| !path.split('.').any(|seg| seg.contains("_se")));
+        }
+        bad.dedup();
+        if !bad.is_empty() {
+            out.push(format!(
+                "{} ({}): {}",
+                s.name,
+                params_text(&s.params),
+                bad.join(", ")
+            ));
+        }
+    }
+    out
+}
+
+/// JSON has no NaN or infinity: serde writes them as `null`, and nothing else in a scheme's
+/// summary is optional.
+fn find_nulls(v: &serde_json::Value, path: &str, out: &mut Vec<String>) {
+    match v {
+        serde_json::Value::Null => out.push(path.to_string()),
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                let p = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                find_nulls(x, &p, out);
+            }
+        }
+        // A per-step or per-trial list is named once, not once per entry.
+        serde_json::Value::Array(a) => {
+            for x in a {
+                find_nulls(x, path, out);
+            }
+        }
+        _ => {}
     }
 }

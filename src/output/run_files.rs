@@ -168,7 +168,9 @@ fn stage_part(
         Part::PerStep => {
             if let Some(summary) = r.summary {
                 let name = format!("{prefix}per_step.csv");
-                out_dir.stage_with(&name, |w| results::write_per_step_csv(summary, w))?;
+                out_dir.stage_with(&name, |w| {
+                    crate::metrics::per_step_csv::write_per_step_csv(summary, w)
+                })?;
                 names.push(name);
             }
         }

@@ -1,7 +1,7 @@
 //! `--loss P`: a scenario run over a lossy link. Every sensor's `[channel]` becomes a Bernoulli
 //! link losing each packet with probability P (the same losses for every scheme, drawn from the
 //! link's own stream), and every scheme whose center has a loss-aware fusion (a `link_loss`
-//! parameter) runs twice: as published (a missing packet read as a silence) and loss-aware,
+//! parameter, or a `loss_aware` switch) runs twice: as published (a missing packet read as a silence) and loss-aware,
 //! labelled "… (loss-aware)", after the published ones. The comparison the user asked for — how wrong
 //! does a center that trusts silence become, and what does knowing the loss rate buy — is then
 //! one table.
@@ -12,12 +12,24 @@ use crate::scheme::registry;
 /// The parameter by which a scheme's center learns the link's loss probability.
 pub const LOSS_AWARE_PARAM: &str = "link_loss";
 
+/// The switch of a center whose loss-aware fusion needs no loss probability (Dormann et al.'s
+/// Algorithm 2: the computed second moment of a lost estimate's extrapolation).
+pub const LOSS_AWARE_FLAG: &str = "loss_aware";
+
 /// The suffix of the label of a loss-aware copy.
 pub const LOSS_AWARE_SUFFIX: &str = " (loss-aware)";
 
+/// Which parameter switches a registry kind's loss-aware fusion on, if it has one.
+fn loss_aware_param(kind: &str) -> Option<&'static str> {
+    let entry = registry::find(kind)?;
+    [LOSS_AWARE_PARAM, LOSS_AWARE_FLAG]
+        .into_iter()
+        .find(|name| entry.params.iter().any(|p| p.name == *name))
+}
+
 /// Whether a registry kind has a loss-aware fusion.
 pub fn has_loss_aware(kind: &str) -> bool {
-    registry::find(kind).is_some_and(|e| e.params.iter().any(|p| p.name == LOSS_AWARE_PARAM))
+    loss_aware_param(kind).is_some()
 }
 
 /// The scenario `text` (from `file`) with a Bernoulli `[channel]` of loss `p` replacing its
@@ -70,8 +82,8 @@ pub fn with_loss(text: &str, file: &str, p: f64) -> Result<String, ScenarioError
 /// is outside `link_loss`'s range: nothing ever arrives, so there is nothing to weigh).
 fn loss_aware_copy(entry: &toml::Table, p: f64) -> Option<toml::Table> {
     let kind = entry.get("kind")?.as_str()?;
-    let aware = p > 0.0 && p < 1.0 && has_loss_aware(kind);
-    if !aware || entry.contains_key(LOSS_AWARE_PARAM) {
+    let param = loss_aware_param(kind)?;
+    if !(p > 0.0 && p < 1.0) || entry.contains_key(param) {
         return None;
     }
     let label = match entry.get("label").and_then(toml::Value::as_str) {
@@ -83,7 +95,12 @@ fn loss_aware_copy(entry: &toml::Table, p: f64) -> Option<toml::Table> {
         "label".into(),
         toml::Value::String(format!("{label}{LOSS_AWARE_SUFFIX}")),
     );
-    copy.insert(LOSS_AWARE_PARAM.into(), toml::Value::Float(p));
+    let value = if param == LOSS_AWARE_FLAG {
+        toml::Value::Boolean(true)
+    } else {
+        toml::Value::Float(p)
+    };
+    copy.insert(param.into(), value);
     Some(copy)
 }
 
@@ -124,6 +141,12 @@ mod tests {
             let label = &exp.curves[v.curve].label;
             let has = v.params.contains_key(LOSS_AWARE_PARAM);
             assert_eq!(has, label.ends_with(LOSS_AWARE_SUFFIX), "{label}");
+            if has {
+                assert_eq!(
+                    v.params[LOSS_AWARE_PARAM],
+                    crate::scenario::ParamValue::Number(0.3)
+                );
+            }
         }
     }
 
@@ -137,6 +160,18 @@ mod tests {
         assert!(got[plain.len()..]
             .iter()
             .all(|l| l.ends_with(LOSS_AWARE_SUFFIX)));
+        // Dormann et al.'s Algorithm 2 switches its loss-aware center on by a flag.
+        let exp = load(&lossy, "t").unwrap();
+        let alg2 = exp
+            .variants
+            .iter()
+            .find(|v| v.params.contains_key(LOSS_AWARE_FLAG))
+            .expect("a loss-aware Algorithm 2");
+        assert_eq!(alg2.kind, "dkf-alg2-event");
+        assert_eq!(
+            alg2.params[LOSS_AWARE_FLAG],
+            crate::scenario::ParamValue::Flag(true)
+        );
     }
 
     #[test]

@@ -232,6 +232,18 @@ pub fn censored_moments(zeta: f64, r: f64, tau_l: f64, tau_r: f64) -> CensoredMo
     }
 }
 
+/// Variance of a standard normal truncated to [-δ, δ]: v(δ) = 1 - 2 δ φ(δ) / (1 - 2 Q(δ))
+/// (Wu et al. 2013, the factor of Theorem 2). v(0) = 0, v(∞) = 1. A series below δ = 1e-3,
+/// where the closed form cancels: v = δ²/3 (1 - 2δ²/15) + O(δ⁶).
+pub fn band_variance(delta: f64) -> f64 {
+    if delta < 1e-3 {
+        let d2 = delta * delta;
+        return d2 / 3.0 * (1.0 - 2.0 * d2 / 15.0);
+    }
+    let mass = 1.0 - 2.0 * super::normal::q(delta);
+    (1.0 - 2.0 * delta * super::normal::pdf(delta) / mass).clamp(0.0, 1.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

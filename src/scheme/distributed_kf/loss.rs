@@ -62,39 +62,11 @@
 //!
 //! A singular A has no debiasing (14): the center then uses the plain extrapolation
 //! A^j x̄^{e,i}_s, uninflated, and its covariance may be optimistic after a loss.
-use super::plan::GlobalizedPlan;
+use super::plan::{EpsilonTable, GlobalizedPlan};
 use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::scheme::SchemeError;
-use std::sync::Mutex;
-
-/// Cov ε^i_t per sensor and step, filled on demand and shared by every center of the plan
-/// (it depends on the plan, Q, R_i and P_0 only). A sensor's list stops growing once the
-/// recursion has converged (relative change below 1e-14); later steps use its last entry.
-#[derive(Debug)]
-pub(super) struct EpsilonTable {
-    q: Matrix,
-    r: Vec<Matrix>,
-    p0: Matrix,
-    per_sensor: Mutex<Vec<SensorEpsilon>>,
-}
-
-#[derive(Debug, Default)]
-struct SensorEpsilon {
-    covs: Vec<Matrix>,
-    converged: bool,
-}
 
 impl EpsilonTable {
-    pub fn new(q: Matrix, r: Vec<Matrix>, p0: Matrix) -> Self {
-        let per_sensor = Mutex::new((0..r.len()).map(|_| SensorEpsilon::default()).collect());
-        Self {
-            q,
-            r,
-            p0,
-            per_sensor,
-        }
-    }
-
     /// Cov ε^i_t.
     pub fn at(&self, plan: &GlobalizedPlan, i: usize, t: usize) -> Result<Matrix, SchemeError> {
         let mut all = self.per_sensor.lock().unwrap_or_else(|e| e.into_inner());

@@ -3,7 +3,6 @@
 //! globalized estimate, the debiasing matrices (eq. (14)) and the gains of the standard KF each
 //! sensor runs beside the globalized one. None of them depends on measurements, so sensors and
 //! fusion center compute them identically; we compute them once and share them.
-use super::loss::EpsilonTable;
 use crate::linalg::{relative_difference, spd_inverse, symmetrize, Matrix};
 use crate::scheme::{SchemeError, System};
 use std::sync::{Arc, Mutex, OnceLock, Weak};
@@ -388,4 +387,34 @@ fn same(a: &StepMatrices, b: &StepMatrices) -> bool {
             .iter()
             .zip(&b.kf_cov)
             .all(|(x, y)| relative_difference(x, y) < TOL)
+}
+
+/// Cov ε^i_t per sensor and step (the memo of the loss fallback's recursion, which fills it in
+/// [`super::loss`]; it lives here, with the plan it belongs to), filled on demand and shared by every center of the plan
+/// (it depends on the plan, Q, R_i and P_0 only). A sensor's list stops growing once the
+/// recursion has converged (relative change below 1e-14); later steps use its last entry.
+#[derive(Debug)]
+pub(super) struct EpsilonTable {
+    pub(super) q: Matrix,
+    pub(super) r: Vec<Matrix>,
+    pub(super) p0: Matrix,
+    pub(super) per_sensor: Mutex<Vec<SensorEpsilon>>,
+}
+
+#[derive(Debug, Default)]
+pub(super) struct SensorEpsilon {
+    pub(super) covs: Vec<Matrix>,
+    pub(super) converged: bool,
+}
+
+impl EpsilonTable {
+    pub fn new(q: Matrix, r: Vec<Matrix>, p0: Matrix) -> Self {
+        let per_sensor = Mutex::new((0..r.len()).map(|_| SensorEpsilon::default()).collect());
+        Self {
+            q,
+            r,
+            p0,
+            per_sensor,
+        }
+    }
 }

@@ -50,21 +50,9 @@ use crate::link::{Message, Received, Transmission};
 use crate::scheme::{
     Feedback, FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System,
 };
-use crate::stats::normal;
+use crate::stats::truncated_normal;
 use rand::RngCore;
 use std::sync::Arc;
-
-/// Variance of a standard normal truncated to [-δ, δ]: v(δ) = 1 - 2 δ φ(δ) / (1 - 2 Q(δ))
-/// (Wu et al. 2013, the factor of Theorem 2). v(0) = 0, v(∞) = 1. A series below δ = 1e-3,
-/// where the closed form cancels: v = δ²/3 (1 - 2δ²/15) + O(δ⁶).
-pub fn truncated_variance(delta: f64) -> f64 {
-    if delta < 1e-3 {
-        let d2 = delta * delta;
-        return d2 / 3.0 * (1.0 - 2.0 * d2 / 15.0);
-    }
-    let mass = 1.0 - 2.0 * normal::q(delta);
-    (1.0 - 2.0 * delta * normal::pdf(delta) / mass).clamp(0.0, 1.0)
-}
 
 /// Sensor side: whitens its innovation against the fed-back fused prediction and sends z_k
 /// when the largest whitened component exceeds δ.
@@ -295,7 +283,7 @@ impl InnovationTriggerCenter {
                 }
             })
             .collect();
-        let betas = vec![1.0 - truncated_variance(delta); system.n_sensors()];
+        let betas = vec![1.0 - truncated_normal::band_variance(delta); system.n_sensors()];
         Ok(Self {
             fusion: Fusion::new(&system),
             out: est.clone(),

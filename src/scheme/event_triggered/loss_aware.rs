@@ -192,7 +192,7 @@ pub fn stochastic_no_arrival(
 /// past is taken Gaussian (so ε ~ N(0, I)) and the posterior is the Gaussian with the exact
 /// second moments of that conditional law, which is itself not Gaussian.
 pub fn no_arrival_variance(delta: f64, m: usize, p: f64) -> f64 {
-    let v_in = super::innovation::truncated_variance(delta);
+    let v_in = truncated_normal::band_variance(delta);
     if p == 0.0 {
         return v_in;
     }

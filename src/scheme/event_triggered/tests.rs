@@ -1,5 +1,4 @@
 //! Exactness, consistency and hand-computed steps of the event-triggered baselines.
-use super::innovation::truncated_variance;
 use super::*;
 use crate::filter::Gaussian;
 use crate::linalg::{mahalanobis_sq, Matrix, Vector};
@@ -8,6 +7,7 @@ use crate::model::{presets, LinearSensor, LinearTransition, MeasurementModel};
 use crate::scheme::centralized::CentralizedKf;
 use crate::scheme::registry::{self, BuildContext};
 use crate::scheme::{FusionCenter, Scheme, SchemeError, SensorNode, System};
+use crate::stats::truncated_normal::band_variance as truncated_variance;
 use crate::stats::{chi2, normal};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
