@@ -101,14 +101,14 @@ fn wu_no_arrival_variance_limits() {
             // p = 0: Wu et al.'s truncated variance, bit for bit.
             assert_eq!(
                 no_arrival_variance(delta, m, 0.0).to_bits(),
-                super::super::innovation::truncated_variance(delta).to_bits()
+                crate::stats::truncated_normal::band_variance(delta).to_bits()
             );
             // Between v(δ) (p = 0) and 1 (p -> 1), increasing in p.
             let (a, b) = (
                 no_arrival_variance(delta, m, 0.2),
                 no_arrival_variance(delta, m, 0.6),
             );
-            let v = super::super::innovation::truncated_variance(delta);
+            let v = crate::stats::truncated_normal::band_variance(delta);
             assert!(v <= a + 1e-15 && a <= b + 1e-15 && b <= 1.0, "{v} {a} {b}");
         }
         // δ = 0 always sends: nothing arriving is a loss and says nothing.
