@@ -373,3 +373,99 @@ impl LinkLayer {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linalg::Vector;
+    use crate::network::channel::Fate;
+
+    /// One sensor over 7 steps that sends at every step but 5: its packets of steps 3 and 4 are
+    /// lost, the rest arrive in time. Returns the history the center holds after step 7.
+    fn history_with(sequence_bits: u32) -> Vec<Received> {
+        let steps = 7;
+        let fates = (1..=steps)
+            .map(|k| Fate {
+                lost: k == 3 || k == 4,
+                ..Fate::default()
+            })
+            .collect();
+        let up = FateTable::from_fates(1, steps, fates);
+        let mut link = LinkLayer::with_fates(up, None, 0, sequence_bits);
+        for k in 1..=steps {
+            let mut inbox = vec![if k == 5 {
+                Received::Silent
+            } else {
+                Received::Measurement(Vector::from_element(1, k as f64))
+            }];
+            let mut traffic = Traffic::default();
+            link.uplink(k, &mut inbox, &mut traffic);
+            let changed = link.receive(k);
+            // Step 6's packet reveals the gap (when it can): re-fuse from step 3.
+            let revealed = k == 6 && sequence_bits >= 2;
+            assert_eq!(changed, revealed.then_some(3), "b = {sequence_bits}, k = {k}");
+            link.record(&inbox);
+        }
+        link.history.iter().map(|h| h[0].clone()).collect()
+    }
+
+    #[test]
+    fn a_revealed_gap_makes_its_silences_unknown() {
+        let z = |k: usize| Received::Measurement(Vector::from_element(1, k as f64));
+        for b in [2, 3, 8, 32] {
+            let h = history_with(b);
+            assert_eq!(h[..2], [z(1), z(2)]);
+            // Lost, lost, silent: the center cannot tell which, so none is information.
+            assert_eq!(h[2..5], [const { Received::NotScheduled }; 3], "b = {b}");
+            assert_eq!(h[5..], [z(6), z(7)]);
+        }
+        // b = 1: two losses wrap around to a gap of 0, the silences stay.
+        let h = history_with(1);
+        assert_eq!(h[2..5], [const { Received::Silent }; 3]);
+        // No sequence numbers: no history kept (no delay either).
+        assert!(history_with(0).is_empty());
+    }
+
+    #[test]
+    fn a_gap_of_zero_confirms_the_silences() {
+        // Silent at 2 and 3, nothing lost: the numbers of 1 and 4 are consecutive.
+        let up = FateTable::from_fates(1, 4, vec![Fate::default(); 4]);
+        let mut link = LinkLayer::with_fates(up, None, 0, 4);
+        for k in 1..=4 {
+            let mut inbox = vec![if k == 1 || k == 4 {
+                Received::Measurement(Vector::zeros(1))
+            } else {
+                Received::Silent
+            }];
+            link.uplink(k, &mut inbox, &mut Traffic::default());
+            assert_eq!(link.receive(k), None);
+            link.record(&inbox);
+        }
+        assert_eq!(link.history[1..3], [vec![Received::Silent], vec![Received::Silent]]);
+    }
+
+    #[test]
+    fn a_late_packet_is_read_in_sending_order() {
+        // Packets of steps 1..=4; step 2's is 2 steps late (fused at 4) and step 3's is lost:
+        // at step 4 the late packet of 2 (gap 0 after 1) and step 4's (gap 1 after 2) arrive,
+        // so only step 3 becomes unknown.
+        let fates = (1..=4)
+            .map(|k| Fate {
+                lost: k == 3,
+                delay: if k == 2 { 2 } else { 0 },
+                ..Fate::default()
+            })
+            .collect();
+        let up = FateTable::from_fates(1, 4, fates);
+        let mut link = LinkLayer::with_fates(up, None, 2, 8);
+        let z = |k: usize| Received::Measurement(Vector::from_element(1, k as f64));
+        for k in 1..=4 {
+            let mut inbox = vec![z(k)];
+            link.uplink(k, &mut inbox, &mut Traffic::default());
+            assert_eq!(link.receive(k), (k == 4).then_some(2));
+            link.record(&inbox);
+        }
+        let h: Vec<_> = link.history.iter().map(|h| h[0].clone()).collect();
+        assert_eq!(h, [z(1), z(2), Received::NotScheduled, z(4)]);
+    }
+}
