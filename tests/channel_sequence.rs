@@ -1,0 +1,107 @@
+//! Sequence numbers on every packet (`sequence_bits`): their bits are priced per packet and per
+//! attempt, in the 802.15.4 frame of the larger payload; with `sequence_bits = 0` nothing
+//! changes; and the gaps they reveal make the center's silences of a lossy link unknown, which
+//! calibrates a center that reads a lost packet as a silence (Zheng et al.'s published CFwMD).
+//! The unit tests of the revealed gaps (which steps become unknown, the mod 2^b wrap) are in
+//! `src/engine/link_layer.rs`.
+use hushfuse::engine::runner;
+use hushfuse::metrics::results;
+use hushfuse::scenario::build;
+
+/// The scalar system of tests/channel.rs: x' = a x + w, y = x + v, q = r = 1.
+fn scalar(a: f64, channel: &str, schemes: &str, trials: usize, steps: usize) -> String {
+    format!(
+        r#"
+name = "scalar"
+trials = {trials}
+steps = {steps}
+seed = 2004
+[model]
+kind = "matrix"
+F = [[{a}]]
+Q = [[1.0]]
+[prior]
+mean = [0.0]
+cov_diag = [1.0]
+[[sensors]]
+H = [[1.0]]
+R = [[1.0]]
+{channel}
+{schemes}
+"#
+    )
+}
+
+fn summary(text: &str) -> results::Summary {
+    let exp = build::load(text, "scalar.toml").unwrap();
+    let sums = runner::run(&exp, runner::RunOptions { threads: 2 }, &|_| {}).unwrap();
+    results::summarize(&exp, &sums)
+}
+
+const KF: &str = "[[schemes]]\nkind = \"centralized-kf\"\n";
+
+/// `entry` twice, without and with `sequence_bits = b`.
+fn pair(entry: &str, b: u32) -> String {
+    format!("{entry}label = \"plain\"\n{entry}label = \"numbered\"\nsequence_bits = {b}\n")
+}
+
+#[test]
+fn a_sequence_number_costs_its_bits_in_the_frame_of_the_larger_payload() {
+    let lossless = "[channel]\nkind = \"bernoulli\"\nloss = 0.0\n";
+    // 32 payload bits in 4 octets: 8 more take a fifth octet (frame 11 + 5 = 16 octets), and
+    // so does 1 more (33 bits); 32 more take 8 octets (frame 19).
+    for (b, frame_octets) in [(8, 16.0), (1, 16.0), (32, 19.0)] {
+        for channel in ["", lossless] {
+            let s = summary(&scalar(1.2, channel, &pair(KF, b), 4, 10));
+            let (plain, seq) = (&s.schemes[0], &s.schemes[1]);
+            assert_eq!(plain.transmissions_per_step, 1.0);
+            assert_eq!((plain.bits_per_step, plain.frame_bits_per_step), (32.0, 8.0 * 15.0));
+            assert_eq!(seq.bits_per_step, 32.0 + f64::from(b), "b = {b}");
+            assert_eq!(seq.frame_bits_per_step, 8.0 * frame_octets, "b = {b}");
+            // Nothing else changes: the estimates are the same.
+            assert_eq!(plain.mse, seq.mse);
+        }
+    }
+    // A lossy link: every packet sent costs its number, lost or not (one attempt each).
+    let lossy = "[channel]\nkind = \"bernoulli\"\nloss = 0.3\n";
+    let sod = "[[schemes]]\nkind = \"send-on-delta\"\ndelta = 1.0\n";
+    let s = summary(&scalar(1.2, lossy, &pair(sod, 8), 10, 30));
+    let (plain, seq) = (&s.schemes[0], &s.schemes[1]);
+    assert_eq!(plain.transmissions_per_step, seq.transmissions_per_step);
+    let extra = seq.bits_per_step - plain.bits_per_step;
+    assert!((extra - 8.0 * plain.transmissions_per_step).abs() < 1e-9);
+    let extra_frame = seq.frame_bits_per_step - plain.frame_bits_per_step;
+    assert!((extra_frame - 8.0 * plain.transmissions_per_step).abs() < 1e-9);
+    // With ARQ every attempt carries it.
+    let arq = "[channel]\nkind = \"bernoulli\"\nloss = 0.3\narq = { max_retries = 3 }\n";
+    let s = summary(&scalar(1.2, arq, &pair(KF, 8), 10, 30));
+    let (plain, seq) = (&s.schemes[0], &s.schemes[1]);
+    let attempts = plain.bits_per_step / 32.0;
+    assert!(attempts > 1.2, "{attempts} attempts per step");
+    assert!((seq.bits_per_step - 40.0 * attempts).abs() < 1e-9);
+    assert!((seq.frame_bits_per_step - 8.0 * 16.0 * attempts).abs() < 1e-9);
+}
+
+#[test]
+fn zero_sequence_bits_is_no_key_bit_for_bit() {
+    let lossy = "[channel]\nkind = \"bernoulli\"\nloss = 0.3\ndelay = 1\n";
+    let pf = "[[schemes]]\nkind = \"censored-pf\"\nl = 0.5\nparticles = 100\n";
+    for channel in ["", lossy] {
+        for entry in [KF, pf] {
+            let without = summary(&scalar(1.2, channel, entry, 6, 20));
+            let with = summary(&scalar(
+                1.2,
+                channel,
+                &format!("{entry}sequence_bits = 0\n"),
+                6,
+                20,
+            ));
+            let mut a = serde_json::to_value(&without.schemes).unwrap();
+            let mut b = serde_json::to_value(&with.schemes).unwrap();
+            // The key given appears in the params; nothing else may differ.
+            a[0]["params"].take();
+            b[0]["params"].take();
+            assert_eq!(a, b, "{channel} {entry}");
+        }
+    }
+}
