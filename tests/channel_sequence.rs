@@ -55,7 +55,10 @@ fn a_sequence_number_costs_its_bits_in_the_frame_of_the_larger_payload() {
             let s = summary(&scalar(1.2, channel, &pair(KF, b), 4, 10));
             let (plain, seq) = (&s.schemes[0], &s.schemes[1]);
             assert_eq!(plain.transmissions_per_step, 1.0);
-            assert_eq!((plain.bits_per_step, plain.frame_bits_per_step), (32.0, 8.0 * 15.0));
+            assert_eq!(
+                (plain.bits_per_step, plain.frame_bits_per_step),
+                (32.0, 8.0 * 15.0)
+            );
             assert_eq!(seq.bits_per_step, 32.0 + f64::from(b), "b = {b}");
             assert_eq!(seq.frame_bits_per_step, 8.0 * frame_octets, "b = {b}");
             // Nothing else changes: the estimates are the same.
@@ -104,4 +107,53 @@ fn zero_sequence_bits_is_no_key_bit_for_bit() {
             assert_eq!(a, b, "{channel} {entry}");
         }
     }
+}
+
+/// Zheng et al.'s censored PF with its published center (`link_loss` absent: a lost packet is
+/// a silence, read as "the innovation stayed inside the band") on the unstable scalar system at
+/// Bernoulli loss 0.3. With 8-bit sequence numbers the center learns of each loss at the
+/// sensor's next arrival and forgets the silences of that gap: better calibrated, decided by
+/// the Monte Carlo standard errors (1000 trials, seed 2004).
+///
+/// Measured (this test, `--nocapture`): 95% NEES coverage 0.8630 ± 0.0024 without, 0.8842 ±
+/// 0.0016 with (7 combined SE); the ANEES without is ruined by diverging trials (RMSE 17),
+/// 1.77 ± 0.03 with (RMSE 1.23). Not consistent yet: the center is still misled at the loss's
+/// own step and until the next arrival (the numbers repair the past, not the present). On the
+/// stable a = 0.95 the gain is smaller (0.892 ± 0.002 → 0.897 ± 0.002): a false silence is
+/// forgotten fast there.
+#[test]
+fn sequence_numbers_calibrate_a_center_that_reads_a_loss_as_a_silence() {
+    let lossy = "[channel]\nkind = \"bernoulli\"\nloss = 0.3\n";
+    let pf = "[[schemes]]\nkind = \"censored-pf\"\nl = 0.5\nparticles = 500\n";
+    let s = summary(&scalar(1.2, lossy, &pair(pf, 8), 1000, 60));
+    let (plain, seq) = (&s.schemes[0], &s.schemes[1]);
+    for x in [plain, seq] {
+        eprintln!(
+            "{}: ANEES {:.3} ± {:.3}, 95% NEES coverage {:.4} ± {:.4}, RMSE {:.4}, rate {:.3}",
+            x.name,
+            x.anees,
+            x.anees_se,
+            x.nees_coverage_95,
+            x.nees_coverage_95_se,
+            x.mean_rmse["state"],
+            x.rate
+        );
+    }
+    let se = plain.nees_coverage_95_se.hypot(seq.nees_coverage_95_se);
+    let (miss_plain, miss_seq) = (0.95 - plain.nees_coverage_95, 0.95 - seq.nees_coverage_95);
+    assert!(miss_seq >= 0.0, "still overconfident: {miss_seq}");
+    assert!(
+        miss_plain - miss_seq > 4.0 * se,
+        "coverage {} -> {} (SE {se})",
+        plain.nees_coverage_95,
+        seq.nees_coverage_95
+    );
+    // The mean NEES: finite and moderate with the numbers; without, no better (a NaN or a
+    // divergence counts as worse).
+    assert!(seq.anees.is_finite() && seq.anees < 2.5, "{}", seq.anees);
+    assert!(
+        !(plain.anees < seq.anees + 4.0 * seq.anees_se),
+        "{}",
+        plain.anees
+    );
 }

@@ -403,7 +403,11 @@ mod tests {
             let changed = link.receive(k);
             // Step 6's packet reveals the gap (when it can): re-fuse from step 3.
             let revealed = k == 6 && sequence_bits >= 2;
-            assert_eq!(changed, revealed.then_some(3), "b = {sequence_bits}, k = {k}");
+            assert_eq!(
+                changed,
+                revealed.then_some(3),
+                "b = {sequence_bits}, k = {k}"
+            );
             link.record(&inbox);
         }
         link.history.iter().map(|h| h[0].clone()).collect()
@@ -441,7 +445,10 @@ mod tests {
             assert_eq!(link.receive(k), None);
             link.record(&inbox);
         }
-        assert_eq!(link.history[1..3], [vec![Received::Silent], vec![Received::Silent]]);
+        assert_eq!(
+            link.history[1..3],
+            [vec![Received::Silent], vec![Received::Silent]]
+        );
     }
 
     #[test]

@@ -259,16 +259,27 @@ mod tests {
         assert_eq!((t.retransmissions, t.duplicates, t.ack_frames), (3, 2, 4));
         assert_eq!(t.ack_bits, 4 * 88);
         // A 5-bit sequence number: 32 + 5 payload bits need a fifth payload octet.
-        let s = deliver_sequenced([z(), Transmission::Silent, z()], &mut inbox, |i| fates[i], 5);
+        let s = deliver_sequenced(
+            [z(), Transmission::Silent, z()],
+            &mut inbox,
+            |i| fates[i],
+            5,
+        );
         assert_eq!((s.bits, s.frame_bits), (5 * 37, 5 * 8 * 16));
         // An 8-bit one on 64 bits (8 octets): one octet more; on a codec's frame, its own octet.
         let m = Message::Measurement(Vector::zeros(2));
-        assert_eq!((m.bits_with_sequence(8), m.frame_bits_with_sequence(8)), (72, 8 * 20));
+        assert_eq!(
+            (m.bits_with_sequence(8), m.frame_bits_with_sequence(8)),
+            (72, 8 * 20)
+        );
         let f = Message::Frame {
             octets: vec![0; 12],
             payload_bits: 2,
         };
-        assert_eq!((f.bits_with_sequence(3), f.frame_bits_with_sequence(3)), (5, 8 * 13));
+        assert_eq!(
+            (f.bits_with_sequence(3), f.frame_bits_with_sequence(3)),
+            (5, 8 * 13)
+        );
         // No retransmission: deliver's counts.
         let plain = deliver_attempts([z(), Transmission::Silent], &mut inbox, |_| Fate::default());
         assert_eq!(plain, deliver([z(), Transmission::Silent], &mut inbox));
