@@ -154,3 +154,19 @@ fn sequence_numbers_calibrate_a_center_that_reads_a_loss_as_a_silence() {
     let worse = plain.anees.is_nan() || plain.anees >= seq.anees + 4.0 * seq.anees_se;
     assert!(worse, "{}", plain.anees);
 }
+
+#[test]
+fn a_center_for_which_a_silence_is_no_information_is_unchanged_by_the_gaps() {
+    // The all-data KF reads a silence as a step without a measurement, as it reads "not
+    // scheduled": the revealed gaps and their re-fusions (with late packets too, and ARQ)
+    // change none of its estimates, only the bits.
+    let link = "[channel]\nkind = \"bernoulli\"\nloss = 0.3\ndelay = { kind = \"geometric\", mean = 1.0 }\narq = { max_retries = 1 }\n";
+    let s = summary(&scalar(1.2, link, &pair(KF, 3), 20, 40));
+    let (plain, seq) = (&s.schemes[0], &s.schemes[1]);
+    assert_eq!(plain.mse, seq.mse);
+    assert_eq!(plain.trace, seq.trace);
+    let attempts = plain.bits_per_step / 32.0;
+    assert!((seq.bits_per_step - 35.0 * attempts).abs() < 1e-9);
+    // 35 bits need a fifth payload octet, as 33 would: frames of 16 octets.
+    assert!((seq.frame_bits_per_step - 128.0 * attempts).abs() < 1e-9);
+}
