@@ -17,11 +17,43 @@
 //! [`crate::network::channel::fate`]): the packet is lost only when every attempt was, every
 //! attempt costs its bits and frame, and the acknowledgements, retries and duplicates are
 //! counted ([`LinkLayer::deliver`]). The center fuses one copy, as without ARQ.
+//!
+//! # Sequence numbers
+//!
+//! With `sequence_bits = b > 0` (a scheme entry's key, [`Variant::sequence_bits`]) every packet
+//! of sensor i carries the count of i's packets before it, mod 2^b; the network prices those
+//! bits ([`network::deliver_sequenced`]). When a packet of i reaches the center (in time, or late
+//! and fused), the center compares its number with that of i's previous packet to have arrived
+//! (by sending order; before the first, the count starts at 0) and learns the gap: how many of
+//! i's packets in between never arrived, mod 2^b, so a run of 2^b losses (or any multiple) is
+//! invisible. It does not learn which of i's silent steps in between were the lost packets.
+//!
+//! The exact treatment would fuse a mixture: over every choice of `gap` (mod 2^b) of the silent
+//! steps in between as the lost packets, the rest as real silences, each choice weighted by its
+//! likelihood under the scheme's triggering rule — a number of hypotheses binomial in the length
+//! of the gap, and a center of its own for each. This one is conservative instead: when the gap
+//! is not 0, every step of i between the two arrivals that reached the center as a silence
+//! becomes [`Received::NotScheduled`] (no information from i at that step, which every center
+//! handles), and the center is rebuilt and re-fuses from the first step (the late packets'
+//! machinery). It throws away the information of the real silences of a gap with a loss (their
+//! "the reading was unremarkable"), never claims a silence that may have been a loss. When the
+//! gap is 0 the silences in between are confirmed real silences and stay. Packets still missing
+//! at the end of the trial are never revealed. A gap marked unknown stays so even if a late
+//! packet inside it arrives afterwards (that packet itself is fused at its step). Cost: one
+//! replay of the trial so far per step at which a gap is revealed, and the history of every
+//! inbox is kept whenever sequence numbers are on.
 use crate::link::{Received, Transmission};
 use crate::network::channel::{ChannelSpec, FateTable};
 use crate::network::{self, Traffic};
 use crate::scenario::experiment::{Experiment, Variant};
 use crate::scheme::{Feedback, FusionCenter, Scheme, SchemeError};
+
+/// Whether a variant's trials may take the fast paths: its links are [`lossless`] and its
+/// packets carry no sequence number (the fast paths count their own traffic, without one; a
+/// variant with `sequence_bits > 0` runs the generic loop, whose numbers are theirs otherwise).
+pub(crate) fn ideal(variant: &Variant) -> bool {
+    variant.sequence_bits == 0 && lossless(variant)
+}
 
 /// Whether a variant runs as if its links were ideal: no channel, or one whose every link is
 /// lossless ([`ChannelSpec::is_lossless`]: nothing lost, late or
@@ -55,7 +87,53 @@ struct InFlight {
     arrive: usize,
     sent: usize,
     sensor: usize,
+    /// The sensor's packets before this one (its sequence number is this mod 2^b).
+    count: u64,
     message: Received,
+}
+
+/// What the sequence numbers tell the center (`sequence_bits > 0`).
+struct Sequencing {
+    /// 2^b.
+    modulus: u64,
+    /// Per sensor: packets sent so far.
+    sent: Vec<u64>,
+    /// Per sensor: the packets that arrived, as (step sent, count), in sending order.
+    arrived: Vec<Vec<(usize, u64)>>,
+    /// Packets arrived in time at the current step, as (sensor, step sent, count), read at
+    /// the next [`LinkLayer::fuse`].
+    pending: Vec<(usize, usize, u64)>,
+}
+
+impl Sequencing {
+    fn new(bits: u32, sensors: usize) -> Option<Self> {
+        (bits > 0).then(|| Self {
+            modulus: 1u64 << bits.min(32),
+            sent: vec![0; sensors],
+            arrived: vec![Vec::new(); sensors],
+            pending: Vec::new(),
+        })
+    }
+
+    /// Sensor `i` sends a packet: its count.
+    fn send(&mut self, i: usize) -> u64 {
+        let c = self.sent[i];
+        self.sent[i] += 1;
+        c
+    }
+
+    /// Sensor `i`'s packet `count`, sent at step `sent`, arrives: the gap its number reveals
+    /// since the previous arrival (mod 2^b), with that arrival's step (0 before the first).
+    fn arrive(&mut self, i: usize, sent: usize, count: u64) -> (u64, usize) {
+        let list = &mut self.arrived[i];
+        let pos = list.partition_point(|&(s, _)| s < sent);
+        let (from, lost) = match pos.checked_sub(1).map(|p| list[p]) {
+            Some((s, c)) => (s, count - c - 1),
+            None => (0, count),
+        };
+        list.insert(pos, (sent, count));
+        (lost % self.modulus, from)
+    }
 }
 
 /// One trial's link: its fates, the feedback each sensor holds, the packets in flight and
@@ -70,8 +148,13 @@ pub(crate) struct LinkLayer {
     /// Steps a late packet may take and still be fused.
     horizon: usize,
     in_flight: Vec<InFlight>,
-    /// The inbox of every step so far, late packets in their own step once they arrived.
+    /// The inbox of every step so far, late packets in their own step once they arrived
+    /// (kept with delays or sequence numbers).
     history: Vec<Vec<Received>>,
+    /// `None` without sequence numbers.
+    sequencing: Option<Sequencing>,
+    /// Bits of each packet's sequence number (0: none).
+    sequence_bits: u32,
 }
 
 impl LinkLayer {
@@ -94,15 +177,36 @@ impl LinkLayer {
         let horizon = specs.iter().map(|s| s.delay().horizon()).max().unwrap_or(0);
         let down = (!specs.iter().all(|s| s.downlink_spec().is_lossless()))
             .then(|| FateTable::draw(specs, exp.steps, exp.seed, trial as u64, true));
-        let holders = if down.is_some() { specs.len() } else { 1 };
-        Some(Self {
-            up: FateTable::draw(specs, exp.steps, exp.seed, trial as u64, false),
+        let up = FateTable::draw(specs, exp.steps, exp.seed, trial as u64, false);
+        let mut link = Self::with_fates(
+            up,
             down,
-            held: vec![initial.clone(); holders],
-            horizon: horizon as usize,
+            horizon as usize,
+            exp.variants[variant].sequence_bits,
+        );
+        link.held = vec![initial.clone(); link.held.len()];
+        Some(link)
+    }
+
+    /// A link of given fates (`down`: `None` when every downlink is lossless), every sensor
+    /// holding no feedback yet.
+    fn with_fates(
+        up: FateTable,
+        down: Option<FateTable>,
+        horizon: usize,
+        sequence_bits: u32,
+    ) -> Self {
+        let holders = if down.is_some() { up.sensors() } else { 1 };
+        Self {
+            sequencing: Sequencing::new(sequence_bits, up.sensors()),
+            up,
+            down,
+            held: vec![None; holders],
+            horizon,
             in_flight: Vec::new(),
             history: Vec::new(),
-        })
+            sequence_bits,
+        }
     }
 
     /// The feedback of step `k` goes out: each sensor whose downlink slot keeps it holds it.
@@ -150,7 +254,12 @@ impl LinkLayer {
         transmissions: impl IntoIterator<Item = Transmission>,
         inbox: &mut Vec<Received>,
     ) -> Traffic {
-        network::deliver_attempts(transmissions, inbox, |i| self.up.get(i, k))
+        network::deliver_sequenced(
+            transmissions,
+            inbox,
+            |i| self.up.get(i, k),
+            self.sequence_bits,
+        )
     }
 
     /// Step `k`'s packets through the link: a lost or late one becomes a silence in `inbox`,
@@ -162,9 +271,13 @@ impl LinkLayer {
             }
             let fate = self.up.get(i, k);
             let delay = fate.delay as usize;
+            let count = self.sequencing.as_mut().map_or(0, |s| s.send(i));
             if fate.lost {
                 traffic.lost += 1;
             } else if delay == 0 {
+                if let Some(s) = &mut self.sequencing {
+                    s.pending.push((i, k, count));
+                }
                 continue;
             } else if delay <= self.horizon {
                 traffic.late += 1;
@@ -172,6 +285,7 @@ impl LinkLayer {
                     arrive: k + delay,
                     sent: k,
                     sensor: i,
+                    count,
                     message: r.clone(),
                 });
             } else {
@@ -182,8 +296,9 @@ impl LinkLayer {
     }
 
     /// Fuses step `k`'s `inbox` into `center`: directly, or, when late packets arrive at this
-    /// step, by a center rebuilt from `scheme` (seeded with `center_seed`) that re-fuses every
-    /// step with the arrivals in their own steps.
+    /// step or sequence numbers reveal a gap ([`LinkLayer::receive`]), by a center rebuilt
+    /// from `scheme` (seeded with `center_seed`) that re-fuses every step with the arrivals in
+    /// their own steps and the unknown silences made [`Received::NotScheduled`].
     pub(crate) fn fuse(
         &mut self,
         k: usize,
@@ -192,18 +307,7 @@ impl LinkLayer {
         scheme: &dyn Scheme,
         center_seed: u64,
     ) -> Result<(), (usize, SchemeError)> {
-        let mut arrived = false;
-        let mut i = 0;
-        while i < self.in_flight.len() {
-            if self.in_flight[i].arrive == k {
-                let p = self.in_flight.swap_remove(i);
-                self.history[p.sent - 1][p.sensor] = p.message;
-                arrived = true;
-            } else {
-                i += 1;
-            }
-        }
-        if arrived {
+        if self.receive(k).is_some() {
             let mut fresh = scheme
                 .build_with_seed(center_seed)
                 .map_err(|e| (0, e))?
@@ -214,9 +318,161 @@ impl LinkLayer {
             *center = fresh;
         }
         center.step(k, inbox).map_err(|e| (k, e))?;
-        if self.horizon > 0 {
+        self.record(inbox);
+        Ok(())
+    }
+
+    /// What reaches the center before it fuses step `k`: the late packets arriving at `k` go
+    /// into their own steps of the history, and (with sequence numbers) every arrival of `k`,
+    /// late or in time, is read for a gap, which makes the silences it covers unknown. Returns
+    /// the first step of the history that changed, if any (the center must re-fuse from it).
+    fn receive(&mut self, k: usize) -> Option<usize> {
+        let mut first: Option<usize> = None;
+        let mut i = 0;
+        while i < self.in_flight.len() {
+            if self.in_flight[i].arrive == k {
+                let p = self.in_flight.swap_remove(i);
+                self.history[p.sent - 1][p.sensor] = p.message;
+                first = Some(first.map_or(p.sent, |f| f.min(p.sent)));
+                if let Some(s) = &mut self.sequencing {
+                    s.pending.push((p.sensor, p.sent, p.count));
+                }
+            } else {
+                i += 1;
+            }
+        }
+        let Some(s) = &mut self.sequencing else {
+            return first;
+        };
+        let mut pending = std::mem::take(&mut s.pending);
+        // In sending order, so that a late packet splits the gap before a later arrival's.
+        pending.sort_unstable_by_key(|&(sensor, sent, _)| (sent, sensor));
+        for &(sensor, sent, count) in &pending {
+            let (gap, from) = s.arrive(sensor, sent, count);
+            if gap == 0 {
+                continue;
+            }
+            for step in from + 1..sent {
+                let r = &mut self.history[step - 1][sensor];
+                if *r == Received::Silent {
+                    *r = Received::NotScheduled;
+                    first = Some(first.map_or(step, |f| f.min(step)));
+                }
+            }
+        }
+        pending.clear();
+        s.pending = pending;
+        first
+    }
+
+    /// Keeps step's fused `inbox` in the history when late packets or sequence numbers may
+    /// change it.
+    fn record(&mut self, inbox: &[Received]) {
+        if self.horizon > 0 || self.sequencing.is_some() {
             self.history.push(inbox.to_vec());
         }
-        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linalg::Vector;
+    use crate::network::channel::Fate;
+
+    /// One sensor over 7 steps that sends at every step but 5: its packets of steps 3 and 4 are
+    /// lost, the rest arrive in time. Returns the history the center holds after step 7.
+    fn history_with(sequence_bits: u32) -> Vec<Received> {
+        let steps = 7;
+        let fates = (1..=steps)
+            .map(|k| Fate {
+                lost: k == 3 || k == 4,
+                ..Fate::default()
+            })
+            .collect();
+        let up = FateTable::from_fates(1, steps, fates);
+        let mut link = LinkLayer::with_fates(up, None, 0, sequence_bits);
+        for k in 1..=steps {
+            let mut inbox = vec![if k == 5 {
+                Received::Silent
+            } else {
+                Received::Measurement(Vector::from_element(1, k as f64))
+            }];
+            let mut traffic = Traffic::default();
+            link.uplink(k, &mut inbox, &mut traffic);
+            let changed = link.receive(k);
+            // Step 6's packet reveals the gap (when it can): re-fuse from step 3.
+            let revealed = k == 6 && sequence_bits >= 2;
+            assert_eq!(
+                changed,
+                revealed.then_some(3),
+                "b = {sequence_bits}, k = {k}"
+            );
+            link.record(&inbox);
+        }
+        link.history.iter().map(|h| h[0].clone()).collect()
+    }
+
+    #[test]
+    fn a_revealed_gap_makes_its_silences_unknown() {
+        let z = |k: usize| Received::Measurement(Vector::from_element(1, k as f64));
+        for b in [2, 3, 8, 32] {
+            let h = history_with(b);
+            assert_eq!(h[..2], [z(1), z(2)]);
+            // Lost, lost, silent: the center cannot tell which, so none is information.
+            assert_eq!(h[2..5], [const { Received::NotScheduled }; 3], "b = {b}");
+            assert_eq!(h[5..], [z(6), z(7)]);
+        }
+        // b = 1: two losses wrap around to a gap of 0, the silences stay.
+        let h = history_with(1);
+        assert_eq!(h[2..5], [const { Received::Silent }; 3]);
+        // No sequence numbers: no history kept (no delay either).
+        assert!(history_with(0).is_empty());
+    }
+
+    #[test]
+    fn a_gap_of_zero_confirms_the_silences() {
+        // Silent at 2 and 3, nothing lost: the numbers of 1 and 4 are consecutive.
+        let up = FateTable::from_fates(1, 4, vec![Fate::default(); 4]);
+        let mut link = LinkLayer::with_fates(up, None, 0, 4);
+        for k in 1..=4 {
+            let mut inbox = vec![if k == 1 || k == 4 {
+                Received::Measurement(Vector::zeros(1))
+            } else {
+                Received::Silent
+            }];
+            link.uplink(k, &mut inbox, &mut Traffic::default());
+            assert_eq!(link.receive(k), None);
+            link.record(&inbox);
+        }
+        assert_eq!(
+            link.history[1..3],
+            [vec![Received::Silent], vec![Received::Silent]]
+        );
+    }
+
+    #[test]
+    fn a_late_packet_is_read_in_sending_order() {
+        // Packets of steps 1..=4; step 2's is 2 steps late (fused at 4) and step 3's is lost:
+        // at step 4 the late packet of 2 (gap 0 after 1) and step 4's (gap 1 after 2) arrive,
+        // so only step 3 becomes unknown.
+        let fates = (1..=4)
+            .map(|k| Fate {
+                lost: k == 3,
+                delay: if k == 2 { 2 } else { 0 },
+                ..Fate::default()
+            })
+            .collect();
+        let up = FateTable::from_fates(1, 4, fates);
+        let mut link = LinkLayer::with_fates(up, None, 2, 8);
+        let z = |k: usize| Received::Measurement(Vector::from_element(1, k as f64));
+        for k in 1..=4 {
+            let mut inbox = vec![z(k)];
+            link.uplink(k, &mut inbox, &mut Traffic::default());
+            assert_eq!(link.receive(k), (k == 4).then_some(2));
+            link.record(&inbox);
+        }
+        let h: Vec<_> = link.history.iter().map(|h| h[0].clone()).collect();
+        assert_eq!(h, [z(1), z(2), Received::NotScheduled, z(4)]);
     }
 }

@@ -334,9 +334,9 @@ fn run_block<'e>(
 ) -> Result<bool, RunError> {
     let batch = (2..=BLOCK).contains(&trials.len())
         // A lossy link is applied by the generic loop only (the fast paths assume every
-        // packet arrives).
+        // packet arrives), and sequence numbers are priced there.
         && exp.variants.iter().all(|v| {
-            crate::engine::link_layer::lossless(v)
+            crate::engine::link_layer::ideal(v)
                 && v.scheme.fast_path().is_some_and(|f| f.batches())
         });
     if !batch {

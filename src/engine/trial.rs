@@ -15,6 +15,7 @@ use crate::engine::seeding::coins;
 use crate::filter::Gaussian;
 use crate::linalg::{LinalgError, Vector};
 use crate::link::{Received, Transmission};
+use crate::network::channel::Fate;
 use crate::network::{self, Schedule, Traffic};
 use crate::scenario::experiment::Experiment;
 #[cfg(doc)]
@@ -32,7 +33,8 @@ pub struct StepOutput<'a> {
     pub estimate: &'a Gaussian,
     /// Per sensor: sent, silent or not scheduled (empty unless [`Observer::needs_links`]).
     pub links: &'a [Link],
-    /// Per sensor: the payload bits sent (empty unless [`Observer::needs_links`]).
+    /// Per sensor: the payload bits sent, sequence number included (empty unless
+    /// [`Observer::needs_links`]).
     pub bits: &'a [u64],
     pub traffic: Traffic,
     /// Effective sample size of a particle filter's fusion center.
@@ -160,8 +162,9 @@ pub fn run_trial(
     let n_sensors = exp.system.n_sensors();
     let variant = &exp.variants[spec.variant];
     let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
-    // A lossy link is the generic loop's (the fast paths assume every packet arrives).
-    if spec.available.is_none() && crate::engine::link_layer::lossless(variant) {
+    // A lossy link is the generic loop's (the fast paths assume every packet arrives), and so
+    // are sequence numbers (the fast paths count traffic without them).
+    if spec.available.is_none() && crate::engine::link_layer::ideal(variant) {
         // One virtual call per trial: the scheme's hook, then its whole trial.
         if let (Some(fast), Some(sink)) = (variant.scheme.fast_path(), observer.fast_sink()) {
             let cache = buffers.cache_for(spec.trial, measurements);
@@ -213,7 +216,8 @@ pub fn run_trial(
                 let (link, b) = match &t {
                     _ if !scheduled(i) => (Link::NotScheduled, 0),
                     Transmission::Send(m) => {
-                        (link.as_ref().map_or(Link::Sent, |l| l.link(i, k)), m.bits())
+                        let b = m.bits_with_sequence(variant.sequence_bits);
+                        (link.as_ref().map_or(Link::Sent, |l| l.link(i, k)), b)
                     }
                     Transmission::Silent => (Link::Silent, 0),
                 };
@@ -224,7 +228,14 @@ pub fn run_trial(
         }
         let mut traffic = match &link {
             Some(l) => l.deliver(k, transmissions.drain(..), inbox),
-            None => network::deliver(transmissions.drain(..), inbox),
+            None if variant.sequence_bits == 0 => network::deliver(transmissions.drain(..), inbox),
+            // Ideal links (nothing goes missing, so the numbers reveal nothing): only their cost.
+            None => network::deliver_sequenced(
+                transmissions.drain(..),
+                inbox,
+                |_| Fate::default(),
+                variant.sequence_bits,
+            ),
         };
         traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
         if let Some(l) = &mut link {

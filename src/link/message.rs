@@ -35,10 +35,34 @@ impl Message {
     /// whole octets. A codec's frame is counted as it is. A real radio pays for this, not for
     /// the payload alone.
     pub fn frame_bits(&self) -> u64 {
-        use crate::link::codec802154::{FCS_OCTETS, MHR_OCTETS};
         match self {
             Message::Frame { octets, .. } => 8 * octets.len() as u64,
-            other => 8 * (MHR_OCTETS + FCS_OCTETS) as u64 + 8 * other.bits().div_ceil(8),
+            other => crate::link::codec802154::mpdu_bits_for_payload(other.bits()),
+        }
+    }
+
+    /// Payload bits of this message carrying a `sequence_bits`-bit sequence number: the
+    /// message's own bits plus the sequence number's. With 0 bits, [`Message::bits`].
+    pub fn bits_with_sequence(&self, sequence_bits: u32) -> u64 {
+        self.bits() + u64::from(sequence_bits)
+    }
+
+    /// Bits of the 802.15.4 MAC frame that carries this message and a `sequence_bits`-bit
+    /// sequence number: the frame of the larger payload
+    /// ([`crate::link::codec802154::mpdu_bits_for_payload`] of [`Message::bits_with_sequence`]),
+    /// so the number costs a whole octet only when the payload no longer fits its octets. A
+    /// codec's frame has no spare payload bits to lend (the dynamic codec fills its payload
+    /// octet's high bits with the zone layout, and the decoders reject non-zero padding), so its
+    /// sequence number takes octets of its own after the codec's payload. With 0 bits,
+    /// [`Message::frame_bits`], bit for bit.
+    pub fn frame_bits_with_sequence(&self, sequence_bits: u32) -> u64 {
+        if sequence_bits == 0 {
+            return self.frame_bits();
+        }
+        let b = u64::from(sequence_bits);
+        match self {
+            Message::Frame { octets, .. } => 8 * (octets.len() as u64 + b.div_ceil(8)),
+            other => crate::link::codec802154::mpdu_bits_for_payload(other.bits() + b),
         }
     }
 }

@@ -94,6 +94,24 @@ pub fn deliver_attempts(
     inbox: &mut Vec<Received>,
     fate: impl Fn(usize) -> Fate,
 ) -> Traffic {
+    deliver_sequenced(transmissions, inbox, fate, 0)
+}
+
+/// [`deliver_attempts`] with a `sequence_bits`-bit sequence number on every packet (the
+/// scheme entry's `sequence_bits`): every attempt costs [`Message::bits_with_sequence`] payload
+/// bits and the frame of that larger payload ([`Message::frame_bits_with_sequence`], which may
+/// add an octet). This is the one place a sequence number is priced, whatever the scheme. With
+/// 0 bits, [`deliver_attempts`]'s counts; with 0 bits and fates of no retransmission,
+/// [`deliver`]'s.
+///
+/// [`Message::bits_with_sequence`]: crate::link::Message::bits_with_sequence
+/// [`Message::frame_bits_with_sequence`]: crate::link::Message::frame_bits_with_sequence
+pub fn deliver_sequenced(
+    transmissions: impl IntoIterator<Item = Transmission>,
+    inbox: &mut Vec<Received>,
+    fate: impl Fn(usize) -> Fate,
+    sequence_bits: u32,
+) -> Traffic {
     inbox.clear();
     let mut traffic = Traffic::default();
     for (i, t) in transmissions.into_iter().enumerate() {
@@ -101,8 +119,8 @@ pub fn deliver_attempts(
             let f = fate(i);
             let attempts = u64::from(f.attempts());
             traffic.messages += 1;
-            traffic.bits += attempts * m.bits();
-            traffic.frame_bits += attempts * m.frame_bits();
+            traffic.bits += attempts * m.bits_with_sequence(sequence_bits);
+            traffic.frame_bits += attempts * m.frame_bits_with_sequence(sequence_bits);
             traffic.retransmissions += u64::from(f.retries);
             traffic.duplicates += u64::from(f.duplicates());
             traffic.ack_frames += u64::from(f.acks);
@@ -240,6 +258,28 @@ mod tests {
         assert_eq!((t.bits, t.frame_bits), (5 * 32, 5 * 8 * 15));
         assert_eq!((t.retransmissions, t.duplicates, t.ack_frames), (3, 2, 4));
         assert_eq!(t.ack_bits, 4 * 88);
+        // A 5-bit sequence number: 32 + 5 payload bits need a fifth payload octet.
+        let s = deliver_sequenced(
+            [z(), Transmission::Silent, z()],
+            &mut inbox,
+            |i| fates[i],
+            5,
+        );
+        assert_eq!((s.bits, s.frame_bits), (5 * 37, 5 * 8 * 16));
+        // An 8-bit one on 64 bits (8 octets): one octet more; on a codec's frame, its own octet.
+        let m = Message::Measurement(Vector::zeros(2));
+        assert_eq!(
+            (m.bits_with_sequence(8), m.frame_bits_with_sequence(8)),
+            (72, 8 * 20)
+        );
+        let f = Message::Frame {
+            octets: vec![0; 12],
+            payload_bits: 2,
+        };
+        assert_eq!(
+            (f.bits_with_sequence(3), f.frame_bits_with_sequence(3)),
+            (5, 8 * 13)
+        );
         // No retransmission: deliver's counts.
         let plain = deliver_attempts([z(), Transmission::Silent], &mut inbox, |_| Fate::default());
         assert_eq!(plain, deliver([z(), Transmission::Silent], &mut inbox));

@@ -113,6 +113,14 @@ pub const ACK_PPDU_OCTETS: usize = PREAMBLE_OCTETS + SFD_OCTETS + PHR_OCTETS + A
 /// Bits of one acknowledgment on air ([`ACK_PPDU_OCTETS`] x 8 = 88), what the network's ARQ
 /// counts per ACK (`crate::network::Traffic::ack_bits`).
 pub const ACK_PPDU_BITS: u64 = 8 * ACK_PPDU_OCTETS as u64;
+/// Bits of the 802.15.4 MAC frame (MPDU) around a payload of `payload_bits` bits: the MAC
+/// header and footer ([`MHR_OCTETS`] + [`FCS_OCTETS`] = 11 octets) around the payload in whole
+/// octets. Every message the network prices outside a codec's own frame, and every payload
+/// enlarged by a sequence number (`crate::link::Message::frame_bits_with_sequence`), is
+/// counted with it.
+pub fn mpdu_bits_for_payload(payload_bits: u64) -> u64 {
+    8 * (MHR_OCTETS + FCS_OCTETS) as u64 + 8 * payload_bits.div_ceil(8)
+}
 /// Broadcast short address / PAN id (§7.2.1.3, §7.2.1.4).
 pub const BROADCAST: u16 = 0xffff;
 /// Short address meaning "associated but no short address allocated" (`macShortAddress`,

@@ -118,6 +118,18 @@ impl FateTable {
         }
     }
 
+    /// A table of given fates, sensor-major (`fates[sensor * steps + step - 1]`): hand-built
+    /// links for the link layer's tests.
+    #[cfg(test)]
+    pub(crate) fn from_fates(sensors: usize, steps: usize, fates: Vec<Fate>) -> FateTable {
+        assert_eq!(fates.len(), sensors * steps);
+        FateTable {
+            sensors,
+            steps,
+            fates,
+        }
+    }
+
     /// The fate of a packet sent by `sensor` at step `step` (1-based, as in the engine's
     /// [`crate::network::Schedule::allows`]). Panics outside the drawn table: that is a bug in
     /// the caller, not a property of the input.
