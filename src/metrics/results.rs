@@ -680,6 +680,78 @@ pub fn text_table(rows: &[Vec<String>], left: usize) -> String {
     out
 }
 
+/// One line per variant whose trial failed: `scheme (params): trial t, step k: message` (the
+/// first failure, by trial). A run with one fails (exit 1) after writing its results.
+pub fn failed(summary: &Summary) -> Vec<String> {
+    summary
+        .schemes
+        .iter()
+        .filter_map(|s| {
+            let f = s.failed.as_ref()?;
+            let who = if s.params.is_empty() {
+                s.name.clone()
+            } else {
+                format!("{} ({})", s.name, params_text(&s.params))
+            };
+            Some(format!(
+                "{who}: trial {}, step {}: {}",
+                f.trial, f.step, f.message
+            ))
+        })
+        .collect()
+}
+
+/// Where a summary holds a number that is not finite (an overflow or a collapsed filter):
+/// `scheme (params): metric` for each. A run that produces one must not look like a success.
+pub fn non_finite(summary: &Summary) -> Vec<String> {
+    let mut out = Vec::new();
+    // A failed variant's numbers are null by design; [`failed`] reports it.
+    for s in summary.schemes.iter().filter(|s| s.failed.is_none()) {
+        let value = serde_json::to_value(s).unwrap_or(serde_json::Value::Null);
+        let mut bad = Vec::new();
+        find_nulls(&value, "", &mut bad);
+        // With one trial no standard error exists: its NaN says so, and is no overflow.
+        if summary.trials < 2 {
+            bad.retain(|path| !path.split('.').any(|seg| seg.contains("_se")));
+        }
+        bad.dedup();
+        if !bad.is_empty() {
+            out.push(format!(
+                "{} ({}): {}",
+                s.name,
+                params_text(&s.params),
+                bad.join(", ")
+            ));
+        }
+    }
+    out
+}
+
+/// JSON has no NaN or infinity: serde writes them as `null`, and nothing else in a scheme's
+/// summary is optional.
+fn find_nulls(v: &serde_json::Value, path: &str, out: &mut Vec<String>) {
+    match v {
+        serde_json::Value::Null => out.push(path.to_string()),
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                let p = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                find_nulls(x, &p, out);
+            }
+        }
+        // A per-step or per-trial list is named once, not once per entry.
+        serde_json::Value::Array(a) => {
+            for x in a {
+                find_nulls(x, path, out);
+            }
+        }
+        _ => {}
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -757,77 +829,5 @@ mod tests {
         let (mean, se) = t.mean_se(3);
         assert!((mean / 2e300 - 1.0).abs() < 1e-12);
         assert!(se.is_nan());
-    }
-}
-
-/// One line per variant whose trial failed: `scheme (params): trial t, step k: message` (the
-/// first failure, by trial). A run with one fails (exit 1) after writing its results.
-pub fn failed(summary: &Summary) -> Vec<String> {
-    summary
-        .schemes
-        .iter()
-        .filter_map(|s| {
-            let f = s.failed.as_ref()?;
-            let who = if s.params.is_empty() {
-                s.name.clone()
-            } else {
-                format!("{} ({})", s.name, params_text(&s.params))
-            };
-            Some(format!(
-                "{who}: trial {}, step {}: {}",
-                f.trial, f.step, f.message
-            ))
-        })
-        .collect()
-}
-
-/// Where a summary holds a number that is not finite (an overflow or a collapsed filter):
-/// `scheme (params): metric` for each. A run that produces one must not look like a success.
-pub fn non_finite(summary: &Summary) -> Vec<String> {
-    let mut out = Vec::new();
-    // A failed variant's numbers are null by design; [`failed`] reports it.
-    for s in summary.schemes.iter().filter(|s| s.failed.is_none()) {
-        let value = serde_json::to_value(s).unwrap_or(serde_json::Value::Null);
-        let mut bad = Vec::new();
-        find_nulls(&value, "", &mut bad);
-        // With one trial no standard error exists: its NaN says so, and is no overflow.
-        if summary.trials < 2 {
-            bad.retain(|path| !path.split('.').any(|seg| seg.contains("_se")));
-        }
-        bad.dedup();
-        if !bad.is_empty() {
-            out.push(format!(
-                "{} ({}): {}",
-                s.name,
-                params_text(&s.params),
-                bad.join(", ")
-            ));
-        }
-    }
-    out
-}
-
-/// JSON has no NaN or infinity: serde writes them as `null`, and nothing else in a scheme's
-/// summary is optional.
-fn find_nulls(v: &serde_json::Value, path: &str, out: &mut Vec<String>) {
-    match v {
-        serde_json::Value::Null => out.push(path.to_string()),
-        serde_json::Value::Object(m) => {
-            for (k, x) in m {
-                let p = if path.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{path}.{k}")
-                };
-                find_nulls(x, &p, out);
-            }
-        }
-        // A per-step or per-trial list is named once, not once per entry.
-        serde_json::Value::Array(a) => {
-            for x in a {
-                find_nulls(x, path, out);
-            }
-        }
-        _ => {}
     }
 }
