@@ -98,6 +98,7 @@ def run(
     report: bool = False,
     reproduce: bool = False,
     checkpoint_every: float = 10.0,
+    loss: Optional[float] = None,
 ) -> Dict[str, Any]:
     """Runs a scenario (Monte Carlo), as ``hushfuse run`` does, and returns its summary.
 
@@ -115,6 +116,9 @@ def run(
             ``hushfuse merge`` turns the N shard files into the whole run's folder.
         report: also write report.html (needs ``out``).
         reproduce: a reproduction, as ``hushfuse reproduce``: also reproduction.md.
+        loss: as ``--loss P``: every sensor behind a Bernoulli link losing each packet with
+            probability P (the same losses for every scheme), and a "... (loss-aware)" copy of
+            every scheme whose center has a loss-aware fusion, after the published ones.
 
     Returns:
         The summary.json of ``hushfuse run`` as Python objects: ``scenario``, ``trials``,
@@ -139,7 +143,7 @@ def run(
         out = os.fspath(out)
     r = _hushfuse.run(
         _check_scenario(scenario), trials, seed, threads, out, resume, shard, report, reproduce,
-        checkpoint_every,
+        checkpoint_every, loss,
     )
     return r if "schemes" not in r else _arrays(r)
 
