@@ -5,7 +5,6 @@
 use hushfuse::engine::replay::{self, Recorded};
 use hushfuse::engine::runner;
 use hushfuse::engine::trace::{self, Link};
-use hushfuse::metrics::results;
 use hushfuse::network::channel::{stability, FateTable};
 
 #[test]
@@ -32,38 +31,16 @@ fn late_packets_and_a_lossy_downlink_are_counted() {
     assert!((after_first - 0.5).abs() < 4.0 * 0.0146, "{after_first}");
 }
 use hushfuse::scenario::build;
+#[path = "common/scalar.rs"]
+mod scalar;
+use scalar::{scalar_system, summary};
 
-/// The scalar system of Sinopoli et al.: x' = a x + w, y = x + v, q = r = 1, a = 1.2.
+/// The scalar system of Sinopoli et al. with a = 1.2 and one sensor.
 fn scalar(channel: &str, schemes: &str, trials: usize) -> String {
-    format!(
-        r#"
-name = "scalar"
-trials = {trials}
-steps = 60
-seed = 2004
-[model]
-kind = "matrix"
-F = [[1.2]]
-Q = [[1.0]]
-[prior]
-mean = [0.0]
-cov_diag = [1.0]
-[[sensors]]
-H = [[1.0]]
-R = [[1.0]]
-{channel}
-{schemes}
-"#
-    )
+    scalar_system(1.2, 1, 60, channel, schemes, trials)
 }
 
 const KF: &str = "[[schemes]]\nkind = \"centralized-kf\"\n";
-
-fn summary(text: &str) -> results::Summary {
-    let exp = build::load(text, "scalar.toml").unwrap();
-    let sums = runner::run(&exp, runner::RunOptions { threads: 2 }, &|_| {}).unwrap();
-    results::summarize(&exp, &sums)
-}
 
 #[test]
 fn a_link_that_loses_nothing_changes_no_number() {

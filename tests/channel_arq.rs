@@ -12,37 +12,15 @@ use hushfuse::metrics::results;
 use hushfuse::network::channel::{stability, FateTable};
 use hushfuse::scenario::build;
 use rand::Rng;
+#[path = "common/scalar.rs"]
+mod scalar;
+use scalar::{scalar_system, summary};
 
-/// A scalar system x' = a x + w, y_i = x + v_i (q = r = 1), with `sensors` sensors.
 fn scalar(a: f64, sensors: usize, channel: &str, schemes: &str, trials: usize) -> String {
-    let sensor = "[[sensors]]\nH = [[1.0]]\nR = [[1.0]]\n".repeat(sensors);
-    format!(
-        r#"
-name = "scalar"
-trials = {trials}
-steps = 60
-seed = 2004
-[model]
-kind = "matrix"
-F = [[{a:?}]]
-Q = [[1.0]]
-[prior]
-mean = [0.0]
-cov_diag = [1.0]
-{sensor}
-{channel}
-{schemes}
-"#
-    )
+    scalar_system(a, sensors, 60, channel, schemes, trials)
 }
 
 const KF: &str = "[[schemes]]\nkind = \"centralized-kf\"\n";
-
-fn summary(text: &str) -> results::Summary {
-    let exp = build::load(text, "scalar.toml").unwrap();
-    let sums = runner::run(&exp, runner::RunOptions { threads: 2 }, &|_| {}).unwrap();
-    results::summarize(&exp, &sums)
-}
 
 fn link(s: &results::Summary) -> &LinkSummary {
     s.schemes[0].link.as_ref().expect("a link section")

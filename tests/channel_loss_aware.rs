@@ -11,41 +11,16 @@ use hushfuse::engine::trace::{self, Link};
 use hushfuse::link::Received;
 use hushfuse::metrics::results;
 use hushfuse::scenario::build;
+#[path = "common/scalar.rs"]
+mod scalar;
+use scalar::{scalar_system, summary};
 
 /// A stable scalar state x' = 0.95 x + w (q = 1) seen by two sensors y = x + v (r = 1).
 fn scalar(channel: &str, schemes: &str, trials: usize) -> String {
-    format!(
-        r#"
-name = "scalar"
-trials = {trials}
-steps = 60
-seed = 2004
-[model]
-kind = "matrix"
-F = [[0.95]]
-Q = [[1.0]]
-[prior]
-mean = [0.0]
-cov_diag = [1.0]
-[[sensors]]
-H = [[1.0]]
-R = [[1.0]]
-[[sensors]]
-H = [[1.0]]
-R = [[1.0]]
-{channel}
-{schemes}
-"#
-    )
+    scalar_system(0.95, 2, 60, channel, schemes, trials)
 }
 
 const LOSSY: &str = "[channel]\nkind = \"bernoulli\"\nloss = 0.3\n";
-
-fn summary(text: &str) -> results::Summary {
-    let exp = build::load(text, "scalar.toml").unwrap();
-    let sums = runner::run(&exp, runner::RunOptions { threads: 2 }, &|_| {}).unwrap();
-    results::summarize(&exp, &sums)
-}
 
 /// A scheme table of `kind` with its knob, `extra` keys and a label.
 fn scheme(kind: &str, knob: &str, extra: &str, label: &str) -> String {

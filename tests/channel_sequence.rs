@@ -4,38 +4,12 @@
 //! calibrates a center that reads a lost packet as a silence (Zheng et al.'s published CFwMD).
 //! The unit tests of the revealed gaps (which steps become unknown, the mod 2^b wrap) are in
 //! `src/engine/link_layer.rs`.
-use hushfuse::engine::runner;
-use hushfuse::metrics::results;
-use hushfuse::scenario::build;
+#[path = "common/scalar.rs"]
+mod scalar;
+use scalar::{scalar_system, summary};
 
-/// The scalar system of tests/channel.rs: x' = a x + w, y = x + v, q = r = 1.
 fn scalar(a: f64, channel: &str, schemes: &str, trials: usize, steps: usize) -> String {
-    format!(
-        r#"
-name = "scalar"
-trials = {trials}
-steps = {steps}
-seed = 2004
-[model]
-kind = "matrix"
-F = [[{a}]]
-Q = [[1.0]]
-[prior]
-mean = [0.0]
-cov_diag = [1.0]
-[[sensors]]
-H = [[1.0]]
-R = [[1.0]]
-{channel}
-{schemes}
-"#
-    )
-}
-
-fn summary(text: &str) -> results::Summary {
-    let exp = build::load(text, "scalar.toml").unwrap();
-    let sums = runner::run(&exp, runner::RunOptions { threads: 2 }, &|_| {}).unwrap();
-    results::summarize(&exp, &sums)
+    scalar_system(a, 1, steps, channel, schemes, trials)
 }
 
 const KF: &str = "[[schemes]]\nkind = \"centralized-kf\"\n";
