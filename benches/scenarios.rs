@@ -53,7 +53,8 @@ fn cpu_seconds() -> f64 {
 const DEFAULT: &str = "kfmc@1,dormann-fig1@1,dormann-fig1@2,zhang-fig5@1,zhang-fig5@2";
 /// Entries run only when a filter names them: the cost of a link.
 /// `+loss0` is a lossless link, which the engine runs as an ideal one; `+loss1e-12` is a link
-/// that does its work (fate tables, the generic loop) and in practice loses nothing.
+/// that does its work (fate tables, the link layer of the generic loop, the fast paths' loss
+/// masks) and in practice loses nothing.
 const EXTRA: &str =
     "arena-1d@1,arena-1d+loss0@1,arena-1d+loss1e-12@1,kfmc+loss0@1,kfmc+loss1e-12@1";
 

@@ -3,8 +3,13 @@
 //! mean, covariance and traffic count, at every step, for every variant of the Dormann et al.
 //! sweep (centralized KF at random rates, Algorithm 1 random and event-based, Algorithm 2 over
 //! alpha x b) and of the peers' centralized KF, on the same data and coin streams — the variants
-//! of a trial sharing one `TrialCache` as the runner shares it.
+//! of a trial sharing one `TrialCache` as the runner shares it. On a link that loses packets
+//! the engine's trial with the fast paths equals its generic loop, the losses applied by each.
 use hushfuse::engine::runner;
+use hushfuse::engine::seeding::coin_stream;
+use hushfuse::engine::trial::{
+    run_trial, LoopBuffers, Observer, ObserverError, StepOutput, TrialSpec,
+};
 use hushfuse::filter::Gaussian;
 use hushfuse::linalg::LinalgError;
 use hushfuse::network::{self, Traffic};
@@ -70,6 +75,7 @@ fn check(exp: &build::Experiment, trials: usize) {
             let Some(r) = fast.run_trial_fast(
                 &data.measurements,
                 exp.steps,
+                None,
                 &mut rng,
                 &mut cache,
                 &mut sink,
@@ -105,4 +111,123 @@ fn seed_004_sweep_fast_trials_are_bit_identical() {
 fn peers_centralized_kf_fast_trial_is_bit_identical() {
     let exp = build::load(include_str!("../benches/data/kfmc.toml"), "kfmc").unwrap();
     check(&exp, 20);
+}
+
+/// What the engine's trial reports, with (`fast`) or without its schemes' fast paths.
+struct Record {
+    steps: Steps,
+    fast: bool,
+    /// Steps that came through the fast path's sink.
+    via_fast: usize,
+}
+
+impl Observer for Record {
+    fn needs_links(&self) -> bool {
+        false
+    }
+
+    fn step(&mut self, s: &StepOutput) -> Result<(), ObserverError> {
+        let (m, c) = bits(s.estimate);
+        self.steps.push((m, c, s.traffic));
+        Ok(())
+    }
+
+    fn fast_sink(&mut self) -> Option<&mut dyn StepSink> {
+        if self.fast {
+            Some(self)
+        } else {
+            None
+        }
+    }
+}
+
+impl StepSink for Record {
+    fn step(&mut self, k: usize, est: &Gaussian, traffic: Traffic) -> Result<(), LinalgError> {
+        assert_eq!(k, self.steps.len() + 1);
+        self.via_fast += 1;
+        let (m, c) = bits(est);
+        self.steps.push((m, c, traffic));
+        Ok(())
+    }
+}
+
+/// `text` with a Bernoulli `[channel]` of loss `p` (what `--loss p` writes in).
+fn with_loss(text: &str, p: f64) -> String {
+    let mut table: toml::Table = toml::from_str(text).unwrap();
+    let mut channel = toml::Table::new();
+    channel.insert("kind".into(), toml::Value::String("bernoulli".into()));
+    channel.insert("loss".into(), toml::Value::Float(p));
+    table.insert("channel".into(), toml::Value::Table(channel));
+    toml::to_string(&table).unwrap()
+}
+
+/// Every variant of `exp` with a fast path, trials `0..trials`: the engine's trial with the
+/// fast paths equals its generic loop bit for bit. Returns the packets lost in the fast runs
+/// of the variants that have a fast path.
+fn check_lossy(exp: &build::Experiment, trials: usize) -> u64 {
+    let mut lost = 0;
+    let mut buffers = LoopBuffers::new(exp.system.n_sensors());
+    for trial in 0..trials {
+        let data = runner::draw_trial(exp, trial);
+        for v in 0..exp.variants.len() {
+            if exp.variants[v].scheme.fast_path().is_none() {
+                continue;
+            }
+            let spec = TrialSpec {
+                trial,
+                variant: v,
+                stream: coin_stream(v),
+                available: None,
+            };
+            let run = |fast: bool, buffers: &mut LoopBuffers| {
+                let mut r = Record {
+                    steps: Vec::new(),
+                    fast,
+                    via_fast: 0,
+                };
+                run_trial(exp, &data.measurements, spec, buffers, &mut r).unwrap();
+                (r.steps, r.via_fast)
+            };
+            let ((fast, via_fast), (generic, _)) =
+                (run(true, &mut buffers), run(false, &mut buffers));
+            // Every scheme with a fast path here takes it on this link.
+            assert_eq!(
+                via_fast, exp.steps,
+                "{}: {}",
+                exp.name, exp.variants[v].curve
+            );
+            for (k, (a, b)) in fast.iter().zip(&generic).enumerate() {
+                assert!(
+                    a == b,
+                    "{} variant {v} ({}), trial {trial}, step {}: fast {a:?} != generic {b:?}",
+                    exp.name,
+                    exp.variants[v].curve,
+                    k + 1
+                );
+            }
+            lost += fast.iter().map(|s| s.2.lost).sum::<u64>();
+        }
+    }
+    lost
+}
+
+#[test]
+fn fast_trials_apply_a_lossy_link_as_the_generic_loop_does() {
+    // Dormann et al.'s sweep: Algorithm 1's loss fallback (an estimate missing twice) and
+    // Algorithm 2's extrapolation from the last estimate to arrive; the centralized KF's
+    // schedule left at the first loss.
+    let text = with_loss(builtin::get("dormann-fig1").unwrap(), 0.2);
+    let mut exp = build::load(&text, "dormann-fig1").unwrap();
+    exp.steps = 40;
+    assert!(check_lossy(&exp, 2) > 0);
+    // The arena: the full-rate distributed KF, both algorithms, both centralized KFs.
+    let text = with_loss(builtin::get("arena-1d").unwrap(), 0.3);
+    let mut exp = build::load(&text, "arena-1d").unwrap();
+    exp.steps = 50;
+    assert!(check_lossy(&exp, 3) > 0);
+    // A link that loses nothing in these trials: the ideal link's fast trials, all-data batch
+    // schedule included.
+    let text = with_loss(include_str!("../benches/data/kfmc.toml"), 1e-12);
+    let exp = build::load(&text, "kfmc").unwrap();
+    assert_eq!(check_lossy(&exp, 5), 0);
 }

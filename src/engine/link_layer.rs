@@ -47,10 +47,12 @@ use crate::network::channel::{ChannelSpec, FateTable};
 use crate::network::{self, Traffic};
 use crate::scenario::experiment::{Experiment, Variant};
 use crate::scheme::{Feedback, FusionCenter, Scheme, SchemeError};
+use std::sync::Arc;
 
-/// Whether a variant's trials may take the fast paths: its links are [`lossless`] and its
-/// packets carry no sequence number (the fast paths count their own traffic, without one; a
-/// variant with `sequence_bits > 0` runs the generic loop, whose numbers are theirs otherwise).
+/// Whether a variant's trials may take the fast paths as on an ideal link: its links are
+/// [`lossless`] and its packets carry no sequence number (the fast paths count their own
+/// traffic, without one; a variant with `sequence_bits > 0` runs the generic loop, whose numbers
+/// are theirs otherwise). A link that only loses packets keeps them too ([`losses_only`]).
 pub(crate) fn ideal(variant: &Variant) -> bool {
     variant.sequence_bits == 0 && lossless(variant)
 }
@@ -65,6 +67,62 @@ pub(crate) fn lossless(variant: &Variant) -> bool {
         .channel
         .as_deref()
         .is_none_or(|specs| specs.iter().all(|s| s.is_lossless()))
+}
+
+/// Whether a variant's lossy link only loses packets: no delay, no retransmission, no sequence
+/// numbers. Its trials may then take the fast paths, which apply the losses themselves
+/// ([`crate::scheme::fast_path::Losses`]); a lossy downlink changes nothing for them (their
+/// schemes send no feedback).
+pub(crate) fn losses_only(variant: &Variant) -> bool {
+    variant.sequence_bits == 0
+        && variant
+            .channel
+            .as_deref()
+            .is_some_and(|specs| specs.iter().all(|s| s.delay().is_zero() && s.arq.is_none()))
+}
+
+/// The fate tables of one trial, shared by its variants whose links are the same: a table is a
+/// function of the links, the trial and the experiment's seed and steps only
+/// ([`FateTable::draw`]), so it is drawn once per trial rather than once per variant.
+#[derive(Default)]
+pub(crate) struct FateCache {
+    /// (trial, seed, steps) of the tables.
+    of: Option<(usize, u64, usize)>,
+    /// (links, downlink?, table).
+    tables: Vec<(Vec<ChannelSpec>, bool, Arc<FateTable>)>,
+}
+
+impl FateCache {
+    /// The uplink (`downlink = false`) or downlink table of `specs` in trial `trial` of `exp`.
+    pub(crate) fn get(
+        &mut self,
+        exp: &Experiment,
+        specs: &[ChannelSpec],
+        trial: usize,
+        downlink: bool,
+    ) -> Arc<FateTable> {
+        let of = Some((trial, exp.seed, exp.steps));
+        if self.of != of {
+            self.tables.clear();
+            self.of = of;
+        }
+        if let Some((_, _, t)) = self
+            .tables
+            .iter()
+            .find(|(s, d, _)| *d == downlink && s.as_slice() == specs)
+        {
+            return t.clone();
+        }
+        let table = Arc::new(FateTable::draw(
+            specs,
+            exp.steps,
+            exp.seed,
+            trial as u64,
+            downlink,
+        ));
+        self.tables.push((specs.to_vec(), downlink, table.clone()));
+        table
+    }
 }
 
 /// What one sensor did at one step.
@@ -139,9 +197,9 @@ impl Sequencing {
 /// One trial's link: its fates, the feedback each sensor holds, the packets in flight and
 /// (with delays) every inbox fused so far.
 pub(crate) struct LinkLayer {
-    up: FateTable,
+    up: Arc<FateTable>,
     /// `None` when every downlink is lossless: nothing to draw, every feedback arrives.
-    down: Option<FateTable>,
+    down: Option<Arc<FateTable>>,
     /// The last feedback that reached each sensor; one entry, shared by all, when every
     /// downlink is lossless (`down` is `None`).
     held: Vec<Option<Feedback>>,
@@ -169,6 +227,7 @@ impl LinkLayer {
         variant: usize,
         trial: usize,
         initial: &Option<Feedback>,
+        fates: &mut FateCache,
     ) -> Option<Self> {
         let specs = exp.variants[variant].channel.as_deref()?;
         if specs.iter().all(ChannelSpec::is_lossless) {
@@ -176,8 +235,8 @@ impl LinkLayer {
         }
         let horizon = specs.iter().map(|s| s.delay().horizon()).max().unwrap_or(0);
         let down = (!specs.iter().all(|s| s.downlink_spec().is_lossless()))
-            .then(|| FateTable::draw(specs, exp.steps, exp.seed, trial as u64, true));
-        let up = FateTable::draw(specs, exp.steps, exp.seed, trial as u64, false);
+            .then(|| fates.get(exp, specs, trial, true));
+        let up = fates.get(exp, specs, trial, false);
         let mut link = Self::with_fates(
             up,
             down,
@@ -191,8 +250,8 @@ impl LinkLayer {
     /// A link of given fates (`down`: `None` when every downlink is lossless), every sensor
     /// holding no feedback yet.
     fn with_fates(
-        up: FateTable,
-        down: Option<FateTable>,
+        up: Arc<FateTable>,
+        down: Option<Arc<FateTable>>,
         horizon: usize,
         sequence_bits: u32,
     ) -> Self {
@@ -391,7 +450,7 @@ mod tests {
             })
             .collect();
         let up = FateTable::from_fates(1, steps, fates);
-        let mut link = LinkLayer::with_fates(up, None, 0, sequence_bits);
+        let mut link = LinkLayer::with_fates(Arc::new(up), None, 0, sequence_bits);
         for k in 1..=steps {
             let mut inbox = vec![if k == 5 {
                 Received::Silent
@@ -434,7 +493,7 @@ mod tests {
     fn a_gap_of_zero_confirms_the_silences() {
         // Silent at 2 and 3, nothing lost: the numbers of 1 and 4 are consecutive.
         let up = FateTable::from_fates(1, 4, vec![Fate::default(); 4]);
-        let mut link = LinkLayer::with_fates(up, None, 0, 4);
+        let mut link = LinkLayer::with_fates(Arc::new(up), None, 0, 4);
         for k in 1..=4 {
             let mut inbox = vec![if k == 1 || k == 4 {
                 Received::Measurement(Vector::zeros(1))
@@ -464,7 +523,7 @@ mod tests {
             })
             .collect();
         let up = FateTable::from_fates(1, 4, fates);
-        let mut link = LinkLayer::with_fates(up, None, 2, 8);
+        let mut link = LinkLayer::with_fates(Arc::new(up), None, 2, 8);
         let z = |k: usize| Received::Measurement(Vector::from_element(1, k as f64));
         for k in 1..=4 {
             let mut inbox = vec![z(k)];

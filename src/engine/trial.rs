@@ -7,10 +7,11 @@
 //!
 //! A scheme's lockstep fast path ([`LockstepFastPath::run_trial_fast`], offered by
 //! [`Scheme::fast_path`]) is a hook of this loop: taken when the observer can take its report
-//! ([`Observer::fast_sink`]) and every reading exists, with the same numbers as the loop (the
-//! bit-for-bit tests are in `tests/fast_paths.rs`).
+//! ([`Observer::fast_sink`]) and every reading exists, on an ideal link or one that only loses
+//! packets (the fast path applies the losses, [`Losses`]), with the same numbers as the loop
+//! (the bit-for-bit tests are in `tests/fast_paths.rs`).
 pub use crate::engine::link_layer::Link;
-use crate::engine::link_layer::LinkLayer;
+use crate::engine::link_layer::{self, FateCache, LinkLayer};
 use crate::engine::seeding::coins;
 use crate::filter::Gaussian;
 use crate::linalg::{LinalgError, Vector};
@@ -20,7 +21,7 @@ use crate::network::{self, Schedule, Traffic};
 use crate::scenario::experiment::Experiment;
 #[cfg(doc)]
 use crate::scheme::fast_path::LockstepFastPath;
-use crate::scheme::fast_path::{FastTrialError, StepSink, TrialCache};
+use crate::scheme::fast_path::{FastTrialError, Losses, StepSink, TrialCache};
 #[cfg(doc)]
 use crate::scheme::Scheme;
 use crate::scheme::SchemeError;
@@ -115,6 +116,8 @@ pub struct LoopBuffers {
     /// (trial, address of its measurements) the cache belongs to: an identity only, never
     /// dereferenced.
     cache_of: Option<(usize, usize)>,
+    /// The link's fates of the current trial, shared by its variants.
+    fates: FateCache,
 }
 
 impl LoopBuffers {
@@ -126,6 +129,7 @@ impl LoopBuffers {
             bits: Vec::with_capacity(n_sensors),
             cache: TrialCache::new(),
             cache_of: None,
+            fates: FateCache::default(),
         }
     }
 
@@ -162,13 +166,22 @@ pub fn run_trial(
     let n_sensors = exp.system.n_sensors();
     let variant = &exp.variants[spec.variant];
     let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
-    // A lossy link is the generic loop's (the fast paths assume every packet arrives), and so
-    // are sequence numbers (the fast paths count traffic without them).
-    if spec.available.is_none() && crate::engine::link_layer::ideal(variant) {
+    // The fast paths take an ideal link, or one that only loses packets (they apply the
+    // losses); delays, retransmissions and sequence numbers are the generic loop's.
+    let ideal = link_layer::ideal(variant);
+    if spec.available.is_none() && (ideal || link_layer::losses_only(variant)) {
         // One virtual call per trial: the scheme's hook, then its whole trial.
         if let (Some(fast), Some(sink)) = (variant.scheme.fast_path(), observer.fast_sink()) {
+            let uplink = match variant.channel.as_deref() {
+                Some(specs) if !ideal => Some(buffers.fates.get(exp, specs, spec.trial, false)),
+                _ => None,
+            };
+            let losses = uplink.as_deref().map(Losses::new);
             let cache = buffers.cache_for(spec.trial, measurements);
-            if let Some(r) = fast.run_trial_fast(measurements, exp.steps, &mut rng, cache, sink) {
+            let steps = exp.steps;
+            let fast =
+                fast.run_trial_fast(measurements, steps, losses.as_ref(), &mut rng, cache, sink);
+            if let Some(r) = fast {
                 return r.map_err(|e| match e {
                     FastTrialError::Scheme { k, source } => LoopError::Scheme { k, source },
                     FastTrialError::Sink { k, source } => LoopError::Covariance { k, source },
@@ -187,12 +200,13 @@ pub fn run_trial(
         transmissions,
         links,
         bits,
+        fates,
         ..
     } = buffers;
     // What the fusion center tells the sensors before the first measurement.
     let mut feedback = inst.center.feedback();
     // The link's fates of this trial, from its own stream: every scheme meets the same ones.
-    let mut link = LinkLayer::new(exp, spec.variant, spec.trial, &feedback);
+    let mut link = LinkLayer::new(exp, spec.variant, spec.trial, &feedback, fates);
     for k in 1..=exp.steps {
         let downlink_lost = link.as_mut().map_or(0, |l| l.downlink(k, &feedback));
         let scheduled = |i: usize| {

@@ -3,6 +3,7 @@
 //! scheme author never needs it; a [`Scheme`] offers it through [`Scheme::fast_path`].
 use crate::filter::Gaussian;
 use crate::linalg::{LinalgError, Vector};
+use crate::network::channel::FateTable;
 #[cfg(doc)]
 use crate::scheme::Scheme;
 use crate::scheme::SchemeError;
@@ -18,15 +19,20 @@ pub trait LockstepFastPath: Send + Sync {
     /// `cache` lives for one trial and is shared by its variants (work that depends on the
     /// data but not on the variant is done once). `None`: no fast path for this scheme or this
     /// data (nothing has been drawn from `rng`; the generic loop runs).
+    ///
+    /// `losses`: the packets a lossy link loses in this trial ([`Losses`]), which the fast
+    /// path must apply as the generic loop does; `None` on an ideal link. A fast path that
+    /// cannot apply them returns `None`.
     fn run_trial_fast(
         &self,
         measurements: &[Vec<Vector>],
         steps: usize,
+        losses: Option<&Losses>,
         rng: &mut dyn RngCore,
         cache: &mut TrialCache,
         sink: &mut dyn StepSink,
     ) -> Option<Result<(), FastTrialError>> {
-        let _ = (measurements, steps, rng, cache, sink);
+        let _ = (measurements, steps, losses, rng, cache, sink);
         None
     }
     /// Whether [`LockstepFastPath::run_batch_fast`] may take several trials at once (the
@@ -50,6 +56,37 @@ pub trait LockstepFastPath: Send + Sync {
     ) -> Option<Result<(), FastTrialError>> {
         let _ = (trials, steps, cache, sink);
         None
+    }
+}
+
+/// The packets a lossy link loses in one trial, as a fast path applies them: a packet that
+/// sensor i sends at step k never reaches the center when [`Losses::lost`]`(i, k)`; the center
+/// sees a silence, and the packet keeps its bits and frame and is counted in
+/// [`crate::network::Traffic::lost`]. The engine hands a fast path the losses only when that is
+/// all the link does (no delay, no retransmission, no sequence numbers: those are the generic
+/// loop's, [`crate::engine::link_layer`]), and the schemes with a fast path send no feedback,
+/// so a lost downlink changes nothing for them.
+#[derive(Debug, Clone, Copy)]
+pub struct Losses<'a> {
+    uplink: &'a FateTable,
+}
+
+impl<'a> Losses<'a> {
+    /// The losses of an uplink fate table (only its `lost` flags are read).
+    pub fn new(uplink: &'a FateTable) -> Self {
+        Self { uplink }
+    }
+
+    /// Whether a packet sent by `sensor` at step `k` (1-based) is lost.
+    #[inline]
+    pub fn lost(&self, sensor: usize, k: usize) -> bool {
+        self.uplink.get(sensor, k).lost
+    }
+
+    /// Whether any slot of steps `1..=steps` loses its packet (a trial without one runs as on
+    /// an ideal link).
+    pub fn any(&self, steps: usize) -> bool {
+        (0..self.uplink.sensors()).any(|i| (1..=steps).any(|k| self.lost(i, k)))
     }
 }
 

@@ -1,7 +1,7 @@
 //! Baselines: the centralized Kalman filter that receives raw measurements — all of them (the
 //! bound every scheme is measured against), or each with probability `rate` (Dormann et al.
 //! Section V: a measurement not sent is lost for good).
-use super::fast_path::{BatchSink, FastTrialError, LockstepFastPath, StepSink, TrialCache};
+use super::fast_path::{BatchSink, FastTrialError, LockstepFastPath, Losses, StepSink, TrialCache};
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::fixed;
@@ -751,21 +751,26 @@ impl LockstepFastPath for CentralizedScheme {
 
     /// The generic loop's [`ForwardingSensor`] coins and [`CentralizedKf`] steps without the
     /// messages, boxes and inbox: linear sensors and well-formed data only.
+    ///
+    /// On a lossy link a lost measurement is one that did not arrive, as for the coins; a
+    /// trial in which no packet is lost runs as on an ideal link.
     fn run_trial_fast(
         &self,
         measurements: &[Vec<Vector>],
         steps: usize,
+        losses: Option<&Losses>,
         rng: &mut dyn RngCore,
         cache: &mut TrialCache,
         sink: &mut dyn StepSink,
     ) -> Option<Result<(), FastTrialError>> {
+        let losses = losses.filter(|l| l.any(steps));
         let sys = &self.system;
         let ns = sys.n_sensors();
         let linear = self.linear.as_ref()?;
         if !self.covers(measurements, steps) {
             return None;
         }
-        if let Some(schedule) = &self.schedule {
+        if let (Some(schedule), None) = (&self.schedule, losses) {
             // The estimate handed to the sink, kept from trial to trial.
             let est = cache.scratch((Arc::as_ptr(schedule) as usize, 0), || sys.prior.clone());
             let all = AllData {
@@ -801,14 +806,20 @@ impl LockstepFastPath for CentralizedScheme {
             for (k, zs) in (1..=steps).zip(measurements) {
                 arrived.clear();
                 let mut traffic = crate::network::Traffic::default();
-                for (z, (bits, frame_bits)) in zs.iter().zip(&cost) {
+                for (i, (z, (bits, frame_bits))) in zs.iter().zip(&cost).enumerate() {
                     // ForwardingSensor::step: always draw, send if u < rate.
                     let u: f64 = rng.random();
                     if u < self.rate {
-                        arrived.push(Some(z));
                         traffic.messages += 1;
                         traffic.bits += bits;
                         traffic.frame_bits += frame_bits;
+                        // The link layer: a lost packet is a silence, counted.
+                        if losses.is_some_and(|l| l.lost(i, k)) {
+                            traffic.lost += 1;
+                            arrived.push(None);
+                        } else {
+                            arrived.push(Some(z));
+                        }
                     } else {
                         arrived.push(None);
                     }

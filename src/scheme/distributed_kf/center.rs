@@ -502,29 +502,26 @@ impl FusionCenter for DkfCenter {
                             &mut self.contribution,
                         )?;
                         &self.contribution
+                    } else if self.plan.a_inv().is_none() {
+                        // Missing twice or more with a singular A: no debiasing, the plain
+                        // extrapolation, uninflated (`super::loss`).
+                        &self.held[i]
                     } else {
                         // Missing twice or more: lost (Algorithm 1) or possibly lost
                         // (loss-aware Algorithm 2), see `super::loss`.
                         if lost == 0 {
                             self.loss_moment.fill(0.0);
                         }
-                        let streak = &mut self.streaks[i];
                         let s = k - self.silent_steps[i];
-                        let (held, received) = (&self.held[i], &self.received[i]);
-                        let out = (&mut self.contribution, &mut self.loss_moment);
-                        if loss_fallback(
+                        loss_fallback(
                             &self.plan,
                             &self.fusion,
-                            streak,
-                            i,
-                            s,
-                            k,
-                            held,
-                            received,
-                            out,
-                        )? {
-                            lost += 1;
-                        }
+                            &mut self.streaks[i],
+                            (i, s, k),
+                            &self.received[i],
+                            (&mut self.contribution, &mut self.loss_moment),
+                        )?;
+                        lost += 1;
                         &self.contribution
                     };
                     crate::linalg::fixed::gemv(&mut self.tmp, &m.cbar_p_inv, contribution);
@@ -566,27 +563,19 @@ impl FusionCenter for DkfCenter {
 }
 
 /// Sensor i, whose last estimate to arrive (`received`, x̄^{e,i}_s) was sent at step s, is
-/// missing at step k for the second time or more: its term (the debiased extrapolation) into
-/// `out.0`, and its second moment S (plus B under Algorithm 2) added to `out.1`. Returns
-/// whether it was added; with a singular A there is no debiasing, the term is the plain
-/// extrapolation `held` and nothing is added ([`super::loss`]).
-#[allow(clippy::too_many_arguments)]
-fn loss_fallback(
+/// missing at step k for the second time or more (`at` = (i, s, k)), and A is invertible: its
+/// term (the debiased extrapolation) into `out.0`, and its second moment S (plus B under
+/// Algorithm 2) added to `out.1` ([`super::loss`]). The fast trial calls it too.
+pub(super) fn loss_fallback(
     plan: &GlobalizedPlan,
     fusion: &Fusion,
     streak: &mut Option<Streak>,
-    i: usize,
-    s: usize,
-    k: usize,
-    held: &Vector,
+    at: (usize, usize, usize),
     received: &Vector,
     out: (&mut Vector, &mut Matrix),
-) -> Result<bool, SchemeError> {
+) -> Result<(), SchemeError> {
+    let (i, s, k) = at;
     let (contribution, moment) = out;
-    if plan.a_inv().is_none() {
-        contribution.copy_from(held);
-        return Ok(false);
-    }
     let table = plan.loss_table();
     let streak = match streak {
         Some(st) => st,
@@ -601,7 +590,7 @@ fn loss_fallback(
     if let Fusion::Bounded { b } = fusion {
         *moment += b;
     }
-    Ok(true)
+    Ok(())
 }
 
 /// The silence set that removes the same sequence of information matrices as `silent` (bit i

@@ -14,17 +14,25 @@
 //! covariances are shared by every trial ([`super::center::DenseMemo`]). A variant then only draws its
 //! coins, runs its trigger and looks its step up. Every number is computed by the operations
 //! the generic path performs, on the same operands, so it is the same bit for bit.
-use super::center::{canonical_silence, DkfCenter};
+//!
+//! On a link that loses packets ([`Losses`]) the sensors are unchanged (they never learn of a
+//! loss) and the center's view of each sensor ([`CenterView`]) counts the steps since its last
+//! estimate *arrived*: Algorithm 2 then extrapolates from that estimate (the replica entry of
+//! that step, shared as above), and Algorithm 1 — whose sensors never omit twice, so a second
+//! missing step is a loss — takes the center's loss fallback ([`super::loss`], the center's own
+//! function on the estimate that arrived, which [`Signals`] keeps).
+use super::center::{canonical_silence, loss_fallback, DkfCenter};
+use super::loss::{self, Streak};
 use super::replica::Replicas;
 use super::sensor::Trigger;
 use super::signals::Signals;
 use super::{DistributedKfScheme, Fusion};
 use crate::filter::Gaussian;
 use crate::linalg::fixed;
-use crate::linalg::Vector;
+use crate::linalg::{Matrix, Vector};
 use crate::link::Message;
 use crate::network::Traffic;
-use crate::scheme::fast_path::{FastTrialError, StepSink, TrialCache};
+use crate::scheme::fast_path::{FastTrialError, Losses, StepSink, TrialCache};
 use crate::scheme::SchemeError;
 use rand::{Rng, RngCore};
 use std::sync::Arc;
@@ -86,11 +94,17 @@ pub(super) fn run(
     scheme: &DistributedKfScheme,
     measurements: &[Vec<Vector>],
     steps: usize,
+    losses: Option<&Losses>,
     rng: &mut dyn RngCore,
     cache: &mut TrialCache,
     sink: &mut dyn StepSink,
 ) -> Option<Result<(), FastTrialError>> {
     let plan = &scheme.plan;
+    let losses = losses.filter(|l| l.any(steps));
+    // A lost estimate with a singular A: the generic center's plain extrapolation.
+    if losses.is_some() && plan.a_inv().is_none() {
+        return None;
+    }
     let key = (Arc::as_ptr(plan) as usize, measurements.as_ptr() as usize);
     // Whether the trial is covered depends on the plan and the data only (the key), so it is
     // checked once per trial too.
@@ -105,7 +119,14 @@ pub(super) fn run(
             }
         })
     });
-    Some(run_variant(scheme, track.as_mut()?, steps, rng, sink))
+    Some(run_variant(
+        scheme,
+        track.as_mut()?,
+        steps,
+        losses,
+        rng,
+        sink,
+    ))
 }
 
 /// Whether the fast trial covers these data: finite measurements of the right sizes for every
@@ -127,19 +148,44 @@ fn covered(scheme: &DistributedKfScheme, measurements: &[Vec<Vector>], steps: us
         })
 }
 
-/// Where a variant's sensor stands: consecutive silent steps before the current one (the
-/// center's count after a silent step is this plus one: every sensor is scheduled at every
-/// step), and for Algorithm 2 its replica's entry at the current step.
+/// Where a variant's sensor stands: consecutive silent steps before the current one (every
+/// sensor is scheduled at every step), and for Algorithm 2 its replica's entry at the current
+/// step.
 #[derive(Clone, Copy, Default)]
 struct SensorState {
     silent_steps: usize,
     entry: u32,
 }
 
+/// What the center holds of a sensor (DkfCenter's per-sensor state): consecutive steps without
+/// its estimate, the current one included (the sensor's own count on an ideal link), the
+/// replica entry of its last estimate to arrive (Algorithm 2, missing twice or more), and the
+/// loss fallback's streak (Algorithm 1, missing twice or more: a loss).
+#[derive(Clone, Default)]
+struct CenterView {
+    missing: usize,
+    entry: u32,
+    streak: Option<Streak>,
+}
+
+/// The loss fallback's work space: per sensor its term (C̄^p_k)^{-1} x̃^{pp,i}_k of (11), the
+/// step's summed second moments, and the number of sensors under it this step.
+struct Fallback {
+    terms: Vec<f64>,
+    moment: Matrix,
+    count: usize,
+    /// x̄^{e,i}_s of the streak being started; the common prior's mean for s = 0.
+    received: Vector,
+    prior: Vector,
+    contribution: Vector,
+    tmp: Vector,
+}
+
 fn run_variant(
     scheme: &DistributedKfScheme,
     track: &mut Track,
     steps: usize,
+    losses: Option<&Losses>,
     rng: &mut dyn RngCore,
     sink: &mut dyn StepSink,
 ) -> Result<(), FastTrialError> {
@@ -154,9 +200,20 @@ fn run_variant(
     let n = sys.state_dim();
     let ns = sys.n_sensors();
     let every_other = scheme.trigger.every_other_step();
+    let bounded = matches!(scheme.fusion, Fusion::Bounded { .. });
     let message = Message::Estimate(Vector::zeros(n));
     let (msg_bits, msg_frame_bits) = (message.bits(), message.frame_bits());
     let mut state = vec![SensorState::default(); ns];
+    let mut view = vec![CenterView::default(); ns];
+    let mut fallback = Fallback {
+        terms: vec![0.0; ns * n],
+        moment: Matrix::zeros(n, n),
+        count: 0,
+        received: Vector::zeros(n),
+        prior: sys.prior.mean.clone(),
+        contribution: Vector::zeros(n),
+        tmp: Vector::zeros(n),
+    };
     let mut est = Gaussian::new(Vector::zeros(n), sys.prior.cov.clone());
     let mut tmp = vec![0.0; n];
     let bound = match &scheme.trigger {
@@ -169,7 +226,9 @@ fn run_variant(
         let mut silent = 0u64;
         let mut inexact = 0usize;
         let mut messages = 0u64;
-        for (i, st) in state.iter_mut().enumerate() {
+        let mut lost = 0u64;
+        fallback.count = 0;
+        for (i, (st, cv)) in state.iter_mut().zip(&mut view).enumerate() {
             // The sensor (DkfSensor::step): its trigger, with Algorithm 2's replica of the
             // center at this step.
             let u: f64 = rng.random();
@@ -189,40 +248,65 @@ fn run_variant(
                         replicas.test_13(st.entry, *alpha, bound, &mut tmp)
                     }
                 };
-            // The center's bookkeeping (DkfCenter::step).
             if send {
                 st.silent_steps = 0;
                 messages += 1;
             } else {
                 st.silent_steps += 1;
-                silent |= 1 << i;
-                if st.silent_steps >= 2 {
-                    match &scheme.fusion {
-                        Fusion::OmittedEstimates => {
-                            return Err(err(k)(SchemeError::Protocol {
-                                sensor: i,
-                                // Unreachable: Algorithm 1's sensors never omit twice and
-                                // the fast trial runs on a lossless link only.
-                                message: format!(
-                                    "silent for {} steps on a lossless link; Algorithm 1's \
-                                     sensors send at least every other step",
-                                    st.silent_steps
-                                ),
-                            }));
-                        }
-                        Fusion::Bounded { .. } => inexact += 1,
+            }
+            // The link: a lost estimate is a silence at the center.
+            let arrived = send && !losses.is_some_and(|l| l.lost(i, k));
+            lost += u64::from(send && !arrived);
+            // The center's bookkeeping (DkfCenter::step).
+            if arrived {
+                cv.missing = 0;
+                cv.streak = None;
+                continue;
+            }
+            cv.missing += 1;
+            silent |= 1 << i;
+            if bounded {
+                // Algorithm 2's replica of the center's held estimate (the sensor's own
+                // entry when the center holds what the sensor believes it holds).
+                cv.entry = if cv.missing == st.silent_steps {
+                    st.entry
+                } else if cv.missing == 1 {
+                    replicas
+                        .after_send(plan, signals, i, k - 1)
+                        .map_err(err(k))?
+                } else {
+                    replicas
+                        .advance(plan, signals, cv.entry, i, k)
+                        .map_err(err(k))?
+                };
+            }
+            if cv.missing >= 2 {
+                match &scheme.fusion {
+                    Fusion::OmittedEstimates => {
+                        fallback
+                            .add(plan, &scheme.fusion, signals, cv, (i, k))
+                            .map_err(err(k))?;
                     }
+                    Fusion::Bounded { .. } => inexact += 1,
                 }
             }
         }
-        let factor = fuse(
-            center, signals, replicas, means, &state, k, p, silent, inexact, &mut est,
-        )
-        .map_err(err(k))?;
+        let factor = if fallback.count > 0 {
+            fallback
+                .fuse(center, signals, replicas, &view, (k, p), silent, &mut est)
+                .map_err(err(k))?;
+            None
+        } else {
+            fuse(
+                center, signals, replicas, means, &view, k, p, silent, inexact, &mut est,
+            )
+            .map_err(err(k))?
+        };
         let traffic = Traffic {
             messages,
             bits: messages * msg_bits,
             frame_bits: messages * msg_frame_bits,
+            lost,
             ..Traffic::default()
         };
         match factor {
@@ -234,17 +318,81 @@ fn run_variant(
     Ok(())
 }
 
-/// The center's step k (DkfCenter::step): (11)'s information vector in sensor order, solved
-/// with (10)'s Cholesky factor, and the fused covariance, into `est`. Returns the NEES factor
-/// of `est.cov` (`fixed::nees_factor`) when the covariance is a copy of a memoized one that
-/// keeps it.
+impl Fallback {
+    /// Sensor i's estimate is missing at k for the second time or more under Algorithm 1 (a
+    /// loss): the center's loss fallback, its term of (11) into `terms`, its moment summed.
+    fn add(
+        &mut self,
+        plan: &super::plan::GlobalizedPlan,
+        fusion: &Fusion,
+        signals: &Signals,
+        cv: &mut CenterView,
+        (i, k): (usize, usize),
+    ) -> Result<(), SchemeError> {
+        if self.count == 0 {
+            self.moment.fill(0.0);
+        }
+        let s = k - cv.missing;
+        if cv.streak.is_none() {
+            // x̄^{e,i}_s, as it arrived.
+            if s == 0 {
+                self.received.copy_from(&self.prior);
+            } else {
+                let x = signals.at(&signals.xbar_e, s, i);
+                self.received.copy_from_slice(x);
+            }
+        }
+        let out = (&mut self.contribution, &mut self.moment);
+        loss_fallback(plan, fusion, &mut cv.streak, (i, s, k), &self.received, out)?;
+        let m = plan.at(k)?;
+        crate::linalg::fixed::gemv(&mut self.tmp, &m.cbar_p_inv, &self.contribution);
+        let n = self.tmp.len();
+        self.terms[i * n..(i + 1) * n].copy_from_slice(self.tmp.as_slice());
+        self.count += 1;
+        Ok(())
+    }
+
+    /// The center's step k with `count` sensors under the loss fallback: (11) in sensor order,
+    /// solved with (10)'s factor of the silence set, the covariance inflated
+    /// ([`loss::inflate`]), as DkfCenter::step does.
+    #[allow(clippy::too_many_arguments)]
+    fn fuse(
+        &self,
+        center: &DkfCenter,
+        signals: &Signals,
+        replicas: &Replicas,
+        view: &[CenterView],
+        (k, p): (usize, usize),
+        silent: u64,
+        est: &mut Gaussian,
+    ) -> Result<(), SchemeError> {
+        let fused = center.fused_covariance(p, canonical_silence(&center.class, silent), 0)?;
+        information_sum(
+            signals,
+            replicas,
+            &self.terms,
+            view,
+            k,
+            est.mean.as_mut_slice(),
+        );
+        fixed::chol_solve(&fused.chol, &mut est.mean);
+        let m = center.plan().at(k)?;
+        est.cov = loss::inflate(&fused.cov, &m.cbar_p_inv, &self.moment, self.count);
+        Ok(())
+    }
+}
+
+/// The center's step k (DkfCenter::step) when no sensor is under the loss fallback: (11)'s
+/// information vector in sensor order, solved with (10)'s Cholesky factor, and the fused
+/// covariance, into `est`. Returns the NEES factor of `est.cov` (`fixed::nees_factor`) when the
+/// covariance is a copy of a memoized one that keeps it.
 #[allow(clippy::too_many_arguments)]
 fn fuse<'c>(
     center: &'c DkfCenter,
     signals: &Signals,
     replicas: &Replicas,
     means: &mut Means,
-    state: &[SensorState],
+    view: &[CenterView],
     k: usize,
     p: usize,
     silent: u64,
@@ -254,7 +402,7 @@ fn fuse<'c>(
     let Some(dense) = center.dense_memo() else {
         let fused =
             center.fused_covariance(p, canonical_silence(&center.class, silent), inexact)?;
-        information_sum(signals, replicas, state, k, est.mean.as_mut_slice());
+        information_sum(signals, replicas, &[], view, k, est.mean.as_mut_slice());
         fixed::chol_solve(&fused.chol, &mut est.mean);
         est.cov.as_mut_slice().copy_from_slice(fused.cov.as_slice());
         return Ok(None);
@@ -264,7 +412,7 @@ fn fuse<'c>(
     match means.get(k, silent).filter(|_| inexact == 0) {
         Some(mean) => est.mean.copy_from_slice(mean),
         None => {
-            information_sum(signals, replicas, state, k, est.mean.as_mut_slice());
+            information_sum(signals, replicas, &[], view, k, est.mean.as_mut_slice());
             fixed::chol_solve(&base.chol, &mut est.mean);
             if inexact == 0 {
                 means.put(k, silent, est.mean.as_slice());
@@ -274,62 +422,68 @@ fn fuse<'c>(
     dense.covariance_into(center, p, set, base, inexact, &mut est.cov)
 }
 
-/// (11): Σ_i of (C̄^e_k)^{-1} x̄^{e,i}_k for a sensor that sent, (C̄^p_k)^{-1} x̄^{p,i}_k for one
-/// that sent at k - 1, (C̄^p_k)^{-1} x̃^{pp,i}_k (Algorithm 2) for one silent longer; from zero,
-/// in sensor order, each `+=` as nalgebra's (element by element) — in fixed size for
-/// dimensions 1..=6.
+/// (11): Σ_i of (C̄^e_k)^{-1} x̄^{e,i}_k for a sensor whose estimate arrived, (C̄^p_k)^{-1}
+/// x̄^{p,i}_k for one whose estimate of k - 1 did, (C̄^p_k)^{-1} x̃^{pp,i}_k (Algorithm 2) or
+/// the loss fallback's term in `fallback` for one missing longer; from zero, in sensor order,
+/// each `+=` as nalgebra's (element by element) — in fixed size for dimensions 1..=6.
 fn information_sum(
     signals: &Signals,
     replicas: &Replicas,
-    state: &[SensorState],
+    fallback: &[f64],
+    view: &[CenterView],
     k: usize,
     out: &mut [f64],
 ) {
+    let terms = Terms {
+        signals,
+        replicas,
+        fallback,
+        k,
+    };
     match out.len() {
-        1 => sum_fixed::<1>(signals, replicas, state, k, out),
-        2 => sum_fixed::<2>(signals, replicas, state, k, out),
-        3 => sum_fixed::<3>(signals, replicas, state, k, out),
-        4 => sum_fixed::<4>(signals, replicas, state, k, out),
-        5 => sum_fixed::<5>(signals, replicas, state, k, out),
-        6 => sum_fixed::<6>(signals, replicas, state, k, out),
+        1 => sum_fixed::<1>(&terms, view, out),
+        2 => sum_fixed::<2>(&terms, view, out),
+        3 => sum_fixed::<3>(&terms, view, out),
+        4 => sum_fixed::<4>(&terms, view, out),
+        5 => sum_fixed::<5>(&terms, view, out),
+        6 => sum_fixed::<6>(&terms, view, out),
         _ => {
             out.fill(0.0);
-            for (i, st) in state.iter().enumerate() {
-                fixed::add_assign(out, information_term(signals, replicas, st, k, i));
+            for (i, cv) in view.iter().enumerate() {
+                fixed::add_assign(out, terms.of(cv, i));
             }
         }
     }
 }
 
-/// Sensor i's term of (11) (see [`information_sum`]).
-#[inline(always)]
-fn information_term<'a>(
+/// Where the sensors' terms of (11) at step k are (see [`information_sum`]).
+struct Terms<'a> {
     signals: &'a Signals,
     replicas: &'a Replicas,
-    st: &SensorState,
+    /// The loss fallback's terms, `n` per sensor (read only for a sensor under it).
+    fallback: &'a [f64],
     k: usize,
-    i: usize,
-) -> &'a [f64] {
-    match st.silent_steps {
-        0 => signals.at(&signals.info_sent, k, i),
-        1 => signals.at(&signals.info_omitted, k, i),
-        _ => replicas.info(st.entry),
+}
+
+impl<'a> Terms<'a> {
+    /// Sensor i's term.
+    #[inline(always)]
+    fn of(&self, cv: &CenterView, i: usize) -> &'a [f64] {
+        let (signals, k) = (self.signals, self.k);
+        match cv.missing {
+            0 => signals.at(&signals.info_sent, k, i),
+            1 => signals.at(&signals.info_omitted, k, i),
+            _ if cv.streak.is_some() => &self.fallback[i * signals.n..(i + 1) * signals.n],
+            _ => self.replicas.info(cv.entry),
+        }
     }
 }
 
 #[inline(always)]
-fn sum_fixed<const N: usize>(
-    signals: &Signals,
-    replicas: &Replicas,
-    state: &[SensorState],
-    k: usize,
-    out: &mut [f64],
-) {
+fn sum_fixed<const N: usize>(terms: &Terms, view: &[CenterView], out: &mut [f64]) {
     let mut acc = [0.0; N];
-    for (i, st) in state.iter().enumerate() {
-        let term: &[f64; N] = information_term(signals, replicas, st, k, i)
-            .try_into()
-            .expect("N entries");
+    for (i, cv) in view.iter().enumerate() {
+        let term: &[f64; N] = terms.of(cv, i).try_into().expect("N entries");
         for j in 0..N {
             acc[j] += term[j];
         }

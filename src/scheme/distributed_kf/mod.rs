@@ -20,7 +20,7 @@ pub use plan::GlobalizedPlan;
 pub use sensor::{DkfSensor, Trigger};
 
 use crate::linalg::Matrix;
-use crate::scheme::fast_path::{FastTrialError, LockstepFastPath, StepSink, TrialCache};
+use crate::scheme::fast_path::{FastTrialError, LockstepFastPath, Losses, StepSink, TrialCache};
 use crate::scheme::{Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use std::sync::Arc;
 
@@ -201,6 +201,7 @@ impl LockstepFastPath for DistributedKfScheme {
         &self,
         measurements: &[Vec<crate::linalg::Vector>],
         steps: usize,
+        losses: Option<&Losses>,
         rng: &mut dyn rand::RngCore,
         cache: &mut TrialCache,
         sink: &mut dyn StepSink,
@@ -209,7 +210,7 @@ impl LockstepFastPath for DistributedKfScheme {
         if self.loss_aware {
             return None;
         }
-        fast::run(self, measurements, steps, rng, cache, sink)
+        fast::run(self, measurements, steps, losses, rng, cache, sink)
     }
 }
 

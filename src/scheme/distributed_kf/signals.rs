@@ -17,6 +17,9 @@ pub(super) struct Signals {
     pub(super) kf: Vec<f64>,
     /// ||K^i_k (z^i_k - H^i x̂^{p,i}_k)||, the norm of test (12); one per (k, i).
     pub(super) correction_norm: Vec<f64>,
+    /// x̄^{e,i}_k: the estimate the sensor sends (what the center keeps of the last one to
+    /// arrive, for the loss fallback of [`super::loss`]).
+    pub(super) xbar_e: Vec<f64>,
     /// (C̄^e_k)^{-1} x̄^{e,i}_k: (11)'s term of an estimate that arrived.
     pub(super) info_sent: Vec<f64>,
     /// (C̄^p_k)^{-1} x̄^{p,i}_k: (11)'s term of an estimate sent at k-1 and omitted at k.
@@ -63,6 +66,7 @@ impl Signals {
             kf_p: Vec::with_capacity(len),
             kf: Vec::with_capacity(len),
             correction_norm: Vec::with_capacity(steps * ns),
+            xbar_e: Vec::with_capacity(len),
             info_sent: Vec::with_capacity(len),
             info_omitted: Vec::with_capacity(len),
         };
@@ -100,6 +104,7 @@ impl Signals {
                 t.correction_norm.push(fixed::norm(tmp2.as_slice()));
                 t.xbar_p.extend_from_slice(xbar_p.as_slice());
                 t.kf.extend_from_slice(kf.as_slice());
+                t.xbar_e.extend_from_slice(xbar.as_slice());
                 crate::linalg::fixed::gemv(&mut tmp, &m.cbar_e_inv, xbar);
                 t.info_sent.extend_from_slice(tmp.as_slice());
                 crate::linalg::fixed::gemv(&mut tmp, &m.cbar_p_inv, &xbar_p);
