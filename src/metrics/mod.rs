@@ -1,6 +1,7 @@
 //! Metrics as mergeable sums, the summaries computed from them, and the bounds no scheme
 //! can beat.
 mod failed;
+pub mod energy;
 pub mod link;
 pub mod pcrb;
 pub mod per_step_csv;
