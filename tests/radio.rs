@@ -61,7 +61,10 @@ fn radio_table_changes_the_energy() {
     );
     assert!(close(d.tx, 2.0 * b.tx));
     assert_eq!((d.sleep, d.ack, d.downlink), (b.sleep, b.ack, b.downlink));
-    assert!(close(doubled.energy_per_step_uj, base.energy_per_step_uj + b.tx));
+    assert!(close(
+        doubled.energy_per_step_uj,
+        base.energy_per_step_uj + b.tx
+    ));
     let awake = run(
         "[radio]\nsleep_ma = 0.0\nstep_seconds = 10.0\nbattery_mah = 1000.0\nsupply_v = 3.3\n",
         KF,
@@ -125,7 +128,10 @@ fn bad_radio_tables_name_the_key() {
     };
     let (field, msg) = err("[radio]\ntx_ma = -1.0\n");
     assert_eq!(field, "radio.tx_ma", "{msg}");
-    assert!(msg.contains("expected a finite number > 0, got -1"), "{msg}");
+    assert!(
+        msg.contains("expected a finite number > 0, got -1"),
+        "{msg}"
+    );
     assert_eq!(err("[radio]\nstep_seconds = 0.0\n").0, "radio.step_seconds");
     assert_eq!(err("[radio]\nlisten_us = nan\n").0, "radio.listen_us");
     assert_eq!(err("[radio]\nack_wait_us = 100.0\n").0, "radio.ack_wait_us");

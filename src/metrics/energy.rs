@@ -27,12 +27,8 @@ pub struct EnergySummary {
 /// The run's counters summed over trials and steps, as one [`Traffic`] (the sums of integer
 /// counts are exact in double precision up to 2^53).
 pub fn total_traffic(sums: &Sums) -> Traffic {
-    let column = |f: usize| -> u64 {
-        (0..sums.steps)
-            .map(|k| sums.at(k, f))
-            .sum::<f64>()
-            .round() as u64
-    };
+    let column =
+        |f: usize| -> u64 { (0..sums.steps).map(|k| sums.at(k, f)).sum::<f64>().round() as u64 };
     // The link's counters (LINK_COUNTERS order): empty rows for a link that did nothing.
     let link = |c: usize| -> u64 { sums.link.iter().map(|r| r[c]).sum() };
     Traffic {

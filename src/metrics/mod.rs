@@ -1,7 +1,7 @@
 //! Metrics as mergeable sums, the summaries computed from them, and the bounds no scheme
 //! can beat.
-mod failed;
 pub mod energy;
+mod failed;
 pub mod link;
 pub mod pcrb;
 pub mod per_step_csv;

@@ -391,7 +391,10 @@ mod tests {
         assert!(close(e.ack, 79.4112), "{e:?}");
         assert!(close(e.downlink, 203.04), "{e:?}");
         // Asleep: 2 s of sensor time less 1536 + 1408 + 3600 µs, at 0.06 mW.
-        assert!(close(e.sleep, 0.06 * (2e6 - 1536.0 - 1408.0 - 3600.0) / 1000.0));
+        assert!(close(
+            e.sleep,
+            0.06 * (2e6 - 1536.0 - 1408.0 - 3600.0) / 1000.0
+        ));
         // Without ARQ and feedback the same frames cost only their TX part and sleep.
         let plain = r.energy(&Activity::of(&t, 2, 1, false, false));
         assert_eq!((plain.ack, plain.downlink), (0.0, 0.0));
