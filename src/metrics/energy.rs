@@ -5,6 +5,7 @@
 use crate::metrics::{Layout, Sums};
 use crate::network::radio::{Activity, EnergyParts, RadioSpec};
 use crate::network::Traffic;
+use crate::scenario::build::{Experiment, Variant};
 use serde::{Deserialize, Serialize};
 
 /// A scheme variant's radio energy (means over trials and steps).
@@ -45,6 +46,18 @@ pub fn total_traffic(sums: &Sums) -> Traffic {
         ack_frames: link(6),
         ack_bits: link(7),
     }
+}
+
+/// The energy summary of variant `v` of `exp` from its `sums`, priced with the scenario's
+/// `[radio]`: its senders wait for acknowledgements when any of its links has `arq` (a
+/// scenario where only some sensors have it is charged as if all had: the sums do not keep
+/// attempts per sensor).
+pub fn of_variant(exp: &Experiment, v: &Variant, sums: &Sums) -> EnergySummary {
+    let arq = v
+        .channel
+        .as_ref()
+        .is_some_and(|c| c.iter().any(|l| l.arq.is_some()));
+    summarize(&exp.radio, sums, exp.trials, exp.system.n_sensors(), arq)
 }
 
 /// The energy summary of a variant's `sums` over `trials` trials, with `sensors` sensors whose

@@ -300,15 +300,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 frame_bits_per_step_se: run_se(Layout::FRAME_BITS, 1.0),
                 downlink_bits_per_step: downlink_bits / steps as f64,
                 downlink_bits_per_step_se: run_se(Layout::DOWNLINK_BITS, 1.0),
-                energy: crate::metrics::energy::summarize(
-                    &exp.radio,
-                    s,
-                    exp.trials,
-                    exp.system.n_sensors(),
-                    v.channel
-                        .as_ref()
-                        .is_some_and(|c| c.iter().any(|l| l.arq.is_some())),
-                ),
+                energy: crate::metrics::energy::of_variant(exp, v, s),
                 traffic_per_step,
                 degenerate_covariance_fraction: degenerate / steps as f64,
                 degenerate_covariance_fraction_se: run_se(Layout::DEGENERATE, 1.0),
