@@ -29,7 +29,8 @@
 //!   messages delivered by ARQ, one each: `ack_frames − duplicates` of [`Traffic`] (every ACK
 //!   after a packet's first acknowledges a duplicate, i.e. the one before it was lost). This is
 //!   exact unless a delivered packet ran out of retries with all its ACKs lost; such a packet
-//!   is charged `t_ta + 352 µs` of waiting instead of 864 µs.
+//!   is charged `t_ta + 352 µs` of waiting instead of 864 µs. A scenario where only some
+//!   sensors have `arq` is charged as if all had (the sums keep no attempts per sensor).
 //! * **Feedback** (only for a scheme that sends any: a run whose `downlink_bits` are not all
 //!   zero): every sensor listens every step, because it cannot know whether the center has
 //!   something for it (a sensor of Zhang et al. learns from the feedback whether it is
