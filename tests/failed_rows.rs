@@ -145,6 +145,10 @@ fn a_failed_variant_is_a_failed_row_and_the_others_finish() {
     assert_eq!(row["failed"]["step"], 7);
     assert!(row["steady_state"]["mse"].is_null());
     assert!(row["mse"][0].is_null());
+    // Its energy too (issue 24), like its other numbers.
+    assert!(row["energy_per_step_uj"].is_null());
+    assert!(row["energy_parts_per_step_uj"]["tx"].is_null());
+    assert!(json["schemes"][0]["energy_per_step_uj"].is_number());
     assert_eq!(row["name"], "failing");
     assert!(json["schemes"][0]["steady_state"]["mse"].is_number());
     assert!(json["schemes"][0].get("failed").is_none());

@@ -1,5 +1,6 @@
 //! Metrics as mergeable sums, the summaries computed from them, and the bounds no scheme
 //! can beat.
+pub mod energy;
 mod failed;
 pub mod link;
 pub mod pcrb;

@@ -86,6 +86,10 @@ pub struct SchemeSummary {
     /// Mean feedback bits from the fusion center to the sensors per step.
     pub downlink_bits_per_step: f64,
     pub downlink_bits_per_step_se: f64,
+    /// What the traffic costs the sensors' radios (`[radio]`): `energy_per_step_uj`, per sensor,
+    /// by part, and the average sensor's `lifetime_days` ([`crate::metrics::energy`]).
+    #[serde(flatten)]
+    pub energy: crate::metrics::energy::EnergySummary,
     /// Per step: rate and bits with their standard errors.
     pub traffic_per_step: TrafficPerStep,
     /// Fraction of (trial, step) pairs whose fused covariance was singular (collapsed
@@ -296,6 +300,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 frame_bits_per_step_se: run_se(Layout::FRAME_BITS, 1.0),
                 downlink_bits_per_step: downlink_bits / steps as f64,
                 downlink_bits_per_step_se: run_se(Layout::DOWNLINK_BITS, 1.0),
+                energy: crate::metrics::energy::of_variant(exp, v, s),
                 traffic_per_step,
                 degenerate_covariance_fraction: degenerate / steps as f64,
                 degenerate_covariance_fraction_se: run_se(Layout::DEGENERATE, 1.0),

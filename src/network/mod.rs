@@ -4,6 +4,7 @@ use crate::link::codec802154::ACK_PPDU_BITS;
 use crate::link::{Received, Transmission};
 
 pub mod channel;
+pub mod radio;
 
 use channel::Fate;
 

@@ -217,6 +217,10 @@ pub fn build_with(
     let parts = crate::scenario::system::build_system(&ctx, &file_spec)?;
     let system = Arc::new(parts.system);
     let channel = crate::scenario::channel::build_channel(&ctx, &file_spec, system.n_sensors())?;
+    let radio = file_spec.radio.unwrap_or_default();
+    radio
+        .validate()
+        .map_err(|e| ctx.err(format!("radio.{}", e.key), e.message))?;
     if file_spec.every_scheme {
         file_spec.schemes =
             crate::scenario::every_scheme::expand(&ctx, &file_spec.schemes, &system)?;
@@ -283,5 +287,6 @@ pub fn build_with(
         steady_from,
         paper: file_spec.paper,
         channel,
+        radio,
     })
 }

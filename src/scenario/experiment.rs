@@ -56,4 +56,7 @@ pub struct Experiment {
     /// every link is ideal. A scheme entry's own `channel` replaces it for that entry's variants:
     /// the engine reads [`Variant::channel`].
     pub channel: Option<Vec<ChannelSpec>>,
+    /// The sensors' radio and battery (`[radio]`, validated; absent: the CC2420's values):
+    /// what the summary prices the traffic with.
+    pub radio: crate::network::radio::RadioSpec,
 }
