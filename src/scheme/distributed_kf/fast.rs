@@ -119,14 +119,11 @@ pub(super) fn run(
             }
         })
     });
-    Some(run_variant(
-        scheme,
-        track.as_mut()?,
-        steps,
-        losses,
-        rng,
-        sink,
-    ))
+    let track = track.as_mut()?;
+    Some(match losses {
+        None => run_variant::<false>(scheme, track, steps, None, rng, sink),
+        Some(_) => run_variant::<true>(scheme, track, steps, losses, rng, sink),
+    })
 }
 
 /// Whether the fast trial covers these data: finite measurements of the right sizes for every
@@ -159,18 +156,27 @@ struct SensorState {
 
 /// What the center holds of a sensor (DkfCenter's per-sensor state): consecutive steps without
 /// its estimate, the current one included (the sensor's own count on an ideal link), the
-/// replica entry of its last estimate to arrive (Algorithm 2, missing twice or more), and the
-/// loss fallback's streak (Algorithm 1, missing twice or more: a loss).
-#[derive(Clone, Default)]
+/// replica entry of its last estimate to arrive (Algorithm 2, missing twice or more), and
+/// whether it is under the loss fallback (Algorithm 1, missing twice or more: a loss; its
+/// streak is in [`Fallback::streaks`]).
+#[derive(Clone, Copy, Default)]
 struct CenterView {
     missing: usize,
     entry: u32,
-    streak: Option<Streak>,
+    fallback: bool,
 }
 
-/// The loss fallback's work space: per sensor its term (C̄^p_k)^{-1} x̃^{pp,i}_k of (11), the
-/// step's summed second moments, and the number of sensors under it this step.
+/// A sensor and the center's view of it.
+#[derive(Clone, Copy, Default)]
+struct Node {
+    sensor: SensorState,
+    center: CenterView,
+}
+
+/// The loss fallback's work space: per sensor its streak and its term (C̄^p_k)^{-1} x̃^{pp,i}_k
+/// of (11), the step's summed second moments, and the number of sensors under it this step.
 struct Fallback {
+    streaks: Vec<Option<Streak>>,
     terms: Vec<f64>,
     moment: Matrix,
     count: usize,
@@ -181,7 +187,9 @@ struct Fallback {
     tmp: Vector,
 }
 
-fn run_variant(
+/// One variant's trial; `LOSSY`: whether `losses` is `Some` (on an ideal link the center's view
+/// of every sensor is the sensor's own, which the compiler then knows).
+fn run_variant<const LOSSY: bool>(
     scheme: &DistributedKfScheme,
     track: &mut Track,
     steps: usize,
@@ -203,9 +211,9 @@ fn run_variant(
     let bounded = matches!(scheme.fusion, Fusion::Bounded { .. });
     let message = Message::Estimate(Vector::zeros(n));
     let (msg_bits, msg_frame_bits) = (message.bits(), message.frame_bits());
-    let mut state = vec![SensorState::default(); ns];
-    let mut view = vec![CenterView::default(); ns];
+    let mut nodes = vec![Node::default(); ns];
     let mut fallback = Fallback {
+        streaks: vec![None; ns],
         terms: vec![0.0; ns * n],
         moment: Matrix::zeros(n, n),
         count: 0,
@@ -228,7 +236,14 @@ fn run_variant(
         let mut messages = 0u64;
         let mut lost = 0u64;
         fallback.count = 0;
-        for (i, (st, cv)) in state.iter_mut().zip(&mut view).enumerate() {
+        for (
+            i,
+            Node {
+                sensor: st,
+                center: cv,
+            },
+        ) in nodes.iter_mut().enumerate()
+        {
             // The sensor (DkfSensor::step): its trigger, with Algorithm 2's replica of the
             // center at this step.
             let u: f64 = rng.random();
@@ -255,12 +270,15 @@ fn run_variant(
                 st.silent_steps += 1;
             }
             // The link: a lost estimate is a silence at the center.
-            let arrived = send && !losses.is_some_and(|l| l.lost(i, k));
+            let arrived = send && !(LOSSY && losses.is_some_and(|l| l.lost(i, k)));
             lost += u64::from(send && !arrived);
             // The center's bookkeeping (DkfCenter::step).
             if arrived {
                 cv.missing = 0;
-                cv.streak = None;
+                if cv.fallback {
+                    cv.fallback = false;
+                    fallback.streaks[i] = None;
+                }
                 continue;
             }
             cv.missing += 1;
@@ -268,7 +286,7 @@ fn run_variant(
             if bounded {
                 // Algorithm 2's replica of the center's held estimate (the sensor's own
                 // entry when the center holds what the sensor believes it holds).
-                cv.entry = if cv.missing == st.silent_steps {
+                cv.entry = if !LOSSY || cv.missing == st.silent_steps {
                     st.entry
                 } else if cv.missing == 1 {
                     replicas
@@ -293,12 +311,12 @@ fn run_variant(
         }
         let factor = if fallback.count > 0 {
             fallback
-                .fuse(center, signals, replicas, &view, (k, p), silent, &mut est)
+                .fuse(center, signals, replicas, &nodes, (k, p), silent, &mut est)
                 .map_err(err(k))?;
             None
         } else {
             fuse(
-                center, signals, replicas, means, &view, k, p, silent, inexact, &mut est,
+                center, signals, replicas, means, &nodes, k, p, silent, inexact, &mut est,
             )
             .map_err(err(k))?
         };
@@ -321,6 +339,8 @@ fn run_variant(
 impl Fallback {
     /// Sensor i's estimate is missing at k for the second time or more under Algorithm 1 (a
     /// loss): the center's loss fallback, its term of (11) into `terms`, its moment summed.
+    #[cold]
+    #[inline(never)]
     fn add(
         &mut self,
         plan: &super::plan::GlobalizedPlan,
@@ -333,7 +353,8 @@ impl Fallback {
             self.moment.fill(0.0);
         }
         let s = k - cv.missing;
-        if cv.streak.is_none() {
+        let streak = &mut self.streaks[i];
+        if streak.is_none() {
             // x̄^{e,i}_s, as it arrived.
             if s == 0 {
                 self.received.copy_from(&self.prior);
@@ -343,7 +364,8 @@ impl Fallback {
             }
         }
         let out = (&mut self.contribution, &mut self.moment);
-        loss_fallback(plan, fusion, &mut cv.streak, (i, s, k), &self.received, out)?;
+        loss_fallback(plan, fusion, streak, (i, s, k), &self.received, out)?;
+        cv.fallback = true;
         let m = plan.at(k)?;
         crate::linalg::fixed::gemv(&mut self.tmp, &m.cbar_p_inv, &self.contribution);
         let n = self.tmp.len();
@@ -361,7 +383,7 @@ impl Fallback {
         center: &DkfCenter,
         signals: &Signals,
         replicas: &Replicas,
-        view: &[CenterView],
+        view: &[Node],
         (k, p): (usize, usize),
         silent: u64,
         est: &mut Gaussian,
@@ -387,12 +409,13 @@ impl Fallback {
 /// covariance, into `est`. Returns the NEES factor of `est.cov` (`fixed::nees_factor`) when the
 /// covariance is a copy of a memoized one that keeps it.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn fuse<'c>(
     center: &'c DkfCenter,
     signals: &Signals,
     replicas: &Replicas,
     means: &mut Means,
-    view: &[CenterView],
+    view: &[Node],
     k: usize,
     p: usize,
     silent: u64,
@@ -430,7 +453,7 @@ fn information_sum(
     signals: &Signals,
     replicas: &Replicas,
     fallback: &[f64],
-    view: &[CenterView],
+    view: &[Node],
     k: usize,
     out: &mut [f64],
 ) {
@@ -449,8 +472,8 @@ fn information_sum(
         6 => sum_fixed::<6>(&terms, view, out),
         _ => {
             out.fill(0.0);
-            for (i, cv) in view.iter().enumerate() {
-                fixed::add_assign(out, terms.of(cv, i));
+            for (i, node) in view.iter().enumerate() {
+                fixed::add_assign(out, terms.of(&node.center, i));
             }
         }
     }
@@ -473,17 +496,17 @@ impl<'a> Terms<'a> {
         match cv.missing {
             0 => signals.at(&signals.info_sent, k, i),
             1 => signals.at(&signals.info_omitted, k, i),
-            _ if cv.streak.is_some() => &self.fallback[i * signals.n..(i + 1) * signals.n],
+            _ if cv.fallback => &self.fallback[i * signals.n..(i + 1) * signals.n],
             _ => self.replicas.info(cv.entry),
         }
     }
 }
 
 #[inline(always)]
-fn sum_fixed<const N: usize>(terms: &Terms, view: &[CenterView], out: &mut [f64]) {
+fn sum_fixed<const N: usize>(terms: &Terms, view: &[Node], out: &mut [f64]) {
     let mut acc = [0.0; N];
-    for (i, cv) in view.iter().enumerate() {
-        let term: &[f64; N] = terms.of(cv, i).try_into().expect("N entries");
+    for (i, node) in view.iter().enumerate() {
+        let term: &[f64; N] = terms.of(&node.center, i).try_into().expect("N entries");
         for j in 0..N {
             acc[j] += term[j];
         }
