@@ -31,7 +31,7 @@ pub fn min_rate(a: &Matrix) -> f64 {
 /// `rate` bits per step on the fully observed source `x' = A x + w`, `w ~ N(0, W)`.
 ///
 /// Errors: [`FloorError::Invalid`] for shapes, non-finite entries or a `W` that is not
-/// symmetric positive definite; [`FloorError::RateTooLow`] at or below [`min_rate`] (or a
+/// symmetric positive definite (with condition number at most 1e10); [`FloorError::RateTooLow`] at or below [`min_rate`] (or a
 /// negative rate); [`FloorError::Solver`] when Clarabel does not report `Solved`.
 pub fn floor_mse(a: &Matrix, w: &Matrix, rate: f64) -> Result<f64, FloorError> {
     Ok(floor_covariance(a, w, rate)?.trace())
@@ -219,7 +219,7 @@ impl Layout {
     }
 }
 
-/// Checks shapes, finiteness and `W ≻ 0`; returns the scale `trace(W) / n` the programs divide
+/// Checks shapes, finiteness and `W ≻ 0` (condition number at most 1e10); returns the scale `trace(W) / n` the programs divide
 /// `W` by.
 fn check_source(a: &Matrix, w: &Matrix) -> Result<f64, FloorError> {
     let n = a.nrows();
@@ -237,6 +237,18 @@ fn check_source(a: &Matrix, w: &Matrix) -> Result<f64, FloorError> {
     }
     check_symmetric(w).map_err(|e| FloorError::Invalid(format!("W: {e}")))?;
     cholesky(w).map_err(|e| FloorError::Invalid(format!("W: {e}")))?;
+    // A W that only rounding keeps positive definite (a rank-deficient noise, such as the
+    // estimate noise of a sensor that sees part of the state) puts a huge log det W against a
+    // huge log det Π: the difference, the rate, would be noise.
+    let eig = w.symmetric_eigenvalues();
+    if eig.min() < 1e-10 * eig.max() {
+        return Err(FloorError::Invalid(format!(
+            "W is singular to working precision (eigenvalues {:.3e} to {:.3e}); the program \
+             needs W positive definite",
+            eig.min(),
+            eig.max()
+        )));
+    }
     Ok(w.trace() / n as f64)
 }
 
