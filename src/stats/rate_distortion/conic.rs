@@ -2,9 +2,7 @@
 //! expressions of the variables that must lie in a cone, which is how the rate–distortion SDP
 //! reads on paper, and turned here into Clarabel's `A x + s = b, s ∈ K` form.
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
-};
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
 use super::FloorError;
 

@@ -67,7 +67,9 @@ pub use sdp::{floor_covariance, floor_mse, min_rate, rate, stationary_covariance
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FloorError {
     /// The rate is negative, or at or below the data-rate minimum: the floor is infinite.
-    #[error("rate {rate} bits/step is at or below {min} bits/step: no scheme keeps the error bounded")]
+    #[error(
+        "rate {rate} bits/step is at or below {min} bits/step: no scheme keeps the error bounded"
+    )]
     RateTooLow { rate: f64, min: f64 },
     /// Shapes, non-finite entries, a covariance that is not positive definite, a Kalman filter
     /// without steady state.

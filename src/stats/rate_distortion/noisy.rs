@@ -95,8 +95,13 @@ fn check_sensor(a: &Matrix, w: &Matrix, h: &Matrix, v: &Matrix) -> Result<(), Fl
             v.shape()
         )));
     }
-    if [a, w, h, v].iter().any(|x| x.iter().any(|e| !e.is_finite())) {
-        return Err(FloorError::Invalid("non-finite entry in A, W, H or V".into()));
+    if [a, w, h, v]
+        .iter()
+        .any(|x| x.iter().any(|e| !e.is_finite()))
+    {
+        return Err(FloorError::Invalid(
+            "non-finite entry in A, W, H or V".into(),
+        ));
     }
     for (name, x) in [("W", w), ("V", v)] {
         check_symmetric(x).map_err(|e| FloorError::Invalid(format!("{name}: {e}")))?;

@@ -161,7 +161,12 @@ mod tests {
 
     #[test]
     fn rate_inverts_distortion() {
-        for &(a, w, r) in &[(1.2, 1.0, 2.0), (0.5, 3.0, 0.7), (-2.0, 0.1, 1.5), (1.0, 1.0, 0.01)] {
+        for &(a, w, r) in &[
+            (1.2, 1.0, 2.0),
+            (0.5, 3.0, 0.7),
+            (-2.0, 0.1, 1.5),
+            (1.0, 1.0, 0.01),
+        ] {
             let d = distortion(a, w, r).unwrap();
             let back = rate(a, w, d).unwrap();
             assert!((back - r).abs() < 1e-12 * r.max(1.0), "{a} {w} {r}: {back}");
@@ -172,10 +177,17 @@ mod tests {
 
     #[test]
     fn kalman_solves_its_riccati_equation() {
-        for &(a, w, h, v) in &[(1.2, 1.0, 1.0, 0.5), (0.9, 0.1, 2.0, 3.0), (2.0, 1e-3, 0.5, 1e2)] {
+        for &(a, w, h, v) in &[
+            (1.2, 1.0, 1.0, 0.5),
+            (0.9, 0.1, 2.0, 3.0),
+            (2.0, 1e-3, 0.5, 1e2),
+        ] {
             let kf = kalman(a, w, h, v).unwrap();
             let again = a * a * kf.posterior + w;
-            assert!((again - kf.prior).abs() < 1e-12 * kf.prior, "{again} {kf:?}");
+            assert!(
+                (again - kf.prior).abs() < 1e-12 * kf.prior,
+                "{again} {kf:?}"
+            );
             // K^2 S with K = M h / S, S = h^2 M + V.
             let s = h * h * kf.prior + v;
             let k = kf.prior * h / s;
