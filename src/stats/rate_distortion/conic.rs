@@ -174,7 +174,9 @@ mod tests {
             prog.exponential(Affine::var(6 + k), Affine::constant(1.0), z(k, k));
         }
         let x = prog.minimize(&[0., 0., 0., 0., 0., 0., -1., -1.]).unwrap();
-        assert!((x[0] - 1.0).abs() < 1e-6 && x[1].abs() < 1e-6, "{x:?}");
-        assert!((x[6] + x[7]).abs() < 1e-6, "{x:?}");
+        // The optimal value is as accurate as the gap (1e-8); the maximizer, where log det is
+        // flat to second order, only to about its square root.
+        assert!((x[6] + x[7]).abs() < 1e-7, "{x:?}");
+        assert!((x[0] - 1.0).abs() < 1e-4 && x[1].abs() < 1e-4, "{x:?}");
     }
 }

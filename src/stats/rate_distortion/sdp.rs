@@ -256,3 +256,51 @@ fn log_det(m: &Matrix) -> Result<f64, FloorError> {
     let c = cholesky(m).map_err(|e| FloorError::Invalid(format!("W: {e}")))?;
     Ok(2.0 * c.l().diagonal().iter().map(|d| d.ln()).sum::<f64>())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn min_rate_counts_unstable_eigenvalue_magnitudes() {
+        // 1.5 times a rotation: a complex pair of magnitude 1.5.
+        let (c, s) = (0.3f64.cos(), 0.3f64.sin());
+        let a = Matrix::from_row_slice(2, 2, &[c, -s, s, c]) * 1.5;
+        assert!((min_rate(&a) - 2.0 * 1.5f64.log2()).abs() < 1e-12);
+        let stable = Matrix::from_row_slice(2, 2, &[0.5, 3.0, 0.0, 0.9]);
+        assert_eq!(min_rate(&stable), 0.0);
+    }
+
+    #[test]
+    fn layout_indices_are_distinct_and_in_range() {
+        let l = Layout::new(3);
+        let mut seen = vec![false; l.n_vars()];
+        for j in 0..3 {
+            for i in 0..=j {
+                for k in [l.p(i, j), l.pi(i, j), l.z(j, i)] {
+                    assert!(!seen[k], "{k} used twice");
+                    seen[k] = true;
+                }
+                assert_eq!(l.p(i, j), l.p(j, i));
+            }
+            seen[l.t(j)] = true;
+        }
+        assert!(seen.iter().all(|&s| s));
+    }
+
+    /// At the optimum the rate budget is spent: `½ log2 det(A P Aᵀ + W) / det P = R`, computed
+    /// from the returned `P` by determinants, not through `Π` as the program does.
+    #[test]
+    fn optimum_spends_the_rate_exactly() {
+        let a = Matrix::from_row_slice(2, 2, &[1.1, 0.4, -0.2, 0.8]);
+        let w = Matrix::from_row_slice(2, 2, &[0.5, 0.1, 0.1, 0.2]);
+        for r in [0.5, 1.0, 3.0] {
+            let p = floor_covariance(&a, &w, r).unwrap();
+            let prior = &a * &p * a.transpose() + &w;
+            let spent = 0.5 * (prior.determinant() / p.determinant()).log2();
+            assert!((spent - r).abs() < 1e-6, "R={r}: spent {spent}");
+            // Posterior below prior (the constraint P ⪯ A P Aᵀ + W).
+            assert!((prior - &p).symmetric_eigenvalues().min() > -1e-8);
+        }
+    }
+}
