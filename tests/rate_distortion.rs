@@ -14,6 +14,15 @@ use hushfuse::stats::rate_distortion::{
     stationary_covariance, FloorError,
 };
 
+/// Whether this build can solve the vector floor's programs (`build.rs` found OpenBLAS; `.ci/run`
+/// installs it): the SDP tests say so and stop where it cannot.
+fn solver_available() -> bool {
+    if !hushfuse::stats::rate_distortion::conic::AVAILABLE {
+        eprintln!("skipped: this build has no BLAS/LAPACK (install libopenblas-dev and rebuild)");
+    }
+    hushfuse::stats::rate_distortion::conic::AVAILABLE
+}
+
 fn m1(x: f64) -> Matrix {
     Matrix::from_element(1, 1, x)
 }
@@ -62,6 +71,9 @@ fn scalar_rate_inverts_the_floor() {
 
 #[test]
 fn sdp_floor_equals_scalar_closed_form_on_1x1() {
+    if !solver_available() {
+        return;
+    }
     let cases = [
         (1.2, 1.0, 2.0),
         (1.2, 1.0, 0.5),
@@ -83,6 +95,9 @@ fn sdp_floor_equals_scalar_closed_form_on_1x1() {
 
 #[test]
 fn sdp_rate_equals_scalar_rate_on_1x1() {
+    if !solver_available() {
+        return;
+    }
     for (a, w, d) in [(1.2, 1.0, 0.0687), (0.5, 2.0, 1.0), (-2.0, 0.1, 0.01)] {
         let sdp = rate(&m1(a), &m1(w), d).unwrap();
         let closed = scalar::rate(a, w, d).unwrap();
@@ -97,6 +112,9 @@ fn sdp_rate_equals_scalar_rate_on_1x1() {
 
 #[test]
 fn vector_rate_inverts_vector_floor() {
+    if !solver_available() {
+        return;
+    }
     let (a, w) = constant_velocity();
     for r in [0.5, 2.0, 5.0] {
         let d = floor_mse(&a, &w, r).unwrap();
@@ -107,6 +125,9 @@ fn vector_rate_inverts_vector_floor() {
 
 #[test]
 fn constant_velocity_floor_falls_with_rate_to_its_high_rate_limit() {
+    if !solver_available() {
+        return;
+    }
     let (a, w) = constant_velocity();
     let mut last = f64::INFINITY;
     for r in [0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0] {
@@ -122,6 +143,9 @@ fn constant_velocity_floor_falls_with_rate_to_its_high_rate_limit() {
 
 #[test]
 fn noisy_floor_lies_above_all_data_kalman_and_tends_to_it() {
+    if !solver_available() {
+        return;
+    }
     let (a, w) = constant_velocity();
     let h = Matrix::identity(2, 2);
     let v = rows(&[&[0.5, 0.0], &[0.0, 0.2]]);
@@ -140,6 +164,9 @@ fn noisy_floor_lies_above_all_data_kalman_and_tends_to_it() {
 
 #[test]
 fn noisy_vector_floor_equals_scalar_on_1x1() {
+    if !solver_available() {
+        return;
+    }
     for (a, w, h, v, r) in [(1.2, 1.0, 1.0, 0.5, 1.0), (0.8, 1.0, 2.0, 3.0, 0.4)] {
         let vector = floor_mse_noisy(&m1(a), &m1(w), &m1(h), &m1(v), r).unwrap();
         let closed = scalar::noisy_distortion(a, w, h, v, r).unwrap();
@@ -170,6 +197,9 @@ fn best_split(a: [f64; 2], w: [f64; 2], r: f64) -> f64 {
 
 #[test]
 fn independent_components_split_the_rate_optimally() {
+    if !solver_available() {
+        return;
+    }
     let (a, w) = ([1.3, 0.6], [1.0, 0.5]);
     let am = Matrix::from_diagonal(&nalgebra::DVector::from_vec(a.to_vec()));
     let wm = Matrix::from_diagonal(&nalgebra::DVector::from_vec(w.to_vec()));
@@ -190,6 +220,9 @@ fn independent_components_split_the_rate_optimally() {
 
 #[test]
 fn stable_source_at_zero_rate_gets_its_stationary_covariance() {
+    if !solver_available() {
+        return;
+    }
     let a = rows(&[&[0.9, 0.2], &[0.0, 0.5]]);
     let w = rows(&[&[1.0, 0.3], &[0.3, 0.5]]);
     let s = stationary_covariance(&a, &w).unwrap();
@@ -208,6 +241,9 @@ fn stable_source_at_zero_rate_gets_its_stationary_covariance() {
 
 #[test]
 fn undefined_cases_are_errors_not_panics() {
+    if !solver_available() {
+        return;
+    }
     let a = rows(&[&[2.0, 0.0], &[0.0, 1.5]]);
     let w = Matrix::identity(2, 2);
     let min = min_rate(&a);

@@ -1,15 +1,19 @@
 //! A small builder of conic programs for Clarabel: constraints are written as affine
 //! expressions of the variables that must lie in a cone, which is how the rate–distortion SDP
 //! reads on paper, and turned here into Clarabel's `A x + s = b, s ∈ K` form.
+//!
+//! Clarabel's PSD cone calls BLAS/LAPACK (Fortran symbols such as `dsyevr_`); the system OpenBLAS
+//! provides them when the build found it (`build.rs`, cfg `hushfuse_openblas`). Without it a
+//! program is not solved: [`ConeProgram::minimize`] says what to install.
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+use clarabel::solver::SupportedConeT;
+#[cfg(hushfuse_openblas)]
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus};
 
 use super::FloorError;
 
-// Clarabel's PSD cone calls BLAS/LAPACK (Fortran symbols such as `dsyevr_`); the system OpenBLAS
-// (Debian: libopenblas-dev) provides them.
-#[link(name = "openblas")]
-extern "C" {}
+/// Whether this build can solve the vector floor's programs (it found a BLAS/LAPACK library).
+pub const AVAILABLE: bool = cfg!(hushfuse_openblas);
 
 /// `constant + Σ coefficient · x[index]`.
 #[derive(Debug, Clone, Default)]
@@ -93,6 +97,18 @@ impl ConeProgram {
     ///
     /// Errors: [`FloorError::Solver`] for any status but `Solved` (infeasible, iteration limit,
     /// numerical trouble), and for a problem Clarabel refuses to set up.
+    #[cfg(not(hushfuse_openblas))]
+    pub fn minimize(&self, q: &[f64]) -> Result<Vec<f64>, FloorError> {
+        let _ = q;
+        Err(FloorError::Solver(
+            "the vector rate-distortion floor needs a BLAS/LAPACK library, which this build did \
+             not find: install OpenBLAS (Debian: apt-get install libopenblas-dev) and rebuild"
+                .into(),
+        ))
+    }
+
+    /// Solves and returns the primal solution (see above).
+    #[cfg(hushfuse_openblas)]
     pub fn minimize(&self, q: &[f64]) -> Result<Vec<f64>, FloorError> {
         let (a, b) = self.constraint_matrix();
         let p = CscMatrix::zeros((self.n_vars, self.n_vars));
@@ -113,6 +129,7 @@ impl ConeProgram {
     }
 
     /// `A` (as CSC, duplicate terms of a row summed) and `b` of `A x + s = b`.
+    #[cfg_attr(not(hushfuse_openblas), allow(dead_code))]
     fn constraint_matrix(&self) -> (CscMatrix<f64>, Vec<f64>) {
         let mut columns: Vec<Vec<(usize, f64)>> = vec![Vec::new(); self.n_vars];
         for (row, e) in self.rows.iter().enumerate() {
@@ -150,6 +167,7 @@ mod tests {
     /// max log det X over 2x2 X with trace 2 is at X = I (log det 0); the build goes through
     /// the same log-det construction as the floor, so a wrong scaling or index fails here.
     #[test]
+    #[cfg_attr(not(hushfuse_openblas), ignore = "no BLAS/LAPACK in this build")]
     fn log_det_with_trace_budget() {
         // x = [X00, X01, X11, Z00, Z10, Z11, t0, t1]
         let mut prog = ConeProgram::new(8);

@@ -293,6 +293,7 @@ mod tests {
     /// At the optimum the rate budget is spent: `½ log2 det(A P Aᵀ + W) / det P = R`, computed
     /// from the returned `P` by determinants, not through `Π` as the program does.
     #[test]
+    #[cfg_attr(not(hushfuse_openblas), ignore = "no BLAS/LAPACK in this build")]
     fn optimum_spends_the_rate_exactly() {
         let a = Matrix::from_row_slice(2, 2, &[1.1, 0.4, -0.2, 0.8]);
         let w = Matrix::from_row_slice(2, 2, &[0.5, 0.1, 0.1, 0.2]);
