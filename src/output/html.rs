@@ -660,7 +660,7 @@ fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), Strin
                 },
                 format!("{:.1}", c.target),
                 format!("{:.1}", c.achieved),
-                c.status.text().into(),
+                c.status_text(),
                 format!("{:.4}", c.result.mean_rmse[group]),
                 crate::metrics::results::num(c.result.anees, 3),
                 format!("{:.3}", c.result.nees_coverage_99),

@@ -271,7 +271,7 @@ fn write_arena_files(
         "budgets": budgets,
         "rows": out.rows.iter().map(|row| row.iter().map(|c| serde_json::json!({
             "scheme": c.label, "kind": c.kind, "knob": c.knob, "value": c.value,
-            "target": c.target, "achieved": c.achieved, "status": c.status,
+            "target": c.target, "achieved": c.achieved, "status": c.status, "end": c.end,
             "bits_per_step": c.result.bits_per_step,
             "frame_bits_per_step": c.result.frame_bits_per_step,
             "downlink_bits_per_step": c.result.downlink_bits_per_step,
