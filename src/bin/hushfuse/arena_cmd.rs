@@ -242,6 +242,8 @@ fn arena_message(
             calibrate::short(100.0 * out.tolerance)
         ));
         msg.push_str(&calibrate::table(out, b, group));
+        // The health of each scheme at this budget, worded as a plain run words it.
+        msg.push_str(&results::warning_block(&out.summaries[b]));
     }
     msg.push_str("\nbest scheme per budget (lowest mean RMSE among schemes within the budget):\n");
     msg.push_str(&arena::best_table(out, group));
