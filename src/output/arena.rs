@@ -118,7 +118,7 @@ pub fn diverged_legend(out: &Outcome, group: &str) -> Option<String> {
     for (b, ok) in ranked(out, group).iter().enumerate() {
         for c in ok.iter().take(2).filter(|c| marked(c)) {
             seen.push(format!(
-                "{} at {} ({:.1}%)",
+                "{} at budget {} ({:.1}%)",
                 c.label,
                 short(out.budgets[b]),
                 100.0 * c.result.diverged_fraction
