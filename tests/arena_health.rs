@@ -83,7 +83,10 @@ fn a_budget_run_prints_and_reports_the_health_of_its_schemes() {
     );
     assert!(out.contains(&legend), "{out}");
     let md = std::fs::read_to_string(d.path().join("o/best_per_budget.md")).unwrap();
-    assert!(md.contains("Send-on-delta †") && md.contains(&legend), "{md}");
+    assert!(
+        md.contains("Send-on-delta †") && md.contains(&legend),
+        "{md}"
+    );
 
     let html = std::fs::read_to_string(d.path().join("o/report.html")).unwrap();
     let calibration = &html[html.find("<h2>Calibration</h2>").unwrap()..];
@@ -97,7 +100,10 @@ fn a_budget_run_prints_and_reports_the_health_of_its_schemes() {
     );
     assert!(calibration.contains("<ul class=\"warnings\">"));
     for w in &warnings {
-        let w = w.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;");
+        let w = w
+            .replace('&', "&amp;")
+            .replace('<', "&lt;")
+            .replace('>', "&gt;");
         assert!(calibration.contains(&format!("<li>{w}</li>")), "{w}");
     }
     assert!(html.contains("Send-on-delta †"));
@@ -108,9 +114,14 @@ fn a_budget_run_prints_and_reports_the_health_of_its_schemes() {
 #[test]
 fn a_healthy_budget_run_has_no_warning_and_no_mark() {
     let d = tempfile::tempdir().unwrap();
-    let text = arena_1d_with("ok", "[[schemes]]\nkind = \"centralized-kf-random\"\nrate = 0.5\n");
+    let text = arena_1d_with(
+        "ok",
+        "[[schemes]]\nkind = \"centralized-kf-random\"\nrate = 0.5\n",
+    );
     std::fs::write(d.path().join("ok.toml"), text).unwrap();
-    let args = ["run", "ok.toml", "--budget", "24", "--trials", "8", "--out", "o"];
+    let args = [
+        "run", "ok.toml", "--budget", "24", "--trials", "8", "--out", "o",
+    ];
     let o = hushfuse(&args, d.path());
     let out = stdout(&o);
     assert_eq!(

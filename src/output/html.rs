@@ -775,10 +775,7 @@ fn results_section(h: &mut String, input: &Input) {
 /// warning ([`crate::metrics::results::warnings`]); nothing when there are none.
 fn warnings_list(h: &mut String, level: u8, warnings: &[String]) {
     if !warnings.is_empty() {
-        let _ = writeln!(
-            h,
-            "<h{level}>Warnings</h{level}>\n<ul class=\"warnings\">"
-        );
+        let _ = writeln!(h, "<h{level}>Warnings</h{level}>\n<ul class=\"warnings\">");
         for w in warnings {
             let _ = writeln!(h, "<li>{}</li>", esc(w));
         }
