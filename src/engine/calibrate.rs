@@ -106,9 +106,12 @@ pub fn knob_range(kind: &str, n_sensors: usize) -> Option<KnobRange> {
 pub enum Status {
     /// Within tolerance of the target.
     Calibrated,
-    /// An integer knob: the nearest integer.
+    /// An integer knob whose reach contains the target, which falls between two integers: the
+    /// nearer of them.
     NearestInteger,
-    /// The target is outside the knob's reach: the nearer end of the range.
+    /// The target is outside the knob's reach: the nearer end of the range (which end:
+    /// [`Calibrated::end`]). An integer knob at its end is this, never [`Status::NearestInteger`]:
+    /// no integer of its range comes closer, however the rounding goes.
     OutOfRange,
     /// The scheme has no knob: run as it is.
     NoKnob,
@@ -128,6 +131,39 @@ impl Status {
     }
 }
 
+/// Which end of its range a knob sits at when the target is out of its reach.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum End {
+    /// The smallest value of the range (`bits = 1`, `rate = 0.001`, a threshold of 0).
+    Lower,
+    /// The largest value that builds (`bits = 8`, `rate = 1`, the threshold's found upper end).
+    Upper,
+}
+
+impl End {
+    /// The end of `[lo, hi]` nearer to `x` (the lower one on a tie, e.g. a one-value range).
+    fn of(x: f64, lo: f64, hi: f64) -> Self {
+        if (x - lo).abs() <= (hi - x).abs() {
+            End::Lower
+        } else {
+            End::Upper
+        }
+    }
+}
+
+impl Calibrated {
+    /// The status as the tables print it: "out of range" names the end of the knob's range
+    /// (so `bits = 8` reads as the top of what the knob can do, not as a rounding).
+    pub fn status_text(&self) -> String {
+        match (self.status, self.end) {
+            (Status::OutOfRange, Some(End::Lower)) => "out of range (lower end)".into(),
+            (Status::OutOfRange, Some(End::Upper)) => "out of range (upper end)".into(),
+            (st, _) => st.text().into(),
+        }
+    }
+}
+
 /// One scheme at one budget.
 #[derive(Debug, Clone, Serialize)]
 pub struct Calibrated {
@@ -138,6 +174,10 @@ pub struct Calibrated {
     pub target: f64,
     pub achieved: f64,
     pub status: Status,
+    /// With [`Status::OutOfRange`]: the end of the range the knob was left at (`None` when a
+    /// bisection inside the range stopped short of the tolerance: the map has a jump there).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub end: Option<End>,
     /// Knob evaluations (pilot runs) spent on this scheme, shared over all budgets.
     #[serde(skip)]
     pub result: SchemeSummary,
@@ -445,7 +485,7 @@ fn calibrate_entry(
         choose_continuous(ev, s, &mut p, &label)?
     };
     let mut rows = Vec::new();
-    for ((x, mut sum, st), &b) in chosen.into_iter().zip(s.budgets) {
+    for ((x, mut sum, st, end), &b) in chosen.into_iter().zip(s.budgets) {
         if s.pilot.is_some_and(|p| p < s.trials) {
             sum = ev
                 .run(&with_knob(entry, knob, x, range.integer), None)?
@@ -460,6 +500,7 @@ fn calibrate_entry(
             target: b,
             achieved: s.axis.of(&sum),
             status: st,
+            end,
             result: sum,
         });
     }
@@ -491,19 +532,25 @@ fn uncalibrated(
             } else {
                 Status::NoKnob
             },
+            end: None,
             result: r.clone(),
         })
         .collect())
 }
 
+/// A knob value chosen for one budget: the value, its pilot result, how it met the budget and,
+/// out of range, at which end.
+type Choice = (f64, SchemeSummary, Status, Option<End>);
+
 /// An integer knob: every integer of the range (a value that does not build ends it), and the
-/// nearest per budget.
+/// nearest per budget. A budget beyond what the first and last integers reach is out of range
+/// at the nearer end; only one the integers straddle is a "nearest integer".
 fn choose_integer(
     ev: &mut Evaluator,
     s: &Setup,
     p: &mut Pilot,
     label: &str,
-) -> Result<Vec<(f64, SchemeSummary, Status)>, String> {
+) -> Result<Vec<Choice>, String> {
     let (axis, tol, knob, range) = (s.axis, s.tol, p.knob, p.range);
     let mut chosen = Vec::new();
     let mut points = Vec::new();
@@ -525,6 +572,11 @@ fn choose_integer(
             .unwrap_or_default();
         return Err(format!("{label}: no value of `{knob}` builds{cause}"));
     }
+    let reach = points.iter().map(|p| axis.of(&p.1));
+    let (min, max) = reach.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), v| {
+        (a.min(v), c.max(v))
+    });
+    let (first, last) = (points[0].0, points[points.len() - 1].0);
     for &b in s.budgets {
         let (x, s) = points
             .iter()
@@ -534,12 +586,14 @@ fn choose_integer(
                     .total_cmp(&(axis.of(&q.1) - b).abs())
             })
             .expect("non-empty");
-        let st = if (axis.of(s) - b).abs() <= tol * b {
-            Status::Calibrated
+        let (st, end) = if (axis.of(s) - b).abs() <= tol * b {
+            (Status::Calibrated, None)
+        } else if b < min || b > max {
+            (Status::OutOfRange, Some(End::of(*x, first, last)))
         } else {
-            Status::NearestInteger
+            (Status::NearestInteger, None)
         };
-        chosen.push((*x, s.clone(), st));
+        chosen.push((*x, s.clone(), st, end));
     }
     Ok(chosen)
 }
@@ -589,7 +643,7 @@ fn choose_continuous(
     s: &Setup,
     p: &mut Pilot,
     label: &str,
-) -> Result<Vec<(f64, SchemeSummary, Status)>, String> {
+) -> Result<Vec<Choice>, String> {
     let (axis, tol) = (s.axis, s.tol);
     let ((lo, f_lo), (hi, f_hi)) = ends(ev, s, p, label)?;
     let increasing = axis.of(&f_hi) >= axis.of(&f_lo);
@@ -600,12 +654,13 @@ fn choose_continuous(
         if b <= min * (1.0 - tol) || b >= max * (1.0 + tol) {
             let at_lo = (b < min) == (a_lo <= a_hi);
             let (x, s) = if at_lo { (lo, &f_lo) } else { (hi, &f_hi) };
-            let st = if (axis.of(s) - b).abs() <= tol * b {
-                Status::Calibrated
+            let (st, end) = if (axis.of(s) - b).abs() <= tol * b {
+                (Status::Calibrated, None)
             } else {
-                Status::OutOfRange
+                let end = if at_lo { End::Lower } else { End::Upper };
+                (Status::OutOfRange, Some(end))
             };
-            chosen.push((x, s.clone(), st));
+            chosen.push((x, s.clone(), st, end));
             continue;
         }
         let best = if (a_lo - b).abs() < (a_hi - b).abs() {
@@ -637,7 +692,7 @@ fn bisect(
     (lo, hi): (f64, f64),
     mut best: (f64, SchemeSummary),
     increasing: bool,
-) -> (f64, SchemeSummary, Status) {
+) -> Choice {
     let (axis, tol) = (s.axis, s.tol);
     let (mut a, mut c) = (lo, hi);
     for _ in 0..40 {
@@ -656,12 +711,15 @@ fn bisect(
             c = mid;
         }
     }
-    let st = if (axis.of(&best.1) - b).abs() <= tol * b {
-        Status::Calibrated
+    let (st, end) = if (axis.of(&best.1) - b).abs() <= tol * b {
+        (Status::Calibrated, None)
+    } else if best.0 == lo || best.0 == hi {
+        // Left at an end: as far as the range goes towards the budget.
+        (Status::OutOfRange, Some(End::of(best.0, lo, hi)))
     } else {
-        Status::OutOfRange
+        (Status::OutOfRange, None)
     };
-    (best.0, best.1, st)
+    (best.0, best.1, st, end)
 }
 
 /// Per budget: the summary of every scheme at its knob, and the scenario as run.
@@ -731,7 +789,7 @@ pub fn table(outcome: &Outcome, b: usize, group: &str) -> String {
             },
             bits_cell(c.target),
             bits_cell(c.achieved),
-            c.status.text().to_string(),
+            c.status_text(),
             c.result
                 .mean_rmse
                 .get(group)

@@ -543,7 +543,16 @@ pub fn table(summary: &Summary) -> String {
             crate::metrics::pcrb::line(b, &summary.group_order)
         );
     }
+    out.push_str(&warning_block(summary));
+    out
+}
+
+/// The [`warnings`] as the terminal prints them under a table: a blank line, then one
+/// `warning: ...` line each; empty when every scheme is healthy. Shared by a plain run's table
+/// and each budget of `--budget`/`--budgets`, so both say the same thing in the same words.
+pub fn warning_block(summary: &Summary) -> String {
     let w = warnings(summary);
+    let mut out = String::new();
     if !w.is_empty() {
         out.push('\n');
         for line in w {

@@ -1,6 +1,6 @@
 //! The arena: every scheme of a scenario at several bit budgets,
 //! accuracy against bits per step, the Pareto front and the best scheme per budget.
-use crate::engine::calibrate::{render, short, Outcome, Status};
+use crate::engine::calibrate::{render, short, Calibrated, Outcome, Status};
 use crate::output::plot::{self, Line};
 use std::path::Path;
 
@@ -30,12 +30,48 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
 
 /// Whether a result counts at its budget: calibrated, or spending no more than the budget
 /// (within the tolerance).
-fn within(c: &crate::engine::calibrate::Calibrated, tol: f64) -> bool {
+fn within(c: &Calibrated, tol: f64) -> bool {
     c.status == Status::Calibrated || c.achieved <= c.target * (1.0 + tol)
 }
 
+/// A scheme that diverged in more than this share of its trials is marked (†) wherever the
+/// best-per-budget tables name it: its low mean RMSE comes from a filter that, in some trials,
+/// lost the target while claiming to know where it was.
+pub const DIVERGED_MARK: f64 = 0.01;
+
+/// Per budget: the schemes within it with a finite mean RMSE of `group`, best first.
+fn ranked<'a>(out: &'a Outcome, group: &str) -> Vec<Vec<&'a Calibrated>> {
+    out.rows
+        .iter()
+        .map(|row| {
+            let mut ok: Vec<&Calibrated> = row
+                .iter()
+                .filter(|c| within(c, out.tolerance))
+                .filter(|c| c.result.mean_rmse.get(group).is_some_and(|r| r.is_finite()))
+                .collect();
+            ok.sort_by(|a, c| a.result.mean_rmse[group].total_cmp(&c.result.mean_rmse[group]));
+            ok
+        })
+        .collect()
+}
+
+/// Whether `c` diverged often enough to be marked.
+fn marked(c: &Calibrated) -> bool {
+    c.result.diverged_fraction > DIVERGED_MARK
+}
+
+/// The scheme's label, with † when it is [`marked`].
+fn label(c: &Calibrated) -> String {
+    if marked(c) {
+        format!("{} †", c.label)
+    } else {
+        c.label.clone()
+    }
+}
+
 /// Per budget: the scheme with the lowest mean RMSE of `group` among those within budget,
-/// as (budget, label, knob text, RMSE, achieved bits, runner-up label and RMSE).
+/// as (budget, label, knob text, RMSE, achieved bits, runner-up label and RMSE). A label
+/// carries † when the scheme diverged in more than [`DIVERGED_MARK`] of its trials.
 pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
     let mut rows = vec![vec![
         format!("budget ({} bits/step)", out.axis.name()),
@@ -46,21 +82,15 @@ pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
         "runner-up".to_string(),
         format!("RMSE {group}"),
     ]];
-    for (b, row) in out.rows.iter().enumerate() {
-        let mut ok: Vec<&crate::engine::calibrate::Calibrated> = row
-            .iter()
-            .filter(|c| within(c, out.tolerance))
-            .filter(|c| c.result.mean_rmse.get(group).is_some_and(|r| r.is_finite()))
-            .collect();
-        ok.sort_by(|a, c| a.result.mean_rmse[group].total_cmp(&c.result.mean_rmse[group]));
-        let knob = |c: &crate::engine::calibrate::Calibrated| match (&c.knob, c.value) {
+    for (b, ok) in ranked(out, group).iter().enumerate() {
+        let knob = |c: &Calibrated| match (&c.knob, c.value) {
             (Some(k), Some(v)) => format!("{k} = {}", short(v)),
             _ => "—".into(),
         };
         let mut r = vec![format!("{}", short(out.budgets[b]))];
         match ok.first() {
             Some(c) => r.extend([
-                c.label.clone(),
+                label(c),
                 knob(c),
                 format!("{:.4}", c.result.mean_rmse[group]),
                 crate::engine::calibrate::bits_cell(c.achieved),
@@ -73,7 +103,7 @@ pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
             ]),
         }
         match ok.get(1) {
-            Some(c) => r.extend([c.label.clone(), format!("{:.4}", c.result.mean_rmse[group])]),
+            Some(c) => r.extend([label(c), format!("{:.4}", c.result.mean_rmse[group])]),
             None => r.extend(["—".into(), "".into()]),
         }
         rows.push(r);
@@ -81,9 +111,37 @@ pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
     rows
 }
 
+/// The legend of the † marks of [`best_per_budget`]: which scheme diverged in what share of its
+/// trials at which budget; `None` when nothing in the table is marked.
+pub fn diverged_legend(out: &Outcome, group: &str) -> Option<String> {
+    let mut seen = Vec::new();
+    for (b, ok) in ranked(out, group).iter().enumerate() {
+        for c in ok.iter().take(2).filter(|c| marked(c)) {
+            seen.push(format!(
+                "{} at budget {} ({:.1}%)",
+                c.label,
+                short(out.budgets[b]),
+                100.0 * c.result.diverged_fraction
+            ));
+        }
+    }
+    (!seen.is_empty()).then(|| {
+        format!(
+            "† diverged in more than {}% of its trials (NEES above the chi-square 99.9% quantile for {} steps in a row, or not finite): {}",
+            short(100.0 * DIVERGED_MARK),
+            crate::metrics::DIVERGENCE_RUN,
+            seen.join(", ")
+        )
+    })
+}
+
 /// The best-per-budget table as text, with the bound below it where there is one.
 pub fn best_table(out: &Outcome, group: &str) -> String {
     let mut s = render(&best_per_budget(out, group));
+    if let Some(line) = diverged_legend(out, group) {
+        s.push_str(&line);
+        s.push('\n');
+    }
     if let Some(line) = bound_line(out, group) {
         s.push_str(&line);
         s.push('\n');
@@ -110,6 +168,9 @@ pub fn best_markdown(out: &Outcome, group: &str) -> String {
         if i == 0 {
             s.push_str(&format!("|{}\n", "---|".repeat(r.len())));
         }
+    }
+    if let Some(line) = diverged_legend(out, group) {
+        s.push_str(&format!("\n{line}\n"));
     }
     if let Some(line) = bound_line(out, group) {
         s.push_str(&format!("\n{line}\n"));

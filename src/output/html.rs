@@ -539,7 +539,9 @@ th,td{border:1px solid #ccc;padding:3px 7px}th{background:#f0f0f0;text-align:lef
 td.n{text-align:right;font-variant-numeric:tabular-nums}\
 pre{background:#f7f7f7;border:1px solid #ddd;padding:0.7em;overflow:auto;font-size:12px}\
 h2{border-bottom:1px solid #ddd;padding-bottom:0.2em;margin-top:1.6em}.meta td{border:none;padding:1px 12px 1px 0}\
-figure{margin:0.5em 0}svg{max-width:100%;height:auto}";
+figure{margin:0.5em 0}svg{max-width:100%;height:auto}\
+ul.warnings{color:#8a3b00;background:#fff6ec;border-left:3px solid #d9822b;padding:0.4em 0.6em 0.4em 2em;font-size:13px}\
+ul.warnings+p,p.legend{font-size:13px}";
 
 /// The report as one HTML string.
 pub fn render(input: &Input) -> Result<String, String> {
@@ -615,6 +617,9 @@ fn header(h: &mut String, input: &Input) {
 fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), String> {
     let _ = writeln!(h, "<h2>Best scheme per budget</h2>\n<p>Every scheme's bandwidth knob tuned so that it spends the budget in {} bits per step (pilot runs on common random numbers, tolerance {}%); schemes without a knob count at budgets they fit.</p>", out.axis.name(), short(100.0 * out.tolerance));
     h.push_str(&html_table(&arena::best_per_budget(out, group)));
+    if let Some(line) = arena::diverged_legend(out, group) {
+        let _ = writeln!(h, "<p class=\"legend\">{}</p>", esc(&line));
+    }
     let x = format!("{} bits per step (achieved)", out.axis.name());
     let g = group.to_string();
     let svg = plot::lines_svg(
@@ -645,6 +650,7 @@ fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), Strin
             "status".into(),
             format!("mean RMSE {group}"),
             "ANEES".into(),
+            "NEES<95%".into(),
             "NEES<99%".into(),
             "diverged".into(),
             "payload bits".into(),
@@ -660,9 +666,10 @@ fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), Strin
                 },
                 format!("{:.1}", c.target),
                 format!("{:.1}", c.achieved),
-                c.status.text().into(),
+                c.status_text(),
                 format!("{:.4}", c.result.mean_rmse[group]),
                 crate::metrics::results::num(c.result.anees, 3),
+                format!("{:.3}", c.result.nees_coverage_95),
                 format!("{:.3}", c.result.nees_coverage_99),
                 format!("{:.1}%", 100.0 * c.result.diverged_fraction),
                 format!("{:.1}", c.result.bits_per_step),
@@ -672,7 +679,10 @@ fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), Strin
         }
         let _ = writeln!(h, "<h3>budget {} bits per step</h3>", short(out.budgets[b]));
         h.push_str(&html_table(&rows));
+        // Each budget's health under its table, as the terminal prints it under the same table.
+        warnings_list(h, 4, &crate::metrics::results::warnings(&out.summaries[b]));
     }
+    let _ = writeln!(h, "<p>NEES&lt;95%, NEES&lt;99%: share of steps whose NEES lies below the chi-square quantile (a consistent filter: 0.95, 0.99); diverged: share of trials whose NEES stayed above the 99.9% quantile for {} steps in a row.</p>", crate::metrics::DIVERGENCE_RUN);
     Ok(())
 }
 
@@ -758,10 +768,15 @@ fn results_section(h: &mut String, input: &Input) {
     }
     h.push_str(&html_table(&rows));
     let _ = writeln!(h, "<p>NEES&lt;95%, NEES&lt;99%: share of steps whose NEES lies below the chi-square quantile (a consistent filter: 0.95, 0.99); diverged: share of trials whose NEES stayed above the 99.9% quantile for {} steps in a row.</p>", crate::metrics::DIVERGENCE_RUN);
-    let warnings = crate::metrics::results::warnings(s);
+    warnings_list(h, 3, &crate::metrics::results::warnings(s));
+}
+
+/// A "Warnings" heading (`<h{level}>`: under the section it belongs to) and one item per
+/// warning ([`crate::metrics::results::warnings`]); nothing when there are none.
+fn warnings_list(h: &mut String, level: u8, warnings: &[String]) {
     if !warnings.is_empty() {
-        let _ = writeln!(h, "<h3>Warnings</h3>\n<ul class=\"warnings\">");
-        for w in &warnings {
+        let _ = writeln!(h, "<h{level}>Warnings</h{level}>\n<ul class=\"warnings\">");
+        for w in warnings {
             let _ = writeln!(h, "<li>{}</li>", esc(w));
         }
         h.push_str("</ul>\n");

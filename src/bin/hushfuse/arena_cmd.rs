@@ -242,6 +242,8 @@ fn arena_message(
             calibrate::short(100.0 * out.tolerance)
         ));
         msg.push_str(&calibrate::table(out, b, group));
+        // The health of each scheme at this budget, worded as a plain run words it.
+        msg.push_str(&results::warning_block(&out.summaries[b]));
     }
     msg.push_str("\nbest scheme per budget (lowest mean RMSE among schemes within the budget):\n");
     msg.push_str(&arena::best_table(out, group));
@@ -271,7 +273,7 @@ fn write_arena_files(
         "budgets": budgets,
         "rows": out.rows.iter().map(|row| row.iter().map(|c| serde_json::json!({
             "scheme": c.label, "kind": c.kind, "knob": c.knob, "value": c.value,
-            "target": c.target, "achieved": c.achieved, "status": c.status,
+            "target": c.target, "achieved": c.achieved, "status": c.status, "end": c.end,
             "bits_per_step": c.result.bits_per_step,
             "frame_bits_per_step": c.result.frame_bits_per_step,
             "downlink_bits_per_step": c.result.downlink_bits_per_step,
