@@ -2,10 +2,14 @@
 //! (Geng et al., Theorem 1, eq. (20)-(25), built on Lemma 1; Allik et al.'s TKF for p = 1).
 //!
 //! The reading is `y = clamp(ybar, tau_l, tau_r)` with `ybar = h x + v`, `v ~ N(0, r)`
-//! (eq. (6)-(7)). With `zeta = h x^-` and `theta = (tau - zeta)/sqrt(r)`:
+//! (eq. (6)-(7)). With `zeta = h x^-`, `u = (tau - zeta)/sqrt(r)` and `theta` the argument of
+//! (14)-(15) (equal to `u` in the corrected form, see below):
 //!
 //! ```text
-//! alpha = Phi(theta_l), beta = 1 - Phi(theta_r), pi = 1 - alpha - beta          (9)
+//! alpha = Phi(u_l), beta = Phi(-u_r) = Phi((zeta - tau_r)/sqrt(r)), pi = 1 - alpha - beta  (9)
+//! lambda = (phi(theta_r) - phi(theta_l)) / (Phi(theta_r) - Phi(theta_l))                 (14)
+//! varphi = (theta_l phi(theta_l) - theta_r phi(theta_r)) / (Phi(theta_r) - Phi(theta_l))
+//!          - lambda^2                                                                    (15)
 //! y^-    = alpha tau_l + beta tau_r + pi (zeta - sqrt(r) lambda)                 (23), (12)
 //! P_xy   = pi P^- h^T                                                            (24)
 //! P_yy   = pi^2 (h P^- h^T + extra) + r (1 + varphi)                             (25)
@@ -14,19 +18,38 @@
 //!
 //! `extra` is the protocol term `sum_{l>=1} Gamma C P_{k-l} C^T Gamma` of (25); it is zero on
 //! the step a sensor is scheduled (only one Gamma_{m, h_{k-l}}, l = 0..p-1, is one).
-//! The two printed typos are options ([`TobitOptions`]), the correct reading the default.
+//!
+//! **Printed and corrected form.** The paper standardizes by two different quantities:
+//!
+//! * the censoring probabilities (9) divide by `sqrt(R)`, the standard deviation:
+//!   `alpha ~ Phi((tau_l - zeta^-)/sqrt(R))`, `beta ~ Phi((zeta^- - tau_r)/sqrt(R))`;
+//! * the `theta` of (14)-(15) is defined after (11) (and, with `zeta^-`, in the notation
+//!   before Lemma 2 that Theorem 1 uses) as `theta = (tau - zeta)/R`, the variance; (23) and
+//!   (25) evaluate `lambda` and `varphi` at that theta (and Theorem 4's bound at `theta_l`).
+//!
+//! The corrected form ([`ThetaDenominator::SqrtR`], the default) uses `sqrt(R)` in all of them:
+//! that is what (16)-(17) themselves write (`phi` and `Phi` of `(tau - zeta)/sqrt(R)`) and what
+//! the truncated-normal moments (31)-(32) of `N(zeta, R)` need, so `theta = u` and `pi` equals
+//! the denominator `Phi(theta_r) - Phi(theta_l)` of (14)-(15). The printed form
+//! ([`ThetaDenominator::R`]) follows the equations literally: `sqrt(R)` in (9), `R` in the
+//! theta of (14)-(15); then `pi` of (9) and the mass `Phi(theta_r) - Phi(theta_l)` in (14)-(15)
+//! differ unless `R = 1`. The `sqrt(R)` factor before `lambda` in (23) and the `R` before
+//! `1 + varphi` in (25) are printed that way and are the same in both forms.
+//! The sign of the lambda term of (23) is the other printed typo ([`LambdaSign`]); the correct
+//! reading of both is the default ([`TobitOptions`]).
 use super::{FilterError, Gaussian};
 use crate::linalg::{symmetrize, Matrix, Vector};
 use crate::stats::truncated_normal::{censoring_probabilities, truncated_standard};
 
-/// How theta is standardized. The paper's definitions after (11) and after Lemma 1 divide by
-/// R; the moments (12)-(17) (and (9) itself) need sqrt(R).
+/// What standardizes the theta of (14)-(15). The censoring probabilities (9) divide by
+/// `sqrt(R)` under either (as (9) prints); see the module doc for the two forms.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ThetaDenominator {
-    /// `theta = (tau - zeta) / sqrt(R)` (correct; default).
+    /// `theta = (tau - zeta) / sqrt(R)` in (14)-(15), as in (9) (corrected form; default).
     #[default]
     SqrtR,
-    /// `theta = (tau - zeta) / R` (as printed).
+    /// `theta = (tau - zeta) / R` in (14)-(15), as printed after (11) and before Lemma 2;
+    /// (9) keeps the printed `sqrt(R)` (printed form).
     R,
 }
 
@@ -127,27 +150,33 @@ pub fn censor(z: f64, tau_l: f64, tau_r: f64) -> Censored {
 /// Theorem 4 use).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TobitTerms {
+    /// The censoring probabilities of (9), standardized by `sqrt(R)` under either option.
     pub alpha: f64,
     pub beta: f64,
-    /// `1 - alpha - beta`.
+    /// `1 - alpha - beta` of (9) (computed as `Phi(u_r) - Phi(u_l)`).
     pub pi: f64,
+    /// The arguments of (14)-(15) (`/ sqrt(R)` or, printed, `/ R`).
     pub theta_l: f64,
     pub theta_r: f64,
     /// The predicted reading y^- of (23).
     pub y_hat: f64,
-    /// `1 + varphi(theta_r, theta_l)` of (13), (25).
+    /// `1 + varphi(theta_r, theta_l)` of (13), (15), (25).
     pub var_factor: f64,
 }
 
-/// Lemma 1 / eq. (9), (23) at `zeta` for noise variance `r`.
+/// Lemma 1 / eq. (9), (14), (15), (23) at `zeta` for noise variance `r`: the censoring
+/// probabilities (9) from `(tau - zeta)/sqrt(r)`, `lambda` (14) and `varphi` (15) from the
+/// theta `opts` chooses (`/ sqrt(r)`, or `/ r` as printed).
 pub fn terms(zeta: f64, r: f64, thr: &Thresholds, opts: &TobitOptions) -> TobitTerms {
     let sd = r.sqrt();
-    let den = match opts.theta_denominator {
-        ThetaDenominator::SqrtR => sd,
-        ThetaDenominator::R => r,
+    // (9): alpha = Phi((tau_l - zeta)/sqrt(R)), beta = Phi((zeta - tau_r)/sqrt(R)).
+    let (u_l, u_r) = ((thr.lo - zeta) / sd, (thr.hi - zeta) / sd);
+    let p = censoring_probabilities(u_l, u_r);
+    // (14)-(15) at theta: the same standardization, or the printed one by R.
+    let (theta_l, theta_r) = match opts.theta_denominator {
+        ThetaDenominator::SqrtR => (u_l, u_r),
+        ThetaDenominator::R => ((thr.lo - zeta) / r, (thr.hi - zeta) / r),
     };
-    let (theta_l, theta_r) = ((thr.lo - zeta) / den, (thr.hi - zeta) / den);
-    let p = censoring_probabilities(theta_l, theta_r);
     let t = truncated_standard(theta_l, theta_r);
     let lambda_term = match opts.lambda_sign {
         LambdaSign::Minus => -sd * t.lambda(),
@@ -400,10 +429,75 @@ mod tests {
                 ..Default::default()
             },
         );
-        assert!((printed_r.alpha - d.alpha).abs() > 1e-3);
+        // (9) prints sqrt(R) under both readings: only (14)-(15) see the printed R.
+        assert_eq!(
+            (printed_r.alpha, printed_r.beta, printed_r.pi),
+            (d.alpha, d.beta, d.pi)
+        );
+        assert!((printed_r.var_factor - d.var_factor).abs() > 1e-3);
+        assert!((printed_r.y_hat - d.y_hat).abs() > 1e-3);
         assert!((printed_sign.y_hat - d.y_hat).abs() > 1e-3);
         // The printed sign puts the prediction outside the censoring region's mean.
         assert!(printed_sign.y_hat > d.y_hat);
+    }
+
+    /// The printed form worked by hand at `zeta = 0`, `R = 0.25` (`sqrt(R) = 0.5`),
+    /// `tau_l = -0.5`, `tau_r = 1`, against the corrected form at the same point.
+    ///
+    /// (9), `sqrt(R)` under both: `alpha = Phi(-0.5 / 0.5) = Phi(-1) = 0.15865525393145705`,
+    /// `beta = Phi((0 - 1) / 0.5) = Phi(-2) = 0.02275013194817921`,
+    /// `pi = Phi(2) - Phi(-1) = 0.8185946141203637` (30-digit values, rounded).
+    ///
+    /// (14)-(15), printed: `theta_l = -0.5 / 0.25 = -2`, `theta_r = 1 / 0.25 = 4`;
+    /// `phi(-2) = 0.05399096651318806`, `phi(4) = 0.00013383022576488537`,
+    /// `Z = Phi(4) - Phi(-2) = 0.9772181968099877`;
+    /// `lambda = (phi(4) - phi(-2)) / Z = -0.05511270304138151`;
+    /// `varphi = (-2 phi(-2) - 4 phi(4)) / Z - lambda^2 = -0.11408451730865699`, so
+    /// `1 + varphi = 0.885915482691343`; (23):
+    /// `y^- = -0.5 alpha + 1 beta + pi (0 - 0.5 lambda) = -0.03402001407790437`.
+    ///
+    /// Corrected: `theta = (-1, 2)`, `Z = pi`, `lambda = (phi(2) - phi(-1)) / pi =
+    /// -0.22963717909132897`, `1 + varphi = 1 + (-phi(-1) - 2 phi(2)) / pi - lambda^2 =
+    /// 0.5197625392115339`, `y^- = 0.03741238398542833`.
+    ///
+    /// The old printed option divided (9) by R too: `alpha = Phi(-2) = 0.0228`,
+    /// `beta = Phi(-4) = 3.2e-5`, `y^- = 0.0156`; the asserts below tell it apart.
+    #[test]
+    fn printed_theta_by_hand_sqrt_r_in_9_and_r_in_14_15() {
+        let thr = Thresholds::new(-0.5, 1.0).unwrap();
+        let close = |got: f64, want: f64, what: &str| {
+            assert!((got - want).abs() < 1e-14, "{what}: {got} vs {want}");
+        };
+        let printed = TobitOptions {
+            theta_denominator: ThetaDenominator::R,
+            ..Default::default()
+        };
+        for (opts, thetas, var_factor, y_hat) in [
+            (
+                printed,
+                (-2.0, 4.0),
+                0.885915482691343,
+                -0.03402001407790437,
+            ),
+            (
+                TobitOptions::default(),
+                (-1.0, 2.0),
+                0.5197625392115339,
+                0.03741238398542833,
+            ),
+        ] {
+            let t = terms(0.0, 0.25, &thr, &opts);
+            close(t.alpha, 0.15865525393145705, "alpha (9)");
+            close(t.beta, 0.02275013194817921, "beta (9)");
+            close(t.pi, 0.8185946141203637, "pi (9)");
+            assert_eq!((t.theta_l, t.theta_r), thetas);
+            close(t.var_factor, var_factor, "1 + varphi (15)");
+            close(t.y_hat, y_hat, "y^- (23) with lambda (14)");
+        }
+        // lambda (14) and varphi (15) on their own at the printed theta.
+        let m = truncated_standard(-2.0, 4.0);
+        close(m.lambda(), -0.05511270304138151, "lambda (14)");
+        close(m.varphi(), -0.11408451730865699, "varphi (15)");
     }
 
     /// `update_in_place` is `update` bit for bit: random priors of dimensions 1..=7 (the

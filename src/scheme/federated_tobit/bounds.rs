@@ -10,7 +10,9 @@
 //!   whole update term is zero on the others (`h = 0`). `1 + varphi_l` is the variance factor
 //!   of the one-sided truncation at `theta_l`, i.e. (15) at `theta_r = +inf`, which is
 //!   `1 - lambda (lambda - theta_l)`; the printed `varphi = lambda (lambda - theta_l)` has the
-//!   opposite sign ([`UpperVarphi`] offers both).
+//!   opposite sign ([`UpperVarphi`] offers both). `alpha` is (9)'s (`sqrt(R)`) and `theta_l`
+//!   the theta of (14)-(15), so under the printed `theta_denominator = "r"` it is
+//!   `(tau_l - zeta^-)/R`, the theorem's printed `theta-bar_l` (see [`crate::filter::tobit`]).
 //! * lower bound, Theorem 4: `P^l_{k+1} = (1 - (1 - alpha - beta)^2) A P^l A^T + Q` as in the
 //!   theorem's statement (the appendix's `(1 - alpha - beta)^2 Q` is looser). `alpha`, `beta`
 //!   are those of what the estimator holds, on every step (as printed).

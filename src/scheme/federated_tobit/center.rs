@@ -192,6 +192,7 @@ pub struct LocalRecord {
     /// Censoring probabilities (9) of what the estimator holds (zero while the hold is empty).
     pub alpha: f64,
     pub beta: f64,
+    /// The left theta of (14)-(15) (`/ R` under the printed `theta_denominator`).
     pub theta_l: f64,
     /// The local prediction covariance `P^-_{m,k}` (19).
     pub pred_cov: Matrix,

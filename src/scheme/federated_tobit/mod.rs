@@ -39,6 +39,19 @@
 //! scheduled sensor (the test `federated_equals_the_centralized_tobit_kf`): the fused filter
 //! does not depend on the sharing coefficients.
 //!
+//! **The printed typos** are options of the scenario file (see [`crate::filter::tobit`]),
+//! the corrected reading the default:
+//!
+//! * `theta_denominator`. (9) prints the censoring probabilities with the standard deviation,
+//!   `alpha ~ Phi((tau_l - zeta^-)/sqrt(R))`, `beta ~ Phi((zeta^- - tau_r)/sqrt(R))`; the theta
+//!   that feeds `lambda` (14) and `varphi` (15), hence (23) and (25) and Theorem 4's
+//!   `varphi(theta_l)`, is printed as `(tau - zeta)/R` (after (11), and with `zeta^-` before
+//!   Lemma 2). The corrected form (`"sqrt-r"`) uses `sqrt(R)` in (9) and (14)-(15) alike, as
+//!   (16)-(17) and the truncated moments (31)-(32) require; the printed form (`"r"`) follows
+//!   the equations literally: `sqrt(R)` in (9), `R` in (14)-(15). The factors `sqrt(R)` before
+//!   `lambda` in (23) and `R` before `1 + varphi` in (25) are printed correctly and shared.
+//! * `lambda_sign`: `zeta - sqrt(R) lambda` as (12) and (32) give, or the `+` printed in (23).
+//!
 //! [`exact_pf`] is the exact-likelihood particle filter shown beside the Tobit KF: one particle filter on the augmented state weighing the scheduled reading by its
 //! exact censored likelihood, the Bayes-optimal answer on the same data.
 pub mod bounds;

@@ -31,7 +31,8 @@ impl PerSensor {
     }
 }
 
-/// `theta_denominator`.
+/// `theta_denominator`: what divides `tau - zeta` in the theta of (14)-(15) (`sqrt-r`, or `r`
+/// as printed after (11)); the censoring probabilities (9) divide by `sqrt(R)` either way.
 #[derive(Debug, Clone, Copy, Default, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum ThetaDenominatorParam {
@@ -287,7 +288,7 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
             name: "theta_denominator",
             values: "\"sqrt-r\" | \"r\"",
             default: "sqrt-r",
-            meaning: "theta = (tau - zeta)/sqrt(R) (correct) or /R (as printed)",
+            meaning: "theta of lambda (14) and varphi (15): (tau - zeta)/sqrt(R) (correct) or /R (as printed); the censoring probabilities (9) use sqrt(R) under both, as printed",
         },
         ParamDoc {
             name: "lambda_sign",
