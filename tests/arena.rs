@@ -92,3 +92,44 @@ fn unreachable_budgets_are_marked() {
     assert_eq!(alg1.status, Status::OutOfRange);
     assert!(alg1.achieved > 12.0);
 }
+
+/// On the energy axis (`--budget-axis energy`) every scheme whose knob reaches the budget
+/// spends it within tolerance, in µJ of radio energy per step, and that figure is the
+/// `energy_per_step_uj` of its summary.
+#[test]
+fn calibration_on_the_energy_axis_reaches_its_budget() {
+    let text = builtin::get("arena-1d").unwrap();
+    let opts = calibrate::Options {
+        load: build::LoadOptions {
+            trials: Some(8),
+            ..Default::default()
+        },
+        axis: calibrate::Axis::Energy,
+        ..Default::default()
+    };
+    // Four sensors asleep cost 4 × 3.0 V × 0.02 mA × 1 s ≈ 240 µJ per step; the all-data KF
+    // (four frames every step) about 360 µJ: a budget of 300 µJ lies between.
+    let budget = 300.0;
+    let out = calibrate::calibrate(text, "built-in:arena-1d", &[budget], &opts).unwrap();
+    let mut calibrated = 0;
+    for (c, s) in out.rows[0].iter().zip(&out.summaries[0].schemes) {
+        assert_eq!(c.achieved, s.energy.energy_per_step_uj, "{}", c.label);
+        if c.kind == "centralized-kf-random" || c.kind == "send-on-delta" {
+            assert_eq!(c.status, Status::Calibrated, "{}", c.label);
+        }
+        if c.status == Status::Calibrated {
+            calibrated += 1;
+            assert!(
+                (c.achieved - budget).abs() <= out.tolerance * budget,
+                "{}: {} µJ for {budget}",
+                c.label,
+                c.achieved
+            );
+        }
+    }
+    assert!(calibrated >= 2);
+    assert_eq!(
+        calibrate::Axis::parse("energy"),
+        Ok(calibrate::Axis::Energy)
+    );
+}

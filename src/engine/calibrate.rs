@@ -47,6 +47,10 @@ pub enum Axis {
     Frame,
     /// Frames plus the fusion center's downlink feedback bits.
     Total,
+    /// What the sensors' radios spend per step, µJ (`[radio]`, [`crate::network::radio`]):
+    /// frames sent, acknowledgements, listening for feedback and sleep. The axis a battery-powered
+    /// deployment pays; its budget includes the radios' sleep, which no knob lowers.
+    Energy,
 }
 
 impl Axis {
@@ -55,8 +59,9 @@ impl Axis {
             "payload" => Ok(Axis::Payload),
             "frame" => Ok(Axis::Frame),
             "total" => Ok(Axis::Total),
+            "energy" => Ok(Axis::Energy),
             _ => Err(format!(
-                "--budget-axis: expected payload, frame or total, got {s:?}"
+                "--budget-axis: expected payload, frame, total or energy, got {s:?}"
             )),
         }
     }
@@ -65,14 +70,25 @@ impl Axis {
             Axis::Payload => "payload",
             Axis::Frame => "frame",
             Axis::Total => "total",
+            Axis::Energy => "energy",
         }
     }
-    /// The bits per step of a result on this axis.
+    /// What a budget on this axis counts, for the tables: "payload bits", …, "µJ".
+    pub fn unit(self) -> &'static str {
+        match self {
+            Axis::Payload => "payload bits",
+            Axis::Frame => "frame bits",
+            Axis::Total => "total bits",
+            Axis::Energy => "µJ",
+        }
+    }
+    /// The bits (µJ) per step of a result on this axis.
     pub fn of(self, s: &SchemeSummary) -> f64 {
         match self {
             Axis::Payload => s.bits_per_step,
             Axis::Frame => s.frame_bits_per_step,
             Axis::Total => s.frame_bits_per_step + s.downlink_bits_per_step,
+            Axis::Energy => s.energy.energy_per_step_uj,
         }
     }
 }

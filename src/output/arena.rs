@@ -1,6 +1,6 @@
 //! The arena: every scheme of a scenario at several bit budgets,
 //! accuracy against bits per step, the Pareto front and the best scheme per budget.
-use crate::engine::calibrate::{render, short, Calibrated, Outcome, Status};
+use crate::engine::calibrate::{render, short, Axis, Calibrated, Outcome, Status};
 use crate::output::plot::{self, Line};
 use std::path::Path;
 
@@ -74,11 +74,16 @@ fn label(c: &Calibrated) -> String {
 /// carries † when the scheme diverged in more than [`DIVERGED_MARK`] of its trials.
 pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
     let mut rows = vec![vec![
-        format!("budget ({} bits/step)", out.axis.name()),
+        format!("budget ({}/step)", out.axis.unit()),
         "best scheme".to_string(),
         "knob".to_string(),
         format!("RMSE {group}"),
-        "bits/step".to_string(),
+        // What it spends on the budget's axis.
+        match out.axis {
+            Axis::Energy => "µJ/step",
+            _ => "bits/step",
+        }
+        .to_string(),
         "runner-up".to_string(),
         format!("RMSE {group}"),
     ]];
@@ -251,7 +256,7 @@ pub fn write_plots(
     scenario: &str,
     dir: &Path,
 ) -> Result<Vec<String>, String> {
-    let x = format!("{} bits per step (achieved)", out.axis.name());
+    let x = format!("{} per step (achieved)", out.axis.unit());
     let mut files = Vec::new();
     let f = format!("rmse_{group}_vs_bits.svg");
     let g = group.to_string();

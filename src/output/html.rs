@@ -615,12 +615,12 @@ fn header(h: &mut String, input: &Input) {
 /// The calibrated arena's section: the best scheme per budget, accuracy and ANEES against bits,
 /// the calibration table of every budget.
 fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), String> {
-    let _ = writeln!(h, "<h2>Best scheme per budget</h2>\n<p>Every scheme's bandwidth knob tuned so that it spends the budget in {} bits per step (pilot runs on common random numbers, tolerance {}%); schemes without a knob count at budgets they fit.</p>", out.axis.name(), short(100.0 * out.tolerance));
+    let _ = writeln!(h, "<h2>Best scheme per budget</h2>\n<p>Every scheme's bandwidth knob tuned so that it spends the budget in {} per step (pilot runs on common random numbers, tolerance {}%); schemes without a knob count at budgets they fit.</p>", out.axis.unit(), short(100.0 * out.tolerance));
     h.push_str(&html_table(&arena::best_per_budget(out, group)));
     if let Some(line) = arena::diverged_legend(out, group) {
         let _ = writeln!(h, "<p class=\"legend\">{}</p>", esc(&line));
     }
-    let x = format!("{} bits per step (achieved)", out.axis.name());
+    let x = format!("{} per step (achieved)", out.axis.unit());
     let g = group.to_string();
     let svg = plot::lines_svg(
         &format!("mean RMSE of {group} against bits"),

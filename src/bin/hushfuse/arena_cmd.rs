@@ -236,9 +236,9 @@ fn arena_message(
     );
     for (b, budget) in budgets.iter().enumerate() {
         msg.push_str(&format!(
-            "\nbudget {} {} bits/step (tolerance {}%):\n",
+            "\nbudget {} {}/step (tolerance {}%):\n",
             calibrate::short(*budget),
-            axis.name(),
+            axis.unit(),
             calibrate::short(100.0 * out.tolerance)
         ));
         msg.push_str(&calibrate::table(out, b, group));

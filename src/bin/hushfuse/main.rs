@@ -70,9 +70,9 @@ struct RunArgs {
     /// scheme per budget.
     #[arg(long, value_name = "B1,B2,...")]
     budgets: Option<String>,
-    /// What the budget counts: uplink payload bits, whole 802.15.4 frames, or frames plus the
-    /// downlink feedback (default: payload).
-    #[arg(long, value_name = "payload|frame|total")]
+    /// What the budget counts: uplink payload bits, whole 802.15.4 frames, frames plus the
+    /// downlink feedback, or the radios' energy in µJ per step (default: payload).
+    #[arg(long, value_name = "payload|frame|total|energy")]
     budget_axis: Option<String>,
     /// Trials of the calibration's pilot runs (default: the scenario's; fewer is faster, and the
     /// calibrated knobs are then rerun at the full count).
