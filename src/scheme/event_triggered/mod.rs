@@ -304,6 +304,28 @@ impl Fusion {
         Ok(())
     }
 
+    /// A whole step on the measurements that arrived in `inbox` and nothing else (a silence
+    /// adds nothing): [`start`](Self::start), [`add`](Self::add) of each sensor in order,
+    /// [`finish`](Self::finish) into `out`. The loss-aware centers then update on each
+    /// silence's mixture.
+    pub fn fuse_received(
+        &mut self,
+        system: &System,
+        pred: &Gaussian,
+        inbox: &[Received],
+        out: &mut Gaussian,
+    ) -> Result<(), SchemeError> {
+        self.start(pred)?;
+        for (i, msg) in inbox.iter().enumerate() {
+            let evidence = match received_measurement(i, msg)? {
+                Some(z) => Evidence::Measurement(z),
+                None => Evidence::Nothing,
+            };
+            self.add(system, i, evidence)?;
+        }
+        self.finish(out)
+    }
+
     /// Ends the step: the fused estimate into `out` (sized for the state; `to_gaussian` in
     /// the buffers for the information form).
     pub fn finish(&mut self, out: &mut Gaussian) -> Result<(), SchemeError> {

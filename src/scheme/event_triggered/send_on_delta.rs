@@ -193,15 +193,8 @@ impl SendOnDeltaCenter {
         mixture: loss_aware::SendOnDeltaMixture,
         q: &mut [f64],
     ) -> Result<(), SchemeError> {
-        self.fusion.start(&self.pred)?;
-        for (i, msg) in inbox.iter().enumerate() {
-            let evidence = match received_measurement(i, msg)? {
-                Some(z) => Evidence::Measurement(z),
-                None => Evidence::Nothing,
-            };
-            self.fusion.add(&self.system, i, evidence)?;
-        }
-        self.fusion.finish(&mut self.out)?;
+        self.fusion
+            .fuse_received(&self.system, &self.pred, inbox, &mut self.out)?;
         // The new q of every sensor, committed only when the step succeeds.
         let mut q_next = q.to_vec();
         for (i, msg) in inbox.iter().enumerate() {

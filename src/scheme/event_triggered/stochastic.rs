@@ -292,15 +292,8 @@ impl StochasticTriggerCenter {
         p: f64,
         log_dets: &[Option<f64>],
     ) -> Result<(), SchemeError> {
-        self.fusion.start(&self.pred)?;
-        for (i, msg) in inbox.iter().enumerate() {
-            let evidence = match received_measurement(i, msg)? {
-                Some(z) => Evidence::Measurement(z),
-                None => Evidence::Nothing,
-            };
-            self.fusion.add(&self.system, i, evidence)?;
-        }
-        self.fusion.finish(&mut self.out)?;
+        self.fusion
+            .fuse_received(&self.system, &self.pred, inbox, &mut self.out)?;
         for (i, msg) in inbox.iter().enumerate() {
             // τ = 0 always sends: nothing arriving is a loss, which says nothing.
             let (Received::Silent, Some(log_det), Some(noise)) =
