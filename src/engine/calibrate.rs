@@ -743,9 +743,11 @@ fn assemble(ev: &Evaluator, s: &Setup, per_scheme: &[Vec<Calibrated>]) -> Outcom
     let mut rows = Vec::new();
     let mut summaries = Vec::new();
     let mut texts = Vec::new();
-    let header = results::summarize(&s.full, &[]);
+    let header = results::summarize_schemes(&s.full, &[]);
+    let pcrb = crate::metrics::pcrb::compute(&s.full).ok();
+    let floor = results::floor_of(&s.full);
     for b in 0..s.budgets.len() {
-        let row: Vec<Calibrated> = per_scheme.iter().map(|r| r[b].clone()).collect();
+        let mut row: Vec<Calibrated> = per_scheme.iter().map(|r| r[b].clone()).collect();
         let tables: Vec<toml::Table> = s
             .list
             .iter()
@@ -761,6 +763,7 @@ fn assemble(ev: &Evaluator, s: &Setup, per_scheme: &[Vec<Calibrated>]) -> Outcom
             })
             .collect();
         let mut summary = header.clone();
+        summary.pcrb = pcrb.clone();
         summary.schemes = row
             .iter()
             .enumerate()
@@ -770,6 +773,10 @@ fn assemble(ev: &Evaluator, s: &Setup, per_scheme: &[Vec<Calibrated>]) -> Outcom
                 s
             })
             .collect();
+        results::apply_floor(&floor, &mut summary);
+        for (c, sc) in row.iter_mut().zip(&summary.schemes) {
+            c.result.floor_mse = sc.floor_mse;
+        }
         texts.push(ev.text(&tables, None));
         summaries.push(summary);
         rows.push(row);

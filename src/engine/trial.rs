@@ -215,12 +215,14 @@ pub fn run_trial(
         transmissions.clear();
         links.clear();
         bits.clear();
+        let mut scheduled_mask = 0u128;
         for (i, node) in inst.sensors.iter_mut().enumerate() {
             let fb = match &link {
                 Some(l) => l.feedback(i),
                 None => feedback.as_ref(),
             };
             let t = if scheduled(i) {
+                scheduled_mask |= network::sensor_bit(i);
                 node.step(k, &measurements[k - 1][i], fb, &mut rng)
                     .map_err(|source| LoopError::Scheme { k, source })?
             } else {
@@ -252,6 +254,7 @@ pub fn run_trial(
             ),
         };
         traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
+        traffic.scheduled = scheduled_mask;
         if let Some(l) = &mut link {
             l.uplink(k, inbox, &mut traffic);
             traffic.downlink_lost = downlink_lost;

@@ -45,6 +45,9 @@ pub fn total_traffic(sums: &Sums) -> Traffic {
         duplicates: link(5),
         ack_frames: link(6),
         ack_bits: link(7),
+        // Totals have no per-step sensor sets (Sums::sensors keeps the per-sensor counts).
+        senders: 0,
+        scheduled: 0,
     }
 }
 

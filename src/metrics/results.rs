@@ -90,6 +90,15 @@ pub struct SchemeSummary {
     /// by part, and the average sensor's `lifetime_days` ([`crate::metrics::energy`]).
     #[serde(flatten)]
     pub energy: crate::metrics::energy::EnergySummary,
+    /// The entropy-coded rate `R_eff`, bits per step: each sensor's send-or-silence decision
+    /// (its binary entropy) plus its payload once per message ([`crate::metrics::floor`]).
+    pub r_eff_per_step: f64,
+    /// The rate–distortion floor at `r_eff_per_step` on the steady-state MSE
+    /// (`steady_state.mse`): no causal scheme spending that rate does better. Null where the
+    /// scenario has no floor (`rate_distortion_floor_note` says why) or the rate is too low for
+    /// any finite error.
+    #[serde(default)]
+    pub floor_mse: Option<f64>,
     /// Per step: rate and bits with their standard errors.
     pub traffic_per_step: TrafficPerStep,
     /// Fraction of (trial, step) pairs whose fused covariance was singular (collapsed
@@ -187,6 +196,13 @@ pub struct Summary {
     /// is defined (see [`crate::metrics::pcrb`]); absent where it was not computed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pcrb: Option<crate::metrics::pcrb::Pcrb>,
+    /// The rate–distortion floor as a curve of steady-state MSE against bits per step
+    /// ([`crate::metrics::floor`]); null where the scenario has none.
+    #[serde(default)]
+    pub rate_distortion_floor: Option<crate::metrics::floor::FloorCurve>,
+    /// Why `rate_distortion_floor` is null.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_distortion_floor_note: Option<String>,
 }
 
 /// Turns sums into per-scheme results, with the model's posterior Cramér–Rao bound where it is
@@ -194,7 +210,40 @@ pub struct Summary {
 pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
     let mut s = summarize_schemes(exp, sums);
     s.pcrb = crate::metrics::pcrb::compute(exp).ok();
+    add_floor(exp, &mut s);
     s
+}
+
+/// The rate–distortion floor of `exp`'s system and its curve, or why there is none.
+pub type ScenarioFloor = Result<(crate::metrics::floor::Floor, crate::metrics::floor::FloorCurve), String>;
+
+/// [`ScenarioFloor`] of `exp` (a dozen small programs: computed once per run).
+pub fn floor_of(exp: &Experiment) -> ScenarioFloor {
+    crate::metrics::floor::Floor::of(exp).and_then(|f| f.curve().map(|c| (f, c)))
+}
+
+/// Fills in the rate–distortion floor of `exp`'s system: the curve, and each scheme's floor at
+/// its `r_eff_per_step` (or the reason there is none).
+pub fn add_floor(exp: &Experiment, s: &mut Summary) {
+    apply_floor(&floor_of(exp), s);
+}
+
+/// [`add_floor`] with the floor computed already.
+pub fn apply_floor(floor: &ScenarioFloor, s: &mut Summary) {
+    match floor {
+        Ok((f, curve)) => {
+            use rayon::prelude::*;
+            s.schemes
+                .par_iter_mut()
+                .for_each(|sc| sc.floor_mse = f.mse_at(sc.r_eff_per_step).ok());
+            s.rate_distortion_floor = Some(curve.clone());
+            s.rate_distortion_floor_note = None;
+        }
+        Err(why) => {
+            s.rate_distortion_floor = None;
+            s.rate_distortion_floor_note = Some(why.clone());
+        }
+    }
 }
 
 /// [`summarize`] without the bound: for the many pilot runs of a calibration, whose bound is
@@ -301,6 +350,14 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 downlink_bits_per_step: downlink_bits / steps as f64,
                 downlink_bits_per_step_se: run_se(Layout::DOWNLINK_BITS, 1.0),
                 energy: crate::metrics::energy::of_variant(exp, v, s),
+                r_eff_per_step: crate::metrics::floor::r_eff_per_step(
+                    s,
+                    exp.system.n_sensors(),
+                    bits / steps as f64,
+                    messages * trials,
+                    s.link.iter().map(|r| r[4] as f64).sum(),
+                ),
+                floor_mse: None,
                 traffic_per_step,
                 degenerate_covariance_fraction: degenerate / steps as f64,
                 degenerate_covariance_fraction_se: run_se(Layout::DEGENERATE, 1.0),
@@ -345,6 +402,8 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
         group_order: exp.groups.iter().map(|(g, _)| g.clone()).collect(),
         schemes,
         pcrb: None,
+        rate_distortion_floor: None,
+        rate_distortion_floor_note: None,
     }
 }
 

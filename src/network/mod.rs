@@ -44,6 +44,35 @@ pub struct Traffic {
     /// ARQ: bits of those acknowledgments on air, 802.15.4 PHY headers included
     /// ([`crate::link::codec802154::ACK_PPDU_BITS`] = 88 each).
     pub ack_bits: u64,
+    /// Which sensors sent a message: bit i for sensor i ([`sensor_bit`]; sensors from
+    /// [`MASKED_SENSORS`] on are not recorded). With [`Traffic::scheduled`] it gives each
+    /// sensor's send probability, whose entropy a send-or-stay-silent decision carries
+    /// (`r_eff_per_step` in `summary.json`).
+    pub senders: u128,
+    /// Which sensors were scheduled (allowed to send and with a reading): bit i for sensor i.
+    pub scheduled: u128,
+}
+
+/// Sensors whose send decisions [`Traffic::senders`] records (the bits of a `u128`).
+pub const MASKED_SENSORS: usize = 128;
+
+/// Sensor `i`'s bit in [`Traffic::senders`] and [`Traffic::scheduled`]; 0 (not recorded) from
+/// [`MASKED_SENSORS`] on.
+pub fn sensor_bit(i: usize) -> u128 {
+    if i < MASKED_SENSORS {
+        1u128 << i
+    } else {
+        0
+    }
+}
+
+/// The mask of sensors `0..n` (every sensor of `n`, up to [`MASKED_SENSORS`]).
+pub fn all_sensors(n: usize) -> u128 {
+    if n >= MASKED_SENSORS {
+        u128::MAX
+    } else {
+        (1u128 << n) - 1
+    }
 }
 
 /// Which sensors may talk at a step.
@@ -74,8 +103,9 @@ pub fn deliver(
 ) -> Traffic {
     inbox.clear();
     let mut traffic = Traffic::default();
-    for t in transmissions {
+    for (i, t) in transmissions.into_iter().enumerate() {
         if let Transmission::Send(m) = &t {
+            traffic.senders |= sensor_bit(i);
             traffic.messages += 1;
             traffic.bits += m.bits();
             traffic.frame_bits += m.frame_bits();
@@ -119,6 +149,7 @@ pub fn deliver_sequenced(
         if let Transmission::Send(m) = &t {
             let f = fate(i);
             let attempts = u64::from(f.attempts());
+            traffic.senders |= sensor_bit(i);
             traffic.messages += 1;
             traffic.bits += attempts * m.bits_with_sequence(sequence_bits);
             traffic.frame_bits += attempts * m.frame_bits_with_sequence(sequence_bits);

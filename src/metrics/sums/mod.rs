@@ -63,6 +63,12 @@ pub struct Sums {
     /// failure reported does not depend on threads, checkpoints or shards.
     #[serde(default)]
     pub failure: Option<TrialFailure>,
+    /// Per sensor i (bit i of [`Traffic::scheduled`] and [`Traffic::senders`]), summed over
+    /// trials and steps: `[steps scheduled, steps it sent]`. Each sensor's send probability,
+    /// whose entropy the entropy-coded rate `r_eff_per_step` charges. Integers (the order of
+    /// additions changes nothing); as long as the highest sensor that was ever scheduled.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<[u64; 2]>,
 }
 
 /// Where and why a variant's trial failed.
@@ -171,6 +177,26 @@ impl Sums {
             nees_hist: NeesHistogram::new(),
             link: Vec::new(),
             failure: None,
+            sensors: Vec::new(),
+        }
+    }
+
+    /// Adds one step's scheduled and sending sensors of `trials` trials (one, or a lockstep
+    /// batch sharing its traffic) to [`Sums::sensors`].
+    fn add_senders(&mut self, t: &Traffic, trials: u64) {
+        let all = t.scheduled | t.senders;
+        if all == 0 {
+            return;
+        }
+        let top = 128 - all.leading_zeros() as usize;
+        if self.sensors.len() < top {
+            self.sensors.resize(top, [0; 2]);
+        }
+        for (field, mut mask) in [(0, t.scheduled), (1, t.senders)] {
+            while mask != 0 {
+                self.sensors[mask.trailing_zeros() as usize][field] += trials;
+                mask &= mask - 1;
+            }
         }
     }
 
@@ -273,6 +299,7 @@ impl Sums {
         self.nees_hist.clear();
         self.link.clear();
         self.failure = None;
+        self.sensors.clear();
     }
 
     /// Adds another block's sums (same shape).
@@ -301,6 +328,13 @@ impl Sums {
         self.nees_hist.merge(&o.nees_hist);
         if let Some(f) = &o.failure {
             self.record_failure(f.clone());
+        }
+        if self.sensors.len() < o.sensors.len() {
+            self.sensors.resize(o.sensors.len(), [0; 2]);
+        }
+        for (a, b) in self.sensors.iter_mut().zip(&o.sensors) {
+            a[0] += b[0];
+            a[1] += b[1];
         }
         if !o.link.is_empty() {
             if self.link.is_empty() {
@@ -342,6 +376,7 @@ impl TrialState<'_> {
         est: &Gaussian,
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
+        sums.add_senders(&traffic, 1);
         self.record_inner(sums, k, truth, est, None, traffic)
     }
 
@@ -357,6 +392,7 @@ impl TrialState<'_> {
         factor: &[f64],
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
+        sums.add_senders(&traffic, 1);
         self.record_inner(sums, k, truth, est, Some(factor), traffic)
     }
 
@@ -663,6 +699,7 @@ pub fn record_shared(
     let n = shared.mean.len();
     let trace = trace(&shared.cov);
     let counts = traffic_counts(traffic);
+    sums.add_senders(&traffic, states.len().min(truths.len()) as u64);
     let trials = states.iter_mut().zip(truths).zip(means.chunks_exact(n));
     let mut trials = trials.peekable();
     while trials.peek().is_some() {

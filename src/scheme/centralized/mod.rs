@@ -595,6 +595,8 @@ fn all_sent_traffic(sys: &System) -> crate::network::Traffic {
         traffic.bits += m.bits();
         traffic.frame_bits += m.frame_bits();
     }
+    traffic.senders = crate::network::all_sensors(sys.n_sensors());
+    traffic.scheduled = traffic.senders;
     traffic
 }
 
@@ -805,11 +807,15 @@ impl LockstepFastPath for CentralizedScheme {
         let mut run = || -> Result<(), FastTrialError> {
             for (k, zs) in (1..=steps).zip(measurements) {
                 arrived.clear();
-                let mut traffic = crate::network::Traffic::default();
+                let mut traffic = crate::network::Traffic {
+                    scheduled: crate::network::all_sensors(ns),
+                    ..Default::default()
+                };
                 for (i, (z, (bits, frame_bits))) in zs.iter().zip(&cost).enumerate() {
                     // ForwardingSensor::step: always draw, send if u < rate.
                     let u: f64 = rng.random();
                     if u < self.rate {
+                        traffic.senders |= crate::network::sensor_bit(i);
                         traffic.messages += 1;
                         traffic.bits += bits;
                         traffic.frame_bits += frame_bits;

@@ -235,6 +235,7 @@ fn run_variant<const LOSSY: bool>(
         let mut inexact = 0usize;
         let mut messages = 0u64;
         let mut lost = 0u64;
+        let mut senders = 0u128;
         fallback.count = 0;
         for (
             i,
@@ -266,6 +267,7 @@ fn run_variant<const LOSSY: bool>(
             if send {
                 st.silent_steps = 0;
                 messages += 1;
+                senders |= crate::network::sensor_bit(i);
             } else {
                 st.silent_steps += 1;
             }
@@ -325,6 +327,8 @@ fn run_variant<const LOSSY: bool>(
             bits: messages * msg_bits,
             frame_bits: messages * msg_frame_bits,
             lost,
+            senders,
+            scheduled: crate::network::all_sensors(ns),
             ..Traffic::default()
         };
         match factor {

@@ -1,0 +1,275 @@
+//! What a run is held to, in bits: each scheme's entropy-coded rate `R_eff` and the
+//! rate–distortion floor at that rate (the smallest steady-state MSE any causal scheme reaches
+//! with `R_eff` bits per step, [`crate::stats::rate_distortion`]).
+//!
+//! **The rate.** A sensor that sends or stays silent tells the center one of two things every
+//! step it is scheduled: the decision carries up to `h(p_i)` bits (`h` the binary entropy, `p_i`
+//! its send probability while scheduled), and a message `b_i` bits more. So
+//!
+//! `R_eff = Σ_i [ s_i h(p_i) + p_i b_i ]` bits per step,
+//!
+//! with `s_i` the share of steps sensor i is scheduled (a round-robin slot that always sends
+//! carries no decision: `h(1) = 0`; a step it is not scheduled, none). `Σ_i s_i p_i b_i` is the
+//! payload per step, counted once per message (ARQ's repeated attempts carry nothing new).
+//! `R_eff` is an upper bound on the information the scheme conveys (the symbols' entropy; their
+//! correlation over time and across sensors would only lower it), so the floor at `R_eff` is a
+//! valid lower bound on the scheme's error: a point below it is a defect.
+//!
+//! **The floor.** For linear sensors `z = H x + v` (all of them, stacked, `V` block diagonal):
+//! the all-data Kalman filter's steady-state error plus the floor of its estimate process
+//! (`floor_mse_noisy`); the scalar closed form for one state, the Tanaka et al. SDP otherwise.
+//! Censored (Tobit) sensors see less than the linear sensor they censor, so the floor of the
+//! uncensored sensor set holds for them too. Nonlinear sensors, a singular process noise or
+//! an SDP without BLAS: no floor, and the reason is given.
+use crate::linalg::Matrix;
+use crate::metrics::sums::Sums;
+use crate::scenario::build::Experiment;
+use crate::stats::rate_distortion::{self as rd, scalar, FloorError};
+use serde::{Deserialize, Serialize};
+
+/// Binary entropy in bits; 0 at p = 0 and p = 1.
+pub fn binary_entropy(p: f64) -> f64 {
+    if p <= 0.0 || p >= 1.0 {
+        return 0.0;
+    }
+    -(p * p.log2() + (1.0 - p) * (1.0 - p).log2())
+}
+
+/// The entropy-coded rate `R_eff` (bits per step) of one variant's sums over `trials` trials of
+/// `steps` steps on `n_sensors` sensors, given its payload bits per step as counted
+/// (`payload_per_step`, every attempt) and the messages and retransmissions of the whole run
+/// (all trials).
+///
+/// Sensors beyond [`crate::network::MASKED_SENSORS`] have no per-sensor counts: their messages
+/// are charged as if each of them were scheduled every step with their common average send
+/// probability (by concavity of `h`, an upper bound of their decisions' entropy).
+pub fn r_eff_per_step(
+    sums: &Sums,
+    n_sensors: usize,
+    payload_per_step: f64,
+    messages: f64,
+    retransmissions: f64,
+) -> f64 {
+    let t = (sums.trials * sums.steps) as f64;
+    if t == 0.0 {
+        return 0.0;
+    }
+    let mut decisions = 0.0;
+    let mut counted = 0.0;
+    for &[scheduled, sent] in &sums.sensors {
+        if scheduled > 0 {
+            decisions += scheduled as f64 / t * binary_entropy(sent as f64 / scheduled as f64);
+        }
+        counted += sent as f64;
+    }
+    let rest = n_sensors.saturating_sub(crate::network::MASKED_SENSORS);
+    if rest > 0 {
+        let p = ((messages - counted) / (rest as f64 * t)).clamp(0.0, 1.0);
+        decisions += rest as f64 * binary_entropy(p);
+    }
+    // Payload once per message: with ARQ every attempt was counted (all of a message's
+    // attempts carry the same bits).
+    let first_attempts = if retransmissions > 0.0 && messages > 0.0 {
+        messages / (messages + retransmissions)
+    } else {
+        1.0
+    };
+    decisions + payload_per_step * first_attempts
+}
+
+/// The floor as a curve, for `summary.json` (`rate_distortion_floor`) and the plots.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct FloorCurve {
+    /// Rates, bits per step.
+    pub rate: Vec<f64>,
+    /// The floor on the steady-state MSE (total over the state) at each rate.
+    pub mse: Vec<f64>,
+    /// The floor as the rate grows without end: the all-data Kalman filter's steady-state MSE.
+    pub all_data_mse: f64,
+    /// At or below this rate no scheme keeps the error bounded (`Σ max(0, log2|λ_i(F)|)`).
+    pub min_rate: f64,
+    /// How the floor was computed.
+    pub method: String,
+}
+
+/// A scenario's floor: the pieces of `D(R) = trace(P_kf) + D_est(R)`.
+#[derive(Debug, Clone)]
+pub struct Floor {
+    a: Matrix,
+    /// Covariance of the Kalman estimate's driving term, `M − P_kf`.
+    estimate_noise: Matrix,
+    all_data_mse: f64,
+    /// The rate from which [`Floor::mse_at`] gives the all-data error (see there).
+    plateau: Option<f64>,
+}
+
+/// Relative excess of the floor over the all-data error below which [`Floor::mse_at`] gives the
+/// all-data error.
+pub const NEGLIGIBLE: f64 = 1e-6;
+
+/// Bits per step above the minimum rate where [`Floor::of`] checks for the plateau.
+const PLATEAU_RATE: f64 = 24.0;
+
+/// Rates of the curve: the fine steps where the floor bends, then doublings.
+const CURVE_RATES: [f64; 12] = [0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 24.0];
+
+impl Floor {
+    /// The floor of `exp`'s system with every sensor, or why there is none.
+    pub fn of(exp: &Experiment) -> Result<Self, String> {
+        let sys = &exp.system;
+        let n = sys.state_dim();
+        let mut rows = 0;
+        let mut linear = Vec::new();
+        for (i, s) in sys.sensors.iter().enumerate() {
+            let l = s
+                .as_linear()
+                .ok_or_else(|| format!("sensor {i} is not linear"))?;
+            rows += l.h().nrows();
+            linear.push((l.h(), s.noise_cov()));
+        }
+        if linear.is_empty() {
+            return Err("no sensors".into());
+        }
+        let mut h = Matrix::zeros(rows, n);
+        let mut v = Matrix::zeros(rows, rows);
+        let mut r0 = 0;
+        for (hi, ri) in &linear {
+            let m = hi.nrows();
+            h.view_mut((r0, 0), (m, n)).copy_from(*hi);
+            v.view_mut((r0, r0), (m, m)).copy_from(*ri);
+            r0 += m;
+        }
+        let a = sys.transition.f().clone();
+        let kf = rd::kalman_steady_state(&a, sys.transition.q(), &h, &v)
+            .map_err(|e| e.to_string())?;
+        let mut floor = Self {
+            estimate_noise: kf.estimate_noise(),
+            all_data_mse: kf.posterior.trace(),
+            a,
+            plateau: None,
+        };
+        let at = floor.min_rate() + PLATEAU_RATE;
+        floor.plateau = floor
+            .solve(at)
+            .is_ok_and(|d| d - floor.all_data_mse <= NEGLIGIBLE * floor.all_data_mse)
+            .then_some(at);
+        Ok(floor)
+    }
+
+    /// The smallest rate with a finite floor.
+    pub fn min_rate(&self) -> f64 {
+        if self.a.nrows() == 1 {
+            scalar::min_rate(self.a[(0, 0)])
+        } else {
+            rd::min_rate(&self.a)
+        }
+    }
+
+    /// The floor on the steady-state MSE at `rate` bits per step, or a lower bound of it
+    /// within [`NEGLIGIBLE`] (relative) of it: from [`Floor::plateau`] bits per step on, where
+    /// the estimate-process term has fallen below that, the all-data error itself (the floor
+    /// decreases with the rate, so the all-data error bounds it from below everywhere, and
+    /// there it is as tight as the solver; this spares one program per scheme).
+    ///
+    /// Errors: at or below [`Floor::min_rate`] (the floor is infinite) or when the program
+    /// cannot be solved.
+    pub fn mse_at(&self, rate: f64) -> Result<f64, FloorError> {
+        if self.plateau.is_some_and(|p| rate >= p) {
+            return Ok(self.all_data_mse);
+        }
+        self.solve(rate)
+    }
+
+    /// The floor at `rate` from the program (or the closed form for one state).
+    fn solve(&self, rate: f64) -> Result<f64, FloorError> {
+        let est = if self.a.nrows() == 1 {
+            scalar::distortion(self.a[(0, 0)], self.estimate_noise[(0, 0)], rate)?
+        } else {
+            rd::floor_mse(&self.a, &self.estimate_noise, rate)?
+        };
+        Ok(self.all_data_mse + est)
+    }
+
+    /// The curve at [`CURVE_RATES`] above the minimum rate (points that cannot be solved are
+    /// left out); `Err` when no point can.
+    pub fn curve(&self) -> Result<FloorCurve, String> {
+        use rayon::prelude::*;
+        let min = self.min_rate();
+        // Independent programs: solved in parallel, collected in rate order.
+        let points: Vec<(f64, Result<f64, FloorError>)> = CURVE_RATES
+            .par_iter()
+            .map(|r| (r + min, self.solve(r + min)))
+            .collect();
+        let mut rate = Vec::new();
+        let mut mse = Vec::new();
+        let mut first_err = None;
+        for (r, d) in points {
+            match d {
+                Ok(d) => {
+                    rate.push(r);
+                    mse.push(d);
+                }
+                Err(e) => {
+                    first_err.get_or_insert(e);
+                }
+            }
+        }
+        if rate.is_empty() {
+            return Err(first_err.map_or("no point".into(), |e| e.to_string()));
+        }
+        Ok(FloorCurve {
+            rate,
+            mse,
+            all_data_mse: self.all_data_mse,
+            min_rate: min,
+            method: if self.a.nrows() == 1 {
+                "closed form (Tatikonda, Sahai, Mitter), noisy sensors by the Kalman split".into()
+            } else {
+                "semidefinite program of Tanaka et al. (Clarabel), noisy sensors by the Kalman split"
+                    .into()
+            },
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn binary_entropy_by_hand() {
+        assert_eq!(binary_entropy(0.0), 0.0);
+        assert_eq!(binary_entropy(1.0), 0.0);
+        assert!((binary_entropy(0.5) - 1.0).abs() < 1e-15);
+        // h(1/4) = 2 - (3/4) log2 3
+        assert!((binary_entropy(0.25) - (2.0 - 0.75 * 3f64.log2())).abs() < 1e-15);
+    }
+
+    fn sums(sensors: Vec<[u64; 2]>, trials: usize, steps: usize) -> Sums {
+        let mut s = Sums::new(1, steps, 1);
+        s.trials = trials;
+        s.sensors = sensors;
+        s
+    }
+
+    #[test]
+    fn r_eff_is_the_payload_when_every_sensor_always_sends() {
+        let s = sums(vec![[200, 200], [200, 200], [200, 200]], 2, 100);
+        assert_eq!(r_eff_per_step(&s, 3, 96.0, 600.0, 0.0), 96.0);
+    }
+
+    #[test]
+    fn r_eff_by_hand() {
+        // Sensor 0 scheduled every step, sends at half of them: h(1/2) = 1 bit a step.
+        // Sensor 1 scheduled at a quarter of the steps (round robin of 4), always sends: 0.
+        // Sensor 2 scheduled every step, sends a quarter: h(1/4).
+        let s = sums(vec![[400, 200], [100, 100], [400, 100]], 4, 100);
+        let payload = 16.0 * (200.0 + 100.0 + 100.0) / 400.0;
+        let want = 1.0 + binary_entropy(0.25) + payload;
+        let got = r_eff_per_step(&s, 3, payload, 400.0, 0.0);
+        assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+        // ARQ: with one retransmission per message the payload counted twice is halved.
+        let got = r_eff_per_step(&s, 3, 2.0 * payload, 400.0, 400.0);
+        assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+    }
+}
