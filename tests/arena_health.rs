@@ -165,7 +165,7 @@ fn an_integer_knob_beyond_its_range_is_out_of_range_at_that_end() {
     // 12 lies between what 3 and 4 bits spend: the nearest integer, no end.
     assert_eq!((at(1).status, at(1).end), (Status::NearestInteger, None));
     assert_eq!(at(1).status_text(), "nearest integer");
-    let table = calibrate::table(&out, 2, "position");
+    let table = hushfuse::output::arena::budget_table(&out, 2, "position");
     assert!(
         table.contains("out of range (upper end)") && !table.contains("nearest integer"),
         "{table}"

@@ -54,6 +54,9 @@ pub enum Axis {
 }
 
 impl Axis {
+    /// Every axis, in the order the tables show their figures.
+    pub const ALL: [Axis; 4] = [Axis::Payload, Axis::Frame, Axis::Total, Axis::Energy];
+
     pub fn parse(s: &str) -> Result<Self, String> {
         match s {
             "payload" => Ok(Axis::Payload),
@@ -790,37 +793,6 @@ fn assemble(ev: &Evaluator, s: &Setup, per_scheme: &[Vec<Calibrated>]) -> Outcom
         axis: s.axis,
         tolerance: s.tol,
     }
-}
-
-/// The calibration table of one budget: target and achieved beside each scheme.
-pub fn table(outcome: &Outcome, b: usize, group: &str) -> String {
-    let mut rows = vec![vec![
-        "scheme".to_string(),
-        "knob".to_string(),
-        format!("target {}", outcome.axis.name()),
-        "achieved".to_string(),
-        "status".to_string(),
-        format!("RMSE {group}"),
-        "ANEES".to_string(),
-    ]];
-    for c in &outcome.rows[b] {
-        rows.push(vec![
-            c.label.clone(),
-            match (&c.knob, c.value) {
-                (Some(k), Some(v)) => format!("{k} = {}", short(v)),
-                _ => "—".to_string(),
-            },
-            bits_cell(c.target),
-            bits_cell(c.achieved),
-            c.status_text(),
-            c.result
-                .mean_rmse
-                .get(group)
-                .map_or("—".into(), |r| format!("{r:.4}")),
-            format!("{:.3}", c.result.anees),
-        ]);
-    }
-    render(&rows)
 }
 
 /// A number with at most 4 significant decimals.

@@ -101,6 +101,10 @@ pub struct Floor {
     all_data_mse: f64,
     /// The rate from which [`Floor::mse_at`] gives the all-data error (see there).
     plateau: Option<f64>,
+    /// The floor at [`CURVE_RATES`] above the minimum rate, where the program was solved.
+    points: Vec<(f64, f64)>,
+    /// Why the first point of the curve that was not solved failed.
+    curve_error: Option<FloorError>,
 }
 
 /// Relative excess of the floor over the all-data error below which [`Floor::mse_at`] gives the
@@ -111,7 +115,9 @@ pub const NEGLIGIBLE: f64 = 1e-6;
 const PLATEAU_RATE: f64 = 24.0;
 
 /// Rates of the curve: the fine steps where the floor bends, then doublings.
-const CURVE_RATES: [f64; 12] = [0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 24.0];
+const CURVE_RATES: [f64; 12] = [
+    0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 24.0,
+];
 
 impl Floor {
     /// The floor of `exp`'s system with every sensor, or why there is none.
@@ -140,20 +146,46 @@ impl Floor {
             r0 += m;
         }
         let a = sys.transition.f().clone();
-        let kf = rd::kalman_steady_state(&a, sys.transition.q(), &h, &v)
-            .map_err(|e| e.to_string())?;
+        let kf =
+            rd::kalman_steady_state(&a, sys.transition.q(), &h, &v).map_err(|e| e.to_string())?;
         let mut floor = Self {
             estimate_noise: kf.estimate_noise(),
             all_data_mse: kf.posterior.trace(),
             a,
             plateau: None,
+            points: Vec::new(),
+            curve_error: None,
         };
-        let at = floor.min_rate() + PLATEAU_RATE;
+        floor.solve_curve();
+        // The curve's last rate is PLATEAU_RATE above the minimum.
         floor.plateau = floor
-            .solve(at)
-            .is_ok_and(|d| d - floor.all_data_mse <= NEGLIGIBLE * floor.all_data_mse)
-            .then_some(at);
+            .points
+            .last()
+            .filter(|(r, d)| {
+                (r - floor.min_rate() - PLATEAU_RATE).abs() < 1e-12
+                    && d - floor.all_data_mse <= NEGLIGIBLE * floor.all_data_mse
+            })
+            .map(|(r, _)| *r);
         Ok(floor)
+    }
+
+    /// Solves the program at every rate of [`CURVE_RATES`] (in parallel: independent
+    /// programs), keeping the points that were solved in rate order.
+    fn solve_curve(&mut self) {
+        use rayon::prelude::*;
+        let min = self.min_rate();
+        let points: Vec<(f64, Result<f64, FloorError>)> = CURVE_RATES
+            .par_iter()
+            .map(|r| (r + min, self.solve(r + min)))
+            .collect();
+        for (r, d) in points {
+            match d {
+                Ok(d) => self.points.push((r, d)),
+                Err(e) => {
+                    self.curve_error.get_or_insert(e);
+                }
+            }
+        }
     }
 
     /// The smallest rate with a finite floor.
@@ -177,7 +209,17 @@ impl Floor {
         if self.plateau.is_some_and(|p| rate >= p) {
             return Ok(self.all_data_mse);
         }
-        self.solve(rate)
+        match self.solve(rate) {
+            // Where the solver does not converge (very low rates on a marginally stable
+            // system): the floor at the next rate of the curve that was solved, or the all-data
+            // error; both lie below the floor at `rate`, which decreases with the rate.
+            Err(FloorError::Solver(_)) => Ok(self
+                .points
+                .iter()
+                .find(|(r, _)| *r >= rate)
+                .map_or(self.all_data_mse, |(_, d)| *d)),
+            other => other,
+        }
     }
 
     /// The floor at `rate` from the program (or the closed form for one state).
@@ -190,38 +232,20 @@ impl Floor {
         Ok(self.all_data_mse + est)
     }
 
-    /// The curve at [`CURVE_RATES`] above the minimum rate (points that cannot be solved are
-    /// left out); `Err` when no point can.
+    /// The curve at [`CURVE_RATES`] above the minimum rate (points that could not be solved
+    /// are left out); `Err` when no point could.
     pub fn curve(&self) -> Result<FloorCurve, String> {
-        use rayon::prelude::*;
-        let min = self.min_rate();
-        // Independent programs: solved in parallel, collected in rate order.
-        let points: Vec<(f64, Result<f64, FloorError>)> = CURVE_RATES
-            .par_iter()
-            .map(|r| (r + min, self.solve(r + min)))
-            .collect();
-        let mut rate = Vec::new();
-        let mut mse = Vec::new();
-        let mut first_err = None;
-        for (r, d) in points {
-            match d {
-                Ok(d) => {
-                    rate.push(r);
-                    mse.push(d);
-                }
-                Err(e) => {
-                    first_err.get_or_insert(e);
-                }
-            }
-        }
-        if rate.is_empty() {
-            return Err(first_err.map_or("no point".into(), |e| e.to_string()));
+        if self.points.is_empty() {
+            return Err(self
+                .curve_error
+                .as_ref()
+                .map_or("no point".into(), |e| e.to_string()));
         }
         Ok(FloorCurve {
-            rate,
-            mse,
+            rate: self.points.iter().map(|p| p.0).collect(),
+            mse: self.points.iter().map(|p| p.1).collect(),
             all_data_mse: self.all_data_mse,
-            min_rate: min,
+            min_rate: self.min_rate(),
             method: if self.a.nrows() == 1 {
                 "closed form (Tatikonda, Sahai, Mitter), noisy sensors by the Kalman split".into()
             } else {

@@ -215,7 +215,13 @@ pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
 }
 
 /// The rate–distortion floor of `exp`'s system and its curve, or why there is none.
-pub type ScenarioFloor = Result<(crate::metrics::floor::Floor, crate::metrics::floor::FloorCurve), String>;
+pub type ScenarioFloor = Result<
+    (
+        crate::metrics::floor::Floor,
+        crate::metrics::floor::FloorCurve,
+    ),
+    String,
+>;
 
 /// [`ScenarioFloor`] of `exp` (a dozen small programs: computed once per run).
 pub fn floor_of(exp: &Experiment) -> ScenarioFloor {
@@ -787,6 +793,9 @@ pub fn non_finite(summary: &Summary) -> Vec<String> {
         if summary.trials < 2 {
             bad.retain(|path| !path.split('.').any(|seg| seg.contains("_se")));
         }
+        // No floor (none for the scenario, or a rate too low for a finite one) is a null by
+        // design: `rate_distortion_floor_note` says why.
+        bad.retain(|path| path != "floor_mse");
         bad.dedup();
         if !bad.is_empty() {
             out.push(format!(

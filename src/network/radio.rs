@@ -323,6 +323,12 @@ impl RadioSpec {
             .total()
     }
 
+    /// What `sensors` sensors spend in a step when none of them turns its radio on, µJ: the
+    /// least any scheme spends per step (the radio's every other state draws more than sleep).
+    pub fn asleep_step_uj(&self, sensors: usize) -> f64 {
+        sensors as f64 * self.sleep_mw() * self.step_seconds * 1000.0
+    }
+
     /// Energy the battery holds, J: capacity × 3.6 C/mAh × voltage.
     pub fn battery_joules(&self) -> f64 {
         self.battery_mah * 3.6 * self.supply_v

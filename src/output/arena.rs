@@ -1,6 +1,6 @@
 //! The arena: every scheme of a scenario at several bit budgets,
 //! accuracy against bits per step, the Pareto front and the best scheme per budget.
-use crate::engine::calibrate::{render, short, Axis, Calibrated, Outcome, Status};
+use crate::engine::calibrate::{bits_cell, render, short, Axis, Calibrated, Outcome, Status};
 use crate::output::plot::{self, Line};
 use std::path::Path;
 
@@ -69,43 +69,102 @@ fn label(c: &Calibrated) -> String {
     }
 }
 
+/// The headers of what a result spends on every axis ([`Axis::ALL`]), then its entropy-coded
+/// rate: every headline row shows them all, whichever axis it was calibrated on.
+/// Their meaning: [`SPEND_LEGEND`].
+pub fn spend_headers() -> Vec<String> {
+    Axis::ALL
+        .iter()
+        .map(|a| a.name().replace("energy", "µJ"))
+        .chain(["R_eff".to_string()])
+        .collect()
+}
+
+/// What the columns of [`spend_headers`] count, printed once under the tables that have them.
+pub const SPEND_LEGEND: &str = "per step: payload, frame (whole 802.15.4 frames) and total (frames + downlink feedback) in bits; µJ: the sensors' radio energy ([radio], CC2420 by default); R_eff: the entropy-coded rate in bits (each sensor's send-or-silence entropy + its payload), at which the rate-distortion floor is taken.";
+
+/// The cells of [`spend_headers`] for one result.
+pub fn spend_cells(s: &crate::metrics::results::SchemeSummary) -> Vec<String> {
+    Axis::ALL
+        .iter()
+        .map(|a| bits_cell(a.of(s)))
+        .chain([bits_cell(s.r_eff_per_step)])
+        .collect()
+}
+
+/// A floor cell: the rate–distortion floor at the result's R_eff, or "—".
+fn floor_cell(s: &crate::metrics::results::SchemeSummary) -> String {
+    s.floor_mse.map_or("—".into(), |f| format!("{f:.4}"))
+}
+
+/// The calibration table of one budget: each scheme's knob and status, what it spends on every
+/// axis, its accuracy beside the rate–distortion floor at its R_eff, and its consistency.
+pub fn budget_table(outcome: &Outcome, b: usize, group: &str) -> String {
+    let mut head = vec!["scheme".to_string(), "knob".into(), "status".into()];
+    head.extend(spend_headers());
+    head.extend([
+        format!("RMSE {group}"),
+        "MSE(ss)".into(),
+        "±se".into(),
+        "floor".into(),
+        "ANEES".into(),
+    ]);
+    let mut rows = vec![head];
+    for c in &outcome.rows[b] {
+        let r = &c.result;
+        let mut row = vec![c.label.clone(), knob_text(c), c.status_text()];
+        row.extend(spend_cells(r));
+        row.extend([
+            r.mean_rmse
+                .get(group)
+                .map_or("—".into(), |x| format!("{x:.4}")),
+            format!("{:.4}", r.steady_state.mse),
+            format!("{:.4}", r.steady_state.mse_se),
+            floor_cell(r),
+            format!("{:.3}", r.anees),
+        ]);
+        rows.push(row);
+    }
+    render(&rows)
+}
+
+/// "knob = value", or "—" for a scheme without one.
+fn knob_text(c: &Calibrated) -> String {
+    match (&c.knob, c.value) {
+        (Some(k), Some(v)) => format!("{k} = {}", short(v)),
+        _ => "—".into(),
+    }
+}
+
 /// Per budget: the scheme with the lowest mean RMSE of `group` among those within budget,
 /// as (budget, label, knob text, RMSE, achieved bits, runner-up label and RMSE). A label
 /// carries † when the scheme diverged in more than [`DIVERGED_MARK`] of its trials.
 pub fn best_per_budget(out: &Outcome, group: &str) -> Vec<Vec<String>> {
-    let mut rows = vec![vec![
+    let mut head = vec![
         format!("budget ({}/step)", out.axis.unit()),
         "best scheme".to_string(),
         "knob".to_string(),
         format!("RMSE {group}"),
-        // What it spends on the budget's axis.
-        match out.axis {
-            Axis::Energy => "µJ/step",
-            _ => "bits/step",
-        }
-        .to_string(),
-        "runner-up".to_string(),
-        format!("RMSE {group}"),
-    ]];
+    ];
+    // What it spends on every axis (the budget's among them).
+    head.extend(spend_headers());
+    head.extend(["runner-up".to_string(), format!("RMSE {group}")]);
+    let mut rows = vec![head];
     for (b, ok) in ranked(out, group).iter().enumerate() {
-        let knob = |c: &Calibrated| match (&c.knob, c.value) {
-            (Some(k), Some(v)) => format!("{k} = {}", short(v)),
-            _ => "—".into(),
-        };
-        let mut r = vec![format!("{}", short(out.budgets[b]))];
+        let mut r = vec![short(out.budgets[b])];
         match ok.first() {
-            Some(c) => r.extend([
-                label(c),
-                knob(c),
-                format!("{:.4}", c.result.mean_rmse[group]),
-                crate::engine::calibrate::bits_cell(c.achieved),
-            ]),
-            None => r.extend([
-                "(none within budget)".into(),
-                "".into(),
-                "".into(),
-                "".into(),
-            ]),
+            Some(c) => {
+                r.extend([
+                    label(c),
+                    knob_text(c),
+                    format!("{:.4}", c.result.mean_rmse[group]),
+                ]);
+                r.extend(spend_cells(&c.result));
+            }
+            None => {
+                r.push("(none within budget)".into());
+                r.extend(std::iter::repeat_n(String::new(), 2 + Axis::ALL.len() + 1));
+            }
         }
         match ok.get(1) {
             Some(c) => r.extend([label(c), format!("{:.4}", c.result.mean_rmse[group])]),
@@ -290,28 +349,61 @@ pub fn write_plots(
     Ok(files)
 }
 
-/// The quick arena of `hushfuse` without arguments: scenario, trials and budgets.
-pub const QUICK: (&str, usize, &[f64]) = ("arena-1d", 40, &[12.0, 24.0, 48.0, 96.0]);
+/// The quick arena of `hushfuse` without arguments: its scenario and trials.
+pub const QUICK: (&str, usize) = ("arena-1d", 40);
 
-/// The paragraph above the quick arena's table.
-pub fn quick_description(trials: usize, budgets: &[f64]) -> String {
+/// The quick arena's axes and budgets, in the order it prints them: energy first, the axis a
+/// battery-powered deployment pays (docs/scenarios.md, "Which axis"), payload last, the
+/// papers' count. On arena-1d the four sensors spend 240 µJ a step asleep and 420 sending
+/// every reading; every reading is 480 frame bits and 128 payload bits.
+pub const QUICK_AXES: [(Axis, &[f64]); 4] = [
+    (Axis::Energy, &[270.0, 300.0, 330.0, 390.0]),
+    (Axis::Total, &[96.0, 192.0, 288.0, 384.0]),
+    (Axis::Frame, &[96.0, 192.0, 288.0, 384.0]),
+    (Axis::Payload, &[12.0, 24.0, 48.0, 96.0]),
+];
+
+/// The paragraph above the quick arena's tables.
+pub fn quick_description(trials: usize) -> String {
     format!(
         "The quick arena (built-in `arena-1d`, {trials} trials x 100 steps): a target moving on a \
 line at nearly constant velocity, watched by three position sensors (noise variances 1, 2 and 4) \
-and one velocity sensor, each sending 32-bit readings over a link that charges every bit. Every \
-scheme of the library runs on the same truths and measurements; each scheme's one bandwidth knob \
-(a send probability, a threshold, the number of quantizer bits, the average number of senders) \
-is tuned so that it spends the same uplink payload bits per step, here {} bits per step (sending \
-everything costs 128). Schemes without a knob (the all-data KF bound, the round-robin Geng et al. \
-schemes) spend what they spend and count only at budgets they fit. The table names, per budget, \
-the scheme with the lowest mean position RMSE. `hushfuse run arena-1d --budgets 12,24,48,96 \
---report` gives the full comparison with figures.\n",
-        budgets
-            .iter()
-            .map(|b| short(*b))
-            .collect::<Vec<_>>()
-            .join(", ")
+and one velocity sensor, each sending 32-bit readings in IEEE 802.15.4 frames. Every scheme of \
+the library runs on the same truths and measurements; each scheme's one bandwidth knob (a send \
+probability, a threshold, the number of quantizer bits, the average number of senders) is tuned \
+so that it spends the same budget per step, and each table names, per budget, the scheme with the \
+lowest mean position RMSE and what it spends on every axis. First the axis a battery-powered \
+deployment pays: the sensors' radio energy (CC2420 radios, one step a second: whole frames with \
+their headers and turnaround, listening for the center's feedback, sleep). Then total bits \
+(frames plus feedback), frame bits, and last payload bits, the papers' count, on which a scheme \
+that sends tiny payloads in whole frames, or listens for feedback, looks cheaper than its radio \
+is. Schemes without a knob (the all-data KF, the round-robin Geng et al. schemes) spend what they \
+spend and count only at budgets they fit. `hushfuse run arena-1d --budgets 270,300,330,390 \
+--report` gives the full comparison with figures (`--budget-axis payload` for payload bits).\n"
     )
+}
+
+/// The heading of one axis's table in the quick arena: the axis, with what the sensors spend
+/// asleep (energy) and what the all-data Kalman filter spends on it.
+pub fn quick_heading(out: &Outcome, asleep_uj: f64) -> String {
+    let all_data = out
+        .rows
+        .first()
+        .and_then(|row| row.iter().find(|c| c.kind == "centralized-kf"))
+        .map(|c| out.axis.of(&c.result));
+    let mut h = format!("\n{} per step", out.axis.unit());
+    let mut notes = Vec::new();
+    if out.axis == Axis::Energy {
+        notes.push(format!("asleep: {}", short(asleep_uj)));
+    }
+    if let Some(a) = all_data {
+        notes.push(format!("every reading sent: {}", short(a)));
+    }
+    if !notes.is_empty() {
+        h.push_str(&format!(" ({})", notes.join("; ")));
+    }
+    h.push_str(":\n");
+    h
 }
 
 #[cfg(test)]

@@ -37,9 +37,38 @@ pub(crate) fn budgets_of(args: &RunArgs) -> Result<Vec<f64>, Failure> {
     Ok(out)
 }
 
-/// The `--budget-axis` given, or `payload` (the default, also in the output hash).
+/// The `--budget-axis` given, or `energy` (the default, also in the output hash): what a
+/// battery-powered deployment pays (docs/scenarios.md, "Which axis").
 pub(crate) fn budget_axis(args: &RunArgs) -> &str {
-    args.budget_axis.as_deref().unwrap_or("payload")
+    args.budget_axis.as_deref().unwrap_or("energy")
+}
+
+/// Refuses energy budgets below what the sensors spend asleep (no scheme spends less): most
+/// likely bits given without `--budget-axis`.
+fn check_energy_budgets(
+    axis: calibrate::Axis,
+    exp: Option<&build::Experiment>,
+    budgets: &[f64],
+    given: bool,
+) -> Result<(), Failure> {
+    let Some(exp) = exp.filter(|_| axis == calibrate::Axis::Energy) else {
+        return Ok(());
+    };
+    let asleep = exp.radio.asleep_step_uj(exp.system.n_sensors());
+    match budgets.iter().find(|&&b| b < asleep) {
+        Some(b) => Err(Failure::Input(format!(
+            "budget {} µJ/step is below what the {} sensors' radios spend asleep ({} µJ/step), which no scheme goes under{}",
+            calibrate::short(*b),
+            exp.system.n_sensors(),
+            calibrate::short(asleep),
+            if given {
+                ""
+            } else {
+                ": budgets are on the energy axis by default (µJ per step); for bits give --budget-axis payload, frame or total"
+            }
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// Refuses the budget options that mean nothing without `--budget`/`--budgets` (for plain runs).
@@ -82,6 +111,7 @@ pub(crate) fn arena_run(
     // The scenario as run, loaded once for the checks before the first pilot run (one that does
     // not load is reported by the calibration with its full message).
     let loaded = build::load_with(&text, &source, &load).ok();
+    check_energy_budgets(axis, loaded.as_ref(), &budgets, args.budget_axis.is_some())?;
     check_arena_room(&early_dir, loaded.as_ref(), budgets.len())?;
     if let (Some(p), Some(exp)) = (args.pilot_trials, &loaded) {
         if p > exp.trials {
@@ -241,12 +271,16 @@ fn arena_message(
             axis.unit(),
             calibrate::short(100.0 * out.tolerance)
         ));
-        msg.push_str(&calibrate::table(out, b, group));
+        msg.push_str(&arena::budget_table(out, b, group));
         // The health of each scheme at this budget, worded as a plain run words it.
         msg.push_str(&results::warning_block(&out.summaries[b]));
     }
     msg.push_str("\nbest scheme per budget (lowest mean RMSE among schemes within the budget):\n");
     msg.push_str(&arena::best_table(out, group));
+    msg.push_str(&format!("{}\n", arena::SPEND_LEGEND));
+    if let Some(note) = &first.rate_distortion_floor_note {
+        msg.push_str(&format!("floor: none for this scenario ({note})\n"));
+    }
     msg
 }
 
@@ -348,27 +382,48 @@ fn write_arena_report(
     Ok(())
 }
 
-/// `hushfuse` without arguments: the quick arena, and which scheme wins at which budget.
+/// `hushfuse` without arguments: the quick arena, and which scheme wins at which budget, on
+/// every axis (energy first).
 pub(crate) fn quick_arena() -> Result<(), Failure> {
-    let (name, trials, budgets) = arena::QUICK;
+    let (name, trials) = arena::QUICK;
     let text = builtin::get(name).expect("built-in quick arena");
-    let opts = calibrate::Options {
-        load: build::LoadOptions {
-            trials: Some(trials),
-            ..Default::default()
-        },
+    let source = format!("built-in:{name}");
+    let load = build::LoadOptions {
+        trials: Some(trials),
         ..Default::default()
     };
+    let exp = build::load_with(text, &source, &load).map_err(|e| Failure::Run(e.to_string()))?;
+    let asleep = exp.radio.asleep_step_uj(exp.system.n_sensors());
     let start = Instant::now();
-    let out = calibrate::calibrate(text, &format!("built-in:{name}"), budgets, &opts)
-        .map_err(Failure::Run)?;
-    let group = out.summaries[0].group_order[0].clone();
-    let mut msg = arena::quick_description(trials, budgets);
-    msg.push('\n');
-    msg.push_str(&arena::best_table(&out, &group));
+    let mut msg = arena::quick_description(trials);
+    let mut evaluations = 0;
+    let mut bound = None;
+    for (axis, budgets) in arena::QUICK_AXES {
+        let opts = calibrate::Options {
+            axis,
+            load: load.clone(),
+            ..Default::default()
+        };
+        let out = calibrate::calibrate(text, &source, budgets, &opts).map_err(Failure::Run)?;
+        let group = out.summaries[0].group_order[0].clone();
+        evaluations += out.evaluations;
+        msg.push_str(&arena::quick_heading(&out, asleep));
+        let table = arena::best_table(&out, &group);
+        // The bound's line is the same under every table: once, at the end.
+        let (rows, line) = match table.find("bound: ") {
+            Some(i) => (&table[..i], Some(table[i..].to_string())),
+            None => (&table[..], None),
+        };
+        msg.push_str(rows);
+        bound = bound.or(line);
+    }
+    msg.push_str(&format!("\n{}\n", arena::SPEND_LEGEND));
+    if let Some(line) = bound {
+        msg.push_str(&line);
+    }
     msg.push_str(&format!(
         "\n({} pilot runs, {:.1} s. `hushfuse list` shows the built-in scenarios, `hushfuse run default` the Dormann et al. comparison, `hushfuse --help` the commands.)\n",
-        out.evaluations,
+        evaluations,
         start.elapsed().as_secs_f64()
     ));
     print_out(&msg);

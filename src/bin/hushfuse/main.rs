@@ -62,16 +62,18 @@ struct RunArgs {
     /// Run even if the estimated memory or run time is above the limits (16 GiB, 24 hours).
     #[arg(long)]
     allow_large: bool,
-    /// Tune every scheme's bandwidth knob so that all spend BITS bits per step (pilot runs on
+    /// Tune every scheme's bandwidth knob so that all spend BUDGET per step on the budget axis
+    /// (µJ of radio energy by default; bits with --budget-axis payload|frame|total; pilot runs on
     /// common random numbers), then compare them.
-    #[arg(long, value_name = "BITS", conflicts_with = "budgets")]
+    #[arg(long, value_name = "BUDGET", conflicts_with = "budgets")]
     budget: Option<f64>,
-    /// Several budgets, comma-separated: accuracy against bits, the Pareto front and the best
-    /// scheme per budget.
+    /// Several budgets, comma-separated: accuracy against what is spent, the Pareto front and
+    /// the best scheme per budget.
     #[arg(long, value_name = "B1,B2,...")]
     budgets: Option<String>,
-    /// What the budget counts: uplink payload bits, whole 802.15.4 frames, frames plus the
-    /// downlink feedback, or the radios' energy in µJ per step (default: payload).
+    /// What the budget counts: the sensors' radio energy in µJ per step (default: what a
+    /// battery-powered deployment pays), uplink payload bits (the papers' count), whole
+    /// 802.15.4 frames, or frames plus the downlink feedback.
     #[arg(long, value_name = "payload|frame|total|energy")]
     budget_axis: Option<String>,
     /// Trials of the calibration's pilot runs (default: the scenario's; fewer is faster, and the
