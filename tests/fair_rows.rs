@@ -87,7 +87,10 @@ fn granted_sets_the_payload_and_one_is_the_papers_protocol() {
     let s = run(&arena_1d_with(&schemes, 6));
     for (i, kind) in GENG.iter().enumerate() {
         let row = &s.schemes[4 * i..4 * i + 4];
-        assert_eq!(row[0].bits_per_step, 32.0, "{kind}: the paper's one reading a step");
+        assert_eq!(
+            row[0].bits_per_step, 32.0,
+            "{kind}: the paper's one reading a step"
+        );
         // Default and granted = 1: the same numbers (the Tobit PF's coins come from the
         // variant's index, so only the deterministic filters are compared number for number).
         if *kind != "tobit-pf" {
@@ -96,10 +99,16 @@ fn granted_sets_the_payload_and_one_is_the_papers_protocol() {
             assert_eq!(row[0].anees_per_step, row[1].anees_per_step, "{kind}");
         }
         assert_eq!(row[1].bits_per_step, 32.0, "{kind}");
-        assert_eq!(row[2].bits_per_step, 16.0, "{kind}: a sensor every other step");
+        assert_eq!(
+            row[2].bits_per_step, 16.0,
+            "{kind}: a sensor every other step"
+        );
         assert_eq!(row[3].bits_per_step, 80.0, "{kind}: 2.5 sensors a step");
         // More readings, a smaller error.
-        assert!(rmse(&row[3]) < rmse(&row[1]) && rmse(&row[1]) < rmse(&row[2]), "{kind}");
+        assert!(
+            rmse(&row[3]) < rmse(&row[1]) && rmse(&row[1]) < rmse(&row[2]),
+            "{kind}"
+        );
     }
 }
 
@@ -146,7 +155,11 @@ tau_r = [1000.0, 1000.0, 1000.0, 20.0]
                 out.budgets[b]
             );
             let g = c.value.unwrap();
-            assert!((g - out.budgets[b] / 32.0).abs() < 0.05, "{}: granted {g}", c.label);
+            assert!(
+                (g - out.budgets[b] / 32.0).abs() < 0.05,
+                "{}: granted {g}",
+                c.label
+            );
         }
     }
 }
@@ -165,13 +178,32 @@ fn arena_1d_tobit_rows_are_not_saturated() {
     for kind in ["federated-tobit", "tobit-pf"] {
         let r = by(kind);
         assert_eq!(r.diverged_fraction, 0.0, "{kind}");
-        assert!(rmse(r) < 1.1 * rmse(rr), "{kind}: {} vs {}", rmse(r), rmse(rr));
-        assert!(rmse(r) < 3.0 * rmse(all), "{kind}: {} vs {}", rmse(r), rmse(all));
-        assert!(r.note.as_deref().unwrap().contains("never saturate"), "{kind}");
+        assert!(
+            rmse(r) < 1.1 * rmse(rr),
+            "{kind}: {} vs {}",
+            rmse(r),
+            rmse(rr)
+        );
+        assert!(
+            rmse(r) < 3.0 * rmse(all),
+            "{kind}: {} vs {}",
+            rmse(r),
+            rmse(all)
+        );
+        assert!(
+            r.note.as_deref().unwrap().contains("never saturate"),
+            "{kind}"
+        );
     }
     let table = results::table(&s);
-    assert!(table.contains("\nnote: FTKF-DB: censoring region"), "{table}");
-    assert!(table.contains("\nnote: Exact Tobit PF: censoring region"), "{table}");
+    assert!(
+        table.contains("\nnote: FTKF-DB: censoring region"),
+        "{table}"
+    );
+    assert!(
+        table.contains("\nnote: Exact Tobit PF: censoring region"),
+        "{table}"
+    );
     // Rows without a note have none, in summary.json too.
     assert!(all.note.is_none());
     let json = serde_json::to_value(&s).unwrap();
@@ -205,7 +237,10 @@ fn note_is_validated_and_printed_once() {
             "schemes[0].sweep.note",
         ),
     ] {
-        let text = arena_1d_with(&format!("[[schemes]]\nkind = \"round-robin-kf\"\n{entry}\n"), 2);
+        let text = arena_1d_with(
+            &format!("[[schemes]]\nkind = \"round-robin-kf\"\n{entry}\n"),
+            2,
+        );
         let e = build::load(&text, "test").err().unwrap().to_string();
         assert!(e.contains(field), "{entry}: {e}");
     }
@@ -218,4 +253,38 @@ fn note_is_validated_and_printed_once() {
         notes::block(&s),
         "\nnote: Round-robin KF (uncensored): mine\n"
     );
+}
+
+/// The schedule behind `granted`: at 1 it grants exactly Geng et al.'s sensor (k - 1) mod N
+/// (eq. (5)) at every step, at N every sensor, and over any N steps each sensor the same number
+/// of times (`granted` times), whatever the fraction.
+#[test]
+fn granted_schedule_generalizes_the_round_robin() {
+    use hushfuse::network::Schedule;
+    for n in 1..=7 {
+        let one = Schedule::RoundRobinGranted(1.0);
+        let all = Schedule::RoundRobinGranted(n as f64);
+        for k in 1..=500 {
+            for i in 0..n {
+                assert_eq!(
+                    one.allows(k, i, n),
+                    Schedule::RoundRobin.allows(k, i, n),
+                    "n {n}, k {k}, i {i}"
+                );
+                assert!(all.allows(k, i, n), "n {n}, k {k}, i {i}");
+            }
+        }
+        for g in [0.25, 0.5, 1.5, 2.5] {
+            if g > n as f64 {
+                continue;
+            }
+            let s = Schedule::round_robin(g);
+            // 4 N steps: 4 N g slots, 4 g per sensor.
+            for i in 0..n {
+                let count = (1..=4 * n).filter(|&k| s.allows(k, i, n)).count();
+                assert_eq!(count as f64, 4.0 * g, "n {n}, granted {g}, sensor {i}");
+            }
+        }
+    }
+    assert_eq!(Schedule::round_robin(1.0), Schedule::RoundRobin);
 }

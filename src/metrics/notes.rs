@@ -13,8 +13,7 @@ pub fn lines(summary: &Summary) -> Vec<String> {
         .iter()
         .filter_map(|s| {
             let note = s.note.as_ref()?;
-            seen.insert(s.curve)
-                .then(|| format!("{}: {note}", s.name))
+            seen.insert(s.curve).then(|| format!("{}: {note}", s.name))
         })
         .collect()
 }

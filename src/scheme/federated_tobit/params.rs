@@ -196,16 +196,18 @@ impl SchemeParams for FtkfParams {
                 LambdaSignParam::Plus => LambdaSign::Plus,
             },
         };
-        Ok(Box::new(FederatedTobitScheme::new(
-            cx.system.clone(),
-            thresholds,
-            noise_var(&self.noise_var, p)?,
-            self.sharing.clone(),
-            fusion,
-            bias_blind,
-            opts,
-        )?
-        .with_granted(self.granted)?))
+        Ok(Box::new(
+            FederatedTobitScheme::new(
+                cx.system.clone(),
+                thresholds,
+                noise_var(&self.noise_var, p)?,
+                self.sharing.clone(),
+                fusion,
+                bias_blind,
+                opts,
+            )?
+            .with_granted(self.granted)?,
+        ))
     }
 }
 
