@@ -195,7 +195,7 @@ fn arena_1d_tobit_rows_are_not_saturated() {
             "{kind}"
         );
     }
-    let table = results::table(&s);
+    let table = notes::block(&s);
     assert!(
         table.contains("\nnote: FTKF-DB: censoring region"),
         "{table}"
@@ -287,4 +287,54 @@ fn granted_schedule_generalizes_the_round_robin() {
         }
     }
     assert_eq!(Schedule::round_robin(1.0), Schedule::RoundRobin);
+}
+
+/// The notes as the user sees them: under the table of a run and of each budget of a
+/// calibrated run, and in `summary.json`; the calibrated run tunes `granted`.
+#[test]
+fn the_cli_prints_and_keeps_the_notes() {
+    let dir = tempfile::tempdir().unwrap();
+    let hushfuse = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_hushfuse"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {out:?}");
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let plain = dir.path().join("plain");
+    let text = hushfuse(&[
+        "run",
+        "arena-1d",
+        "--trials",
+        "4",
+        "--out",
+        plain.to_str().unwrap(),
+    ]);
+    assert!(
+        text.contains("\nnote: FTKF-DB: censoring region +-1000"),
+        "{text}"
+    );
+    assert!(
+        text.contains("\nnote: Exact Tobit PF: censoring region"),
+        "{text}"
+    );
+    let json = std::fs::read_to_string(plain.join("summary.json")).unwrap();
+    assert_eq!(json.matches("\"note\":").count(), 2);
+    let budget = dir.path().join("budget");
+    let text = hushfuse(&[
+        "run",
+        "arena-1d",
+        "--trials",
+        "4",
+        "--budget",
+        "48",
+        "--out",
+        budget.to_str().unwrap(),
+    ]);
+    assert!(
+        text.contains("\nnote: FTKF-DB: censoring region +-1000"),
+        "{text}"
+    );
+    assert!(text.contains("granted = 1.5"), "{text}");
 }

@@ -18,8 +18,9 @@ pub fn lines(summary: &Summary) -> Vec<String> {
         .collect()
 }
 
-/// The [`lines`] as the terminal prints them under a table: a blank line, then one
-/// `note: ...` line each; empty when no row has a note.
+/// The [`lines`] as the terminal prints them under a table (a plain run's, after its warnings,
+/// and each budget's of `--budget`/`--budgets`): a blank line, then one `note: ...` line each;
+/// empty when no row has a note.
 pub fn block(summary: &Summary) -> String {
     let notes = lines(summary);
     let mut out = String::new();

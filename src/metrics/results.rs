@@ -563,7 +563,6 @@ pub fn warning_block(summary: &Summary) -> String {
             let _ = writeln!(out, "warning: {line}");
         }
     }
-    out.push_str(&super::notes::block(summary));
     out
 }
 
