@@ -308,6 +308,7 @@ fn the_cli_prints_and_keeps_the_notes() {
         "arena-1d",
         "--trials",
         "4",
+        "--report",
         "--out",
         plain.to_str().unwrap(),
     ]);
@@ -321,6 +322,12 @@ fn the_cli_prints_and_keeps_the_notes() {
     );
     let json = std::fs::read_to_string(plain.join("summary.json")).unwrap();
     assert_eq!(json.matches("\"note\":").count(), 2);
+    let report = std::fs::read_to_string(plain.join("report.html")).unwrap();
+    assert!(report.contains("<h3>Notes</h3>"), "report.html");
+    assert!(
+        report.contains("<li>FTKF-DB: censoring region +-1000"),
+        "report.html"
+    );
     let budget = dir.path().join("budget");
     let text = hushfuse(&[
         "run",
