@@ -31,6 +31,10 @@ fn calibration_reaches_every_budget_of_arena_1d() {
         "send-on-delta",
         "ci-fusion",
         "naive-fusion",
+        // Geng et al.'s round-robin schemes, by the sensors granted per step.
+        "federated-tobit",
+        "round-robin-kf",
+        "tobit-pf",
     ];
     for (b, row) in out.rows.iter().enumerate() {
         for c in row {

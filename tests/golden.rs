@@ -21,6 +21,13 @@
 //! `scripts/compare-summaries.py` against the summary of the commit before (29c4cd6) showed
 //! only its two "FTKF-DB (theta / R as printed)" variants (tau = 5, 1) and the paper note on
 //! the typos changed, every other value equal; every other built-in kept its hash.
+//! Issue 24 (item 5, fair rows) gave arena-1d's two Tobit rows (FTKF-DB, Exact Tobit PF) a
+//! censoring region that suits its target (+-1000 on position, +-20 on velocity, instead of the
+//! paper's [-5, 5], which saturated them) and a `note`, and arena-tobit's two Tobit rows a
+//! `note`: `scripts/compare-summaries.py` against the summaries of the commit before (40b749f)
+//! showed only those two arena-1d rows changed (and the added `note` keys), every arena-tobit
+//! value equal; both were re-recorded. The new knob `granted` defaults to the paper's
+//! round-robin: every other built-in, geng-oscillator and geng-tracking included, kept its hash.
 //!
 //! When a change is *meant* to move numbers, rerun with `HUSHFUSE_PRINT_GOLDEN=1 cargo test
 //! --release --test golden -- --nocapture`, paste the printed table, and say in the commit
@@ -49,11 +56,11 @@ const GOLDEN: &[(&str, usize, u64, usize)] = &[
     ("geng-tracking", 8, 0xef354cdb4edc6cfb, 313476),
     ("sinopoli-critical", 8, 0x1e1919b7424d86c9, 844796),
     ("gilbert-elliott-stability", 8, 0x7ef3d15a76d8a115, 716769),
-    ("arena-1d", 4, 0x0a09e77a39e2d3b3, 809369),
+    ("arena-1d", 4, 0xc0d6b2f0c1c74987, 808728),
     ("arena-nca", 4, 0xc7228336b744925a, 721388),
     ("arena-rss", 4, 0xe2a3211f1b8cd6a9, 122846),
     ("arena-wsn", 4, 0x1540cc35d6ebf8f2, 343645),
-    ("arena-tobit", 4, 0x023054b8d0921e54, 908164),
+    ("arena-tobit", 4, 0x375dd43371cd756c, 908404),
 ];
 
 /// FNV-1a, 64 bits: a stable hash written out (std's hasher may change between releases).

@@ -66,7 +66,7 @@ fn every_knob_builds_at_both_ends_of_its_range() {
             let e = registry::find(kind).unwrap();
             let Some(k) = e.knob else { continue };
             let mut table = raw.clone();
-            for key in ["kind", "label", "sweep", "frontier"] {
+            for key in ["kind", "label", "note", "sweep", "frontier"] {
                 table.remove(key);
             }
             let lo = k.lo.at(n).expect("a closed lower end");

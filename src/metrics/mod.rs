@@ -4,6 +4,7 @@ pub mod energy;
 mod failed;
 pub mod floor;
 pub mod link;
+pub mod notes;
 pub mod pcrb;
 pub mod per_step_csv;
 pub mod results;

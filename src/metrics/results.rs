@@ -47,6 +47,9 @@ pub struct SchemeSummary {
     pub kind: String,
     pub curve: usize,
     pub params: Params,
+    /// The entry's `note`: what differs on this row from the others (absent: nothing).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
     /// RMSE per state group per step.
     pub rmse: BTreeMap<String, Vec<f64>>,
     /// Standard error of `rmse` (delta method: se(MSE) / (2 RMSE)).
@@ -333,6 +336,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 kind: v.kind.to_string(),
                 curve: v.curve,
                 params: v.params.clone(),
+                note: exp.curves[v.curve].note.clone(),
                 rmse,
                 rmse_se,
                 mean_rmse,

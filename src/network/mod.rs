@@ -76,21 +76,45 @@ pub fn all_sensors(n: usize) -> u128 {
 }
 
 /// Which sensors may talk at a step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum Schedule {
     /// Every sensor may send at every step.
     #[default]
     All,
-    /// Round-robin: at step k only sensor (k - 1) mod N may send (Geng et al.'s protocol).
+    /// Round-robin: at step k only sensor (k - 1) mod N may send (Geng et al.'s protocol,
+    /// eq. (4)-(5): the token `h_k = mod(k - 1, N) + 1`).
     RoundRobin,
+    /// Round-robin with `granted` sensor slots per step, `0 < granted <= N` (see
+    /// [`Schedule::round_robin`]): the token of Geng et al.'s (5) moves on by `granted`
+    /// sensors a step instead of one, so slots `floor((k - 1) g) .. floor(k g) - 1` (taken mod
+    /// N) send at step k. `granted = 1` is [`Schedule::RoundRobin`], `granted = N` every
+    /// sensor at every step, `granted = 1/T` one sensor every T steps.
+    RoundRobinGranted(f64),
 }
 
 impl Schedule {
+    /// Round-robin granting `granted` sensor slots per step: [`Schedule::RoundRobin`] (the
+    /// paper's, one per step) at exactly 1, else [`Schedule::RoundRobinGranted`].
+    pub fn round_robin(granted: f64) -> Self {
+        if granted == 1.0 {
+            Schedule::RoundRobin
+        } else {
+            Schedule::RoundRobinGranted(granted)
+        }
+    }
+
     /// Whether sensor `i` of `n` may send at step `k` (k starts at 1).
     pub fn allows(self, k: usize, i: usize, n: usize) -> bool {
         match self {
             Schedule::All => true,
             Schedule::RoundRobin => (k.saturating_sub(1)) % n.max(1) == i,
+            Schedule::RoundRobinGranted(g) => {
+                let n = n.max(1);
+                // The token's slots of step k: [a, b), slot j is sensor j mod n.
+                let a = (k.saturating_sub(1) as f64 * g).floor() as usize;
+                let b = ((k as f64 * g).floor() as usize).max(a);
+                b - a >= n || a + (i % n + n - a % n) % n < b
+            }
         }
     }
 }

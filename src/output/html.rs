@@ -769,6 +769,7 @@ fn results_section(h: &mut String, input: &Input) {
     h.push_str(&html_table(&rows));
     let _ = writeln!(h, "<p>NEES&lt;95%, NEES&lt;99%: share of steps whose NEES lies below the chi-square quantile (a consistent filter: 0.95, 0.99); diverged: share of trials whose NEES stayed above the 99.9% quantile for {} steps in a row.</p>", crate::metrics::DIVERGENCE_RUN);
     warnings_list(h, 3, &crate::metrics::results::warnings(s));
+    super::notes::list(h, &crate::metrics::notes::lines(s), esc);
 }
 
 /// A "Warnings" heading (`<h{level}>`: under the section it belongs to) and one item per

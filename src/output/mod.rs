@@ -3,6 +3,7 @@
 pub mod arena;
 pub mod folder;
 pub mod html;
+pub mod notes;
 pub mod plot;
 pub mod report;
 pub mod run_files;

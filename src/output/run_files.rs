@@ -236,6 +236,7 @@ pub fn run_text(
         summary.scenario, summary.trials, summary.steps, summary.seed, summary.sensors, elapsed
     );
     text.push_str(&results::table(summary));
+    text.push_str(&crate::metrics::notes::block(summary));
     text.push_str(&format!(
         "\nMSE(ss), trace(ss): steady state from step {}; ANEES = mean NEES / state dimension (1 = consistent).\n",
         exp.steady_from

@@ -32,6 +32,9 @@ pub struct Curve {
     /// Names of the swept parameters (empty when not swept).
     pub swept: Vec<String>,
     pub frontier: Option<FrontierSpec>,
+    /// What differs on this row from the others (`note = "..."`, e.g. a sensor the other
+    /// schemes do not have): printed under the tables and kept in `summary.json`.
+    pub note: Option<String>,
 }
 
 /// A validated experiment.

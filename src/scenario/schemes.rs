@@ -1,5 +1,7 @@
 //! Scheme construction: each `[[schemes]]` entry is one curve; each point of its sweep one
 //! variant, parsed and built by the scheme's registry entry. This file knows no scheme by name.
+//! Besides the scheme's parameters an entry may carry `label`, `note` (what differs on its
+//! row, shown under the tables), `sweep`, `frontier`, `channel` and `sequence_bits`.
 use crate::network::channel::ChannelSpec;
 use crate::scenario::error::{Ctx, ScenarioError};
 use crate::scenario::experiment::{Curve, Variant};
@@ -33,6 +35,16 @@ pub(crate) fn build_schemes(
         let label = match base.remove("label") {
             Some(toml::Value::String(s)) => Some(s),
             Some(_) => return Err(ctx.err(format!("{field}.label"), "expected a string")),
+            None => None,
+        };
+        let row_note = match base.remove("note") {
+            Some(toml::Value::String(s)) if !s.trim().is_empty() => Some(s.trim().to_string()),
+            Some(_) => {
+                return Err(ctx.err(
+                    format!("{field}.note"),
+                    "expected a non-empty string: what differs on this row from the others",
+                ))
+            }
             None => None,
         };
         let entry = match base.remove("kind") {
@@ -104,6 +116,7 @@ pub(crate) fn build_schemes(
             kind: entry.kind.to_string(),
             swept: swept.iter().map(|(k, _)| k.clone()).collect(),
             frontier,
+            note: row_note,
         });
     }
     let mut seen = std::collections::BTreeSet::new();

@@ -6,7 +6,7 @@
 use crate::scenario::error::{Ctx, ScenarioError};
 
 /// Keys of a scheme table that are not scheme parameters.
-pub const RESERVED: &[&str] = &["kind", "label", "sweep", "frontier", "channel"];
+pub const RESERVED: &[&str] = &["kind", "label", "note", "sweep", "frontier", "channel"];
 
 /// The prefix of a swept key of the entry's own link (`channel.loss`).
 pub const CHANNEL_PREFIX: &str = "channel.";

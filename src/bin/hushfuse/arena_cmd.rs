@@ -274,6 +274,7 @@ fn arena_message(
         msg.push_str(&arena::budget_table(out, b, group));
         // The health of each scheme at this budget, worded as a plain run words it.
         msg.push_str(&results::warning_block(&out.summaries[b]));
+        msg.push_str(&hushfuse::metrics::notes::block(&out.summaries[b]));
     }
     msg.push_str("\nbest scheme per budget (lowest mean RMSE among schemes within the budget):\n");
     msg.push_str(&arena::best_table(out, group));

@@ -48,6 +48,9 @@ pub struct FtkfModel {
     /// The filter's prior (of the filter state).
     pub prior: Gaussian,
     pub bias_blind: Option<BiasBlind>,
+    /// Which sensors send at a step: Geng et al.'s round-robin (4)-(5) by default, or one
+    /// granting more (or fewer) sensors per step (`granted`, [`super::granted_schedule`]).
+    pub schedule: Schedule,
     full_dim: usize,
 }
 
@@ -174,6 +177,7 @@ impl FtkfModel {
             opts,
             prior,
             bias_blind,
+            schedule: Schedule::RoundRobin,
             full_dim: n,
         })
     }
@@ -458,10 +462,12 @@ impl FusionCenter for FtkfCenter {
             )));
         }
         // The zero-order hold (4): a reading is fresh on the step it arrived; only a fresh,
-        // scheduled reading updates a local filter.
+        // scheduled reading (Gamma_{m, h_k} = 1 of (4)-(5), or one of the `granted` slots)
+        // updates a local filter.
+        let schedule = self.model.schedule;
         for (i, (f, r)) in self.fresh.iter_mut().zip(inbox).enumerate() {
             *f = match r {
-                Received::Measurement(z) if Schedule::RoundRobin.allows(k, i, p) => Some(z[0]),
+                Received::Measurement(z) if schedule.allows(k, i, p) => Some(z[0]),
                 _ => None,
             };
         }

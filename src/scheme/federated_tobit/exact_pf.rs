@@ -34,8 +34,10 @@
 //! [`Schedule::All`] too.
 //!
 //! # Traffic
-//! Sensors forward z only when scheduled: one 32-bit measurement per step, fixed by the
-//! schedule, so the scheme has no bandwidth knob. Nothing is fed back.
+//! Sensors forward z only when scheduled: one 32-bit measurement per step under the paper's
+//! round-robin; the knob `granted` (sensors granted per step, [`super::granted_schedule`])
+//! moves the token of (5) on by that many sensors a step, `32 granted` bits per step on
+//! average. Nothing is fed back.
 //!
 //! # Sharing
 //! [`censor`] and [`Censored`] are eq. (6) as a function; the federated Tobit KF uses the same
@@ -442,6 +444,8 @@ pub struct TobitPfScheme {
     /// Extra noise each sensor adds before sending (Geng et al.'s Table III on one scenario, as
     /// [`super::RoundRobinSensor`]); zero by default.
     extra_sd: Vec<f64>,
+    /// Round-robin (4)-(5), or granting `granted` sensors per step ([`Self::with_granted`]).
+    schedule: Schedule,
 }
 
 impl TobitPfScheme {
@@ -463,7 +467,15 @@ impl TobitPfScheme {
             channels,
             transition,
             options,
+            schedule: Schedule::RoundRobin,
         })
+    }
+
+    /// The scheme granting `granted` sensors per step ([`super::granted_schedule`]; 1:
+    /// unchanged). Every reading that arrives is weighed, so the filter stays exact.
+    pub fn with_granted(mut self, granted: f64) -> Result<Self, SchemeError> {
+        self.schedule = super::granted_schedule(granted, self.extra_sd.len())?;
+        Ok(self)
     }
 
     /// The scheme at other noise variances than the sensors' own (`noise_var[i] >= R_i`): each
@@ -530,8 +542,9 @@ impl Scheme for TobitPfScheme {
         })
     }
 
-    /// Round-robin (eq. (4)-(5)): at step k only sensor (k - 1) mod p sends.
+    /// Round-robin (eq. (4)-(5)): at step k only sensor (k - 1) mod p sends; with `granted`,
+    /// the step's slots of [`Schedule::RoundRobinGranted`].
     fn schedule(&self) -> Schedule {
-        Schedule::RoundRobin
+        self.schedule
     }
 }

@@ -10,6 +10,13 @@
 //!   scheduled sensor sends its raw reading (32 bits, `Message::Measurement`) — that uplink,
 //!   sensor -> estimator, is what the runner counts. Unscheduled sensors are not stepped and
 //!   arrive as `Received::NotScheduled`.
+//! * **Bandwidth knob `granted`** (beyond the paper): the sensors granted per step. The
+//!   token `h_k = mod(k - 1, p) + 1` of (5) moves on by `granted` sensors a step instead of
+//!   one ([`Schedule::RoundRobinGranted`]), so `Gamma_{m, h_k}` of (4) is one for every sensor
+//!   among the step's slots: `granted = 1` (the default) is the paper's protocol exactly,
+//!   `granted = p` every sensor at every step, a fraction one sensor every `1/granted` steps.
+//!   Each granted sensor's local filter updates (20)-(25) and the others only predict, as in
+//!   the paper; with several updated locals the fusion (26) is no longer one Tobit KF.
 //! * **Remote estimators, hold and detection device at the fusion center**: the p local Tobit
 //!   filters sit next to the fusion center (the paper's Remark after (5): the
 //!   estimator-to-center channel is short and perfect), so the center applies the zero-order
@@ -163,6 +170,20 @@ pub fn scalar_sensors(
         .collect()
 }
 
+/// The round-robin schedule granting `granted` sensors per step on `p` sensors (the knob of
+/// Geng et al.'s schemes; [`Schedule::round_robin`]): refused outside `(0, p]`.
+pub fn granted_schedule(granted: f64, p: usize) -> Result<Schedule, SchemeError> {
+    if !(granted.is_finite() && granted > 0.0 && granted <= p as f64) {
+        return Err(SchemeError::Invalid {
+            field: "granted",
+            message: format!(
+                "expected sensors granted per step in (0, {p}] (1: the paper's round-robin), got {granted}"
+            ),
+        });
+    }
+    Ok(Schedule::round_robin(granted))
+}
+
 /// Geng et al.'s FTKF-DB / FTKF / LTKF under round-robin.
 #[derive(Debug, Clone)]
 pub struct FederatedTobitScheme {
@@ -205,6 +226,13 @@ impl FederatedTobitScheme {
     pub fn model(&self) -> &Arc<FtkfModel> {
         &self.model
     }
+
+    /// The scheme granting `granted` sensors per step ([`granted_schedule`]; 1: unchanged).
+    pub fn with_granted(mut self, granted: f64) -> Result<Self, SchemeError> {
+        let schedule = granted_schedule(granted, self.model.n_sensors())?;
+        Arc::make_mut(&mut self.model).schedule = schedule;
+        Ok(self)
+    }
 }
 
 impl Scheme for FederatedTobitScheme {
@@ -219,7 +247,7 @@ impl Scheme for FederatedTobitScheme {
         })
     }
     fn schedule(&self) -> Schedule {
-        Schedule::RoundRobin
+        self.model.schedule
     }
 }
 
@@ -230,6 +258,7 @@ impl Scheme for FederatedTobitScheme {
 pub struct RoundRobinKfScheme {
     system: Arc<System>,
     extra_sd: Vec<f64>,
+    schedule: Schedule,
 }
 
 impl RoundRobinKfScheme {
@@ -248,7 +277,14 @@ impl RoundRobinKfScheme {
         Ok(Self {
             system: Arc::new(sys),
             extra_sd,
+            schedule: Schedule::RoundRobin,
         })
+    }
+
+    /// The scheme granting `granted` sensors per step ([`granted_schedule`]; 1: unchanged).
+    pub fn with_granted(mut self, granted: f64) -> Result<Self, SchemeError> {
+        self.schedule = granted_schedule(granted, self.extra_sd.len())?;
+        Ok(self)
     }
 }
 
@@ -264,6 +300,6 @@ impl Scheme for RoundRobinKfScheme {
         })
     }
     fn schedule(&self) -> Schedule {
-        Schedule::RoundRobin
+        self.schedule
     }
 }

@@ -88,10 +88,17 @@ pub struct FtkfParams {
     pub theta_denominator: ThetaDenominatorParam,
     #[serde(default)]
     pub lambda_sign: LambdaSignParam,
+    /// Sensors granted per step (the bandwidth knob; 1: the paper's round-robin).
+    #[serde(default = "one")]
+    pub granted: f64,
 }
 
 fn yes() -> bool {
     true
+}
+
+pub(crate) fn one() -> f64 {
+    1.0
 }
 
 /// The censoring region of every sensor from `tau` (symmetric, for all) or `tau_l` / `tau_r`
@@ -189,15 +196,18 @@ impl SchemeParams for FtkfParams {
                 LambdaSignParam::Plus => LambdaSign::Plus,
             },
         };
-        Ok(Box::new(FederatedTobitScheme::new(
-            cx.system.clone(),
-            thresholds,
-            noise_var(&self.noise_var, p)?,
-            self.sharing.clone(),
-            fusion,
-            bias_blind,
-            opts,
-        )?))
+        Ok(Box::new(
+            FederatedTobitScheme::new(
+                cx.system.clone(),
+                thresholds,
+                noise_var(&self.noise_var, p)?,
+                self.sharing.clone(),
+                fusion,
+                bias_blind,
+                opts,
+            )?
+            .with_granted(self.granted)?,
+        ))
     }
 }
 
@@ -207,15 +217,18 @@ impl SchemeParams for FtkfParams {
 pub struct RoundRobinKfParams {
     #[serde(default)]
     pub noise_var: Option<PerSensor>,
+    /// Sensors granted per step (the bandwidth knob; 1: the paper's round-robin).
+    #[serde(default = "one")]
+    pub granted: f64,
 }
 
 impl SchemeParams for RoundRobinKfParams {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
         let p = cx.system.n_sensors();
-        Ok(Box::new(RoundRobinKfScheme::new(
-            cx.system.clone(),
-            noise_var(&self.noise_var, p)?,
-        )?))
+        Ok(Box::new(
+            RoundRobinKfScheme::new(cx.system.clone(), noise_var(&self.noise_var, p)?)?
+                .with_granted(self.granted)?,
+        ))
     }
 }
 
@@ -226,11 +239,26 @@ const NOISE_VAR: ParamDoc = ParamDoc {
     meaning: "run at this noise variance: the sensor adds N(0, noise_var - R), the same for every variant",
 };
 
+/// `granted`, the bandwidth knob of Geng et al.'s three schemes.
+pub(crate) const GRANTED: ParamDoc = ParamDoc {
+    name: "granted",
+    values: "number in (0, N]",
+    default: "1",
+    meaning: "sensors granted per step: the round-robin token of eq. (5) moves on by this many sensors a step (slots floor((k-1) g)..floor(k g) - 1, mod N, send at step k); 1 is the paper's protocol, N every sensor every step, 1/T one sensor every T steps; 32 granted payload bits per step",
+};
+
+/// The knob `granted` on `[0.01, N]`: bits per step grow with it (32 per granted sensor).
+pub(crate) const GRANTED_KNOB: registry::Knob = registry::Knob::rising(
+    "granted",
+    registry::Bound::Fixed(0.01),
+    registry::Bound::PerSensor(1.0),
+);
+
 pub const ENTRY: SchemeEntry = SchemeEntry {
     kind: "federated-tobit",
     label: "FTKF-DB",
     summary:
-        "Geng et al.: round-robin (one 32-bit reading per step), zero-order hold and two-sided \
+        "Geng et al.: round-robin (one 32-bit reading per step; `granted` per step with the knob), zero-order hold and two-sided \
               censoring (6) at the center, local Tobit KFs (Theorem 1) fused federatedly with \
               reset (Theorem 2); estimator -> center is co-located (not counted)",
     params: &[
@@ -296,8 +324,9 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
             default: "minus",
             meaning: "sign of the lambda term of (23): minus as (12) requires, plus as printed",
         },
+        GRANTED,
     ],
-    knob: None,
+    knob: Some(GRANTED_KNOB),
     applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<FtkfParams>,
     example: "tau = 5.0",
@@ -309,8 +338,8 @@ pub const ROUND_ROBIN_KF: SchemeEntry = SchemeEntry {
     label: "Round-robin KF (uncensored)",
     summary: "information bound of Geng et al.: KF on the same round-robin schedule with the \
               uncensored readings",
-    params: &[NOISE_VAR],
-    knob: None,
+    params: &[NOISE_VAR, GRANTED],
+    knob: Some(GRANTED_KNOB),
     applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<RoundRobinKfParams>,
     example: "",

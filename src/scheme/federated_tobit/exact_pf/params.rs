@@ -2,7 +2,9 @@
 //! threshold names `tau_l` / `tau_r` are the federated Tobit KF's too.
 use super::{TobitPfOptions, TobitPfScheme, MAX_PARTICLES};
 use crate::filter::particle::{ResamplePolicy, Resampling};
-use crate::scheme::federated_tobit::params::{noise_var, region, PerSensor};
+use crate::scheme::federated_tobit::params::{
+    noise_var, one, region, PerSensor, GRANTED, GRANTED_KNOB,
+};
 use crate::scheme::registry::{
     self, BuildContext, ParamDoc, ParamError, SchemeEntry, SchemeParams,
 };
@@ -32,6 +34,9 @@ pub struct TobitPfParams {
     /// Resample only when ESS < ess_threshold * particles (default: every step).
     #[serde(default)]
     pub ess_threshold: Option<f64>,
+    /// Sensors granted per step (the bandwidth knob; 1: the paper's round-robin).
+    #[serde(default = "one")]
+    pub granted: f64,
 }
 
 fn default_particles() -> usize {
@@ -73,7 +78,7 @@ impl SchemeParams for TobitPfParams {
                 self.options(),
             )?,
         };
-        Ok(Box::new(scheme))
+        Ok(Box::new(scheme.with_granted(self.granted)?))
     }
 }
 
@@ -114,8 +119,9 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
         },
         registry::RESAMPLING,
         registry::ESS_THRESHOLD,
+        GRANTED,
     ],
-    knob: None,
+    knob: Some(GRANTED_KNOB),
     applies: registry::Applies::ScalarLinearSensors,
     build: registry::parse_and_build::<TobitPfParams>,
     example: "tau = 5.0\nparticles = 200",
