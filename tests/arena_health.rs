@@ -45,7 +45,17 @@ fn a_budget_run_prints_and_reports_the_health_of_its_schemes() {
     let d = tempfile::tempdir().unwrap();
     std::fs::write(d.path().join("div.toml"), arena_1d_with("div", DIVERGING)).unwrap();
     let args = [
-        "run", "div.toml", "--budget", "12", "--trials", "20", "--report", "--out", "o",
+        "run",
+        "div.toml",
+        "--budget",
+        "12",
+        "--budget-axis",
+        "payload",
+        "--trials",
+        "20",
+        "--report",
+        "--out",
+        "o",
     ];
     let o = hushfuse(&args, d.path());
     let out = stdout(&o);
@@ -120,7 +130,16 @@ fn a_healthy_budget_run_has_no_warning_and_no_mark() {
     );
     std::fs::write(d.path().join("ok.toml"), text).unwrap();
     let args = [
-        "run", "ok.toml", "--budget", "24", "--trials", "8", "--out", "o",
+        "run",
+        "ok.toml",
+        "--budget",
+        "24",
+        "--budget-axis",
+        "payload",
+        "--trials",
+        "8",
+        "--out",
+        "o",
     ];
     let o = hushfuse(&args, d.path());
     let out = stdout(&o);

@@ -36,6 +36,8 @@ fn close_budgets_write_two_folders() {
             "tiny.toml",
             "--budgets",
             "24.00001,24.00004",
+            "--budget-axis",
+            "payload",
             "--trials",
             "2",
             "--out",
@@ -115,6 +117,8 @@ fn a_huge_budget_gets_a_short_folder_name_or_is_refused_cleanly() {
             "tiny.toml",
             "--budget",
             "1e300",
+            "--budget-axis",
+            "payload",
             "--trials",
             "2",
             "--out",
@@ -214,7 +218,16 @@ fn a_calibration_failure_names_its_cause() {
         std::fs::write(d.path().join(&file), tiny_with_schemes(name, scheme)).unwrap();
         let o = hushfuse(
             &[
-                "run", &file, "--budget", "2", "--trials", "2", "--out", name,
+                "run",
+                &file,
+                "--budget",
+                "2",
+                "--budget-axis",
+                "payload",
+                "--trials",
+                "2",
+                "--out",
+                name,
             ],
             d.path(),
         );

@@ -600,6 +600,8 @@ fn arena_and_replay_are_refused_on_a_disk_without_room() {
             &scenario,
             "--budgets",
             "8,16",
+            "--budget-axis",
+            "payload",
             "--trials",
             "4",
             "--out",

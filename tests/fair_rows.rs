@@ -336,6 +336,8 @@ fn the_cli_prints_and_keeps_the_notes() {
         "4",
         "--budget",
         "48",
+        "--budget-axis",
+        "payload",
         "--out",
         budget.to_str().unwrap(),
     ]);

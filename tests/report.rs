@@ -89,6 +89,8 @@ fn report_html_is_self_contained() {
         "4",
         "--budgets",
         "20,40",
+        "--budget-axis",
+        "payload",
         "--report",
         "--out",
         arena.to_str().unwrap(),

@@ -249,6 +249,16 @@ pub fn bits_lines(
     metric: &dyn Fn(&crate::engine::calibrate::Calibrated) -> f64,
     front: bool,
 ) -> Vec<Line> {
+    scheme_lines(out, &|c| c.achieved, metric, front)
+}
+
+/// [`bits_lines`] with any abscissa `x` (e.g. the entropy-coded rate).
+pub fn scheme_lines(
+    out: &Outcome,
+    x: &dyn Fn(&Calibrated) -> f64,
+    metric: &dyn Fn(&Calibrated) -> f64,
+    front: bool,
+) -> Vec<Line> {
     let n = out.rows.first().map_or(0, Vec::len);
     let mut lines = Vec::new();
     let mut all = Vec::new();
@@ -256,7 +266,7 @@ pub fn bits_lines(
         let mut pts: Vec<(f64, f64)> = out
             .rows
             .iter()
-            .map(|row| (row[s].achieved, metric(&row[s])))
+            .map(|row| (x(&row[s]), metric(&row[s])))
             .filter(|(x, y)| x.is_finite() && y.is_finite())
             .collect();
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -308,7 +318,52 @@ fn with_bound(mut lines: Vec<Line>, bound: Option<f64>) -> Vec<Line> {
     lines
 }
 
-/// Writes `rmse_<group>_vs_bits.svg` (first group) and `anees_vs_bits.svg`; returns the files.
+/// The lines of the rate–distortion figure: every scheme's steady-state MSE against its
+/// entropy-coded rate R_eff over the budgets, the floor (dashed black: no scheme can lie below
+/// it) and the all-data bound (dashed grey); `None` without a floor.
+pub fn floor_lines(out: &Outcome) -> Option<Vec<Line>> {
+    let first = out.summaries.first()?;
+    let curve = first.rate_distortion_floor.as_ref()?;
+    let mut lines = scheme_lines(
+        out,
+        &|c| c.result.r_eff_per_step,
+        &|c| c.result.steady_state.mse,
+        false,
+    );
+    let hi = lines
+        .iter()
+        .flat_map(|l| l.points.iter().map(|p| p.0))
+        .fold(curve.rate.last().copied().unwrap_or(1.0), f64::max);
+    let mut pts: Vec<(f64, f64)> = curve
+        .rate
+        .iter()
+        .copied()
+        .zip(curve.mse.iter().copied())
+        .collect();
+    // Beyond the curve's last rate the floor is the all-data error to within 1e-6.
+    pts.push((hi, curve.all_data_mse));
+    lines.push(Line {
+        name: "rate-distortion floor (any causal scheme)".into(),
+        points: pts,
+        dashed: true,
+        color: 10,
+        markers: false,
+    });
+    if let Some(b) = &first.pcrb {
+        let lo = curve.rate.first().copied().unwrap_or(0.0);
+        lines.push(Line {
+            name: "PCRB (all data, any estimator)".into(),
+            points: vec![(lo, b.steady_mse), (hi, b.steady_mse)],
+            dashed: true,
+            color: 9,
+            markers: false,
+        });
+    }
+    Some(lines)
+}
+
+/// Writes `rmse_<group>_vs_bits.svg` (first group), `anees_vs_bits.svg` and, where the scenario
+/// has a rate–distortion floor, `mse_vs_r_eff.svg`; returns the files.
 pub fn write_plots(
     out: &Outcome,
     group: &str,
@@ -346,8 +401,24 @@ pub fn write_plots(
         &bits_lines(out, &|c| c.result.anees, false),
     )?;
     files.push(f);
+    if let Some(lines) = floor_lines(out) {
+        let f = "mse_vs_r_eff.svg".to_string();
+        plot::lines(
+            &dir.join(&f),
+            &format!("{scenario}: {FLOOR_TITLE}"),
+            FLOOR_X,
+            FLOOR_Y,
+            &lines,
+        )?;
+        files.push(f);
+    }
     Ok(files)
 }
+
+/// The rate–distortion figure's title and axes.
+pub const FLOOR_TITLE: &str = "steady-state MSE against the entropy-coded rate, above the floor";
+pub const FLOOR_X: &str = "R_eff, bits per step (send-or-silence entropy + payload)";
+pub const FLOOR_Y: &str = "steady-state MSE (total)";
 
 /// The quick arena of `hushfuse` without arguments: its scenario and trials.
 pub const QUICK: (&str, usize) = ("arena-1d", 40);
