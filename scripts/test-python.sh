@@ -28,10 +28,10 @@ if [ "${HUSHFUSE_FRESH_VENV:-0}" = 1 ] || ! cmp -s python/requirements-test.txt 
     rm -rf "$venv"
     mkdir -p target/py
     "$py" -m venv "$venv"
-    "$venv/bin/pip" install -q --disable-pip-version-check -r python/requirements-test.txt
+    "$venv/bin/python" -m pip install -q --disable-pip-version-check -r python/requirements-test.txt
     cp python/requirements-test.txt "$stamp"
 fi
-"$venv/bin/pip" uninstall -q -y hushfuse >/dev/null 2>&1 || true
+"$venv/bin/python" -m pip uninstall -q -y hushfuse >/dev/null 2>&1 || true
 rm -rf "$wheels"
 t_venv=$(took "$t0")
 
@@ -40,8 +40,8 @@ cargo clippy -p hushfuse-python --release -- -D warnings
 t_clippy=$(took "$t1")
 
 t2=$(now)
-(cd python && "$root/$venv/bin/maturin" build --release --quiet -i "$root/$venv/bin/python" --out "$root/$wheels")
-"$venv/bin/pip" install -q --disable-pip-version-check --no-deps "$wheels"/hushfuse-*.whl
+(cd python && "$root/$venv/bin/python" -m maturin build --release --quiet -i "$root/$venv/bin/python" --out "$root/$wheels")
+"$venv/bin/python" -m pip install -q --disable-pip-version-check --no-deps "$wheels"/hushfuse-*.whl
 t_wheel=$(took "$t2")
 
 # The command line, for the tests that compare Python with it: built as the integration tests
@@ -56,7 +56,7 @@ export OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1
 t3=$(now)
 # From target/py, so that the installed package is imported, not python/hushfuse.
 set +e
-(cd target/py && "$root/$venv/bin/pytest" -q -p no:cacheprovider "$root/python/tests")
+(cd target/py && "$root/$venv/bin/python" -m pytest -q -p no:cacheprovider "$root/python/tests")
 rc=$?
 set -e
 t_pytest=$(took "$t3")

@@ -332,7 +332,8 @@ fn replay_err(e: replay::ReplayError) -> PyErr {
 /// (T, m_i) (an all-NaN row: no reading), and optionally the truth (T, n). Returns what
 /// [`replay_csv`] returns.
 #[pyfunction]
-#[pyo3(signature = (scenario, measurements, truth=None, seed=None, trial=0))]
+#[pyo3(signature = (scenario, measurements, truth=None, seed=None, trial=0, schemes=None))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn replay_arrays<'py>(
     py: Python<'py>,
     scenario: &str,
@@ -340,8 +341,9 @@ pub(crate) fn replay_arrays<'py>(
     truth: Option<PyReadonlyArray2<'py, f64>>,
     seed: Option<u64>,
     trial: usize,
+    schemes: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let (text, source) = resolve(scenario)?;
+    let (text, source) = scenario_text(scenario, schemes, None)?;
     // Contiguous row-major copies only where numpy's layout is not (a column slice of a 3-D
     // array): the replay reads rows.
     let owned: Vec<(Vec<f64>, usize, usize)> = measurements
@@ -384,7 +386,7 @@ pub(crate) fn replay_arrays<'py>(
 /// Replays CSV texts (the command line's layout: a pandas DataFrame in long form) through
 /// every variant of a scenario, with the command line's messages (file, line, column).
 #[pyfunction]
-#[pyo3(signature = (scenario, measurements_csv, measurements_name, truth_csv=None, truth_name="truth", seed=None, trial=0))]
+#[pyo3(signature = (scenario, measurements_csv, measurements_name, truth_csv=None, truth_name="truth", seed=None, trial=0, schemes=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn replay_csv<'py>(
     py: Python<'py>,
@@ -395,8 +397,9 @@ pub(crate) fn replay_csv<'py>(
     truth_name: &str,
     seed: Option<u64>,
     trial: usize,
+    schemes: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let (text, source) = resolve(scenario)?;
+    let (text, source) = scenario_text(scenario, schemes, None)?;
     let opts = replay::ReplayOptions {
         seed,
         trial,
