@@ -42,20 +42,16 @@ pub(crate) fn describe(py: Python<'_>, e: &PyErr) -> String {
     }
 }
 
-/// Where in a trial user code failed, for its error.
+/// Whose user code failed, for its error (the engine adds the trial and the step).
 #[derive(Debug, Clone)]
 struct Origin {
     kind: Arc<str>,
-    trial: Option<usize>,
 }
 
 impl Origin {
     fn fail(&self, py: Python<'_>, what: &str, e: &PyErr) -> SchemeError {
-        let trial = self
-            .trial
-            .map_or(String::new(), |t| format!(" (trial {t})"));
         SchemeError::Unsupported(format!(
-            "Python scheme {:?}{trial}: {what} raised {}\n{}",
+            "Python scheme {:?}: {what} raised {}\n{}",
             self.kind,
             e.get_type(py)
                 .name()
@@ -65,13 +61,7 @@ impl Origin {
         ))
     }
     fn bad(&self, what: &str, message: String) -> SchemeError {
-        let trial = self
-            .trial
-            .map_or(String::new(), |t| format!(" (trial {t})"));
-        SchemeError::Unsupported(format!(
-            "Python scheme {:?}{trial}: {what} {message}",
-            self.kind
-        ))
+        SchemeError::Unsupported(format!("Python scheme {:?}: {what} {message}", self.kind))
     }
 }
 
@@ -97,7 +87,6 @@ impl PyScheme {
     fn make(&self, trial: Option<usize>, seed: u64) -> Result<SchemeInstance, SchemeError> {
         let origin = Origin {
             kind: self.kind.clone(),
-            trial,
         };
         Python::with_gil(|py| {
             let view = match self.view.get() {

@@ -99,9 +99,12 @@ fn run_failure(e: engine_run::RunFailure) -> PyErr {
 fn python_failure(summary: &results::Summary) -> PyResult<()> {
     for s in &summary.schemes {
         if let (Some(f), true) = (&s.failed, external::is_python_kind(&s.kind)) {
+            // The loop's words are "scheme {label}, step {k}: {cause}": said once, with the trial.
+            let prefix = format!("scheme {}, step {}: ", s.name, f.step);
+            let cause = f.message.strip_prefix(&prefix).unwrap_or(&f.message);
             return Err(RunError::new_err(format!(
-                "scheme {:?} failed at trial {}, step {}: {}",
-                s.name, f.trial, f.step, f.message
+                "scheme {:?}, trial {}, step {}: {cause}",
+                s.name, f.trial, f.step
             )));
         }
     }
