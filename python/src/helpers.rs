@@ -17,6 +17,18 @@ use std::sync::{Arc, Mutex};
 /// `obj` as a float64 numpy array (scalars, lists and arrays of ints accepted), with its
 /// shape; an error in words otherwise.
 fn floats(obj: &Bound<'_, PyAny>) -> Result<(Vec<f64>, Vec<usize>), String> {
+    // A float64 array, contiguous: read as it is (the common case, without numpy calls).
+    if let Ok(arr) = obj.downcast::<numpy::PyArrayDyn<f64>>() {
+        let ro = arr.readonly();
+        if let Ok(data) = ro.as_slice() {
+            return Ok((data.to_vec(), ro.shape().to_vec()));
+        }
+    }
+    if let Ok(x) = obj.extract::<f64>() {
+        if !obj.is_instance_of::<pyo3::types::PyBool>() {
+            return Ok((vec![x], Vec::new()));
+        }
+    }
     let py = obj.py();
     let np = py.import("numpy").map_err(|e| e.to_string())?;
     let arr = np

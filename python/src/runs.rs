@@ -153,6 +153,32 @@ fn scenario_text(
     }
 }
 
+/// The worker threads of a run: `threads`, except that the default (0: one per core) is one
+/// thread when the scenario lists a Python scheme. Python code runs one call at a time (the
+/// GIL), and worker threads that take turns at it are slower than one thread (measured in
+/// `benches/python_scheme.py`); the results are the same for any count.
+fn threads_for(text: &str, threads: usize) -> usize {
+    if threads != 0 {
+        return threads;
+    }
+    let python = toml::from_str::<toml::Table>(text).ok().is_some_and(|doc| {
+        doc.get("schemes")
+            .and_then(|v| v.as_array())
+            .is_some_and(|list| {
+                list.iter().any(|t| {
+                    t.get("kind")
+                        .and_then(|k| k.as_str())
+                        .is_some_and(external::is_python_kind)
+                })
+            })
+    });
+    if python {
+        1
+    } else {
+        0
+    }
+}
+
 /// Runs a scenario (Monte Carlo) as `hushfuse run` does. Without `out`: in memory, returns
 /// the summary (with its `paper` section). With `out`: the run's folder, written exactly as
 /// the command line writes it, checkpointed every `checkpoint_every` seconds so that
@@ -183,6 +209,7 @@ pub(crate) fn run<'py>(
     pilot_trials: Option<usize>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let (text, source) = scenario_text(scenario, schemes, loss)?;
+    let threads = threads_for(&text, threads);
     if let Some(budgets) = budgets {
         if out.is_some() || resume || shard.is_some() || report || reproduce {
             return Err(pyo3::exceptions::PyValueError::new_err(
