@@ -1,6 +1,6 @@
 """Your own scheme in the arena: a send-on-delta variant with a loss-aware center, written in
-Python, calibrated to the same bit budgets as the built-in schemes on arena-1d (every sensor
-behind a link that loses 20% of the packets) and plotted. Run from the repository:
+Python, calibrated to the same bit budgets as built-in schemes on arena-1d's system (every
+sensor behind a link that loses 20% of the packets) and plotted. Run from the repository:
 
     python examples/python/send_on_delta.py [TRIALS] [OUT.png]
 """
@@ -60,8 +60,39 @@ class MySendOnDelta(hf.SchemeSpec):
     sensor, center = Sensor, LossAwareCenter
 
 
+# arena-1d's system (1-D constant velocity; 3 position sensors, 1 velocity sensor) behind a
+# Bernoulli link losing 20% of the packets, with the event-triggered schemes of the library.
+# (`run("arena-1d", loss=0.2, budgets=...)` would take every scheme, but the calibration of its
+# censored particle filter fails under loss: a known limitation of that scheme.)
+SCENARIO = """
+name = "arena-1d-lossy"
+trials = 40
+steps = 100
+seed = 1101
+channel = { kind = "bernoulli", loss = 0.2 }
+[model]
+kind = "constant-velocity-1d"
+dt = 1.0
+sigma2 = 0.1
+[prior]
+mean = [0.0, 1.0]
+cov_diag = [10.0, 1.0]
+[groups]
+position = [0]
+velocity = [1]
+""" + "".join(f"[[sensors]]\nH = [[{h}]]\nR = [[{r}]]\n" for h, r in
+              [("1.0, 0.0", 1.0), ("1.0, 0.0", 2.0), ("1.0, 0.0", 4.0), ("0.0, 1.0", 0.5)])
+BUILT_IN = [
+    {"kind": "send-on-delta", "delta": 1.0},
+    {"kind": "send-on-delta", "delta": 1.0, "link_loss": 0.2, "label": "Send-on-delta (loss-aware)"},
+    {"kind": "innovation-trigger-kf", "delta": 1.0},
+    {"kind": "centralized-kf-random", "rate": 0.5},
+]
+
+
 def main(trials=40, png="send_on_delta.png", budgets=(40.0, 80.0)):
-    arena = hf.run("arena-1d", trials=trials, loss=0.2, schemes=[MySendOnDelta], budgets=list(budgets))
+    schemes = BUILT_IN + [{"kind": MySendOnDelta.kind, "link_loss": 0.2}]
+    arena = hf.run(SCENARIO, trials=trials, schemes=schemes, budgets=list(budgets))
     rmse = {}  # label -> position RMSE per budget
     for b, run in zip(arena["budgets"], arena["runs"]):
         print(f"budget {b:g} payload bits/step:")
@@ -80,7 +111,7 @@ def main(trials=40, png="send_on_delta.png", budgets=(40.0, 80.0)):
     fig, ax = plt.subplots(figsize=(7, 4))
     for name, ys in rmse.items():
         ax.plot(arena["budgets"], ys, "o-", lw=2.5 if "Python" in name else 1, label=name)
-    ax.set(xlabel="payload bits per step", ylabel="position RMSE", title="arena-1d, 20% packet loss")
+    ax.set(xlabel="payload bits per step", ylabel="position RMSE", title="arena-1d's system, 20% packet loss")
     ax.legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(png, dpi=120)
