@@ -60,9 +60,28 @@ set +e
 rc=$?
 set -e
 t_pytest=$(took "$t3")
-echo "test-python: venv + pinned tools ${t_venv} s, clippy (python crate) ${t_clippy} s, wheel build + install ${t_wheel} s, command line ${t_bin} s, pytest ${t_pytest} s"
+
+# Every Python example of the README (and examples/python/), as a reader runs it: a fresh
+# virtual environment with the wheel and its "examples" extra (pandas, matplotlib; the pinned
+# versions), each block run in a scratch folder.
+t4=$(now)
+readme_venv=target/py/readme-venv
+rm -rf "$readme_venv"
+"$py" -m venv "$readme_venv"
+wheel=$(ls "$wheels"/hushfuse-*.whl)
+"$readme_venv/bin/python" -m pip install -q --disable-pip-version-check -c python/requirements-test.txt "$wheel[examples]"
+set +e
+"$readme_venv/bin/python" scripts/readme-python.py README.md
+rc_readme=$?
+set -e
+t_readme=$(took "$t4")
+echo "test-python: venv + pinned tools ${t_venv} s, clippy (python crate) ${t_clippy} s, wheel build + install ${t_wheel} s, command line ${t_bin} s, pytest ${t_pytest} s, README examples (fresh venv) ${t_readme} s"
 if [ "$rc" -eq 5 ]; then
     echo "test-python: pytest collected no tests: failing" >&2
+    exit 1
+fi
+if [ "$rc" -eq 0 ] && [ "$rc_readme" -ne 0 ]; then
+    echo "test-python: a README example failed" >&2
     exit 1
 fi
 exit "$rc"
