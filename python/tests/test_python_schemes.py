@@ -298,3 +298,34 @@ def test_the_namespace_is_the_api():
     assert public == set(hf.__all__), public ^ set(hf.__all__)
     for helper in ("np", "json", "Dict", "io", "os", "math", "annotations"):
         assert not hasattr(hf, helper), helper
+
+
+def test_feedback_of_a_python_center_reaches_the_sensors_and_is_charged(tmp_path):
+    got = []
+
+    class FbSensor(hf.SensorNode):
+        def step(self, k, z, feedback):
+            got.append(None if feedback is None else feedback.mean.copy())
+            return hf.Silence()
+
+    class FbCenter(IgnoreCenter):
+        def feedback(self):
+            return hf.Feedback.prediction(self.mean)
+
+    @hf.register
+    class PyFb(hf.SchemeSpec):
+        kind = "py-fb"
+        params = {"delta": 0.0}
+        sensor, center = FbSensor, FbCenter
+
+    try:
+        s = scenario(trials=2, steps=6, schemes='[[schemes]]\nkind = "py-fb"\n')
+        r = hf.run(s, threads=1)
+        assert r["schemes"][0]["downlink_bits_per_step"] == 2 * 32
+        assert r["schemes"][0]["bits_per_step"] == 0
+        assert got[0] is not None and np.array_equal(got[0], [0.0, 1.0])  # the prior's mean
+        # The run's folder and report, as the command line writes them.
+        out = hf.run(s, out=tmp_path / "run", report=True)
+        assert "report.html" in out["files"] and (tmp_path / "run" / "report.html").exists()
+    finally:
+        hf.unregister("py-fb")

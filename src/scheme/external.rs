@@ -167,7 +167,7 @@ pub fn payload_message(payload: &[u8], payload_bits: u32, sensor: u16) -> Result
             payload.len()
         ));
     }
-    if payload_bits % 8 != 0 {
+    if !payload_bits.is_multiple_of(8) {
         let spare = payload[octets - 1] >> (payload_bits % 8);
         if spare != 0 {
             return Err(format!(
@@ -205,6 +205,7 @@ pub fn frame_payload(frame: &[u8]) -> Option<&[u8]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scheme::registry;
 
     #[test]
     fn payload_frames_are_priced_as_any_message() {
@@ -220,6 +221,67 @@ mod tests {
         assert_eq!(frame_payload(&bad), None);
         assert!(payload_message(&[0b1000], 3, 0).is_err());
         assert!(payload_message(&[1, 2], 3, 0).is_err());
+    }
+
+    const SYSTEM: &str = r#"
+name = "t"
+trials = 4
+steps = 20
+seed = 3
+[model]
+kind = "constant-velocity-1d"
+dt = 1.0
+sigma2 = 0.1
+[prior]
+mean = [0.0, 1.0]
+cov_diag = [1.0, 1.0]
+[[sensors]]
+H = [[1.0, 0.0]]
+R = [[1.0]]
+[[sensors]]
+H = [[0.0, 1.0]]
+R = [[2.0]]
+"#;
+
+    /// A kind registered at run time runs in scenarios beside the built-in ones, on the same
+    /// data, listed or in an `every_scheme` arena (after the built-in kinds).
+    #[test]
+    fn a_registered_kind_runs_beside_the_built_ins() {
+        let kind = "test-external-sod";
+        let builder: Builder = Arc::new(|table, cx| {
+            (registry::find("send-on-delta").expect("built-in").build)(table, cx)
+        });
+        register(Declaration {
+            kind: kind.into(),
+            label: "External SOD".into(),
+            summary: "send-on-delta, registered at run time".into(),
+            params: vec![("delta".into(), "1.0".into(), String::new())],
+            knob: Some(Knob::threshold("delta")),
+            example: "delta = 1.0".into(),
+            builder,
+        })
+        .unwrap();
+        assert_eq!(registry::find(kind).unwrap().knob.unwrap().name, "delta");
+        let listed = format!(
+            "{SYSTEM}[[schemes]]\nkind = \"send-on-delta\"\ndelta = 0.5\n[[schemes]]\nkind = \"{kind}\"\ndelta = 0.5\n"
+        );
+        let exp = crate::scenario::build::load(&listed, "t.toml").unwrap();
+        let sums = crate::engine::runner::run(&exp, Default::default(), &|_| {}).unwrap();
+        let s = crate::metrics::results::summarize(&exp, &sums);
+        let (a, b) = (&s.schemes[0], &s.schemes[1]);
+        assert_eq!(b.name, "External SOD");
+        assert_eq!(a.mse, b.mse);
+        assert_eq!(a.bits_per_step, b.bits_per_step);
+        let arena = format!(
+            "{}[[schemes]]\nkind = \"{kind}\"\n",
+            SYSTEM.replace("seed = 3\n", "seed = 3\nevery_scheme = true\n")
+        );
+        let exp = crate::scenario::build::load(&arena, "t.toml").unwrap();
+        assert_eq!(exp.variants.last().unwrap().kind, kind);
+        assert!(exp.variants.len() > 2);
+        assert!(unregister(kind));
+        assert!(registry::find(kind).is_none());
+        assert!(crate::scenario::build::load(&listed, "t.toml").is_err());
     }
 
     #[test]
