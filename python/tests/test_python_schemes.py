@@ -329,3 +329,34 @@ def test_feedback_of_a_python_center_reaches_the_sensors_and_is_charged(tmp_path
         assert "report.html" in out["files"] and (tmp_path / "run" / "report.html").exists()
     finally:
         hf.unregister("py-fb")
+
+
+def test_wrong_returns_of_user_code_are_named():
+    class Five(hf.SensorNode):
+        def step(self, k, z, feedback):
+            return 5
+
+    class Shapeless(IgnoreCenter):
+        def estimate(self):
+            return self.mean[:1], self.cov
+
+    @hf.register
+    class PyFive(hf.SchemeSpec):
+        kind = "py-five"
+        params = {"delta": 0.0}
+        sensor, center = Five, SodCenter
+
+    @hf.register
+    class PyShapeless(hf.SchemeSpec):
+        kind = "py-shapeless"
+        params = {"delta": 0.0}
+        sensor, center = SodSensor, Shapeless
+
+    try:
+        with pytest.raises(hf.RunError, match=r"sensor 0\.step\(k=1\) returned a int; expected a message"):
+            hf.run(scenario(trials=1, steps=3, schemes='[[schemes]]\nkind = "py-five"\n'))
+        with pytest.raises(hf.RunError, match=r"estimate\(\) after step 0 returned a mean of 1 components"):
+            hf.run(scenario(trials=1, steps=3, schemes='[[schemes]]\nkind = "py-shapeless"\n'))
+    finally:
+        hf.unregister("py-five")
+        hf.unregister("py-shapeless")

@@ -273,7 +273,7 @@ R = [[2.0]]
         assert_eq!(a.mse, b.mse);
         assert_eq!(a.bits_per_step, b.bits_per_step);
         let arena = format!(
-            "{}[[schemes]]\nkind = \"{kind}\"\n",
+            "{}[[schemes]]\nkind = \"{kind}\"\ndelta = 1.0\n",
             SYSTEM.replace("seed = 3\n", "seed = 3\nevery_scheme = true\n")
         );
         let exp = crate::scenario::build::load(&arena, "t.toml").unwrap();
