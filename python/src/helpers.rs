@@ -24,8 +24,12 @@ fn floats(obj: &Bound<'_, PyAny>) -> Result<(Vec<f64>, Vec<usize>), String> {
             return Ok((data.to_vec(), ro.shape().to_vec()));
         }
     }
-    if let Ok(x) = obj.extract::<f64>() {
-        if !obj.is_instance_of::<pyo3::types::PyBool>() {
+    // A Python number (a numpy float64 scalar is one), not a flag.
+    let number = obj.is_instance_of::<pyo3::types::PyFloat>()
+        || (obj.is_instance_of::<pyo3::types::PyInt>()
+            && !obj.is_instance_of::<pyo3::types::PyBool>());
+    if number {
+        if let Ok(x) = obj.extract::<f64>() {
             return Ok((vec![x], Vec::new()));
         }
     }
