@@ -28,10 +28,10 @@ if [ "${HUSHFUSE_FRESH_VENV:-0}" = 1 ] || ! cmp -s python/requirements-test.txt 
     rm -rf "$venv"
     mkdir -p target/py
     "$py" -m venv "$venv"
-    "$venv/bin/pip" install -q --disable-pip-version-check -r python/requirements-test.txt
+    "$venv/bin/python" -m pip install -q --disable-pip-version-check -r python/requirements-test.txt
     cp python/requirements-test.txt "$stamp"
 fi
-"$venv/bin/pip" uninstall -q -y hushfuse >/dev/null 2>&1 || true
+"$venv/bin/python" -m pip uninstall -q -y hushfuse >/dev/null 2>&1 || true
 rm -rf "$wheels"
 t_venv=$(took "$t0")
 
@@ -40,8 +40,8 @@ cargo clippy -p hushfuse-python --release -- -D warnings
 t_clippy=$(took "$t1")
 
 t2=$(now)
-(cd python && "$root/$venv/bin/maturin" build --release --quiet -i "$root/$venv/bin/python" --out "$root/$wheels")
-"$venv/bin/pip" install -q --disable-pip-version-check --no-deps "$wheels"/hushfuse-*.whl
+(cd python && "$root/$venv/bin/python" -m maturin build --release --quiet -i "$root/$venv/bin/python" --out "$root/$wheels")
+"$venv/bin/python" -m pip install -q --disable-pip-version-check --no-deps "$wheels"/hushfuse-*.whl
 t_wheel=$(took "$t2")
 
 # The command line, for the tests that compare Python with it: built as the integration tests
@@ -56,13 +56,32 @@ export OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1
 t3=$(now)
 # From target/py, so that the installed package is imported, not python/hushfuse.
 set +e
-(cd target/py && "$root/$venv/bin/pytest" -q -p no:cacheprovider "$root/python/tests")
+(cd target/py && "$root/$venv/bin/python" -m pytest -q -p no:cacheprovider "$root/python/tests")
 rc=$?
 set -e
 t_pytest=$(took "$t3")
-echo "test-python: venv + pinned tools ${t_venv} s, clippy (python crate) ${t_clippy} s, wheel build + install ${t_wheel} s, command line ${t_bin} s, pytest ${t_pytest} s"
+
+# Every Python example of the README (and examples/python/), as a reader runs it: a fresh
+# virtual environment with the wheel and its "examples" extra (pandas, matplotlib; the pinned
+# versions), each block run in a scratch folder.
+t4=$(now)
+readme_venv=target/py/readme-venv
+rm -rf "$readme_venv"
+"$py" -m venv "$readme_venv"
+wheel=$(ls "$wheels"/hushfuse-*.whl)
+"$readme_venv/bin/python" -m pip install -q --disable-pip-version-check -c python/requirements-test.txt "$wheel[examples]"
+set +e
+"$readme_venv/bin/python" scripts/readme-python.py README.md
+rc_readme=$?
+set -e
+t_readme=$(took "$t4")
+echo "test-python: venv + pinned tools ${t_venv} s, clippy (python crate) ${t_clippy} s, wheel build + install ${t_wheel} s, command line ${t_bin} s, pytest ${t_pytest} s, README examples (fresh venv) ${t_readme} s"
 if [ "$rc" -eq 5 ]; then
     echo "test-python: pytest collected no tests: failing" >&2
+    exit 1
+fi
+if [ "$rc" -eq 0 ] && [ "$rc_readme" -ne 0 ]; then
+    echo "test-python: a README example failed" >&2
     exit 1
 fi
 exit "$rc"

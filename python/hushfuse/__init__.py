@@ -7,7 +7,10 @@ quantization, scheduling); a fusion center fuses what arrives and what the silen
 - :func:`replay` runs every scheme of a scenario on recorded measurements (numpy arrays or a
   pandas DataFrame), exactly as ``hushfuse replay`` does;
 - :func:`simulate` draws one simulated trial (truth and measurements) as the simulator does;
-- :class:`Scheme` gives one scheme's sensor nodes and fusion center, to drive your own loop.
+- :class:`Scheme` gives one scheme's sensor nodes and fusion center, to drive your own loop;
+- :class:`SchemeSpec`, :class:`SensorNode`, :class:`FusionCenter` and :func:`register` let you
+  write a scheme of your own in Python that runs beside the built-in ones (``run``, ``replay``,
+  the arena's ``budget=``), charged the same bits (see ``hushfuse._schemes``).
 
 Scenarios are given as a built-in name (``builtins()``), a path to a TOML file, or TOML text.
 Bad input raises :class:`ScenarioError` or :class:`DataError` (both :class:`InputError`, a
@@ -15,25 +18,42 @@ Bad input raises :class:`ScenarioError` or :class:`DataError` (both :class:`Inpu
 """
 from __future__ import annotations
 
-import io
-import math
-import os
+import io as _io
+import math as _math
+import os as _os
 from typing import Any, Dict, List, Optional, Sequence, Union
 
-import numpy as np
+import numpy as _np
 
 from . import _hushfuse
 from ._hushfuse import (
     DataError,
     Feedback,
-    FusionCenter,
     InputError,
+    LinearFusion,
+    Received,
     RunError,
     Scheme,
     ScenarioError,
-    SensorNode,
+    System,
     Transmission,
     builtins,
+)
+from ._schemes import (
+    Context,
+    Estimate,
+    FusionCenter,
+    Knob,
+    Measurement,
+    Payload,
+    QuantizedIndex,
+    SchemeSpec,
+    SensorNode,
+    Silence,
+    register,
+    registered,
+    scheme_tables as _scheme_tables,
+    unregister,
 )
 
 __version__ = _hushfuse.__version__
@@ -54,6 +74,20 @@ __all__ = [
     "ScenarioError",
     "DataError",
     "RunError",
+    "SchemeSpec",
+    "Knob",
+    "Context",
+    "register",
+    "unregister",
+    "registered",
+    "Measurement",
+    "Estimate",
+    "QuantizedIndex",
+    "Payload",
+    "Silence",
+    "Received",
+    "System",
+    "LinearFusion",
 ]
 
 # Per-step lists of a scheme's summary that become numpy arrays.
@@ -61,19 +95,19 @@ _PER_STEP = ("mse", "trace", "anees_per_step")
 
 
 def _nan(v: Any) -> float:
-    return math.nan if v is None else float(v)
+    return _math.nan if v is None else float(v)
 
 
 def _arrays(summary: Dict[str, Any]) -> Dict[str, Any]:
     """Per-step lists -> float numpy arrays (null, i.e. not finite, -> NaN)."""
     for s in summary["schemes"]:
         for key in _PER_STEP:
-            s[key] = np.array([_nan(v) for v in s[key]], dtype=float)
-        s["rmse"] = {g: np.array([_nan(v) for v in r], dtype=float) for g, r in s["rmse"].items()}
+            s[key] = _np.array([_nan(v) for v in s[key]], dtype=float)
+        s["rmse"] = {g: _np.array([_nan(v) for v in r], dtype=float) for g, r in s["rmse"].items()}
         ess = s.get("ess")
         if ess is not None:
             for key in ("mean_per_step", "min_per_step"):
-                ess[key] = np.array([_nan(v) for v in ess[key]], dtype=float)
+                ess[key] = _np.array([_nan(v) for v in ess[key]], dtype=float)
     return summary
 
 
@@ -81,7 +115,7 @@ def _check_scenario(scenario: Any) -> str:
     if isinstance(scenario, (str,)):
         return scenario
     if hasattr(scenario, "__fspath__"):
-        return os.fspath(scenario)
+        return _os.fspath(scenario)
     raise TypeError(
         f"scenario: expected a built-in name, a path or TOML text, got {type(scenario).__name__}"
     )
@@ -92,13 +126,19 @@ def run(
     trials: Optional[int] = None,
     seed: Optional[int] = None,
     threads: int = 0,
-    out: Optional[Union[str, "os.PathLike[str]"]] = None,
+    out: Optional[Union[str, "_os.PathLike[str]"]] = None,
     resume: bool = False,
     shard: Optional[Union[str, Sequence[int]]] = None,
     report: bool = False,
     reproduce: bool = False,
     checkpoint_every: float = 10.0,
     loss: Optional[float] = None,
+    schemes: Any = None,
+    budget: Optional[float] = None,
+    budgets: Optional[Sequence[float]] = None,
+    budget_axis: str = "payload",
+    tolerance: float = 0.02,
+    pilot_trials: Optional[int] = None,
 ) -> Dict[str, Any]:
     """Runs a scenario (Monte Carlo), as ``hushfuse run`` does, and returns its summary.
 
@@ -119,6 +159,16 @@ def run(
         loss: as ``--loss P``: every sensor behind a Bernoulli link losing each packet with
             probability P (the same losses for every scheme), and a "... (loss-aware)" copy of
             every scheme whose center has a loss-aware fusion, after the published ones.
+        schemes: scheme entries added to the scenario's: kind names, registered
+            :class:`SchemeSpec` subclasses, or dicts (``{"kind": ..., "label": ..., params}``).
+        budget: the arena, as ``--budget B``: every scheme's knob calibrated so that it spends
+            B per step on ``budget_axis`` (``payload``, ``frame``, ``total`` bits or
+            ``energy`` µJ) within ``tolerance`` (relative), on pilot runs of
+            ``pilot_trials`` trials (default: the scenario's). Returns the summary at that
+            budget with ``budget``, ``axis`` and ``calibration`` (per scheme: ``label``,
+            ``kind``, ``knob``, ``value``, ``target``, ``achieved``, ``status``).
+        budgets: several budgets, as ``--budgets``: returns ``budgets``, ``axis``,
+            ``calibration`` (per budget, per scheme) and ``runs`` (per budget, its summary).
 
     Returns:
         The summary.json of ``hushfuse run`` as Python objects: ``scenario``, ``trials``,
@@ -140,12 +190,38 @@ def run(
         i, n = shard
         shard = f"{int(i)}/{int(n)}"
     if out is not None:
-        out = os.fspath(out)
+        out = _os.fspath(out)
+    if budget is not None and budgets is not None:
+        raise ValueError("give budget= or budgets=, not both")
+    many = None
+    if budget is not None:
+        many = [_number(budget, "budget")]
+    elif budgets is not None:
+        many = [_number(b, "budgets") for b in _np.atleast_1d(_np.asarray(budgets, dtype=object))]
     r = _hushfuse.run(
         _check_scenario(scenario), trials, seed, threads, out, resume, shard, report, reproduce,
-        checkpoint_every, loss,
+        checkpoint_every, loss, _scheme_tables(schemes), many, budget_axis, tolerance,
+        pilot_trials,
     )
-    return r if "schemes" not in r else _arrays(r)
+    if many is None:
+        return r if "schemes" not in r else _arrays(r)
+    runs = [_arrays(x) for x in r["runs"]]
+    if budget is None:
+        r["runs"] = runs
+        return r
+    out_r = runs[0]
+    out_r.update(budget=many[0], axis=r["axis"], calibration=r["calibration"][0],
+                 evaluations=r["evaluations"])
+    return out_r
+
+
+def _number(v: Any, name: str) -> float:
+    if isinstance(v, (bool, _np.bool_)) or not isinstance(v, (int, float, _np.integer, _np.floating)):
+        raise TypeError(f"{name}: expected a number of bits (or µJ) per step, got {type(v).__name__}")
+    v = float(v)
+    if not (_math.isfinite(v) and v > 0):
+        raise ValueError(f"{name}: expected a positive finite number, got {v}")
+    return v
 
 
 def simulate(scenario: str, trial: int = 0, seed: Optional[int] = None) -> Dict[str, Any]:
@@ -179,11 +255,11 @@ def _fmt(v: float) -> str:
 def _cell(v: Any) -> str:
     """One DataFrame cell as CSV text: floats so that they read back to the same bits (pandas'
     own to_csv drops the 17th digit), NaN as an empty field, anything else as written."""
-    if isinstance(v, (float, np.floating)):
-        return "" if math.isnan(v) else _fmt(v)
-    if isinstance(v, (bool, np.bool_)):
+    if isinstance(v, (float, _np.floating)):
+        return "" if _math.isnan(v) else _fmt(v)
+    if isinstance(v, (bool, _np.bool_)):
         return str(v)
-    if isinstance(v, (int, np.integer)):
+    if isinstance(v, (int, _np.integer)):
         return str(int(v))
     return "" if v is None else str(v)
 
@@ -191,7 +267,7 @@ def _cell(v: Any) -> str:
 def _frame_csv(frame: Any) -> str:
     import csv
 
-    out = io.StringIO()
+    out = _io.StringIO()
     w = csv.writer(out, lineterminator="\n")
     w.writerow([str(c) for c in frame.columns])
     for row in frame.itertuples(index=False, name=None):
@@ -199,10 +275,10 @@ def _frame_csv(frame: Any) -> str:
     return out.getvalue()
 
 
-def _real(a: Any, name: str) -> np.ndarray:
+def _real(a: Any, name: str) -> _np.ndarray:
     """``a`` as a float array; booleans, complex numbers, strings and objects are refused
     (numpy would turn True into 1.0 and drop an imaginary part without a word)."""
-    arr = np.asarray(a)
+    arr = _np.asarray(a)
     if arr.dtype.kind not in "fiu":
         raise TypeError(
             f"{name}: expected real numbers (a float array), got an array of dtype {arr.dtype}"
@@ -210,9 +286,9 @@ def _real(a: Any, name: str) -> np.ndarray:
     return arr.astype(float, copy=False)
 
 
-def _measurement_arrays(measurements: Any) -> List[np.ndarray]:
+def _measurement_arrays(measurements: Any) -> List[_np.ndarray]:
     """A 3-D array (T, N, m) or a sequence of N 2-D arrays (T, m_i) -> list of 2-D arrays."""
-    if isinstance(measurements, np.ndarray):
+    if isinstance(measurements, _np.ndarray):
         if measurements.ndim != 3:
             raise ValueError(
                 "measurements: expected a 3-D array (steps, sensors, components), a list of "
@@ -246,29 +322,29 @@ def _measurement_arrays(measurements: Any) -> List[np.ndarray]:
     )
 
 
-def _measurements_csv(arrays: Sequence[np.ndarray]) -> str:
+def _measurements_csv(arrays: Sequence[_np.ndarray]) -> str:
     """Long-form CSV of per-sensor arrays; an all-NaN row is a missing reading."""
     width = max(a.shape[1] for a in arrays)
-    out = io.StringIO()
+    out = _io.StringIO()
     out.write("step,sensor," + ",".join(f"z{j}" for j in range(width)) + "\n")
     steps = arrays[0].shape[0]
     for i, a in enumerate(arrays):
-        nan = np.isnan(a)
+        nan = _np.isnan(a)
         part = nan.any(axis=1) & ~nan.all(axis=1)
         if part.any():
-            k = int(np.argmax(part))
+            k = int(_np.argmax(part))
             raise ValueError(
                 f"measurements[{i}] row {k} (step {k + 1}): some components are NaN and others "
                 "not (an all-NaN row means no reading)"
             )
-        inf = np.isinf(a).any(axis=1)
+        inf = _np.isinf(a).any(axis=1)
         if inf.any():
-            k = int(np.argmax(inf))
+            k = int(_np.argmax(inf))
             raise ValueError(f"measurements[{i}] row {k} (step {k + 1}): a component is not finite")
     for k in range(steps):
         for i, a in enumerate(arrays):
             row = a[k]
-            if np.isnan(row).all():
+            if _np.isnan(row).all():
                 continue
             out.write(f"{k + 1},{i}," + ",".join(_fmt(v) for v in row))
             out.write("," * (width - len(row)) + "\n")
@@ -283,20 +359,20 @@ def _truth_csv(truth: Any) -> str:
         t = t[:, None]
     if t.ndim != 2:
         raise ValueError(f"truth: expected a 2-D array (steps, state components), got shape {t.shape}")
-    out = io.StringIO()
+    out = _io.StringIO()
     out.write("step," + ",".join(f"x{j}" for j in range(t.shape[1])) + "\n")
     for k, row in enumerate(t):
         out.write(f"{k + 1}," + ",".join(_fmt(v) for v in row) + "\n")
     return out.getvalue()
 
 
-def _truth_array(truth: Any) -> np.ndarray:
+def _truth_array(truth: Any) -> _np.ndarray:
     t = _real(truth, "truth")
     if t.ndim == 1:
         t = t[:, None]
     if t.ndim != 2:
         raise ValueError(f"truth: expected a 2-D array (steps, state components), got shape {t.shape}")
-    return np.ascontiguousarray(t, dtype=float)
+    return _np.ascontiguousarray(t, dtype=float)
 
 
 def measurements_frame(measurements: Any) -> "Any":
@@ -304,7 +380,7 @@ def measurements_frame(measurements: Any) -> "Any":
     command line read: columns ``step``, ``sensor``, ``z0``, ``z1``, ...; all-NaN rows left out."""
     import pandas as pd
 
-    text = io.StringIO(_measurements_csv(_measurement_arrays(measurements)))
+    text = _io.StringIO(_measurements_csv(_measurement_arrays(measurements)))
     if int(pd.__version__.split(".")[0]) >= 3:
         return pd.read_csv(text)  # round-trip precision is the default from pandas 3 on
     return pd.read_csv(text, float_precision="round_trip")
@@ -316,6 +392,7 @@ def replay(
     truth: Any = None,
     seed: Optional[int] = None,
     trial: int = 0,
+    schemes: Any = None,
 ) -> Dict[str, Any]:
     """Runs every scheme (variant) of a scenario on recorded measurements, as
     ``hushfuse replay`` does: each sensor node sees its recorded z_k and decides what to send
@@ -331,6 +408,7 @@ def replay(
             step from 1. With truth there are metrics.
         seed: replaces the scenario's seed (the schemes' coins).
         trial: use the coins of this trial (to replay data of trial K of a simulation).
+        schemes: scheme entries added to the scenario's (as :func:`run`'s).
 
     Returns:
         ``steps``, ``available`` (bool array (T, N): which readings exist), ``schemes``: per
@@ -357,14 +435,20 @@ def replay(
         )
         truth_name = "truth (DataFrame)" if _is_frame(truth) else "truth"
         truth_csv = None if truth is None else _truth_csv(truth)
-        r = _hushfuse.replay_csv(scenario, meas_csv, meas_name, truth_csv, truth_name, seed, trial)
+        r = _hushfuse.replay_csv(
+            scenario, meas_csv, meas_name, truth_csv, truth_name, seed, trial, _scheme_tables(schemes)
+        )
     else:
         # Arrays go to the library as they are (float64, row-major): no text in between.
-        arrays = [np.ascontiguousarray(a, dtype=float) for a in _measurement_arrays(measurements)]
+        arrays = [_np.ascontiguousarray(a, dtype=float) for a in _measurement_arrays(measurements)]
         t = None if truth is None else _truth_array(truth)
-        r = _hushfuse.replay_arrays(scenario, arrays, t, seed, trial)
+        r = _hushfuse.replay_arrays(scenario, arrays, t, seed, trial, _scheme_tables(schemes))
     for s in r["schemes"]:
-        s["links"] = np.array(s["links"], dtype=str).reshape(r["available"].shape)
+        s["links"] = _np.array(s["links"], dtype=str).reshape(r["available"].shape)
     if r["summary"] is not None:
         r["summary"] = _arrays(r["summary"])
     return r
+
+
+# The namespace is the API: the helpers' names are not part of it.
+del annotations, Any, Dict, List, Optional, Sequence, Union

@@ -8,14 +8,30 @@ import numpy.typing as npt
 from ._hushfuse import (
     DataError as DataError,
     Feedback as Feedback,
-    FusionCenter as FusionCenter,
     InputError as InputError,
+    LinearFusion as LinearFusion,
+    Received as Received,
     RunError as RunError,
     Scheme as Scheme,
     ScenarioError as ScenarioError,
-    SensorNode as SensorNode,
+    System as System,
     Transmission as Transmission,
     builtins as builtins,
+)
+from ._schemes import (
+    Context as Context,
+    Estimate as Estimate,
+    FusionCenter as FusionCenter,
+    Knob as Knob,
+    Measurement as Measurement,
+    Payload as Payload,
+    QuantizedIndex as QuantizedIndex,
+    SchemeSpec as SchemeSpec,
+    SensorNode as SensorNode,
+    Silence as Silence,
+    register as register,
+    registered as registered,
+    unregister as unregister,
 )
 
 __version__: str
@@ -35,6 +51,12 @@ def run(
     reproduce: bool = False,
     checkpoint_every: float = 10.0,
     loss: Optional[float] = None,
+    schemes: Any = None,
+    budget: Optional[float] = None,
+    budgets: Optional[Sequence[float]] = None,
+    budget_axis: str = "payload",
+    tolerance: float = 0.02,
+    pilot_trials: Optional[int] = None,
 ) -> Dict[str, Any]: ...
 def simulate(scenario: ScenarioLike, trial: int = 0, seed: Optional[int] = None) -> Dict[str, Any]: ...
 def variants(scenario: ScenarioLike) -> List[Dict[str, Any]]: ...
@@ -45,4 +67,5 @@ def replay(
     truth: Union[None, Any, npt.NDArray[np.float64]] = None,
     seed: Optional[int] = None,
     trial: int = 0,
+    schemes: Any = None,
 ) -> Dict[str, Any]: ...

@@ -56,6 +56,14 @@ class Transmission:
 
     @staticmethod
     def silent() -> Transmission: ...
+    @staticmethod
+    def measurement(z: Any) -> Transmission: ...
+    @staticmethod
+    def estimate(x: Any) -> Transmission: ...
+    @staticmethod
+    def quantized_index(index: int, bits: int) -> Transmission: ...
+    @staticmethod
+    def payload(data: bytes, bits: int) -> Transmission: ...
     @property
     def sent(self) -> bool: ...
     @property
@@ -77,6 +85,51 @@ class Feedback:
     @property
     def kind(self) -> str: ...
     def bits(self, n_sensors: int) -> int: ...
+    @staticmethod
+    def prediction(mean: Any, cov: Any = None) -> "Feedback":
+        """The fused prediction as feedback (downlink: 32 bits per number)."""
+    @property
+    def mean(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def cov(self) -> Optional[npt.NDArray[np.float64]]: ...
+
+class Received:
+    """What a Python fusion center finds from one sensor at one step."""
+
+    @property
+    def kind(self) -> str:
+        """"measurement", "estimate", "payload", "silent" or "not_scheduled"."""
+    @property
+    def arrived(self) -> bool: ...
+    @property
+    def value(self) -> Union[npt.NDArray[np.float64], bytes, None]: ...
+    @property
+    def index(self) -> Optional[int]: ...
+
+class System:
+    """The system a scheme estimates."""
+
+    n_sensors: int
+    state_dim: int
+    meas_dims: List[int]
+    F: npt.NDArray[np.float64]
+    Q: npt.NDArray[np.float64]
+    H: List[Optional[npt.NDArray[np.float64]]]
+    R: List[npt.NDArray[np.float64]]
+    prior: Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]
+
+class LinearFusion:
+    """The library's Kalman arithmetic (prediction, information-form fusion)."""
+
+    def __init__(self, system: System) -> None: ...
+    def predict(self, mean: Any, cov: Any) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    def start(self, mean: Any, cov: Any) -> None: ...
+    def add(self, i: int, z: Any, r: Any = None) -> None: ...
+    def finish(self) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+
+def register_scheme(kind: str, label: str, summary: str, params: List[Tuple[str, Optional[str], str]], knob: Any, factory: Any) -> None: ...
+def unregister_scheme(kind: str) -> bool: ...
+def registered_schemes() -> List[str]: ...
 
 class SensorNode:
     """The sensor side of a scheme: one node, one step per call."""
@@ -86,7 +139,7 @@ class SensorNode:
     @property
     def dim(self) -> int: ...
     def step(
-        self, k: int, z: npt.NDArray[np.float64], feedback: Optional[Feedback] = None
+        self, k: int, z: Any, feedback: Optional[Feedback] = None
     ) -> Transmission:
         """Processes measurement z of step k (k >= 1) with the center's feedback of step k - 1."""
 

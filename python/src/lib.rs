@@ -2,6 +2,8 @@
 //! (`python/hushfuse/__init__.py`) turns numpy arrays and pandas frames into the command line's
 //! CSV layout and the results back into numpy arrays, so that every check and every message is
 //! the command line's own.
+mod external;
+mod helpers;
 mod runs;
 
 use hushfuse::engine::replay;
@@ -14,7 +16,7 @@ use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
 use hushfuse::scheme;
 use numpy::ndarray::{Array2, Array3};
-use numpy::{IntoPyArray, PyReadonlyArray1};
+use numpy::IntoPyArray;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -94,6 +96,18 @@ pub(crate) fn load(
     loss: Option<f64>,
 ) -> PyResult<build::Experiment> {
     let (text, source) = resolve_with_loss(scenario, loss)?;
+    load_text(&text, &source, trials, seed, threads)
+}
+
+/// [`load`] of a scenario's text.
+pub(crate) fn load_text(
+    text: &str,
+    source: &str,
+    trials: Option<usize>,
+    seed: Option<u64>,
+    threads: usize,
+) -> PyResult<build::Experiment> {
+    let (text, source) = (text.to_string(), source.to_string());
     let kind = build::file_kind(&text, &source).map_err(scenario_err)?;
     if kind == build::FileKind::TableReport {
         return Err(ScenarioError::new_err(format!(
@@ -135,8 +149,8 @@ pub(crate) fn estimates_arrays(ests: &[Gaussian], n: usize) -> (Array2<f64>, Arr
 
 /// What one sensor put on the network at one step.
 #[pyclass(module = "hushfuse._hushfuse", frozen)]
-struct Transmission {
-    inner: link::Transmission,
+pub(crate) struct Transmission {
+    pub(crate) inner: link::Transmission,
 }
 
 #[pymethods]
@@ -147,6 +161,44 @@ impl Transmission {
         Self {
             inner: link::Transmission::Silent,
         }
+    }
+    /// A measurement z (a number, a list or an array), 32 bits per component.
+    #[staticmethod]
+    fn measurement(z: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let z = external::measurement_like(z, "measurement")?;
+        Ok(Self {
+            inner: link::Transmission::Send(link::Message::Measurement(z)),
+        })
+    }
+    /// A state estimate x (a number, a list or an array), 32 bits per component.
+    #[staticmethod]
+    fn estimate(x: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let x = external::measurement_like(x, "estimate")?;
+        Ok(Self {
+            inner: link::Transmission::Send(link::Message::Estimate(x)),
+        })
+    }
+    /// A quantization index 0 <= index < 2^bits sent in `bits` payload bits (1..=64), in an
+    /// 802.15.4 frame (least significant octet first).
+    #[staticmethod]
+    fn quantized_index(index: u64, bits: u32) -> PyResult<Self> {
+        if !(1..=64).contains(&bits) || (bits < 64 && index >> bits != 0) {
+            return Err(PyValueError::new_err(format!(
+                "quantized index {index} in {bits} bits: expected 1 <= bits <= 64 and 0 <= index < 2^bits"
+            )));
+        }
+        let octets = (bits as usize).div_ceil(8);
+        Self::payload(&index.to_le_bytes()[..octets], bits)
+    }
+    /// A raw payload: `data` (bytes) carrying `bits` payload bits (len(data) = ceil(bits / 8),
+    /// unused high bits of the last octet zero), in an 802.15.4 frame.
+    #[staticmethod]
+    fn payload(data: &[u8], bits: u32) -> PyResult<Self> {
+        let m = hushfuse::scheme::external::payload_message(data, bits, 0)
+            .map_err(PyValueError::new_err)?;
+        Ok(Self {
+            inner: link::Transmission::Send(m),
+        })
     }
     /// Whether a message was sent.
     #[getter]
@@ -201,8 +253,8 @@ impl Transmission {
 
 /// What the fusion center tells the sensors before the next step (schemes with feedback).
 #[pyclass(module = "hushfuse._hushfuse", frozen)]
-struct Feedback {
-    inner: scheme::Feedback,
+pub(crate) struct Feedback {
+    pub(crate) inner: scheme::Feedback,
 }
 
 #[pymethods]
@@ -222,6 +274,35 @@ impl Feedback {
     fn __repr__(&self) -> String {
         format!("Feedback(kind={:?})", self.kind())
     }
+    /// The fused prediction as feedback (to every sensor): mean and, optionally, covariance
+    /// (downlink: 32 bits per number, the covariance as its distinct entries).
+    #[staticmethod]
+    #[pyo3(signature = (mean, cov=None))]
+    fn prediction(mean: &Bound<'_, PyAny>, cov: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+        let mean = external::measurement_like(mean, "mean")?;
+        let cov = cov.map(|c| external::matrix_like(c, "cov")).transpose()?;
+        Ok(Self {
+            inner: scheme::Feedback::Prediction { mean, cov },
+        })
+    }
+    /// A prediction's mean (None for other feedback).
+    #[getter]
+    fn mean<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        match &self.inner {
+            scheme::Feedback::Prediction { mean, .. } => {
+                Some(mean.as_slice().to_vec().into_pyarray(py).into_any())
+            }
+            _ => None,
+        }
+    }
+    /// A prediction's covariance (None when it has none).
+    #[getter]
+    fn cov<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        match &self.inner {
+            scheme::Feedback::Prediction { cov: Some(c), .. } => Some(helpers::matrix_array(py, c)),
+            _ => None,
+        }
+    }
 }
 
 /// The sensor side of a scheme: one node, one step per call.
@@ -235,7 +316,7 @@ struct SensorNode {
     dim: usize,
 }
 
-fn lock<T: ?Sized>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+pub(crate) fn lock<T: ?Sized>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
@@ -247,10 +328,10 @@ impl SensorNode {
     fn step(
         &self,
         k: usize,
-        z: PyReadonlyArray1<'_, f64>,
+        z: &Bound<'_, PyAny>,
         feedback: Option<PyRef<'_, Feedback>>,
     ) -> PyResult<Transmission> {
-        let z = z.as_array();
+        let z = helpers::vector_of(z).map_err(|m| PyValueError::new_err(format!("z: {m}")))?;
         if z.len() != self.dim {
             return Err(PyValueError::new_err(format!(
                 "sensor {}: z has {} components, the sensor measures {}",
@@ -264,8 +345,9 @@ impl SensorNode {
         }
         if z.iter().any(|v| !v.is_finite()) {
             return Err(PyValueError::new_err(format!(
-                "sensor {}: z is not finite: {z}",
-                self.index
+                "sensor {}: z is not finite: {:?}",
+                self.index,
+                z.as_slice()
             )));
         }
         let mut last = lock(&self.last);
@@ -275,7 +357,6 @@ impl SensorNode {
                 self.index, *last
             )));
         }
-        let z = Vector::from_iterator(self.dim, z.iter().copied());
         let fb = feedback.as_ref().map(|f| &f.inner);
         let mut rng = lock(&self.rng);
         let t = lock(&self.node)
@@ -558,6 +639,12 @@ fn _hushfuse(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<FusionCenter>()?;
     m.add_class::<Transmission>()?;
     m.add_class::<Feedback>()?;
+    m.add_class::<external::PyReceived>()?;
+    m.add_class::<helpers::PySystem>()?;
+    m.add_class::<helpers::LinearFusion>()?;
+    m.add_function(wrap_pyfunction!(external::register_scheme, m)?)?;
+    m.add_function(wrap_pyfunction!(external::unregister_scheme, m)?)?;
+    m.add_function(wrap_pyfunction!(external::registered_schemes, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -1,10 +1,12 @@
 //! Runs, replays and simulated trials for Python: numpy arrays in and out, results as Python
 //! objects (never JSON or CSV text in between), and the engine's own run layer
 //! ([`hushfuse::engine::run`]) for output folders, resuming and shards.
+use crate::external;
 use crate::{
-    estimates_arrays, load, python_words, resolve, resolve_with_loss, vectors_to_array2, DataError,
-    RunError, ScenarioError,
+    estimates_arrays, load, python_words, resolve, vectors_to_array2, DataError, RunError,
+    ScenarioError,
 };
+use hushfuse::engine::calibrate;
 use hushfuse::engine::replay::{self, arrays};
 use hushfuse::engine::run as engine_run;
 use hushfuse::engine::{durable, runner};
@@ -92,14 +94,100 @@ fn run_failure(e: engine_run::RunFailure) -> PyErr {
     }
 }
 
+/// A failure of a Python scheme (user code) as the error of the run: the scheme, the trial,
+/// the step and the Python traceback. Failures of built-in schemes stay failed rows.
+fn python_failure(summary: &results::Summary) -> PyResult<()> {
+    for s in &summary.schemes {
+        if let (Some(f), true) = (&s.failed, external::is_python_kind(&s.kind)) {
+            // The loop's words are "scheme {label}, step {k}: {cause}": said once, with the trial.
+            let prefix = format!("scheme {}, step {}: ", s.name, f.step);
+            let cause = f.message.strip_prefix(&prefix).unwrap_or(&f.message);
+            return Err(RunError::new_err(format!(
+                "scheme {:?}, trial {}, step {}: {cause}",
+                s.name, f.trial, f.step
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The scenario's text with `extra` (JSON: a list of scheme tables) appended to its
+/// `[[schemes]]`.
+fn with_schemes(text: &str, source: &str, extra: Option<&str>) -> PyResult<String> {
+    let Some(extra) = extra else {
+        return Ok(text.to_string());
+    };
+    let tables: Vec<toml::Table> = serde_json::from_str(extra).map_err(|e| {
+        pyo3::exceptions::PyValueError::new_err(format!(
+            "schemes: expected a list of dicts of numbers, strings and flags ({e})"
+        ))
+    })?;
+    let mut doc: toml::Table =
+        toml::from_str(text).map_err(|e| ScenarioError::new_err(format!("{source}: {e}")))?;
+    let list = doc
+        .entry("schemes")
+        .or_insert_with(|| toml::Value::Array(Vec::new()));
+    let Some(list) = list.as_array_mut() else {
+        return Err(ScenarioError::new_err(format!(
+            "{source}: `schemes` is not a list of tables"
+        )));
+    };
+    list.extend(tables.into_iter().map(toml::Value::Table));
+    Ok(toml::to_string(&doc).expect("a TOML table serializes"))
+}
+
+/// The scenario's text and source: resolved, with `extra` schemes and `--loss`.
+fn scenario_text(
+    scenario: &str,
+    extra: Option<&str>,
+    loss: Option<f64>,
+) -> PyResult<(String, String)> {
+    let (text, source) = resolve(scenario)?;
+    let text = with_schemes(&text, &source, extra)?;
+    match loss {
+        None => Ok((text, source)),
+        Some(p) => Ok((
+            hushfuse::scenario::lossy::with_loss(&text, &source, p).map_err(crate::scenario_err)?,
+            source,
+        )),
+    }
+}
+
+/// The worker threads of a run: `threads`, except that the default (0: one per core) is one
+/// thread when the scenario lists a Python scheme. Python code runs one call at a time (the
+/// GIL), and worker threads that take turns at it are slower than one thread (measured in
+/// `benches/python_scheme.py`); the results are the same for any count.
+fn threads_for(text: &str, threads: usize) -> usize {
+    if threads != 0 {
+        return threads;
+    }
+    let python = toml::from_str::<toml::Table>(text).ok().is_some_and(|doc| {
+        doc.get("schemes")
+            .and_then(|v| v.as_array())
+            .is_some_and(|list| {
+                list.iter().any(|t| {
+                    t.get("kind")
+                        .and_then(|k| k.as_str())
+                        .is_some_and(external::is_python_kind)
+                })
+            })
+    });
+    if python {
+        1
+    } else {
+        0
+    }
+}
+
 /// Runs a scenario (Monte Carlo) as `hushfuse run` does. Without `out`: in memory, returns
 /// the summary (with its `paper` section). With `out`: the run's folder, written exactly as
 /// the command line writes it, checkpointed every `checkpoint_every` seconds so that
 /// `resume=True` continues a run that was killed; `shard="I/N"` runs one shard (for
 /// `hushfuse merge`). Returns a dict; with `out`, also `out` and `files` (or, for a shard,
-/// only `shard`, `blocks` and `done`).
+/// only `shard`, `blocks` and `done`). `schemes`: JSON of scheme tables added to the
+/// scenario's. With `budgets`: the arena (see [`arena`]).
 #[pyfunction]
-#[pyo3(signature = (scenario, trials=None, seed=None, threads=0, out=None, resume=false, shard=None, report=false, reproduce=false, checkpoint_every=10.0, loss=None))]
+#[pyo3(signature = (scenario, trials=None, seed=None, threads=0, out=None, resume=false, shard=None, report=false, reproduce=false, checkpoint_every=10.0, loss=None, schemes=None, budgets=None, budget_axis="payload", tolerance=0.02, pilot_trials=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run<'py>(
     py: Python<'py>,
@@ -114,22 +202,51 @@ pub(crate) fn run<'py>(
     reproduce: bool,
     checkpoint_every: f64,
     loss: Option<f64>,
+    schemes: Option<&str>,
+    budgets: Option<Vec<f64>>,
+    budget_axis: &str,
+    tolerance: f64,
+    pilot_trials: Option<usize>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let (text, source) = scenario_text(scenario, schemes, loss)?;
+    let threads = threads_for(&text, threads);
+    if let Some(budgets) = budgets {
+        if out.is_some() || resume || shard.is_some() || report || reproduce {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "budget=/budgets= run in memory: out=, resume=, shard=, report= and reproduce= are for plain runs (the command line's `hushfuse run --budgets ... --out DIR` writes the arena's files)",
+            ));
+        }
+        let opts = calibrate::Options {
+            axis: calibrate::Axis::parse(budget_axis).map_err(|m| {
+                pyo3::exceptions::PyValueError::new_err(m.replace("--budget-axis", "budget_axis"))
+            })?,
+            tolerance,
+            pilot_trials,
+            threads,
+            load: build::LoadOptions {
+                trials,
+                seed,
+                threads,
+                limits: None,
+            },
+        };
+        return arena(py, &text, &source, &budgets, &opts);
+    }
     if out.is_none() && (resume || shard.is_some() || report) {
         return Err(pyo3::exceptions::PyValueError::new_err(
             "resume=, shard= and report= need out= (the folder that keeps the run's files)",
         ));
     }
     let Some(out) = out else {
-        let exp = load(scenario, trials, seed, threads, loss)?;
+        let exp = crate::load_text(&text, &source, trials, seed, threads)?;
         let sums = py
             .allow_threads(|| runner::run(&exp, runner::RunOptions { threads }, &|_| {}))
             .map_err(|e| RunError::new_err(e.to_string()))?;
         let summary = results::summarize(&exp, &sums);
+        python_failure(&summary)?;
         check_finite(results::non_finite(&summary))?;
         return summary_object(py, &exp, &summary);
     };
-    let (text, source) = resolve_with_loss(scenario, loss)?;
     let shard = shard
         .map(durable::parse_shard)
         .transpose()
@@ -154,6 +271,7 @@ pub(crate) fn run<'py>(
     let d = PyDict::new(py);
     match outcome {
         engine_run::Outcome::Whole(done) => {
+            python_failure(&done.summary)?;
             check_finite(done.non_finite.clone())?;
             let s = summary_object(py, &done.exp, &done.summary)?;
             s.set_item("out", done.dir.display().to_string())?;
@@ -170,6 +288,35 @@ pub(crate) fn run<'py>(
             d.set_item("done", true)?;
         }
     }
+    Ok(d.into_any())
+}
+
+/// The arena in memory, as `hushfuse run --budgets`: every scheme's knob calibrated to each
+/// budget ([`calibrate::calibrate`]). Returns `budgets`, `axis`, `tolerance`, `evaluations`
+/// (pilot runs), `calibration` (per budget, per scheme: label, kind, knob, value, target,
+/// achieved, status) and `runs` (per budget, the summary of every scheme at its knob).
+fn arena<'py>(
+    py: Python<'py>,
+    text: &str,
+    source: &str,
+    budgets: &[f64],
+    opts: &calibrate::Options,
+) -> PyResult<Bound<'py, PyAny>> {
+    let out = py
+        .allow_threads(|| calibrate::calibrate(text, source, budgets, opts))
+        .map_err(|m| RunError::new_err(python_words(&m)))?;
+    let d = PyDict::new(py);
+    d.set_item("budgets", out.budgets.clone())?;
+    d.set_item("axis", out.axis.name())?;
+    d.set_item("tolerance", out.tolerance)?;
+    d.set_item("evaluations", out.evaluations)?;
+    d.set_item("calibration", serialize(py, &out.rows)?)?;
+    let runs = PyList::empty(py);
+    for summary in &out.summaries {
+        python_failure(summary)?;
+        runs.append(serialize(py, summary)?)?;
+    }
+    d.set_item("runs", runs)?;
     Ok(d.into_any())
 }
 
@@ -215,7 +362,8 @@ fn replay_err(e: replay::ReplayError) -> PyErr {
 /// (T, m_i) (an all-NaN row: no reading), and optionally the truth (T, n). Returns what
 /// [`replay_csv`] returns.
 #[pyfunction]
-#[pyo3(signature = (scenario, measurements, truth=None, seed=None, trial=0))]
+#[pyo3(signature = (scenario, measurements, truth=None, seed=None, trial=0, schemes=None))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn replay_arrays<'py>(
     py: Python<'py>,
     scenario: &str,
@@ -223,8 +371,9 @@ pub(crate) fn replay_arrays<'py>(
     truth: Option<PyReadonlyArray2<'py, f64>>,
     seed: Option<u64>,
     trial: usize,
+    schemes: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let (text, source) = resolve(scenario)?;
+    let (text, source) = scenario_text(scenario, schemes, None)?;
     // Contiguous row-major copies only where numpy's layout is not (a column slice of a 3-D
     // array): the replay reads rows.
     let owned: Vec<(Vec<f64>, usize, usize)> = measurements
@@ -267,7 +416,7 @@ pub(crate) fn replay_arrays<'py>(
 /// Replays CSV texts (the command line's layout: a pandas DataFrame in long form) through
 /// every variant of a scenario, with the command line's messages (file, line, column).
 #[pyfunction]
-#[pyo3(signature = (scenario, measurements_csv, measurements_name, truth_csv=None, truth_name="truth", seed=None, trial=0))]
+#[pyo3(signature = (scenario, measurements_csv, measurements_name, truth_csv=None, truth_name="truth", seed=None, trial=0, schemes=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn replay_csv<'py>(
     py: Python<'py>,
@@ -278,8 +427,9 @@ pub(crate) fn replay_csv<'py>(
     truth_name: &str,
     seed: Option<u64>,
     trial: usize,
+    schemes: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let (text, source) = resolve(scenario)?;
+    let (text, source) = scenario_text(scenario, schemes, None)?;
     let opts = replay::ReplayOptions {
         seed,
         trial,

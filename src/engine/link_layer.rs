@@ -356,7 +356,7 @@ impl LinkLayer {
 
     /// Fuses step `k`'s `inbox` into `center`: directly, or, when late packets arrive at this
     /// step or sequence numbers reveal a gap ([`LinkLayer::receive`]), by a center rebuilt
-    /// from `scheme` (seeded with `center_seed`) that re-fuses every step with the arrivals in
+    /// from `scheme` (for `trial`, seeded with `center_seed`) that re-fuses every step with the arrivals in
     /// their own steps and the unknown silences made [`Received::NotScheduled`].
     pub(crate) fn fuse(
         &mut self,
@@ -364,11 +364,11 @@ impl LinkLayer {
         inbox: &[Received],
         center: &mut Box<dyn FusionCenter>,
         scheme: &dyn Scheme,
-        center_seed: u64,
+        (trial, center_seed): (usize, u64),
     ) -> Result<(), (usize, SchemeError)> {
         if self.receive(k).is_some() {
             let mut fresh = scheme
-                .build_with_seed(center_seed)
+                .build_for_trial(trial, center_seed)
                 .map_err(|e| (0, e))?
                 .center;
             for (j, past) in self.history.iter().enumerate() {

@@ -191,7 +191,7 @@ pub fn run_trial(
     }
     let mut inst = variant
         .scheme
-        .build_with_seed(center_seed)
+        .build_for_trial(spec.trial, center_seed)
         .map_err(|source| LoopError::Scheme { k: 0, source })?;
     let schedule = variant.scheme.schedule();
     let with_links = observer.needs_links();
@@ -273,7 +273,7 @@ pub fn run_trial(
                     inbox,
                     &mut inst.center,
                     variant.scheme.as_ref(),
-                    center_seed,
+                    (spec.trial, center_seed),
                 )
                 .map_err(|(k, source)| LoopError::Scheme { k, source })?,
             None => inst

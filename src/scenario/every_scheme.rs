@@ -69,6 +69,15 @@ pub(crate) fn expand(
             out.extend(own.into_iter().cloned());
         }
     }
+    // Kinds registered at run time (`crate::scheme::external`) run where they are listed,
+    // after the built-in ones.
+    out.extend(
+        listed
+            .iter()
+            .zip(&kinds)
+            .filter(|(_, k)| !registry::SCHEMES.iter().any(|e| e.kind == **k))
+            .map(|(t, _)| t.clone()),
+    );
     Ok(out)
 }
 

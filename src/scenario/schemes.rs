@@ -98,7 +98,7 @@ pub(crate) fn build_schemes(
                 link.channel(ctx, (&field, &note), system.n_sensors(), channel)?;
             let sequence_bits = link.sequence_bits(ctx, (&field, &note))?;
             let cx = BuildContext { system, steps };
-            let scheme = (entry.build)(t, &cx).map_err(|e| match &e.field {
+            let scheme = registry::build_entry(entry, t, &cx).map_err(|e| match &e.field {
                 Some(f) => ctx.err(format!("{at}.{f}"), e.message.clone()),
                 None => ctx.err(&at, e.message.clone()),
             })?;

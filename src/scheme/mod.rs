@@ -5,6 +5,7 @@ pub mod centralized;
 pub mod distributed_kf;
 pub mod estimate_fusion;
 pub mod event_triggered;
+pub mod external;
 pub mod fast_path;
 pub mod federated_tobit;
 pub mod quantized_innovation;
@@ -173,6 +174,13 @@ pub trait Scheme: Send + Sync + Debug {
     fn build_with_seed(&self, seed: u64) -> Result<SchemeInstance, SchemeError> {
         let _ = seed;
         self.build()
+    }
+    /// Like [`Scheme::build_with_seed`], for trial `trial` of a run (the engine's call): schemes
+    /// whose nodes want to know their trial (external schemes, for their error messages) take
+    /// it here. By default [`Scheme::build_with_seed`].
+    fn build_for_trial(&self, trial: usize, seed: u64) -> Result<SchemeInstance, SchemeError> {
+        let _ = trial;
+        self.build_with_seed(seed)
     }
     /// Which sensors may talk at each step.
     fn schedule(&self) -> Schedule {

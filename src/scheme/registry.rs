@@ -297,12 +297,32 @@ pub use super::SCHEMES;
 
 /// The entry of a kind.
 pub fn find(kind: &str) -> Option<&'static SchemeEntry> {
-    SCHEMES.iter().find(|e| e.kind == kind)
+    SCHEMES
+        .iter()
+        .find(|e| e.kind == kind)
+        .or_else(|| super::external::find(kind))
+}
+
+/// Builds a scheme of `entry`'s kind from its table: the entry's own builder, or the builder
+/// of a kind registered at run time ([`super::external`]).
+pub fn build_entry(
+    entry: &SchemeEntry,
+    table: toml::Table,
+    cx: &BuildContext,
+) -> Result<Box<dyn Scheme>, ParamError> {
+    if !SCHEMES.iter().any(|e| e.kind == entry.kind) {
+        if let Some(r) = super::external::build(entry.kind, table.clone(), cx) {
+            return r;
+        }
+    }
+    (entry.build)(table, cx)
 }
 
 /// The known kinds, for error messages.
 pub fn kinds() -> Vec<&'static str> {
-    SCHEMES.iter().map(|e| e.kind).collect()
+    let mut k: Vec<&'static str> = SCHEMES.iter().map(|e| e.kind).collect();
+    k.extend(super::external::kinds());
+    k
 }
 
 /// The registry as text: every kind with its parameters and defaults (`hushfuse list-schemes`).
