@@ -92,7 +92,7 @@ BUILT_IN = [
 
 def main(trials=40, png="send_on_delta.png", budgets=(40.0, 80.0)):
     schemes = BUILT_IN + [{"kind": MySendOnDelta.kind, "link_loss": 0.2}]
-    arena = hf.run(SCENARIO, trials=trials, schemes=schemes, budgets=list(budgets))
+    arena = hf.run(SCENARIO, trials=trials, schemes=schemes, budgets=list(budgets), budget_axis="payload")
     rmse = {}  # label -> position RMSE per budget
     for b, run in zip(arena["budgets"], arena["runs"]):
         print(f"budget {b:g} payload bits/step:")

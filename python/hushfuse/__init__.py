@@ -136,7 +136,7 @@ def run(
     schemes: Any = None,
     budget: Optional[float] = None,
     budgets: Optional[Sequence[float]] = None,
-    budget_axis: str = "payload",
+    budget_axis: str = "energy",
     tolerance: float = 0.02,
     pilot_trials: Optional[int] = None,
 ) -> Dict[str, Any]:
@@ -162,8 +162,9 @@ def run(
         schemes: scheme entries added to the scenario's: kind names, registered
             :class:`SchemeSpec` subclasses, or dicts (``{"kind": ..., "label": ..., params}``).
         budget: the arena, as ``--budget B``: every scheme's knob calibrated so that it spends
-            B per step on ``budget_axis`` (``payload``, ``frame``, ``total`` bits or
-            ``energy`` µJ) within ``tolerance`` (relative), on pilot runs of
+            B per step on ``budget_axis`` (``energy``, the default: µJ of the sensors'
+            radios, what a battery-powered deployment pays; or ``payload``, ``frame``,
+            ``total`` bits) within ``tolerance`` (relative), on pilot runs of
             ``pilot_trials`` trials (default: the scenario's). Returns the summary at that
             budget with ``budget``, ``axis`` and ``calibration`` (per scheme: ``label``,
             ``kind``, ``knob``, ``value``, ``target``, ``achieved``, ``status``).

@@ -54,7 +54,7 @@ def run(
     schemes: Any = None,
     budget: Optional[float] = None,
     budgets: Optional[Sequence[float]] = None,
-    budget_axis: str = "payload",
+    budget_axis: str = "energy",
     tolerance: float = 0.02,
     pilot_trials: Optional[int] = None,
 ) -> Dict[str, Any]: ...

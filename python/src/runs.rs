@@ -187,7 +187,7 @@ fn threads_for(text: &str, threads: usize) -> usize {
 /// only `shard`, `blocks` and `done`). `schemes`: JSON of scheme tables added to the
 /// scenario's. With `budgets`: the arena (see [`arena`]).
 #[pyfunction]
-#[pyo3(signature = (scenario, trials=None, seed=None, threads=0, out=None, resume=false, shard=None, report=false, reproduce=false, checkpoint_every=10.0, loss=None, schemes=None, budgets=None, budget_axis="payload", tolerance=0.02, pilot_trials=None))]
+#[pyo3(signature = (scenario, trials=None, seed=None, threads=0, out=None, resume=false, shard=None, report=false, reproduce=false, checkpoint_every=10.0, loss=None, schemes=None, budgets=None, budget_axis="energy", tolerance=0.02, pilot_trials=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run<'py>(
     py: Python<'py>,

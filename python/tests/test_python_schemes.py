@@ -168,7 +168,7 @@ def test_python_schemes_join_an_arena_beside_the_built_ins():
 
 def test_calibration_of_a_python_scheme_reaches_the_budget():
     only = '[[schemes]]\nkind = "py-send-on-delta"\ndelta = 1.0\n'
-    r = hf.run(scenario(trials=10, schemes=only), budget=40.0)
+    r = hf.run(scenario(trials=10, schemes=only), budget=40.0, budget_axis="payload")
     (row,) = r["calibration"]
     assert row["kind"] == "py-send-on-delta" and row["knob"] == "delta"
     assert row["status"] == "calibrated", row
@@ -181,7 +181,7 @@ def test_calibration_of_a_python_scheme_reaches_the_budget():
 
 def test_budget_works_for_built_in_schemes_and_budgets_gives_every_budget():
     sod = '[[schemes]]\nkind = "send-on-delta"\ndelta = 1.0\n'
-    r = hf.run(scenario(trials=5, schemes=sod), budget=30)
+    r = hf.run(scenario(trials=5, schemes=sod), budget=30, budget_axis="payload")
     assert r["budget"] == 30.0 and r["axis"] == "payload"
     assert abs(r["calibration"][0]["achieved"] - 30.0) <= 0.02 * 30.0
     many = hf.run(scenario(trials=5, schemes=sod), budgets=[20, 60], budget_axis="frame")
