@@ -121,7 +121,11 @@ fn refused(text: &str) -> String {
 #[test]
 fn inflation_claims_are_validated_at_load() {
     let ok = "kind = \"inflation\"\ntext = \"t\"\nscheme = \"SOI-KF (sign)\"\n";
-    build::load(&with_claim(&format!("{ok}check = \"trace-recursion\""), ""), "t").unwrap();
+    build::load(
+        &with_claim(&format!("{ok}check = \"trace-recursion\""), ""),
+        "t",
+    )
+    .unwrap();
     let cases = [
         (format!("{ok}check = \"trace-recursoin\""), "", "trace-recursoin"),
         (format!("{ok}check = \"efficiency\""), "", "reference"),

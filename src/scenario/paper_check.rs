@@ -237,49 +237,7 @@ pub(crate) fn check(
                 let ci = s.curve(&at("scheme"), scheme)?;
                 check_intermittent(ctx, &at, (ci, &curves[ci]), variants, system, c)?;
             }
-            ClaimSpec::Inflation {
-                scheme,
-                check: what,
-                reference,
-                within,
-                ..
-            } => {
-                let ci = s.curve(&at("scheme"), scheme)?;
-                check_inflation(&s, &at, ci, system)?;
-                match (what, reference) {
-                    (InflationCheck::Efficiency, Some(r)) => {
-                        let ri = s.curve(&at("reference"), r)?;
-                        if variants.iter().filter(|v| v.curve == ri).count() != 1 {
-                            return Err(ctx.err(
-                                at("reference"),
-                                format!("{r:?} must be one variant (not swept)"),
-                            ));
-                        }
-                        check_inflation(&s, &at, ri, system)?;
-                    }
-                    (InflationCheck::Efficiency, None) => {
-                        return Err(ctx.err(
-                            at("reference"),
-                            "an `efficiency` claim needs the label of the curve it divides by",
-                        ));
-                    }
-                    (_, Some(_)) => {
-                        return Err(ctx.err(
-                            at("reference"),
-                            "only an `efficiency` claim takes a reference",
-                        ));
-                    }
-                    (_, None) => {}
-                }
-                if let Some(w) = within {
-                    if !(w.is_finite() && *w > 0.0 && *w <= 1.0) {
-                        return Err(ctx.err(
-                            at("within"),
-                            format!("expected a relative tolerance in (0, 1], got {w}"),
-                        ));
-                    }
-                }
-            }
+            ClaimSpec::Inflation { .. } => check_inflation_claim(&s, &at, variants, system, c)?,
         }
     }
     Ok(())
@@ -389,6 +347,64 @@ fn check_inflation(
             return Err(s.ctx.err(
                 at("scheme"),
                 format!("{label:?}: the classic factor is for an ideal link; this curve has a link model (`channel`)"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// An `inflation` claim: its curve (and an `efficiency` claim's one-variant reference) through
+/// [`check_inflation`], a reference exactly when the check needs one, `within` in (0, 1].
+fn check_inflation_claim(
+    s: &Scope,
+    at: &dyn Fn(&str) -> String,
+    variants: &[Variant],
+    system: &System,
+    claim: &ClaimSpec,
+) -> Result<(), ScenarioError> {
+    let ClaimSpec::Inflation {
+        scheme,
+        check: what,
+        reference,
+        within,
+        ..
+    } = claim
+    else {
+        return Ok(());
+    };
+    let ctx = s.ctx;
+    let ci = s.curve(&at("scheme"), scheme)?;
+    check_inflation(s, at, ci, system)?;
+    match (what, reference) {
+        (InflationCheck::Efficiency, Some(r)) => {
+            let ri = s.curve(&at("reference"), r)?;
+            if variants.iter().filter(|v| v.curve == ri).count() != 1 {
+                return Err(ctx.err(
+                    at("reference"),
+                    format!("{r:?} must be one variant (not swept)"),
+                ));
+            }
+            check_inflation(s, at, ri, system)?;
+        }
+        (InflationCheck::Efficiency, None) => {
+            return Err(ctx.err(
+                at("reference"),
+                "an `efficiency` claim needs the label of the curve it divides by",
+            ));
+        }
+        (_, Some(_)) => {
+            return Err(ctx.err(
+                at("reference"),
+                "only an `efficiency` claim takes a reference",
+            ));
+        }
+        (_, None) => {}
+    }
+    if let Some(w) = within {
+        if !(w.is_finite() && *w > 0.0 && *w <= 1.0) {
+            return Err(ctx.err(
+                at("within"),
+                format!("expected a relative tolerance in (0, 1], got {w}"),
             ));
         }
     }

@@ -260,12 +260,25 @@ pub fn check(
                 let e_ref = recursion(&m, c_ref, exp.steps, exp.steady_from);
                 let (r, r_se) = ratio(s, &summary.schemes[rv]);
                 let limit = limit_words(&m, c, c_ref);
-                (r, r_se, expected / e_ref, format!("MSE ratio to {}{limit}", summary.schemes[rv].name))
+                (
+                    r,
+                    r_se,
+                    expected / e_ref,
+                    format!("MSE ratio to {}{limit}", summary.schemes[rv].name),
+                )
             }
-            (InflationCheck::TraceRecursion, _) => {
-                (s.steady_state.trace, s.steady_state.trace_se, expected, "trace".into())
-            }
-            _ => (s.steady_state.mse, s.steady_state.mse_se, expected, "MSE".into()),
+            (InflationCheck::TraceRecursion, _) => (
+                s.steady_state.trace,
+                s.steady_state.trace_se,
+                expected,
+                "trace".into(),
+            ),
+            _ => (
+                s.steady_state.mse,
+                s.steady_state.mse_se,
+                expected,
+                "MSE".into(),
+            ),
         };
         let d = (ours - expected) / expected;
         let rel_se = se / expected.abs();
