@@ -159,7 +159,7 @@ fn inflation_claims_are_validated_at_load() {
             "kind = \"inflation\"\ntext = \"t\"\nscheme = \"Lossy\"\ncheck = \"mse-recursion\""
                 .to_string(),
             "[[schemes]]\nkind = \"quantized-innovation\"\nlabel = \"Lossy\"\nquantizer = \"sign\"\nchannel = { kind = \"bernoulli\", loss = 0.1 }\n",
-            "ideal link",
+            "delivers every message",
         ),
     ];
     for (claim, extra, needle) in cases {

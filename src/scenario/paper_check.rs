@@ -343,11 +343,15 @@ fn check_inflation(
     for v in s.variants.iter().filter(|v| v.curve == ci) {
         crate::scenario::classic::cells(v.kind, &v.params)
             .map_err(|e| s.ctx.err(at("scheme"), format!("{label:?}: {e}")))?;
-        if v.channel.is_some() {
-            return Err(s.ctx.err(
-                at("scheme"),
-                format!("{label:?}: the classic factor is for an ideal link; this curve has a link model (`channel`)"),
-            ));
+        // Every message must arrive at once: an ideal link, or a lossless one without delay.
+        for spec in v.channel.as_deref().into_iter().flatten() {
+            if !matches!(Arrivals::of(Some(spec)), Ok(Arrivals::Bernoulli { gamma }) if gamma == 1.0)
+            {
+                return Err(s.ctx.err(
+                    at("scheme"),
+                    format!("{label:?}: the classic factor is for a link that delivers every message at once (ideal, or lossless without delay or arq); this curve's link loses or delays them"),
+                ));
+            }
         }
     }
     Ok(())

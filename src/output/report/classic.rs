@@ -323,12 +323,15 @@ mod tests {
         let (t, c) = lloyd_max(2);
         assert!(t[0].abs() < 1e-12);
         assert!((c - 2.0 / std::f64::consts::PI).abs() < 1e-9, "{c}");
-        // 1 - D of Max's (1960) N(0, 1) quantizers: D = 0.1175, 0.03454, 0.009497 for 4, 8,
-        // 16 levels; Zhang et al.'s (2016) Table 7: 0.8825 (4 levels), 0.8098 (3), 0.9201 (5).
+        // 1 - D of Max's (1960) N(0, 1) quantizers as printed: D = 0.1175, 0.03454, 0.009497
+        // for 4, 8, 16 levels (his 16-level value is 4e-6 below the converged one, 0.009501,
+        // which an independent Lloyd iteration with erfc also reaches); Zhang et al.'s (2016)
+        // Table 7: 0.8825 (4 levels), 0.8098 (3), 0.9201 (5).
         for (n, want, tol) in [
             (4, 1.0 - 0.1175, 1e-4),
             (8, 1.0 - 0.03454, 1e-5),
-            (16, 1.0 - 0.009497, 1e-6),
+            (16, 1.0 - 0.009497, 1e-5),
+            (16, 1.0 - 0.009501008, 1e-8),
             (3, 0.8098, 1e-4),
             (5, 0.9201, 1e-4),
         ] {
