@@ -9,7 +9,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 all=(dormann-fig1 geng-oscillator geng-tracking zhang-fig4 zhang-fig5 zheng-fig1
      zheng-fig2-table1 zheng-fig3 zheng-fig4 zheng-fig5-table2 zheng-fig6 zheng-fig8 zheng-fig9
-     zheng-fig10-table3 zheng-nofb-n4 sinopoli-critical gilbert-elliott-stability)
+     zheng-fig10-table3 zheng-nofb-n4 sinopoli-critical gilbert-elliott-stability
+     classic-quantized-kf classic-one-bit-static classic-one-bit-tracking)
 rerun=("$@")
 if [ ${#rerun[@]} -eq 0 ]; then
     rerun=("${all[@]}")
@@ -37,6 +38,8 @@ Measured on the 2-core development machine with the full trial counts of the bui
 Verdicts near the z = -2 line are Monte Carlo outcomes, not properties of the method: with 200 trials (zheng-fig8, -fig9, -fig10-table3, as in the paper) and in heavy-tailed settings (zheng-nofb-n4 at l = 1) they change with the seed; the scenario notes say by how much and how many trials settle them.
 
 The two stability reproductions (`sinopoli-critical`, `gilbert-elliott-stability`) use `intermittent` claims (docs/scenarios.md): the filter's steady-state trace and MSE against an independent computation of the data-free variance recursion (the claim checker's own arrival sequences), Sinopoli's bounds mapped to the posterior, and, at and beyond the critical value, the tail index of the per-trial errors. Their thresholds are family-wise (Bonferroni over a claim's points); where the stationary error has infinite variance no standard error is used (ranks instead, not counted), and a divergence is judged by the tail, since no Monte Carlo mean can show an infinite expectation.
+
+The three classic quantized-innovation reproductions (`classic-quantized-kf`, `classic-one-bit-static`, `classic-one-bit-tracking`) use `inflation` claims (docs/scenarios.md): the filter's steady-state covariance, its MSE, or its MSE ratio to the all-data Kalman filter (paired by trial) against the variance recursion P+ = P- - c P-^2 / (P- + r) with the classic factor c (2/π for the sign, 1 - D for an N-cell Lloyd-Max quantizer), computed independently by the claim checker (its own Lloyd-Max design and integration). The verdicts are equivalence tests against a stated relative tolerance (ours), family-wise over a claim's points; the difference from exact equality is printed in standard errors.
 
 Also reproduced exactly (computed, not simulated): `hushfuse reproduce zhang-tables` (18 of 18 printed values of Zhang et al. (2016), Tables 2, 4, 5, 6) and `hushfuse reproduce zhang-table7` (6 of 6 values of Table 7 to the printed 4 decimals).
 

@@ -103,6 +103,21 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/gilbert-elliott-stability.toml"),
     ),
     (
+        "classic-quantized-kf",
+        "Ribeiro et al. (2006) and Msechu et al. (2008): the 2/π factor of the sign-of-innovation KF and the c = 1 - D factors of 2-4 bit quantized innovations, against an independent recursion",
+        include_str!("../../scenarios/classic-quantized-kf.toml"),
+    ),
+    (
+        "classic-one-bit-static",
+        "Ribeiro et al. (2006): one sign bit per measurement of a constant, the 2/π Fisher-information loss (MSE ratio to the all-data KF tends to π/2)",
+        include_str!("../../scenarios/classic-one-bit-static.toml"),
+    ),
+    (
+        "classic-one-bit-tracking",
+        "Stein et al. (2015): one sign bit per step tracking a slow random walk, MSE ratio to the all-data KF √(π/2) (Ribeiro et al.'s 2/π)",
+        include_str!("../../scenarios/classic-one-bit-tracking.toml"),
+    ),
+    (
         "arena-1d",
         "Arena: 1-D constant velocity, 4 scalar linear sensors, every scheme of the registry (--budget, --budgets)",
         include_str!("../../scenarios/arena-1d.toml"),

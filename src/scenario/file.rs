@@ -423,6 +423,39 @@ pub enum ClaimSpec {
         #[serde(default, deserialize_with = "exact_opt")]
         range: Option<[f64; 2]>,
     },
+    /// The classic covariance-reduction factor of Kalman filtering with quantized
+    /// innovations (Ribeiro, Giannakis and Roumeliotis 2006: 2/π for the sign; Msechu,
+    /// Roumeliotis, Ribeiro and Giannakis 2008: c = 1 - D for an N-cell Lloyd–Max quantizer)
+    /// on a scalar system, checked at every variant of curve `scheme` against the
+    /// variance recursion P+ = P- - c P-² / (P- + r) computed independently by the claim
+    /// checker (`crate::output::report::classic`).
+    Inflation {
+        text: String,
+        scheme: String,
+        check: InflationCheck,
+        /// `efficiency`: the curve (one variant) whose steady-state MSE divides the scheme's.
+        #[serde(default)]
+        reference: Option<String>,
+        /// Relative tolerance of the equivalence test (default 0.05, ours): a point holds when
+        /// its relative difference from the recursion plus the Bonferroni quantile of standard
+        /// errors is at most this, fails when the difference minus them exceeds it.
+        #[serde(default)]
+        within: Option<f64>,
+    },
+}
+
+/// What an `inflation` claim checks.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum InflationCheck {
+    /// The steady-state `trace` equals the recursion with the quantizer's factor.
+    TraceRecursion,
+    /// The steady-state MSE (actual squared error) equals that recursion.
+    MseRecursion,
+    /// The ratio of the steady-state MSE to `reference`'s equals the ratio of their
+    /// recursions (one sign bit against all data: π/2 for a static state, √(π/2) for a slow
+    /// random walk).
+    Efficiency,
 }
 
 /// What an `intermittent` claim checks.

@@ -4,7 +4,7 @@
 use crate::scenario::error::{Ctx, ScenarioError};
 use crate::scenario::experiment::{Curve, Variant};
 use crate::scenario::intermittent::{self, Arrivals, Regime, ScalarModel};
-use crate::scenario::{ClaimSpec, IntermittentCheck, PaperSpec, Params};
+use crate::scenario::{ClaimSpec, InflationCheck, IntermittentCheck, PaperSpec, Params};
 use crate::scheme::System;
 
 struct Scope<'a> {
@@ -237,6 +237,7 @@ pub(crate) fn check(
                 let ci = s.curve(&at("scheme"), scheme)?;
                 check_intermittent(ctx, &at, (ci, &curves[ci]), variants, system, c)?;
             }
+            ClaimSpec::Inflation { .. } => check_inflation_claim(&s, &at, variants, system, c)?,
         }
     }
     Ok(())
@@ -325,6 +326,91 @@ fn check_intermittent(
                 if what == IntermittentCheck::Diverges { "at or beyond" } else { "on the stable side of" }
             ),
         ));
+    }
+    Ok(())
+}
+
+/// An `inflation` claim's curve: the scalar system with H = [[1]], every variant on an ideal
+/// link and quantizing into a Lloyd–Max cell count the classic factor describes (or analog).
+fn check_inflation(
+    s: &Scope,
+    at: &dyn Fn(&str) -> String,
+    ci: usize,
+    system: &System,
+) -> Result<(), ScenarioError> {
+    let label = &s.curves[ci].label;
+    ScalarModel::of(system).map_err(|e| s.ctx.err(at("scheme"), e))?;
+    for v in s.variants.iter().filter(|v| v.curve == ci) {
+        crate::scenario::classic::cells(v.kind, &v.params)
+            .map_err(|e| s.ctx.err(at("scheme"), format!("{label:?}: {e}")))?;
+        // Every message must arrive at once: an ideal link, or a lossless one without delay.
+        for spec in v.channel.as_deref().into_iter().flatten() {
+            if !matches!(Arrivals::of(Some(spec)), Ok(Arrivals::Bernoulli { gamma }) if gamma == 1.0)
+            {
+                return Err(s.ctx.err(
+                    at("scheme"),
+                    format!("{label:?}: the classic factor is for a link that delivers every message at once (ideal, or lossless without delay or arq); this curve's link loses or delays them"),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// An `inflation` claim: its curve (and an `efficiency` claim's one-variant reference) through
+/// [`check_inflation`], a reference exactly when the check needs one, `within` in (0, 1].
+fn check_inflation_claim(
+    s: &Scope,
+    at: &dyn Fn(&str) -> String,
+    variants: &[Variant],
+    system: &System,
+    claim: &ClaimSpec,
+) -> Result<(), ScenarioError> {
+    let ClaimSpec::Inflation {
+        scheme,
+        check: what,
+        reference,
+        within,
+        ..
+    } = claim
+    else {
+        return Ok(());
+    };
+    let ctx = s.ctx;
+    let ci = s.curve(&at("scheme"), scheme)?;
+    check_inflation(s, at, ci, system)?;
+    match (what, reference) {
+        (InflationCheck::Efficiency, Some(r)) => {
+            let ri = s.curve(&at("reference"), r)?;
+            if variants.iter().filter(|v| v.curve == ri).count() != 1 {
+                return Err(ctx.err(
+                    at("reference"),
+                    format!("{r:?} must be one variant (not swept)"),
+                ));
+            }
+            check_inflation(s, at, ri, system)?;
+        }
+        (InflationCheck::Efficiency, None) => {
+            return Err(ctx.err(
+                at("reference"),
+                "an `efficiency` claim needs the label of the curve it divides by",
+            ));
+        }
+        (_, Some(_)) => {
+            return Err(ctx.err(
+                at("reference"),
+                "only an `efficiency` claim takes a reference",
+            ));
+        }
+        (_, None) => {}
+    }
+    if let Some(w) = within {
+        if !(w.is_finite() && *w > 0.0 && *w <= 1.0) {
+            return Err(ctx.err(
+                at("within"),
+                format!("expected a relative tolerance in (0, 1], got {w}"),
+            ));
+        }
     }
     Ok(())
 }

@@ -1,5 +1,6 @@
 //! `hushfuse reproduce`: our numbers beside the paper's published ones, and each of the paper's
 //! claims checked on our numbers.
+pub mod classic;
 pub mod intermittent;
 #[cfg(test)]
 mod tests;
@@ -129,6 +130,9 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
             ClaimSpec::Consistent { text, schemes } => check_consistent(exp, summary, text, schemes),
             ClaimSpec::Intermittent { text, scheme, check, within, sequences, range } => {
                 intermittent::check(exp, summary, text, scheme, *check, (*within, *sequences, *range))
+            }
+            ClaimSpec::Inflation { text, scheme, check, reference, within } => {
+                classic::check(exp, summary, text, scheme, (*check, reference.as_deref(), *within))
             }
         })
         .collect()
