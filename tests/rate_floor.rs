@@ -84,14 +84,21 @@ fn the_floor_curve_falls_to_the_all_data_error() {
         eprintln!("skipped: {:?}", s.rate_distortion_floor_note);
         return;
     }
-    let c = s.rate_distortion_floor.as_ref().expect("arena-1d has a floor");
+    let c = s
+        .rate_distortion_floor
+        .as_ref()
+        .expect("arena-1d has a floor");
     assert!(c.rate.windows(2).all(|w| w[0] < w[1]));
     assert!(c.mse.windows(2).all(|w| w[0] >= w[1]), "{:?}", c.mse);
     assert!(c.mse.iter().all(|&d| d >= c.all_data_mse));
     // The floor at the top of the curve is the all-data KF's steady-state error, which is the
     // steady state of the posterior Cramér–Rao bound on linear sensors.
     let pcrb = s.pcrb.as_ref().unwrap().steady_mse;
-    assert!((c.all_data_mse - pcrb).abs() < 1e-6 * pcrb, "{} vs {pcrb}", c.all_data_mse);
+    assert!(
+        (c.all_data_mse - pcrb).abs() < 1e-6 * pcrb,
+        "{} vs {pcrb}",
+        c.all_data_mse
+    );
     // Nonlinear sensors: no floor, and the reason.
     let rss = run("arena-rss", 2);
     assert!(rss.rate_distortion_floor.is_none());

@@ -533,8 +533,15 @@ pub fn table(summary: &Summary) -> String {
         "bits/step",
         "frame bits/step",
         "downlink/step",
+        "µJ/step",
+        "R_eff",
     ];
     header.extend(traffic.map(String::from));
+    // The rate-distortion floor at each row's R_eff, beside MSE(ss) in meaning.
+    let any_floor = summary.schemes.iter().any(|s| s.floor_mse.is_some());
+    if any_floor {
+        header.push("floor(ss)".to_string());
+    }
     // Sent messages the link lost (they are in tx/step and the bits: they were sent).
     let any_link = summary.schemes.iter().any(|s| s.link.is_some());
     if any_link {
@@ -581,6 +588,11 @@ pub fn table(summary: &Summary) -> String {
         r.push(format!("{:.0}", s.bits_per_step));
         r.push(format!("{:.0}", s.frame_bits_per_step));
         r.push(format!("{:.0}", s.downlink_bits_per_step));
+        r.push(format!("{:.1}", s.energy.energy_per_step_uj));
+        r.push(format!("{:.1}", s.r_eff_per_step));
+        if any_floor {
+            r.push(s.floor_mse.map_or("-".into(), |f| num(f, 4)));
+        }
         if any_link {
             r.push(
                 s.link

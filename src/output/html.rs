@@ -746,6 +746,9 @@ fn results_section(h: &mut String, input: &Input) {
             "payload bits/step",
             "frame bits/step",
             "downlink bits/step",
+            "µJ/step",
+            "R_eff bits/step",
+            "floor MSE(ss)",
         ]
         .map(String::from),
     );
@@ -772,6 +775,9 @@ fn results_section(h: &mut String, input: &Input) {
             format!("{:.1}", r.bits_per_step),
             format!("{:.1}", r.frame_bits_per_step),
             format!("{:.1}", r.downlink_bits_per_step),
+            format!("{:.1}", r.energy.energy_per_step_uj),
+            format!("{:.1}", r.r_eff_per_step),
+            r.floor_mse.map_or("—".into(), |f| format!("{f:.4}")),
         ]);
         if with_link {
             row.push(
