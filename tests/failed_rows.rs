@@ -138,7 +138,7 @@ fn a_failed_variant_is_a_failed_row_and_the_others_finish() {
         "{table}"
     );
     assert_eq!(results::failed(&summary).len(), 1);
-    assert!(results::non_finite(&summary).is_empty());
+    assert!(hushfuse::metrics::finite::non_finite(&summary).is_empty());
     let json = hushfuse::metrics::summary_json(&summary).unwrap();
     let row = &json["schemes"][1];
     assert_eq!(row["failed"]["trial"], failure.trial);

@@ -252,7 +252,7 @@ fn check(text: &str) -> Result<(), String> {
             return Ok(()); // a run error exits 1 with a message: fine
         };
         let summary = results::summarize(&exp, &sums);
-        let bad = results::non_finite(&summary);
+        let bad = hushfuse::metrics::finite::non_finite(&summary);
         // A failed variant's numbers are null in summary.json by design (its row is marked
         // failed and the run exits 1), so the check reads the variants that did not fail.
         let failed = results::failed(&summary);
@@ -316,6 +316,6 @@ fn the_bases_are_valid() {
     for text in [LINEAR, PLACED] {
         let exp = build::load(text, "base.toml").unwrap();
         let sums = runner::run(&exp, runner::RunOptions { threads: 1 }, &|_| {}).unwrap();
-        assert!(results::non_finite(&results::summarize(&exp, &sums)).is_empty());
+        assert!(hushfuse::metrics::finite::non_finite(&results::summarize(&exp, &sums)).is_empty());
     }
 }

@@ -244,7 +244,7 @@ pub(crate) fn run<'py>(
             .map_err(|e| RunError::new_err(e.to_string()))?;
         let summary = results::summarize(&exp, &sums);
         python_failure(&summary)?;
-        check_finite(results::non_finite(&summary))?;
+        check_finite(hushfuse::metrics::finite::non_finite(&summary))?;
         return summary_object(py, &exp, &summary);
     };
     let shard = shard

@@ -748,7 +748,7 @@ fn assemble(ev: &Evaluator, s: &Setup, per_scheme: &[Vec<Calibrated>]) -> Outcom
     let mut texts = Vec::new();
     let header = results::summarize_schemes(&s.full, &[]);
     let pcrb = crate::metrics::pcrb::compute(&s.full).ok();
-    let floor = results::floor_of(&s.full);
+    let floor = crate::metrics::floor::floor_of(&s.full);
     for b in 0..s.budgets.len() {
         let mut row: Vec<Calibrated> = per_scheme.iter().map(|r| r[b].clone()).collect();
         let tables: Vec<toml::Table> = s

@@ -260,7 +260,7 @@ fn write_run(
     manifest.seed = Some(key.seed);
     manifest.trials = Some(key.trials);
     let files = out_dir.commit(manifest, false).map_err(RunFailure::Run)?;
-    let non_finite = results::non_finite(&summary);
+    let non_finite = crate::metrics::finite::non_finite(&summary);
     let failed = results::failed(&summary);
     Ok(Finished {
         exp,

@@ -1,7 +1,7 @@
 //! A failed variant in the outputs: its row of the terminal table and its `summary.json` value
 //! (the numbers it recorded before it failed are not results). Which variants failed, and which
 //! numbers are not finite, [`crate::metrics::results::failed`] and
-//! [`crate::metrics::results::non_finite`] say.
+//! [`crate::metrics::finite::non_finite`] say.
 
 /// A failed variant's row of the terminal table: its name and parameters, then `FAILED` and
 /// dashes (its numbers are not reported; the failure is said under the table).

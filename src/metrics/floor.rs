@@ -77,6 +77,44 @@ pub fn r_eff_per_step(
     decisions + payload_per_step * first_attempts
 }
 
+/// [`r_eff_per_step`] of one variant's sums, from its per-trial means of payload bits and
+/// messages summed over the steps (as `summarize_schemes` has them).
+pub fn r_eff_of(exp: &Experiment, sums: &Sums, bits: f64, messages: f64) -> f64 {
+    let trials = exp.trials as f64;
+    r_eff_per_step(
+        sums,
+        exp.system.n_sensors(),
+        bits / exp.steps.max(1) as f64,
+        messages * trials,
+        // Retransmissions: the link's counter 4 (`LINK_COUNTERS`).
+        sums.link.iter().map(|r| r[4] as f64).sum(),
+    )
+}
+
+/// The rate–distortion floor of `exp`'s system and its curve, or why there is none.
+pub type ScenarioFloor = Result<
+    (
+        crate::metrics::floor::Floor,
+        crate::metrics::floor::FloorCurve,
+    ),
+    String,
+>;
+
+/// [`ScenarioFloor`] of `exp` (a dozen small programs: computed once per run).
+pub fn floor_of(exp: &Experiment) -> ScenarioFloor {
+    Floor::of(exp).and_then(|f| f.curve().map(|c| (f, c)))
+}
+
+/// The floor of each of `rates` (bits per step): `None` without a scenario floor, or where the
+/// rate is too low for a finite one. Independent programs, solved in parallel.
+pub fn floors_at(floor: &ScenarioFloor, rates: &[f64]) -> Vec<Option<f64>> {
+    use rayon::prelude::*;
+    match floor {
+        Ok((f, _)) => rates.par_iter().map(|r| f.mse_at(*r).ok()).collect(),
+        Err(_) => vec![None; rates.len()],
+    }
+}
+
 /// The floor as a curve, for `summary.json` (`rate_distortion_floor`) and the plots.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct FloorCurve {

@@ -2,6 +2,7 @@
 //! can beat.
 pub mod energy;
 mod failed;
+pub mod finite;
 pub mod floor;
 pub mod link;
 pub mod notes;

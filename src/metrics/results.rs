@@ -40,6 +40,27 @@ pub struct TrafficPerStep {
     pub downlink_bits_se: Vec<f64>,
 }
 
+impl TrafficPerStep {
+    /// From the per-step mean (`col`) and standard error (`col_se`) of a layout field, and the
+    /// division by the number of sensors (`per_sensor`) that makes a rate of messages.
+    fn of(
+        col: &dyn Fn(usize) -> Vec<f64>,
+        col_se: &dyn Fn(usize) -> Vec<f64>,
+        per_sensor: &dyn Fn(Vec<f64>) -> Vec<f64>,
+    ) -> Self {
+        Self {
+            rate: per_sensor(col(Layout::MESSAGES)),
+            rate_se: per_sensor(col_se(Layout::MESSAGES)),
+            payload_bits: col(Layout::BITS),
+            payload_bits_se: col_se(Layout::BITS),
+            frame_bits: col(Layout::FRAME_BITS),
+            frame_bits_se: col_se(Layout::FRAME_BITS),
+            downlink_bits: col(Layout::DOWNLINK_BITS),
+            downlink_bits_se: col_se(Layout::DOWNLINK_BITS),
+        }
+    }
+}
+
 /// Results of one scheme variant.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct SchemeSummary {
@@ -213,46 +234,21 @@ pub struct Summary {
 pub fn summarize(exp: &Experiment, sums: &[Sums]) -> Summary {
     let mut s = summarize_schemes(exp, sums);
     s.pcrb = crate::metrics::pcrb::compute(exp).ok();
-    add_floor(exp, &mut s);
+    apply_floor(&crate::metrics::floor::floor_of(exp), &mut s);
     s
 }
 
-/// The rate–distortion floor of `exp`'s system and its curve, or why there is none.
-pub type ScenarioFloor = Result<
-    (
-        crate::metrics::floor::Floor,
-        crate::metrics::floor::FloorCurve,
-    ),
-    String,
->;
-
-/// [`ScenarioFloor`] of `exp` (a dozen small programs: computed once per run).
-pub fn floor_of(exp: &Experiment) -> ScenarioFloor {
-    crate::metrics::floor::Floor::of(exp).and_then(|f| f.curve().map(|c| (f, c)))
-}
-
-/// Fills in the rate–distortion floor of `exp`'s system: the curve, and each scheme's floor at
-/// its `r_eff_per_step` (or the reason there is none).
-pub fn add_floor(exp: &Experiment, s: &mut Summary) {
-    apply_floor(&floor_of(exp), s);
-}
-
-/// [`add_floor`] with the floor computed already.
-pub fn apply_floor(floor: &ScenarioFloor, s: &mut Summary) {
-    match floor {
-        Ok((f, curve)) => {
-            use rayon::prelude::*;
-            s.schemes
-                .par_iter_mut()
-                .for_each(|sc| sc.floor_mse = f.mse_at(sc.r_eff_per_step).ok());
-            s.rate_distortion_floor = Some(curve.clone());
-            s.rate_distortion_floor_note = None;
-        }
-        Err(why) => {
-            s.rate_distortion_floor = None;
-            s.rate_distortion_floor_note = Some(why.clone());
-        }
+/// Fills in the rate–distortion floor of a summary's system (`floor`, from
+/// [`crate::metrics::floor::floor_of`]): the curve, and each scheme's floor at its
+/// `r_eff_per_step`, or the reason there is none.
+pub fn apply_floor(floor: &crate::metrics::floor::ScenarioFloor, s: &mut Summary) {
+    let rates: Vec<f64> = s.schemes.iter().map(|x| x.r_eff_per_step).collect();
+    let at = crate::metrics::floor::floors_at(floor, &rates);
+    for (x, f) in s.schemes.iter_mut().zip(at) {
+        x.floor_mse = f;
     }
+    s.rate_distortion_floor = floor.as_ref().ok().map(|(_, c)| c.clone());
+    s.rate_distortion_floor_note = floor.as_ref().err().cloned();
 }
 
 /// [`summarize`] without the bound: for the many pilot runs of a calibration, whose bound is
@@ -291,16 +287,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
             }
             let per_sensor =
                 |v: Vec<f64>| -> Vec<f64> { v.into_iter().map(|x| x / n_sensors).collect() };
-            let traffic_per_step = TrafficPerStep {
-                rate: per_sensor(col(Layout::MESSAGES)),
-                rate_se: per_sensor(col_se(Layout::MESSAGES)),
-                payload_bits: col(Layout::BITS),
-                payload_bits_se: col_se(Layout::BITS),
-                frame_bits: col(Layout::FRAME_BITS),
-                frame_bits_se: col_se(Layout::FRAME_BITS),
-                downlink_bits: col(Layout::DOWNLINK_BITS),
-                downlink_bits_se: col_se(Layout::DOWNLINK_BITS),
-            };
+            let traffic_per_step = TrafficPerStep::of(&col, &col_se, &per_sensor);
             let p_div = s.diverged as f64 / trials;
             let anees_per_step: Vec<f64> = col(Layout::NEES).into_iter().map(|x| x / n).collect();
             let messages: f64 = col(Layout::MESSAGES).iter().sum();
@@ -360,13 +347,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 downlink_bits_per_step: downlink_bits / steps as f64,
                 downlink_bits_per_step_se: run_se(Layout::DOWNLINK_BITS, 1.0),
                 energy: crate::metrics::energy::of_variant(exp, v, s),
-                r_eff_per_step: crate::metrics::floor::r_eff_per_step(
-                    s,
-                    exp.system.n_sensors(),
-                    bits / steps as f64,
-                    messages * trials,
-                    s.link.iter().map(|r| r[4] as f64).sum(),
-                ),
+                r_eff_per_step: crate::metrics::floor::r_eff_of(exp, s, bits, messages),
                 floor_mse: None,
                 traffic_per_step,
                 degenerate_covariance_fraction: degenerate / steps as f64,
@@ -794,60 +775,6 @@ pub fn failed(summary: &Summary) -> Vec<String> {
             ))
         })
         .collect()
-}
-
-/// Where a summary holds a number that is not finite (an overflow or a collapsed filter):
-/// `scheme (params): metric` for each. A run that produces one must not look like a success.
-pub fn non_finite(summary: &Summary) -> Vec<String> {
-    let mut out = Vec::new();
-    // A failed variant's numbers are null by design; [`failed`] reports it.
-    for s in summary.schemes.iter().filter(|s| s.failed.is_none()) {
-        let value = serde_json::to_value(s).unwrap_or(serde_json::Value::Null);
-        let mut bad = Vec::new();
-        find_nulls(&value, "", &mut bad);
-        // With one trial no standard error exists: its NaN says so, and is no overflow.
-        if summary.trials < 2 {
-            bad.retain(|path| !path.split('.').any(|seg| seg.contains("_se")));
-        }
-        // No floor (none for the scenario, or a rate too low for a finite one) is a null by
-        // design: `rate_distortion_floor_note` says why.
-        bad.retain(|path| path != "floor_mse");
-        bad.dedup();
-        if !bad.is_empty() {
-            out.push(format!(
-                "{} ({}): {}",
-                s.name,
-                params_text(&s.params),
-                bad.join(", ")
-            ));
-        }
-    }
-    out
-}
-
-/// JSON has no NaN or infinity: serde writes them as `null`, and nothing else in a scheme's
-/// summary is optional.
-fn find_nulls(v: &serde_json::Value, path: &str, out: &mut Vec<String>) {
-    match v {
-        serde_json::Value::Null => out.push(path.to_string()),
-        serde_json::Value::Object(m) => {
-            for (k, x) in m {
-                let p = if path.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{path}.{k}")
-                };
-                find_nulls(x, &p, out);
-            }
-        }
-        // A per-step or per-trial list is named once, not once per entry.
-        serde_json::Value::Array(a) => {
-            for x in a {
-                find_nulls(x, path, out);
-            }
-        }
-        _ => {}
-    }
 }
 
 #[cfg(test)]

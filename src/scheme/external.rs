@@ -12,15 +12,12 @@
 //!
 //! Registration leaks the declaration's strings (a registered kind lives as long as the
 //! process, like the built-in list); registering a kind again replaces its builder.
-use super::registry::{Applies, BuildContext, Knob, ParamDoc, ParamError, SchemeEntry};
+use super::registry::{self, Applies, BuildContext, Knob, ParamDoc, ParamError, SchemeEntry};
 use super::Scheme;
 use crate::link::codec802154::{self, crc16_kermit, BROADCAST, FRAME_CONTROL};
 use crate::link::Message;
-use std::sync::{Arc, RwLock};
 
-/// Turns a scheme table (its parameters, without `kind`, `label`, `sweep`) into the scheme.
-pub type Builder =
-    Arc<dyn Fn(toml::Table, &BuildContext) -> Result<Box<dyn Scheme>, ParamError> + Send + Sync>;
+pub use super::registry::RuntimeBuilder as Builder;
 
 /// A scheme kind declared at run time.
 pub struct Declaration {
@@ -37,13 +34,6 @@ pub struct Declaration {
     pub example: String,
     pub builder: Builder,
 }
-
-struct Registered {
-    entry: &'static SchemeEntry,
-    builder: Builder,
-}
-
-static EXTERNAL: RwLock<Vec<Registered>> = RwLock::new(Vec::new());
 
 fn leak(s: String) -> &'static str {
     Box::leak(s.into_boxed_str())
@@ -101,53 +91,23 @@ pub fn register(d: Declaration) -> Result<(), String> {
         example: leak(d.example),
         missing_packet: "a missing packet reaches the center as nothing (Received::NotScheduled is not used; the center sees a silence): the scheme's own center decides",
     }));
-    let mut list = EXTERNAL.write().unwrap_or_else(|e| e.into_inner());
-    list.retain(|r| r.entry.kind != entry.kind);
-    list.push(Registered {
-        entry,
-        builder: d.builder,
-    });
+    registry::register_runtime(entry, d.builder);
     Ok(())
 }
 
 /// Removes an external kind; whether it was registered.
 pub fn unregister(kind: &str) -> bool {
-    let mut list = EXTERNAL.write().unwrap_or_else(|e| e.into_inner());
-    let before = list.len();
-    list.retain(|r| r.entry.kind != kind);
-    list.len() != before
-}
-
-/// The entry of a registered external kind.
-pub fn find(kind: &str) -> Option<&'static SchemeEntry> {
-    let list = EXTERNAL.read().unwrap_or_else(|e| e.into_inner());
-    list.iter().find(|r| r.entry.kind == kind).map(|r| r.entry)
+    registry::unregister_runtime(kind)
 }
 
 /// Every registered external kind, in registration order.
 pub fn kinds() -> Vec<&'static str> {
-    let list = EXTERNAL.read().unwrap_or_else(|e| e.into_inner());
-    list.iter().map(|r| r.entry.kind).collect()
+    registry::runtime_kinds()
 }
 
 /// Whether `kind` is a registered external kind.
 pub fn is_external(kind: &str) -> bool {
-    find(kind).is_some()
-}
-
-/// Builds the external kind `kind` from its table; `None` when no such kind is registered.
-pub fn build(
-    kind: &str,
-    table: toml::Table,
-    cx: &BuildContext,
-) -> Option<Result<Box<dyn Scheme>, ParamError>> {
-    let builder = {
-        let list = EXTERNAL.read().unwrap_or_else(|e| e.into_inner());
-        list.iter()
-            .find(|r| r.entry.kind == kind)
-            .map(|r| r.builder.clone())?
-    };
-    Some(builder(table, cx))
+    registry::find_runtime(kind).is_some()
 }
 
 /// Octets of the MAC header before a payload frame's payload.
@@ -206,6 +166,7 @@ pub fn frame_payload(frame: &[u8]) -> Option<&[u8]> {
 mod tests {
     use super::*;
     use crate::scheme::registry;
+    use std::sync::Arc;
 
     #[test]
     fn payload_frames_are_priced_as_any_message() {

@@ -295,33 +295,80 @@ fn backticked(message: &str, prefix: &str) -> Option<String> {
 
 pub use super::SCHEMES;
 
+/// Builds a scheme of a kind registered at run time from its table (a closure: a function
+/// pointer cannot hold, e.g., the Python objects of a user's scheme).
+pub type RuntimeBuilder = std::sync::Arc<
+    dyn Fn(toml::Table, &BuildContext) -> Result<Box<dyn Scheme>, ParamError> + Send + Sync,
+>;
+
+/// The kinds registered at run time ([`super::external`] declares and checks them), beside the
+/// built-in [`SCHEMES`]: the registry is the one place every kind is looked up.
+static RUNTIME: std::sync::RwLock<Vec<(&'static SchemeEntry, RuntimeBuilder)>> =
+    std::sync::RwLock::new(Vec::new());
+
+fn runtime() -> std::sync::RwLockReadGuard<'static, Vec<(&'static SchemeEntry, RuntimeBuilder)>> {
+    RUNTIME.read().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Adds (or replaces) a kind registered at run time.
+pub fn register_runtime(entry: &'static SchemeEntry, builder: RuntimeBuilder) {
+    let mut list = RUNTIME.write().unwrap_or_else(|e| e.into_inner());
+    list.retain(|(e, _)| e.kind != entry.kind);
+    list.push((entry, builder));
+}
+
+/// Removes a kind registered at run time; whether it was there.
+pub fn unregister_runtime(kind: &str) -> bool {
+    let mut list = RUNTIME.write().unwrap_or_else(|e| e.into_inner());
+    let before = list.len();
+    list.retain(|(e, _)| e.kind != kind);
+    list.len() != before
+}
+
+/// The entry of a kind registered at run time.
+pub fn find_runtime(kind: &str) -> Option<&'static SchemeEntry> {
+    runtime()
+        .iter()
+        .find(|(e, _)| e.kind == kind)
+        .map(|(e, _)| *e)
+}
+
+/// The kinds registered at run time, in registration order.
+pub fn runtime_kinds() -> Vec<&'static str> {
+    runtime().iter().map(|(e, _)| e.kind).collect()
+}
+
 /// The entry of a kind.
 pub fn find(kind: &str) -> Option<&'static SchemeEntry> {
     SCHEMES
         .iter()
         .find(|e| e.kind == kind)
-        .or_else(|| super::external::find(kind))
+        .or_else(|| find_runtime(kind))
 }
 
 /// Builds a scheme of `entry`'s kind from its table: the entry's own builder, or the builder
-/// of a kind registered at run time ([`super::external`]).
+/// of a kind registered at run time.
 pub fn build_entry(
     entry: &SchemeEntry,
     table: toml::Table,
     cx: &BuildContext,
 ) -> Result<Box<dyn Scheme>, ParamError> {
     if !SCHEMES.iter().any(|e| e.kind == entry.kind) {
-        if let Some(r) = super::external::build(entry.kind, table.clone(), cx) {
-            return r;
+        let builder = runtime()
+            .iter()
+            .find(|(e, _)| e.kind == entry.kind)
+            .map(|(_, b)| b.clone());
+        if let Some(b) = builder {
+            return b(table, cx);
         }
     }
     (entry.build)(table, cx)
 }
 
-/// The known kinds, for error messages.
+/// The known kinds, for error messages: the built-in ones, then those registered at run time.
 pub fn kinds() -> Vec<&'static str> {
     let mut k: Vec<&'static str> = SCHEMES.iter().map(|e| e.kind).collect();
-    k.extend(super::external::kinds());
+    k.extend(runtime_kinds());
     k
 }
 

@@ -234,7 +234,7 @@ fn check_arena_finite(out: &calibrate::Outcome, budgets: &[f64]) -> Result<(), F
         .iter()
         .zip(budgets)
         .flat_map(|(s, b)| {
-            results::non_finite(s)
+            hushfuse::metrics::finite::non_finite(s)
                 .into_iter()
                 .map(move |m| format!("budget {}: {m}", calibrate::dir_label(*b)))
         })
@@ -402,7 +402,7 @@ pub(crate) fn quick_arena() -> Result<(), Failure> {
     for (axis, budgets) in arena::QUICK_AXES {
         let opts = calibrate::Options {
             axis,
-            load: load.clone(),
+            load,
             ..Default::default()
         };
         let out = calibrate::calibrate(text, &source, budgets, &opts).map_err(Failure::Run)?;

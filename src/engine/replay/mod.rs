@@ -751,7 +751,7 @@ pub fn non_finite_estimates(exp: &Experiment, rep: &Replayed) -> Vec<String> {
     bad
 }
 
-/// [`crate::metrics::results::non_finite`] for a replay: one trial has no standard errors (they are
+/// [`crate::metrics::finite::non_finite`] for a replay: one trial has no standard errors (they are
 /// NaN, written as null), which is not a failure; anything else not finite is.
 pub fn non_finite(summary: &crate::metrics::results::Summary) -> Vec<String> {
     let mut check = summary.clone();
@@ -759,5 +759,5 @@ pub fn non_finite(summary: &crate::metrics::results::Summary) -> Vec<String> {
         let ss = &mut s.steady_state;
         (ss.mse_se, ss.trace_se, ss.rate_se) = (0.0, 0.0, 0.0);
     }
-    crate::metrics::results::non_finite(&check)
+    crate::metrics::finite::non_finite(&check)
 }

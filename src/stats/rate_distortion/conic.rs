@@ -161,6 +161,21 @@ impl ConeProgram {
     }
 }
 
+/// OpenBLAS on one thread, once per process. The programs here have matrices of order below
+/// ten: OpenBLAS's worker threads only spin on them (a floor of Dormann et al.'s 93 curves took
+/// 4 s of system time on 2 cores with its default threads, none with one), and the runs already
+/// use every core.
+#[cfg(hushfuse_openblas)]
+fn single_threaded_blas() {
+    extern "C" {
+        fn openblas_set_num_threads(n: std::os::raw::c_int);
+    }
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    // SAFETY: OpenBLAS's documented setter, called with a valid count before any of our calls
+    // into it (and again harmless if another part of the process set it).
+    ONCE.call_once(|| unsafe { openblas_set_num_threads(1) });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -198,19 +213,4 @@ mod tests {
         assert!((x[6] + x[7]).abs() < 1e-7, "{x:?}");
         assert!((x[0] - 1.0).abs() < 1e-4 && x[1].abs() < 1e-4, "{x:?}");
     }
-}
-
-/// OpenBLAS on one thread, once per process. The programs here have matrices of order below
-/// ten: OpenBLAS's worker threads only spin on them (a floor of Dormann et al.'s 93 curves took
-/// 4 s of system time on 2 cores with its default threads, none with one), and the runs already
-/// use every core.
-#[cfg(hushfuse_openblas)]
-fn single_threaded_blas() {
-    extern "C" {
-        fn openblas_set_num_threads(n: std::os::raw::c_int);
-    }
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    // SAFETY: OpenBLAS's documented setter, called with a valid count before any of our calls
-    // into it (and again harmless if another part of the process set it).
-    ONCE.call_once(|| unsafe { openblas_set_num_threads(1) });
 }
