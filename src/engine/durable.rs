@@ -23,8 +23,9 @@ const MAGIC: &[u8; 8] = b"HUSHFUSE";
 /// Version of the file layout and of [`State`]; files of another version are refused.
 /// 2: `Sums::per_trial` flat. 3: `Sums::link` (the link's per-step counts). 4: `Sums::link`
 /// rows of 8 counters (ARQ's retransmissions, duplicates, ACK frames and ACK bits added). 5:
-/// `Sums::failure` (a variant's first failed trial).
-pub const FORMAT: u32 = 5;
+/// `Sums::failure` (a variant's first failed trial). 6: `Sums::sensors` (per-sensor scheduled and
+/// sent steps, for the entropy-coded rate).
+pub const FORMAT: u32 = 6;
 const HEADER: usize = 8 + 4 + 8 + 32;
 
 /// What a run is, for telling whether a checkpoint or shard belongs to it, and how to rebuild
@@ -652,6 +653,20 @@ pub fn validate_sums(
                 "link",
                 format!("{} steps long", s.link.len()),
                 format!("empty or {} steps", e.steps),
+            );
+        }
+        if s.sensors.len() > crate::network::MASKED_SENSORS {
+            return bad(
+                "sensors",
+                format!("{} sensors long", s.sensors.len()),
+                format!("at most {}", crate::network::MASKED_SENSORS),
+            );
+        }
+        if let Some(c) = s.sensors.iter().find(|c| c[1] > c[0]) {
+            return bad(
+                "sensors",
+                format!("a sensor sent {} times in {} scheduled steps", c[1], c[0]),
+                "at most once a scheduled step".into(),
             );
         }
         if !counted {

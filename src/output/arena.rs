@@ -376,7 +376,10 @@ pub fn write_plots(
     let g = group.to_string();
     plot::lines(
         &dir.join(&f),
-        &format!("{scenario}: mean RMSE of {group} against bits"),
+        &format!(
+            "{scenario}: mean RMSE of {group} against {}",
+            out.axis.unit()
+        ),
         &x,
         &format!("mean RMSE {group}"),
         &with_bound(
@@ -395,7 +398,10 @@ pub fn write_plots(
     let f = "anees_vs_bits.svg".to_string();
     plot::lines(
         &dir.join(&f),
-        &format!("{scenario}: ANEES against bits (1 = consistent)"),
+        &format!(
+            "{scenario}: ANEES against {} (1 = consistent)",
+            out.axis.unit()
+        ),
         &x,
         "ANEES",
         &bits_lines(out, &|c| c.result.anees, false),

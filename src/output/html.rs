@@ -623,7 +623,7 @@ fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), Strin
     let x = format!("{} per step (achieved)", out.axis.unit());
     let g = group.to_string();
     let svg = plot::lines_svg(
-        &format!("mean RMSE of {group} against bits"),
+        &format!("mean RMSE of {group} against {}", out.axis.unit()),
         &x,
         &format!("mean RMSE {group}"),
         &arena::bits_lines(
@@ -632,9 +632,13 @@ fn arena_section(h: &mut String, out: &Outcome, group: &str) -> Result<(), Strin
             true,
         ),
     )?;
-    let _ = writeln!(h, "<h2>Accuracy against bits</h2>\n<figure>{svg}</figure>");
+    let _ = writeln!(
+        h,
+        "<h2>Accuracy against {}</h2>\n<figure>{svg}</figure>",
+        out.axis.unit()
+    );
     let svg = plot::lines_svg(
-        "ANEES against bits (1 = consistent)",
+        &format!("ANEES against {} (1 = consistent)", out.axis.unit()),
         &x,
         "ANEES",
         &arena::bits_lines(out, &|c| c.result.anees, false),

@@ -67,7 +67,8 @@ pub struct Sums {
     /// trials and steps: `[steps scheduled, steps it sent]`. Each sensor's send probability,
     /// whose entropy the entropy-coded rate `r_eff_per_step` charges. Integers (the order of
     /// additions changes nothing); as long as the highest sensor that was ever scheduled.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    /// (Always written: checkpoints are postcard, which has no optional fields.)
+    #[serde(default)]
     pub sensors: Vec<[u64; 2]>,
 }
 
