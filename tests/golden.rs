@@ -34,7 +34,7 @@
 //! added; no other built-in changed.
 //!
 //! Issue 24 (items 2-3) added `r_eff_per_step` and `floor_mse` to every scheme and
-//! `rate_distortion_floor` (or `rate_distortion_floor_note`) to every summary: every built-in
+//! `rate_distortion_floor` (absent, with `rate_distortion_floor_note`, where there is none) to every summary: every built-in
 //! but the classic ones, run at these trials by the binary of the commit before (3b5e7ea, with
 //! the fair rows) and by the new one, compared equal on every pre-existing key
 //! (`scripts/compare-summaries.py`), and all hashes were re-recorded.
@@ -48,32 +48,32 @@ use std::process::Command;
 const GOLDEN: &[(&str, usize, u64, usize)] = &[
     ("default", 8, 0x8c71ee02b8a5787b, 553153),
     ("dormann-fig1", 8, 0xeb93e304a54f4571, 5089836),
-    ("zhang-fig4", 8, 0xf5584d5d1dccdb9e, 222265),
-    ("zhang-fig5", 8, 0xb0bd8fd45b1a2393, 221880),
+    ("zhang-fig4", 8, 0xca069074a4c14e1a, 222232),
+    ("zhang-fig5", 8, 0x19f3b4ca70c566bd, 221847),
     ("zhang-table7", 8, 0x583977c3ff48095b, 1066),
     ("zhang-tables", 8, 0xdb5625c0f613852d, 2560),
-    ("zheng-fig1", 8, 0x10d07a01018fbfb4, 65926),
-    ("zheng-fig10-table3", 2, 0xe4b5b56fc078f420, 85594),
-    ("zheng-fig2-table1", 8, 0x5972b4a78fe5013e, 151804),
-    ("zheng-fig3", 8, 0xe540529cd98c5325, 80247),
-    ("zheng-fig4", 8, 0x40f67e0a86b565c9, 66102),
-    ("zheng-fig5-table2", 8, 0xf5d6020a6e62b68f, 96756),
-    ("zheng-fig6", 8, 0x7ca1edea6a1078c7, 79961),
-    ("zheng-fig8", 2, 0x21c41856b77fc0ed, 56658),
-    ("zheng-fig9", 2, 0xebb5dbc7051b1015, 253031),
-    ("zheng-nofb-n4", 8, 0x2bad352c1d0738bc, 135111),
-    ("geng-oscillator", 8, 0x2f40f2455cd14b4c, 1086763),
-    ("geng-tracking", 8, 0xa66d760243fcc454, 313999),
+    ("zheng-fig1", 8, 0x1c5f4b144bf5b520, 65893),
+    ("zheng-fig10-table3", 2, 0x953ec6737a2c572c, 85561),
+    ("zheng-fig2-table1", 8, 0xb38abd1265b429ec, 151771),
+    ("zheng-fig3", 8, 0x3d03649cb167238f, 80214),
+    ("zheng-fig4", 8, 0x3bd7ea975ac07fad, 66069),
+    ("zheng-fig5-table2", 8, 0x5f78c2f0dc8092a5, 96723),
+    ("zheng-fig6", 8, 0x7c829ec54c378d79, 79928),
+    ("zheng-fig8", 2, 0x082eb91d690d6fb7, 56625),
+    ("zheng-fig9", 2, 0x97706eecade1285f, 252998),
+    ("zheng-nofb-n4", 8, 0x19d8da1e29619980, 135078),
+    ("geng-oscillator", 8, 0xd2dd3b5fb5982578, 1086730),
+    ("geng-tracking", 8, 0x8c09ec5d6c410346, 313966),
     ("sinopoli-critical", 8, 0xbbfbe79e70d9b327, 846547),
     ("gilbert-elliott-stability", 8, 0x6957f77732781e89, 718382),
     ("classic-quantized-kf", 8, 0xae8e662a21d0072a, 200216),
-    ("classic-one-bit-static", 8, 0xc347f1fbb82a8c88, 158052),
+    ("classic-one-bit-static", 8, 0x0060c26de681ebd4, 158019),
     ("classic-one-bit-tracking", 8, 0xfe21921e6b198f1f, 305588),
     ("arena-1d", 4, 0x87244ea5d62a7a32, 810763),
     ("arena-nca", 4, 0xe711081a962d4c29, 723038),
-    ("arena-rss", 4, 0xe2dc4b2750b98230, 123612),
-    ("arena-wsn", 4, 0xa9d2103a174e9157, 344407),
-    ("arena-tobit", 4, 0x098940b7a00b456a, 909694),
+    ("arena-rss", 4, 0xd395e6367819e86c, 123579),
+    ("arena-wsn", 4, 0x0692ef29bdfda84d, 344374),
+    ("arena-tobit", 4, 0x898bc3d4bca059f6, 909661),
 ];
 
 /// FNV-1a, 64 bits: a stable hash written out (std's hasher may change between releases).

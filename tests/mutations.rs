@@ -258,6 +258,11 @@ fn check(text: &str) -> Result<(), String> {
         let failed = results::failed(&summary);
         let mut finished = summary.clone();
         finished.schemes.retain(|s| s.failed.is_none());
+        // No floor at a scheme's rate (none for the scenario, or a rate too low for a finite
+        // one) is a null by design, not a non-finite number.
+        for s in &mut finished.schemes {
+            s.floor_mse.get_or_insert(0.0);
+        }
         // The CLI turns these into exit code 1; here the function must find them.
         let json = serde_json::to_string(&finished).unwrap();
         if bad.is_empty() && json.contains("null") {

@@ -655,19 +655,8 @@ pub fn validate_sums(
                 format!("empty or {} steps", e.steps),
             );
         }
-        if s.sensors.len() > crate::network::MASKED_SENSORS {
-            return bad(
-                "sensors",
-                format!("{} sensors long", s.sensors.len()),
-                format!("at most {}", crate::network::MASKED_SENSORS),
-            );
-        }
-        if let Some(c) = s.sensors.iter().find(|c| c[1] > c[0]) {
-            return bad(
-                "sensors",
-                format!("a sensor sent {} times in {} scheduled steps", c[1], c[0]),
-                "at most once a scheduled step".into(),
-            );
+        if let Some((got, expected)) = sensors_problem(s) {
+            return bad("sensors", got, expected);
         }
         if !counted {
             continue;
@@ -732,6 +721,24 @@ pub fn validate(exp: &Experiment, state: &State) -> Result<(), String> {
             )
         }),
     }
+}
+
+/// What is wrong with a checkpoint's per-sensor counts ([`Sums::sensors`]), as (got,
+/// expected): more sensors than are recorded, or a sensor that sent more often than it was
+/// scheduled.
+fn sensors_problem(s: &Sums) -> Option<(String, String)> {
+    if s.sensors.len() > crate::network::MASKED_SENSORS {
+        return Some((
+            format!("{} sensors long", s.sensors.len()),
+            format!("at most {}", crate::network::MASKED_SENSORS),
+        ));
+    }
+    s.sensors.iter().find(|c| c[1] > c[0]).map(|c| {
+        (
+            format!("a sensor sent {} times in {} scheduled steps", c[1], c[0]),
+            "at most once a scheduled step".to_string(),
+        )
+    })
 }
 
 #[cfg(test)]

@@ -221,8 +221,8 @@ pub struct Summary {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pcrb: Option<crate::metrics::pcrb::Pcrb>,
     /// The rate–distortion floor as a curve of steady-state MSE against bits per step
-    /// ([`crate::metrics::floor`]); null where the scenario has none.
-    #[serde(default)]
+    /// ([`crate::metrics::floor`]); absent where the scenario has none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rate_distortion_floor: Option<crate::metrics::floor::FloorCurve>,
     /// Why `rate_distortion_floor` is null.
     #[serde(default, skip_serializing_if = "Option::is_none")]
