@@ -201,12 +201,19 @@ pub fn diverged_legend(out: &Outcome, group: &str) -> Option<String> {
 
 /// The best-per-budget table as text, with the bound below it where there is one.
 pub fn best_table(out: &Outcome, group: &str) -> String {
-    let mut s = render(&best_per_budget(out, group));
-    if let Some(line) = diverged_legend(out, group) {
+    let mut s = best_rows(out, group);
+    if let Some(line) = bound_line(out, group) {
         s.push_str(&line);
         s.push('\n');
     }
-    if let Some(line) = bound_line(out, group) {
+    s
+}
+
+/// The best-per-budget table as text with its † legend, without the bound (the quick arena
+/// prints several tables and the bound once).
+pub fn best_rows(out: &Outcome, group: &str) -> String {
+    let mut s = render(&best_per_budget(out, group));
+    if let Some(line) = diverged_legend(out, group) {
         s.push_str(&line);
         s.push('\n');
     }
@@ -215,7 +222,7 @@ pub fn best_table(out: &Outcome, group: &str) -> String {
 
 /// The posterior Cramér–Rao bound on the mean RMSE of `group` (every sensor at every step,
 /// any estimator): no scheme can be below it, whatever its budget.
-fn bound_line(out: &Outcome, group: &str) -> Option<String> {
+pub fn bound_line(out: &Outcome, group: &str) -> Option<String> {
     let b = out.summaries.first()?.pcrb.as_ref()?;
     let r = b.mean_rmse.get(group)?;
     Some(format!(

@@ -409,18 +409,14 @@ pub(crate) fn quick_arena() -> Result<(), Failure> {
         let group = out.summaries[0].group_order[0].clone();
         evaluations += out.evaluations;
         msg.push_str(&arena::quick_heading(&out, asleep));
-        let table = arena::best_table(&out, &group);
-        // The bound's line is the same under every table: once, at the end.
-        let (rows, line) = match table.find("bound: ") {
-            Some(i) => (&table[..i], Some(table[i..].to_string())),
-            None => (&table[..], None),
-        };
-        msg.push_str(rows);
-        bound = bound.or(line);
+        msg.push_str(&arena::best_rows(&out, &group));
+        // The bound is the same under every table: printed once, at the end.
+        bound = bound.or_else(|| arena::bound_line(&out, &group));
     }
     msg.push_str(&format!("\n{}\n", arena::SPEND_LEGEND));
     if let Some(line) = bound {
         msg.push_str(&line);
+        msg.push('\n');
     }
     msg.push_str(&format!(
         "\n({} pilot runs, {:.1} s. `hushfuse list` shows the built-in scenarios, `hushfuse run default` the Dormann et al. comparison, `hushfuse --help` the commands.)\n",
