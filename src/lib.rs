@@ -57,6 +57,7 @@ pub mod engine;
 pub mod filter;
 pub mod linalg;
 pub mod link;
+pub mod live;
 pub mod metrics;
 pub mod model;
 pub mod network;

@@ -3,6 +3,7 @@
 //! own module (`run`: run and reproduce; `merge`; `arena_cmd`: budgets and the quick arena;
 //! `report_cmd`; `replay_cmd`). The modules share this file's imports through `use super::*`.
 mod arena_cmd;
+mod live_cmd;
 mod merge;
 mod replay_cmd;
 mod report_cmd;
@@ -148,6 +149,10 @@ enum Command {
         /// Run even if the estimated memory or run time is above the limits.
         #[arg(long)]
         allow_large: bool,
+        /// Over a lossy link: every packet lost with probability P (as `hushfuse run --loss`),
+        /// with the fates of trial K.
+        #[arg(long, value_name = "P")]
+        loss: Option<f64>,
     },
     /// Merge the shard files of `run --shard I/N` (files, or folders holding them) into the
     /// outputs of the whole run, byte for byte those of an unsharded run.
@@ -169,6 +174,85 @@ enum Command {
         /// Print the reference as Markdown (the text of docs/scenarios.md).
         #[arg(long)]
         markdown: bool,
+    },
+    /// The fusion center of a live run: listens for the sensor nodes (UDP), announces each
+    /// step, fuses the 802.15.4 frames that arrive, sends the feedback; appends every fused step
+    /// to OUT/estimates.csv (flushed).
+    Center {
+        /// Path of a TOML scenario, or the name of a built-in one.
+        scenario: String,
+        /// Address to listen on (HOST:PORT).
+        #[arg(long, value_name = "HOST:PORT")]
+        listen: String,
+        #[command(flatten)]
+        run: live_cmd::LiveRun,
+        #[command(flatten)]
+        pacing: live_cmd::Pacing,
+        /// Output folder (default: hushfuse-out/<scenario>-live/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Continue an interrupted center from the journal in its output folder.
+        #[arg(long)]
+        resume: bool,
+    },
+    /// One sensor node of a live run: reads its measurements (simulated as trial K, from a
+    /// recording, or from standard input), runs its scheme's sensor side, sends real 802.15.4
+    /// frames to the center.
+    Node {
+        /// Path of a TOML scenario, or the name of a built-in one.
+        scenario: String,
+        /// Which sensor (0-based, the order of the scenario's sensors).
+        #[arg(long)]
+        sensor: usize,
+        /// The center's (or the channel proxy's) address.
+        #[arg(long, value_name = "HOST:PORT")]
+        connect: String,
+        #[command(flatten)]
+        run: live_cmd::LiveRun,
+        /// Recorded measurements (the CSV `hushfuse replay` reads); this sensor's rows are used.
+        #[arg(long, value_name = "FILE.csv", conflicts_with = "stdin")]
+        measurements: Option<PathBuf>,
+        /// Read one line per step from standard input (the components, separated by commas or
+        /// spaces; an empty line: no reading).
+        #[arg(long)]
+        stdin: bool,
+        /// Give up after SECS without a word from the center.
+        #[arg(long, value_name = "SECS", default_value_t = 60.0)]
+        give_up: f64,
+    },
+    /// A live run on this machine: the center, one node process per sensor, and the channel
+    /// proxy when the scenario's link loses packets. Writes the estimates.csv of `replay`.
+    Live {
+        /// Path of a TOML scenario, or the name of a built-in one.
+        scenario: String,
+        #[command(flatten)]
+        run: live_cmd::LiveRun,
+        #[command(flatten)]
+        pacing: live_cmd::Pacing,
+        /// Recorded measurements (default: trial K simulated).
+        #[arg(long, value_name = "FILE.csv")]
+        measurements: Option<PathBuf>,
+        /// Recorded truth (checked against the measurements' steps).
+        #[arg(long, value_name = "FILE.csv")]
+        truth: Option<PathBuf>,
+        /// Output folder (default: hushfuse-out/<scenario>-live/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Relay between the nodes and the center that applies the scenario's [channel] with the
+    /// simulation's fates (same seed and trial): lost frames are dropped, lost feedback is
+    /// taken out of the step's announcement.
+    ChannelProxy {
+        /// Path of a TOML scenario, or the name of a built-in one.
+        scenario: String,
+        /// Address the nodes send to (HOST:PORT; port 0: any free port, printed).
+        #[arg(long, value_name = "HOST:PORT")]
+        listen: String,
+        /// The center's address.
+        #[arg(long, value_name = "HOST:PORT")]
+        center: String,
+        #[command(flatten)]
+        run: live_cmd::LiveRun,
     },
     /// Run a built-in paper scenario and print our numbers beside the paper's, and its claims.
     Reproduce {
@@ -249,6 +333,7 @@ fn main() -> ExitCode {
             seed,
             trial,
             allow_large,
+            loss,
         }) => replay(&ReplayArgs {
             scenario: &scenario,
             measurements: &measurements,
@@ -257,7 +342,53 @@ fn main() -> ExitCode {
             seed,
             trial,
             allow_large,
+            loss,
         }),
+        Some(Command::Center {
+            scenario,
+            listen,
+            run,
+            pacing,
+            out,
+            resume,
+        }) => live_cmd::center(&scenario, &listen, &run, &pacing, out.as_deref(), resume),
+        Some(Command::Node {
+            scenario,
+            sensor,
+            connect,
+            run,
+            measurements,
+            stdin,
+            give_up,
+        }) => {
+            let source = match (&measurements, stdin) {
+                (Some(m), _) => live_cmd::Source::Csv(m),
+                (None, true) => live_cmd::Source::Stdin,
+                (None, false) => live_cmd::Source::Simulated,
+            };
+            live_cmd::node(&scenario, sensor, &connect, &run, source, give_up)
+        }
+        Some(Command::Live {
+            scenario,
+            run,
+            pacing,
+            measurements,
+            truth,
+            out,
+        }) => live_cmd::live_all(
+            &scenario,
+            &run,
+            &pacing,
+            measurements.as_deref(),
+            truth.as_deref(),
+            out.as_deref(),
+        ),
+        Some(Command::ChannelProxy {
+            scenario,
+            listen,
+            center,
+            run,
+        }) => live_cmd::channel_proxy(&scenario, &listen, &center, &run),
         Some(Command::Merge {
             shards,
             out,

@@ -9,11 +9,13 @@ pub(crate) struct ReplayArgs<'a> {
     pub(crate) seed: Option<u64>,
     pub(crate) trial: usize,
     pub(crate) allow_large: bool,
+    pub(crate) loss: Option<f64>,
 }
 
 /// `hushfuse replay`: every scheme of the scenario on recorded measurements.
 pub(crate) fn replay(a: &ReplayArgs) -> Result<(), Failure> {
     let (text, source) = scenario_text(a.scenario)?;
+    let text = with_loss(text, &source, a.loss)?;
     let limits = if a.allow_large {
         hushfuse::scenario::limits::Limits::none()
     } else {

@@ -343,8 +343,24 @@ fn quoted(s: &str) -> String {
 /// sensor what it did (`sent`, `silent`, `not_scheduled`, `missing`: no reading) and the
 /// payload bits it sent.
 pub fn estimates_csv(exp: &Experiment, rec: &Recorded, rep: &Replayed) -> String {
+    let mut out = estimates_header(exp);
+    for (v, vr) in rep.variants.iter().enumerate() {
+        for (k, est) in vr.estimates.iter().enumerate() {
+            let sensors = (0..exp.system.n_sensors()).map(|i| {
+                (
+                    link_name(vr.links[k][i], rec.available[k][i]),
+                    vr.bits[k][i],
+                )
+            });
+            out.push_str(&estimates_row(exp, v, k + 1, est, sensors));
+        }
+    }
+    out
+}
+
+/// The header line of `estimates.csv` (with its newline).
+pub fn estimates_header(exp: &Experiment) -> String {
     let n = exp.system.state_dim();
-    let ns = exp.system.n_sensors();
     let mut out = String::from("scheme,params,variant,step");
     (0..n).for_each(|j| {
         let _ = write!(out, ",mean_{j}");
@@ -352,33 +368,37 @@ pub fn estimates_csv(exp: &Experiment, rec: &Recorded, rep: &Replayed) -> String
     (0..n).for_each(|j| {
         let _ = write!(out, ",var_{j}");
     });
-    (0..ns).for_each(|i| {
+    (0..exp.system.n_sensors()).for_each(|i| {
         let _ = write!(out, ",sensor_{i},bits_{i}");
     });
     out.push('\n');
-    for (v, vr) in rep.variants.iter().enumerate() {
-        let variant = &exp.variants[v];
-        let label = quoted(&exp.curves[variant.curve].label);
-        let params = quoted(&crate::metrics::results::params_text(&variant.params));
-        for (k, est) in vr.estimates.iter().enumerate() {
-            let _ = write!(out, "{label},{params},{v},{}", k + 1);
-            est.mean.iter().for_each(|m| {
-                let _ = write!(out, ",{m}");
-            });
-            (0..n).for_each(|j| {
-                let _ = write!(out, ",{}", est.cov[(j, j)]);
-            });
-            for i in 0..ns {
-                let _ = write!(
-                    out,
-                    ",{},{}",
-                    link_name(vr.links[k][i], rec.available[k][i]),
-                    vr.bits[k][i]
-                );
-            }
-            out.push('\n');
-        }
+    out
+}
+
+/// One line of `estimates.csv` (with its newline): variant `v` after step `k`, and per sensor
+/// what it did and the payload bits it sent. `hushfuse replay` and the live center write the
+/// same lines.
+pub fn estimates_row<'s>(
+    exp: &Experiment,
+    v: usize,
+    k: usize,
+    est: &Gaussian,
+    sensors: impl IntoIterator<Item = (&'s str, u64)>,
+) -> String {
+    let variant = &exp.variants[v];
+    let label = quoted(&exp.curves[variant.curve].label);
+    let params = quoted(&crate::metrics::results::params_text(&variant.params));
+    let mut out = format!("{label},{params},{v},{k}");
+    est.mean.iter().for_each(|m| {
+        let _ = write!(out, ",{m}");
+    });
+    (0..exp.system.state_dim()).for_each(|j| {
+        let _ = write!(out, ",{}", est.cov[(j, j)]);
+    });
+    for (link, bits) in sensors {
+        let _ = write!(out, ",{link},{bits}");
     }
+    out.push('\n');
     out
 }
 

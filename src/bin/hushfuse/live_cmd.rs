@@ -1,0 +1,440 @@
+//! `hushfuse center`, `node`, `live` and `channel-proxy`: a live run over UDP
+//! ([`hushfuse::live`]).
+use super::*;
+use hushfuse::live::{self, Center, CenterOptions, LiveFolder, Node, NodeOptions, Pace};
+use hushfuse::scenario::experiment::Experiment;
+use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
+use std::time::Duration;
+
+/// What every process of one live run must agree on.
+#[derive(clap::Args, Clone, Default)]
+pub(crate) struct LiveRun {
+    /// Coins of this trial (and, for simulated readings, its measurements).
+    #[arg(long, default_value_t = 0)]
+    pub(crate) trial: usize,
+    /// Override the scenario's seed.
+    #[arg(long)]
+    pub(crate) seed: Option<u64>,
+    /// Steps (default: the scenario's, or those of the recorded measurements).
+    #[arg(long)]
+    pub(crate) steps: Option<usize>,
+    /// The scenario with a Bernoulli link that loses each packet with probability P (as
+    /// `hushfuse run --loss`); the channel proxy applies it.
+    #[arg(long, value_name = "P")]
+    pub(crate) loss: Option<f64>,
+}
+
+/// How the center paces and waits.
+#[derive(clap::Args, Clone)]
+pub(crate) struct Pacing {
+    /// Close each step after SECS on the wall clock (default: lock step, when every node has
+    /// reported).
+    #[arg(long, value_name = "SECS")]
+    pub(crate) period: Option<f64>,
+    /// In lock step, close a step after SECS without every node's report (the silent nodes
+    /// are silences).
+    #[arg(long, value_name = "SECS", default_value_t = 10.0)]
+    pub(crate) timeout: f64,
+    /// Seconds to wait for every node to greet before the first step.
+    #[arg(long, value_name = "SECS", default_value_t = 30.0)]
+    pub(crate) wait: f64,
+    /// Run only these schemes (labels as in the tables; repeat the option); default: all.
+    #[arg(long = "scheme", value_name = "LABEL")]
+    pub(crate) schemes: Vec<String>,
+}
+
+fn seconds(name: &str, s: f64) -> Result<Duration, Failure> {
+    Duration::try_from_secs_f64(s)
+        .ok()
+        .filter(|d| !d.is_zero())
+        .ok_or_else(|| {
+            Failure::Input(format!(
+                "{name}: expected a positive number of seconds, got {s}"
+            ))
+        })
+}
+
+fn address(text: &str, what: &str) -> Result<SocketAddr, Failure> {
+    text.to_socket_addrs()
+        .ok()
+        .and_then(|mut a| a.next())
+        .ok_or_else(|| Failure::Input(format!("{what}: {text:?} is not an address (HOST:PORT)")))
+}
+
+/// The scenario's text as every process of the run loads it, and the experiment of `steps`
+/// steps (the scenario's when `None`).
+pub(crate) fn load(
+    scenario: &str,
+    run: &LiveRun,
+    data_steps: Option<usize>,
+) -> Result<(Experiment, String), Failure> {
+    let (text, source) = scenario_text(scenario)?;
+    let text = with_loss(text, &source, run.loss)?;
+    let steps = match run.steps.or(data_steps) {
+        Some(s) => s,
+        None => {
+            build::parse(&text, &source)
+                .map_err(|e| Failure::Input(e.to_string()))?
+                .steps
+        }
+    };
+    let (exp, _) = replay::load_experiment(&text, &source, steps, run.seed, &Default::default())
+        .map_err(|e| Failure::Input(e.to_string()))?;
+    live::check_live(&exp).map_err(Failure::Input)?;
+    if run.trial > 0 && data_steps.is_none() && run.trial >= u32::MAX as usize {
+        return Err(Failure::Input("--trial is too large".into()));
+    }
+    Ok((exp, text))
+}
+
+/// The variants `pacing.schemes` names (all when empty).
+fn variants(exp: &Experiment, pacing: &Pacing) -> Result<Vec<usize>, Failure> {
+    let label = |v: usize| exp.curves[exp.variants[v].curve].label.as_str();
+    for s in &pacing.schemes {
+        if !(0..exp.variants.len()).any(|v| label(v) == s) {
+            let all: Vec<&str> = (0..exp.variants.len()).map(label).collect();
+            return Err(Failure::Input(format!(
+                "--scheme {s:?}: the scenario has no such scheme; its schemes are: {}",
+                all.join(", ")
+            )));
+        }
+    }
+    Ok((0..exp.variants.len())
+        .filter(|&v| pacing.schemes.is_empty() || pacing.schemes.iter().any(|s| s == label(v)))
+        .collect())
+}
+
+fn center_options(pacing: &Pacing, status: bool) -> Result<CenterOptions, Failure> {
+    Ok(CenterOptions {
+        pace: match pacing.period {
+            Some(p) => Pace::Period(seconds("--period", p)?),
+            None => Pace::Lockstep {
+                timeout: seconds("--timeout", pacing.timeout)?,
+            },
+        },
+        wait_for_nodes: seconds("--wait", pacing.wait)?,
+        status,
+    })
+}
+
+/// The center on `socket`, writing into `dir` (resumed from its journal with `resume`).
+#[allow(clippy::too_many_arguments)]
+fn serve(
+    exp: &Experiment,
+    text: &str,
+    run: &LiveRun,
+    pacing: &Pacing,
+    socket: &UdpSocket,
+    dir: &Path,
+    resume: bool,
+    status: bool,
+) -> Result<(), Failure> {
+    let fp = live::fingerprint(exp, text, run.trial);
+    let mut center =
+        Center::new(exp, run.trial, fp, variants(exp, pacing)?).map_err(Failure::Input)?;
+    let mut folder = if resume {
+        LiveFolder::resume(exp, dir, &mut center)
+            .map_err(Failure::Input)?
+            .0
+    } else {
+        let hash = output::sha256_hex(format!("{text}\0{:?}\0{}", run.seed, run.trial).as_bytes());
+        LiveFolder::create(exp, dir, &hash).map_err(Failure::Input)?
+    };
+    let opts = center_options(pacing, status)?;
+    live::run_center(socket, &mut center, &opts, &mut folder).map_err(Failure::Run)
+}
+
+/// `hushfuse center`.
+pub(crate) fn center(
+    scenario: &str,
+    listen: &str,
+    run: &LiveRun,
+    pacing: &Pacing,
+    out: Option<&Path>,
+    resume: bool,
+) -> Result<(), Failure> {
+    let (exp, text) = load(scenario, run, None)?;
+    let socket = UdpSocket::bind(address(listen, "--listen")?)
+        .map_err(|e| Failure::Input(format!("--listen {listen}: {e}")))?;
+    let dir = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(format!("{}-live", exp.name)));
+    eprintln!(
+        "center of {} listening on {}, writing {}",
+        exp.name,
+        socket
+            .local_addr()
+            .map_err(|e| Failure::Run(e.to_string()))?,
+        dir.display()
+    );
+    serve(&exp, &text, run, pacing, &socket, &dir, resume, true)
+}
+
+/// Where a node's readings come from.
+pub(crate) enum Source<'a> {
+    Simulated,
+    Csv(&'a Path),
+    Stdin,
+}
+
+/// `hushfuse node`.
+pub(crate) fn node(
+    scenario: &str,
+    sensor: usize,
+    connect: &str,
+    run: &LiveRun,
+    source: Source,
+    give_up: f64,
+) -> Result<(), Failure> {
+    let center = address(connect, "--connect")?;
+    let (exp, text, readings): (Experiment, String, Box<dyn live::Readings>) = match source {
+        Source::Csv(path) => {
+            let name = path.display().to_string();
+            let csv = std::fs::read_to_string(path)
+                .map_err(|e| Failure::Input(format!("{name}: cannot read: {e}")))?;
+            let meas = replay::parse_measurements(&csv, &name)
+                .map_err(|e| Failure::Input(e.to_string()))?;
+            let steps = replay::steps_of(&meas, None).map_err(|e| Failure::Input(e.to_string()))?;
+            let (exp, text) = load(scenario, run, Some(steps))?;
+            let rec =
+                replay::recorded(&exp, &meas, None).map_err(|e| Failure::Input(e.to_string()))?;
+            let mine = own_readings(&rec, sensor);
+            (exp, text, Box::new(live::Recorded(mine)))
+        }
+        Source::Simulated => {
+            let (exp, text) = load(scenario, run, None)?;
+            let data = runner::draw_trial(&exp, run.trial);
+            let rec = replay::Recorded::from_trial(&data);
+            let mine = own_readings(&rec, sensor);
+            (exp, text, Box::new(live::Recorded(mine)))
+        }
+        Source::Stdin => {
+            let (exp, text) = load(scenario, run, None)?;
+            let dim = exp.system.sensors.get(sensor).map_or(1, |s| s.meas_dim());
+            let lines = live::Lines::new(std::io::stdin().lock(), dim);
+            (exp, text, Box::new(lines))
+        }
+    };
+    let fp = live::fingerprint(&exp, &text, run.trial);
+    let mut node = Node::new(&exp, sensor, run.trial, readings).map_err(Failure::Input)?;
+    let opts = NodeOptions {
+        center,
+        hello_every: Duration::from_secs(1),
+        give_up_after: seconds("--give-up", give_up)?,
+    };
+    live::run_node(&mut node, fp, &opts).map_err(|e| Failure::Run(format!("sensor {sensor}: {e}")))
+}
+
+fn own_readings(rec: &replay::Recorded, sensor: usize) -> Vec<Option<hushfuse::linalg::Vector>> {
+    rec.measurements
+        .iter()
+        .zip(&rec.available)
+        .map(|(m, a)| match (m.get(sensor), a.get(sensor)) {
+            (Some(z), Some(true)) => Some(z.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// `hushfuse channel-proxy`.
+pub(crate) fn channel_proxy(
+    scenario: &str,
+    listen: &str,
+    center: &str,
+    run: &LiveRun,
+) -> Result<(), Failure> {
+    let (exp, _) = load(scenario, run, None)?;
+    let center = address(center, "--center")?;
+    let socket = UdpSocket::bind(address(listen, "--listen")?)
+        .map_err(|e| Failure::Input(format!("--listen {listen}: {e}")))?;
+    let fates = live::proxy::Fates::new(&exp, run.trial).map_err(Failure::Input)?;
+    // The address first, alone on its line: `hushfuse live` reads it.
+    println!(
+        "{}",
+        socket
+            .local_addr()
+            .map_err(|e| Failure::Run(e.to_string()))?
+    );
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    live::proxy::run_proxy(&socket, center, fates).map_err(Failure::Run)
+}
+
+/// `hushfuse live`: the center here, a proxy when the scenario's link loses packets, and one
+/// node process per sensor, all on localhost.
+pub(crate) fn live_all(
+    scenario: &str,
+    run: &LiveRun,
+    pacing: &Pacing,
+    measurements: Option<&Path>,
+    truth: Option<&Path>,
+    out: Option<&Path>,
+) -> Result<(), Failure> {
+    let data_steps = match measurements {
+        Some(p) => {
+            let name = p.display().to_string();
+            let csv = std::fs::read_to_string(p)
+                .map_err(|e| Failure::Input(format!("{name}: cannot read: {e}")))?;
+            let meas = replay::parse_measurements(&csv, &name)
+                .map_err(|e| Failure::Input(e.to_string()))?;
+            let truth_table = match truth {
+                Some(t) => {
+                    let tname = t.display().to_string();
+                    let text = std::fs::read_to_string(t)
+                        .map_err(|e| Failure::Input(format!("{tname}: cannot read: {e}")))?;
+                    Some(
+                        replay::parse_truth(&text, &tname)
+                            .map_err(|e| Failure::Input(e.to_string()))?,
+                    )
+                }
+                None => None,
+            };
+            Some(
+                replay::steps_of(&meas, truth_table.as_ref())
+                    .map_err(|e| Failure::Input(e.to_string()))?,
+            )
+        }
+        None if truth.is_some() => {
+            return Err(Failure::Input(
+                "--truth goes with --measurements (simulated readings have their own truth)".into(),
+            ))
+        }
+        None => None,
+    };
+    let run = LiveRun {
+        steps: run.steps.or(data_steps),
+        ..run.clone()
+    };
+    let (exp, text) = load(scenario, &run, None)?;
+    let socket = UdpSocket::bind("127.0.0.1:0").map_err(|e| Failure::Run(e.to_string()))?;
+    let center_addr = socket
+        .local_addr()
+        .map_err(|e| Failure::Run(e.to_string()))?;
+    let dir = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(format!("{}-live", exp.name)));
+    let exe = std::env::current_exe().map_err(|e| Failure::Run(e.to_string()))?;
+    let common = |cmd: &mut std::process::Command| {
+        cmd.arg("--trial").arg(run.trial.to_string());
+        cmd.arg("--steps").arg(exp.steps.to_string());
+        if let Some(s) = run.seed {
+            cmd.arg("--seed").arg(s.to_string());
+        }
+        if let Some(p) = run.loss {
+            cmd.arg("--loss").arg(p.to_string());
+        }
+    };
+    let mut children = Children(Vec::new());
+    let lossy = exp.variants.iter().any(|v| v.channel.is_some());
+    let node_target = if lossy {
+        let mut cmd = std::process::Command::new(&exe);
+        cmd.args([
+            "channel-proxy",
+            scenario,
+            "--listen",
+            "127.0.0.1:0",
+            "--center",
+        ])
+        .arg(center_addr.to_string())
+        .stdout(std::process::Stdio::piped());
+        common(&mut cmd);
+        let mut child = cmd
+            .spawn()
+            .map_err(|e| Failure::Run(format!("cannot start the channel proxy: {e}")))?;
+        let mut line = String::new();
+        let stdout = child.stdout.take().expect("piped");
+        std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut line)
+            .map_err(|e| Failure::Run(format!("the channel proxy: {e}")))?;
+        children.0.push(("channel proxy".into(), child));
+        address(line.trim(), "the channel proxy's address")?
+    } else {
+        center_addr
+    };
+    for i in 0..exp.system.n_sensors() {
+        let mut cmd = std::process::Command::new(&exe);
+        cmd.args(["node", scenario, "--sensor"])
+            .arg(i.to_string())
+            .arg("--connect")
+            .arg(node_target.to_string());
+        common(&mut cmd);
+        if let Some(m) = measurements {
+            cmd.arg("--measurements").arg(m);
+        }
+        let child = cmd
+            .spawn()
+            .map_err(|e| Failure::Run(format!("cannot start node {i}: {e}")))?;
+        children.0.push((format!("node {i}"), child));
+    }
+    eprintln!(
+        "live run of {}: center {center_addr}, {} node processes{}, writing {}",
+        exp.name,
+        exp.system.n_sensors(),
+        if lossy {
+            " behind the channel proxy"
+        } else {
+            ""
+        },
+        dir.display()
+    );
+    let start = Instant::now();
+    serve(&exp, &text, &run, pacing, &socket, &dir, false, true)?;
+    children.wait()?;
+    print_out(&format!(
+        "{}: {} schemes x {} steps live in {:.1} s\nwrote {}: {}, {}, {}\n",
+        exp.name,
+        variants(&exp, pacing)?.len(),
+        exp.steps,
+        start.elapsed().as_secs_f64(),
+        dir.display(),
+        live::ESTIMATES,
+        live::LOG,
+        live::JOURNAL
+    ));
+    Ok(())
+}
+
+/// The processes `hushfuse live` started: waited for (nodes end when the center ends the
+/// run), killed if the center fails.
+struct Children(Vec<(String, std::process::Child)>);
+
+impl Children {
+    fn wait(&mut self) -> Result<(), Failure> {
+        let mut failed = Vec::new();
+        for (name, child) in self.0.drain(..) {
+            let mut child = child;
+            let deadline = Instant::now() + Duration::from_secs(10);
+            let status = loop {
+                match child.try_wait() {
+                    Ok(Some(s)) => break Some(s),
+                    Ok(None) if Instant::now() < deadline => {
+                        std::thread::sleep(Duration::from_millis(20))
+                    }
+                    _ => {
+                        let _ = child.kill();
+                        let _ = child.wait();
+                        break None;
+                    }
+                }
+            };
+            if !status.is_some_and(|s| s.success()) && name != "channel proxy" {
+                failed.push(name);
+            }
+        }
+        match failed.is_empty() {
+            true => Ok(()),
+            false => Err(Failure::Run(format!(
+                "{} did not end cleanly",
+                failed.join(", ")
+            ))),
+        }
+    }
+}
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for (_, c) in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}

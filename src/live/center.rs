@@ -1,0 +1,380 @@
+//! The fusion side of a live run, without sockets: [`Center`] announces each step, takes the
+//! datagrams that arrive, and at the step's end fuses the inbox they make with the scheme's
+//! own [`crate::scheme::FusionCenter`], exactly as the engine's loop fuses a simulated one
+//! ([`crate::engine::trial`]): a frame that arrived is its message, a sensor that reported no
+//! frame is a silence, one that had no reading or was not scheduled is
+//! [`Received::NotScheduled`]. A sensor that did not report by the step's end is a silence too
+//! (the center cannot tell a dead node from a quiet one, as it cannot tell a lost packet from
+//! a silence) and is logged. [`super::run_center`] drives it over UDP.
+use super::wire::{self, Datagram, Kind, MessageKind, DONE_READING, HELLO_FRESH, STEP_CATCH_UP};
+use crate::engine::seeding;
+use crate::filter::Gaussian;
+use crate::linalg::Vector;
+use crate::link::Received;
+use crate::scenario::experiment::Experiment;
+use crate::scheme::{Feedback, FusionCenter};
+
+/// Counts of datagrams that were not used, by reason.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Dropped {
+    /// Not a datagram of ours, or its envelope is corrupt (CRC, length).
+    pub corrupt: u64,
+    /// A frame whose 802.15.4 frame check sequence (or header) is wrong.
+    pub bad_frame: u64,
+    /// Of a step or variant other than the current one (late, or replayed).
+    pub stale: u64,
+    /// A second copy of a frame or report already taken at this step.
+    pub duplicate: u64,
+    /// From a sensor index the scenario does not have.
+    pub unknown_sensor: u64,
+}
+
+/// What became of one sensor at a fused step, as `estimates.csv` says it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorRecord {
+    /// `sent`, `silent`, `not_scheduled`, `missing` (no reading) or `no_report`.
+    pub link: &'static str,
+    /// Payload bits of the frame that arrived.
+    pub bits: u64,
+}
+
+/// One fused step.
+#[derive(Debug, Clone)]
+pub struct StepRecord {
+    pub variant: usize,
+    pub k: usize,
+    pub inbox: Vec<Received>,
+    pub sensors: Vec<SensorRecord>,
+    pub estimate: Gaussian,
+    /// Payload bits that arrived at this step.
+    pub bits: u64,
+}
+
+/// What the driver must do after a datagram.
+#[derive(Debug, Default)]
+pub struct Accepted {
+    /// A node greeted the center: its sensor, and whether it has just started.
+    pub hello: Option<(usize, bool)>,
+    /// Datagrams for the sender (catch-up steps, the current step, a refusal).
+    pub replies: Vec<Vec<u8>>,
+}
+
+/// The sensors' reports of the current step.
+struct Pending {
+    /// The message that arrived from each sensor, with its payload bits.
+    frames: Vec<Option<(Received, u64)>>,
+    /// Each sensor's report: `Some(had a reading)`.
+    done: Vec<Option<bool>>,
+}
+
+/// The center of a live run of trial `trial` of `exp`, over the variants `variants` in order.
+pub struct Center<'a> {
+    exp: &'a Experiment,
+    trial: usize,
+    fingerprint: [u8; 8],
+    variants: Vec<usize>,
+    /// Position in `variants`.
+    at: usize,
+    /// Step being collected (1-based); `exp.steps + 1` when the variant is done.
+    k: usize,
+    center: Option<Box<dyn FusionCenter>>,
+    feedback: Option<Feedback>,
+    /// Per step of the current variant, per sensor, the step announcement sent (for nodes that
+    /// catch up).
+    announced: Vec<Vec<Vec<u8>>>,
+    pending: Pending,
+    pub dropped: Dropped,
+}
+
+impl<'a> Center<'a> {
+    pub fn new(
+        exp: &'a Experiment,
+        trial: usize,
+        fingerprint: [u8; 8],
+        variants: Vec<usize>,
+    ) -> Result<Self, String> {
+        super::check_live(exp)?;
+        if variants.is_empty() {
+            return Err("no scheme to run".into());
+        }
+        let n = exp.system.n_sensors();
+        let mut c = Self {
+            exp,
+            trial,
+            fingerprint,
+            variants,
+            at: 0,
+            k: 1,
+            center: None,
+            feedback: None,
+            announced: Vec::new(),
+            pending: Pending {
+                frames: vec![None; n],
+                done: vec![None; n],
+            },
+            dropped: Dropped::default(),
+        };
+        c.start_variant()?;
+        Ok(c)
+    }
+
+    fn start_variant(&mut self) -> Result<(), String> {
+        let v = self.variants[self.at];
+        let center_seed =
+            seeding::center_seed(self.exp.seed, self.trial as u64, seeding::coin_stream(v));
+        let inst = self.exp.variants[v]
+            .scheme
+            .build_for_trial(self.trial, center_seed)
+            .map_err(|e| format!("scheme {}: cannot build it: {e}", self.label(v)))?;
+        self.feedback = inst.center.feedback().map(super::as_sent);
+        self.center = Some(inst.center);
+        self.k = 1;
+        self.announced.clear();
+        Ok(())
+    }
+
+    /// The label of variant `v`.
+    pub fn label(&self, v: usize) -> &str {
+        &self.exp.curves[self.exp.variants[v].curve].label
+    }
+
+    /// Whether every variant has run.
+    pub fn finished(&self) -> bool {
+        self.at >= self.variants.len()
+    }
+
+    /// (variant, step) being collected.
+    pub fn position(&self) -> (usize, usize) {
+        (self.variants[self.at.min(self.variants.len() - 1)], self.k)
+    }
+
+    /// The current estimate (the prior before the first step).
+    pub fn estimate(&self) -> Option<&Gaussian> {
+        self.center.as_deref().map(|c| c.estimate())
+    }
+
+    /// The announcements of the current step, one per sensor: the step and the feedback each
+    /// sensor is sent.
+    pub fn announce(&mut self) -> Result<Vec<Vec<u8>>, String> {
+        let (v, k) = self.position();
+        if self.announced.len() < k {
+            let n = self.exp.system.n_sensors();
+            let mut all = Vec::with_capacity(n);
+            for i in 0..n {
+                let mut d = Datagram::new(Kind::Step, i, v, k);
+                if let Some(fb) = &self.feedback {
+                    match wire::feedback_frame(fb, i, k).map_err(|e| {
+                        format!("scheme {}: feedback cannot be sent: {e}", self.label(v))
+                    })? {
+                        Some((flags, frame)) => {
+                            d.flags = flags;
+                            d.body = frame;
+                        }
+                        // An innovation reference with nothing for sensor i.
+                        None => d.flags = wire::STEP_REFERENCE,
+                    }
+                }
+                all.push(d.encode());
+            }
+            self.announced.push(all);
+        }
+        Ok(self.announced[k - 1].clone())
+    }
+
+    /// The scenario's number of sensors.
+    pub fn sensors(&self) -> usize {
+        self.pending.done.len()
+    }
+
+    /// Whether every sensor has reported the current step.
+    pub fn complete(&self) -> bool {
+        self.pending.done.iter().all(Option::is_some)
+    }
+
+    /// Sensors that have reported the current step.
+    pub fn heard(&self) -> usize {
+        self.pending.done.iter().filter(|d| d.is_some()).count()
+    }
+
+    /// Sensors that have not reported the current step.
+    pub fn missing(&self) -> Vec<usize> {
+        (0..self.pending.done.len())
+            .filter(|&i| self.pending.done[i].is_none())
+            .collect()
+    }
+
+    /// Takes one datagram from a node.
+    pub fn accept(&mut self, octets: &[u8]) -> Accepted {
+        let Ok(d) = Datagram::decode(octets) else {
+            self.dropped.corrupt += 1;
+            return Accepted::default();
+        };
+        let i = usize::from(d.sensor);
+        if i >= self.exp.system.n_sensors() {
+            self.dropped.unknown_sensor += 1;
+            return Accepted::default();
+        }
+        match d.kind {
+            Kind::Hello => self.hello(i, &d),
+            Kind::CatchUp => self.catch_up(i, &d),
+            Kind::Frame | Kind::Done if self.finished() => {
+                self.dropped.stale += 1;
+                Accepted::default()
+            }
+            Kind::Frame | Kind::Done => {
+                let (v, k) = self.position();
+                // A corrupt frame is counted as such whichever step it claims.
+                let frame = (d.kind == Kind::Frame).then(|| self.read_frame(i, &d));
+                if let Some(None) = frame {
+                    self.dropped.bad_frame += 1;
+                } else if usize::from(d.variant) != v || d.step as usize != k {
+                    self.dropped.stale += 1;
+                } else if d.kind == Kind::Done {
+                    match self.pending.done[i] {
+                        Some(_) => self.dropped.duplicate += 1,
+                        None => self.pending.done[i] = Some(d.flags & DONE_READING != 0),
+                    }
+                } else if self.pending.frames[i].is_some() {
+                    self.dropped.duplicate += 1;
+                } else if let Some(Some(r)) = frame {
+                    self.pending.frames[i] = Some((r, u64::from(d.aux)));
+                }
+                Accepted::default()
+            }
+            _ => {
+                self.dropped.corrupt += 1;
+                Accepted::default()
+            }
+        }
+    }
+
+    fn hello(&mut self, i: usize, d: &Datagram) -> Accepted {
+        if d.body != self.fingerprint {
+            let mut x = Datagram::new(Kind::Reject, i, 0, 0);
+            x.body = b"it runs another scenario, seed, number of steps or trial than the center"
+                .to_vec();
+            return Accepted {
+                hello: None,
+                replies: vec![x.encode()],
+            };
+        }
+        let mut replies = Vec::new();
+        if !self.finished() {
+            if let Ok(all) = self.announce() {
+                replies.push(all[i].clone());
+            }
+        }
+        Accepted {
+            hello: Some((i, d.flags & HELLO_FRESH != 0)),
+            replies,
+        }
+    }
+
+    /// A node that has done variant `d.variant` up to step `d.step` is sent the steps since,
+    /// marked as catch-up, then the current one.
+    fn catch_up(&mut self, i: usize, d: &Datagram) -> Accepted {
+        let (v, k) = self.position();
+        if self.finished() || usize::from(d.variant) != v || d.step as usize >= k {
+            return Accepted::default();
+        }
+        let mut replies: Vec<Vec<u8>> = (d.step as usize + 1..k)
+            .filter_map(|j| self.announced.get(j - 1))
+            .map(|all| {
+                let mut s = Datagram::decode(&all[i]).expect("our own datagram");
+                s.flags |= STEP_CATCH_UP;
+                s.encode()
+            })
+            .collect();
+        if let Ok(all) = self.announce() {
+            replies.push(all[i].clone());
+        }
+        Accepted {
+            hello: None,
+            replies,
+        }
+    }
+
+    /// The message of a [`Kind::Frame`], or `None` when it is corrupt.
+    fn read_frame(&self, i: usize, d: &Datagram) -> Option<Received> {
+        let src = wire::sensor_address(i);
+        let payload = wire::check_mpdu(&d.body, src, wire::CENTER_ADDRESS).ok()?;
+        let sys = &self.exp.system;
+        match MessageKind::from_code(d.flags)? {
+            MessageKind::Measurement => {
+                let v = wire::read_f32s(payload, sys.sensors[i].meas_dim()).ok()?;
+                Some(Received::Measurement(Vector::from_vec(v)))
+            }
+            MessageKind::Estimate => {
+                let v = wire::read_f32s(payload, sys.state_dim()).ok()?;
+                Some(Received::Estimate(Vector::from_vec(v)))
+            }
+            MessageKind::Codec => Some(Received::Frame(d.body.clone())),
+        }
+    }
+
+    /// Ends the current step: fuses what arrived, readies the next step (or variant).
+    pub fn close(&mut self) -> Result<StepRecord, String> {
+        let (v, k) = self.position();
+        let n = self.exp.system.n_sensors();
+        let schedule = self.exp.variants[v].scheme.schedule();
+        let mut inbox = Vec::with_capacity(n);
+        let mut sensors = Vec::with_capacity(n);
+        for i in 0..n {
+            let frame = self.pending.frames[i].take();
+            let (r, rec) = match (self.pending.done[i].take(), frame) {
+                (Some(false), _) => (Received::NotScheduled, ("missing", 0)),
+                _ if !schedule.allows(k, i, n) => (Received::NotScheduled, ("not_scheduled", 0)),
+                (_, Some((r, bits))) => (r, ("sent", bits)),
+                (Some(true), None) => (Received::Silent, ("silent", 0)),
+                (None, None) => (Received::Silent, ("no_report", 0)),
+            };
+            inbox.push(r);
+            sensors.push(SensorRecord {
+                link: rec.0,
+                bits: rec.1,
+            });
+        }
+        self.fuse(v, k, inbox, sensors)
+    }
+
+    /// Fuses step `k` of variant `v` on `inbox` (the current step), as [`Center::close`] or a
+    /// resumed center does.
+    pub fn fuse(
+        &mut self,
+        v: usize,
+        k: usize,
+        inbox: Vec<Received>,
+        sensors: Vec<SensorRecord>,
+    ) -> Result<StepRecord, String> {
+        if self.finished() || (v, k) != self.position() {
+            return Err(format!(
+                "step {k} of variant {v} is not the one the center is at ({:?})",
+                self.position()
+            ));
+        }
+        let label = self.label(v).to_string();
+        let center = self.center.as_mut().expect("a variant is running");
+        center
+            .step(k, &inbox)
+            .map_err(|e| format!("scheme {label}, step {k}: {e}"))?;
+        let estimate = center.estimate().clone();
+        self.feedback = center.feedback().map(super::as_sent);
+        let bits = sensors.iter().map(|s| s.bits).sum();
+        let record = StepRecord {
+            variant: v,
+            k,
+            inbox,
+            sensors,
+            estimate,
+            bits,
+        };
+        self.k += 1;
+        if self.k > self.exp.steps {
+            self.at += 1;
+            if !self.finished() {
+                self.start_variant()?;
+            }
+        }
+        Ok(record)
+    }
+}

@@ -1,0 +1,392 @@
+//! The sensor side of a live run, without sockets: [`Node`] turns the center's datagrams into
+//! the sensor's replies, running the scheme's own [`crate::scheme::SensorNode`] on its readings
+//! with its own coins ([`crate::engine::seeding::sensor_coins`]). A program that embeds a
+//! sensor feeds it what arrives and sends what it returns; [`run_node`] does that over UDP.
+use super::wire::{self, Datagram, Kind, MessageKind, DONE_READING, HELLO_FRESH, STEP_CATCH_UP};
+use crate::engine::seeding;
+use crate::linalg::Vector;
+use crate::link::{Message, Transmission};
+use crate::scenario::experiment::Experiment;
+use crate::scheme::{Feedback, SensorNode};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use std::net::{SocketAddr, UdpSocket};
+use std::time::{Duration, Instant};
+
+/// Where a node's readings come from.
+pub trait Readings {
+    /// The sensor's reading at step `k` (1-based) of every variant (each variant reads the
+    /// same data from step 1); `None`: no reading at that step.
+    fn reading(&mut self, k: usize) -> Result<Option<Vector>, String>;
+}
+
+/// Readings held in memory: a simulated trial's, or a recording's.
+pub struct Recorded(pub Vec<Option<Vector>>);
+
+impl Readings for Recorded {
+    fn reading(&mut self, k: usize) -> Result<Option<Vector>, String> {
+        self.0.get(k.wrapping_sub(1)).cloned().ok_or_else(|| {
+            format!(
+                "no reading for step {k}: the data has {} steps",
+                self.0.len()
+            )
+        })
+    }
+}
+
+/// Readings from lines of text (standard input): line k is the reading of step k, its
+/// components separated by commas or spaces; an empty line is no reading. Lines read are kept,
+/// so the next variant reads them again.
+pub struct Lines<R> {
+    input: R,
+    dim: usize,
+    read: Vec<Option<Vector>>,
+}
+
+impl<R: std::io::BufRead> Lines<R> {
+    pub fn new(input: R, dim: usize) -> Self {
+        Self {
+            input,
+            dim,
+            read: Vec::new(),
+        }
+    }
+}
+
+impl<R: std::io::BufRead> Readings for Lines<R> {
+    fn reading(&mut self, k: usize) -> Result<Option<Vector>, String> {
+        while self.read.len() < k {
+            let line_no = self.read.len() + 1;
+            let mut line = String::new();
+            let n = self
+                .input
+                .read_line(&mut line)
+                .map_err(|e| format!("cannot read line {line_no}: {e}"))?;
+            if n == 0 {
+                return Err(format!(
+                    "the input ended at line {line_no}: one line per step is needed (an empty line for no reading)"
+                ));
+            }
+            let fields: Vec<&str> = line
+                .split(|c: char| c == ',' || c.is_whitespace())
+                .filter(|s| !s.is_empty())
+                .collect();
+            if fields.is_empty() {
+                self.read.push(None);
+                continue;
+            }
+            let values = fields
+                .iter()
+                .map(|s| s.parse::<f64>().ok().filter(|x| x.is_finite()))
+                .collect::<Option<Vec<f64>>>()
+                .ok_or_else(|| {
+                    format!("line {line_no}: {:?} is not finite numbers", line.trim())
+                })?;
+            if values.len() != self.dim {
+                return Err(format!(
+                    "line {line_no}: {} numbers, the sensor measures {}",
+                    values.len(),
+                    self.dim
+                ));
+            }
+            self.read.push(Some(Vector::from_vec(values)));
+        }
+        Ok(self.read[k - 1].clone())
+    }
+}
+
+/// What the node does after a datagram.
+#[derive(Debug, Default)]
+pub struct Reply {
+    /// Datagrams to send to the center, in order.
+    pub datagrams: Vec<Vec<u8>>,
+    /// The center said the run is over.
+    pub finished: bool,
+}
+
+/// One variant's sensor, as far as it got.
+struct Current {
+    variant: usize,
+    sensor: Box<dyn SensorNode>,
+    coins: Xoshiro256PlusPlus,
+    /// Steps done (0: none).
+    done: usize,
+    /// The feedback the sensor last heard.
+    held: Option<Feedback>,
+    /// The replies of the last step done, sent again when the center asks for it again.
+    last: Vec<Vec<u8>>,
+}
+
+/// Sensor `sensor` of a live run of trial `trial` of `exp`.
+pub struct Node<'a> {
+    exp: &'a Experiment,
+    sensor: usize,
+    trial: usize,
+    readings: Box<dyn Readings + 'a>,
+    current: Option<Current>,
+    fresh: bool,
+}
+
+/// The first eight octets of a SHA-256 of what a node and its center must agree on: the
+/// scenario as run, its seed and steps, and the trial.
+pub fn fingerprint(exp: &Experiment, scenario_text: &str, trial: usize) -> [u8; 8] {
+    let hex = crate::output::sha256_hex(
+        format!("{scenario_text}\0{}\0{}\0{trial}", exp.seed, exp.steps).as_bytes(),
+    );
+    let mut out = [0u8; 8];
+    for (o, pair) in out.iter_mut().zip(hex.as_bytes().chunks(2)) {
+        *o = u8::from_str_radix(std::str::from_utf8(pair).unwrap_or("00"), 16).unwrap_or(0);
+    }
+    out
+}
+
+impl<'a> Node<'a> {
+    pub fn new(
+        exp: &'a Experiment,
+        sensor: usize,
+        trial: usize,
+        readings: Box<dyn Readings + 'a>,
+    ) -> Result<Self, String> {
+        if sensor >= exp.system.n_sensors() {
+            return Err(format!(
+                "the scenario has {} sensors (0 to {}), not {sensor}",
+                exp.system.n_sensors(),
+                exp.system.n_sensors().saturating_sub(1)
+            ));
+        }
+        super::check_live(exp)?;
+        Ok(Self {
+            exp,
+            sensor,
+            trial,
+            readings,
+            current: None,
+            fresh: true,
+        })
+    }
+
+    /// The greeting that (re)announces this node to the center.
+    pub fn hello(&self, fingerprint: [u8; 8]) -> Vec<u8> {
+        let mut d = Datagram::new(Kind::Hello, self.sensor, 0, 0);
+        d.flags = if self.fresh { HELLO_FRESH } else { 0 };
+        d.body = fingerprint.to_vec();
+        d.encode()
+    }
+
+    /// Handles one datagram from the center. Datagrams that are not for this node, corrupt,
+    /// or of a step already done are ignored (an empty reply).
+    pub fn handle(&mut self, octets: &[u8]) -> Result<Reply, String> {
+        let Ok(d) = Datagram::decode(octets) else {
+            return Ok(Reply::default());
+        };
+        match d.kind {
+            Kind::End => Ok(Reply {
+                datagrams: Vec::new(),
+                finished: true,
+            }),
+            Kind::Reject => Err(format!(
+                "the center refused this node: {}",
+                String::from_utf8_lossy(&d.body)
+            )),
+            Kind::Step if usize::from(d.sensor) == self.sensor => self.step(&d),
+            _ => Ok(Reply::default()),
+        }
+    }
+
+    fn step(&mut self, d: &Datagram) -> Result<Reply, String> {
+        let (v, k) = (usize::from(d.variant), d.step as usize);
+        if v >= self.exp.variants.len() || k == 0 || k > self.exp.steps {
+            return Ok(Reply::default());
+        }
+        if self.current.as_ref().is_none_or(|c| c.variant < v) {
+            self.current = Some(self.start(v)?);
+        }
+        let cur = self.current.as_mut().expect("just set");
+        if cur.variant > v || k < cur.done {
+            return Ok(Reply::default());
+        }
+        let catch_up = d.flags & STEP_CATCH_UP != 0;
+        if k == cur.done {
+            // Asked again (a restarted center, a lost reply): the same answer.
+            let datagrams = if catch_up {
+                Vec::new()
+            } else {
+                cur.last.clone()
+            };
+            return Ok(Reply {
+                datagrams,
+                finished: false,
+            });
+        }
+        if k > cur.done + 1 {
+            // Steps missed (this node was down, or their announcements were lost): ask for them.
+            let ask = Datagram::new(Kind::CatchUp, self.sensor, v, cur.done).encode();
+            return Ok(Reply {
+                datagrams: vec![ask],
+                finished: false,
+            });
+        }
+        self.fresh = false;
+        let replies = self.sense(d, k)?;
+        let cur = self.current.as_mut().expect("current variant");
+        cur.done = k;
+        cur.last = replies.clone();
+        Ok(Reply {
+            datagrams: if catch_up { Vec::new() } else { replies },
+            finished: false,
+        })
+    }
+
+    fn start(&self, v: usize) -> Result<Current, String> {
+        let stream = seeding::coin_stream(v);
+        let center_seed = seeding::center_seed(self.exp.seed, self.trial as u64, stream);
+        let mut inst = self.exp.variants[v]
+            .scheme
+            .build_for_trial(self.trial, center_seed)
+            .map_err(|e| format!("cannot build the scheme: {e}"))?;
+        let sensor = inst.sensors.swap_remove(self.sensor);
+        Ok(Current {
+            variant: v,
+            sensor,
+            coins: super::sensor_coins(self.exp.seed, self.trial as u64, stream, self.sensor),
+            done: 0,
+            held: None,
+            last: Vec::new(),
+        })
+    }
+
+    /// Step `k`: the feedback heard, the reading, the sensor's decision, its frame.
+    fn sense(&mut self, d: &Datagram, k: usize) -> Result<Vec<Vec<u8>>, String> {
+        let (i, n) = (self.sensor, self.exp.system.n_sensors());
+        let reading = self.readings.reading(k)?;
+        let cur = self.current.as_mut().expect("current variant");
+        let v = cur.variant;
+        let label = &self.exp.curves[self.exp.variants[v].curve].label;
+        if let Ok(Some(fb)) =
+            wire::read_feedback(d.flags, &d.body, i, n, self.exp.system.state_dim())
+        {
+            cur.held = Some(fb);
+        } else if d.flags & wire::STEP_REFERENCE != 0 && d.body.is_empty() {
+            // An innovation reference with nothing for this sensor (it is not activated).
+            cur.held = Some(Feedback::InnovationReference(vec![None; n]));
+        }
+        let schedule = self.exp.variants[v].scheme.schedule();
+        let mut out = Vec::new();
+        if let (true, Some(z)) = (schedule.allows(k, i, n), &reading) {
+            let t = cur
+                .sensor
+                .step(k, z, cur.held.as_ref(), &mut cur.coins)
+                .map_err(|e| format!("scheme {label}, step {k}: {e}"))?;
+            if let Transmission::Send(m) = t {
+                out.push(frame_datagram(&m, i, v, k).map_err(|e| {
+                    format!("scheme {label}, step {k}: its message cannot be sent: {e}")
+                })?);
+            }
+        }
+        let mut done = Datagram::new(Kind::Done, i, v, k);
+        done.flags = if reading.is_some() { DONE_READING } else { 0 };
+        out.push(done.encode());
+        Ok(out)
+    }
+}
+
+/// The [`Kind::Frame`] datagram of sensor `i`'s message at step `k` of variant `v`.
+pub fn frame_datagram(m: &Message, i: usize, v: usize, k: usize) -> Result<Vec<u8>, String> {
+    let (kind, body) = match m {
+        Message::Measurement(z) => (
+            MessageKind::Measurement,
+            wire::mpdu(
+                k as u8,
+                wire::CENTER_ADDRESS,
+                wire::sensor_address(i),
+                &wire::f32_payload(z.iter().copied()),
+            )
+            .map_err(|e| e.to_string())?,
+        ),
+        Message::Estimate(x) => (
+            MessageKind::Estimate,
+            wire::mpdu(
+                k as u8,
+                wire::CENTER_ADDRESS,
+                wire::sensor_address(i),
+                &wire::f32_payload(x.iter().copied()),
+            )
+            .map_err(|e| e.to_string())?,
+        ),
+        Message::Frame { octets, .. } => {
+            if octets.len() > wire::MAX_MPDU_OCTETS {
+                return Err(format!("a frame of {} octets", octets.len()));
+            }
+            (MessageKind::Codec, octets.clone())
+        }
+    };
+    let mut d = Datagram::new(Kind::Frame, i, v, k);
+    d.flags = kind.code();
+    d.aux = u16::try_from(m.bits()).map_err(|_| format!("{} payload bits", m.bits()))?;
+    d.body = body;
+    Ok(d.encode())
+}
+
+/// How [`run_node`] talks to the center.
+#[derive(Debug, Clone)]
+pub struct NodeOptions {
+    pub center: SocketAddr,
+    /// Greet the center again after this long without a word from it.
+    pub hello_every: Duration,
+    /// Give up after this long without a word from the center.
+    pub give_up_after: Duration,
+}
+
+/// Runs `node` against the center at `opts.center` until the center ends the run.
+pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Result<(), String> {
+    let bind: SocketAddr = if opts.center.is_ipv4() {
+        "0.0.0.0:0".parse().expect("address")
+    } else {
+        "[::]:0".parse().expect("address")
+    };
+    let socket = UdpSocket::bind(bind).map_err(|e| format!("cannot open a UDP socket: {e}"))?;
+    socket
+        .set_read_timeout(Some(opts.hello_every))
+        .map_err(|e| e.to_string())?;
+    let send = |octets: &[u8]| {
+        // A datagram that cannot be sent now is as good as lost: the center asks again.
+        let _ = socket.send_to(octets, opts.center);
+    };
+    send(&node.hello(fingerprint));
+    let mut heard = Instant::now();
+    let mut buf = [0u8; 2048];
+    loop {
+        match socket.recv_from(&mut buf) {
+            Ok((len, from)) => {
+                if from != opts.center {
+                    continue;
+                }
+                heard = Instant::now();
+                let reply = node.handle(&buf[..len])?;
+                for d in &reply.datagrams {
+                    send(d);
+                }
+                if reply.finished {
+                    return Ok(());
+                }
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::ConnectionRefused
+                ) =>
+            {
+                if heard.elapsed() >= opts.give_up_after {
+                    return Err(format!(
+                        "no word from the center at {} for {:.0} s",
+                        opts.center,
+                        opts.give_up_after.as_secs_f64()
+                    ));
+                }
+                send(&node.hello(fingerprint));
+            }
+            Err(e) => return Err(format!("cannot receive: {e}")),
+        }
+    }
+}
