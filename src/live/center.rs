@@ -259,7 +259,9 @@ impl<'a> Center<'a> {
             };
         }
         let mut replies = Vec::new();
-        if !self.finished() {
+        // Once the current step is out (not while the driver waits for the first greetings,
+        // when it announces to every node at once), a node that greets gets it.
+        if !self.finished() && self.announced.len() >= self.k {
             if let Ok(all) = self.announce() {
                 replies.push(all[i].clone());
             }

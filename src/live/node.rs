@@ -336,6 +336,17 @@ pub struct NodeOptions {
     pub give_up_after: Duration,
 }
 
+impl NodeOptions {
+    /// The center at `center`; a greeting every second of silence, giving up after a minute.
+    pub fn to(center: SocketAddr) -> Self {
+        Self {
+            center,
+            hello_every: Duration::from_secs(1),
+            give_up_after: Duration::from_secs(60),
+        }
+    }
+}
+
 /// Runs `node` against the center at `opts.center` until the center ends the run.
 pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Result<(), String> {
     let bind: SocketAddr = if opts.center.is_ipv4() {
