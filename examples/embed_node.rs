@@ -51,8 +51,11 @@ fn main() -> Result<(), String> {
         // The other three sensors: trial 0's simulated readings.
         let data = runner::draw_trial(&exp, 0);
         for i in 1..4 {
-            let readings: Vec<Option<Vector>> =
-                data.measurements.iter().map(|z| Some(z[i].clone())).collect();
+            let readings: Vec<Option<Vector>> = data
+                .measurements
+                .iter()
+                .map(|z| Some(z[i].clone()))
+                .collect();
             let (exp, center_addr) = (&exp, center_addr);
             s.spawn(move || -> Result<(), String> {
                 let mut node = Node::new(exp, i, 0, Box::new(live::Recorded(readings)))?;

@@ -428,3 +428,97 @@ fn junk_datagrams_are_counted_and_dropped() {
     assert!(counts[1] > 100, "{log}");
     assert!(counts[2] > 10, "{log}");
 }
+
+/// Bad requests get a clear error and exit code 2; a node of another run is refused by the
+/// center and says so.
+#[test]
+fn bad_requests_are_refused_with_their_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let err = |out: &Output, code: i32, text: &str| {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{stderr}");
+        assert!(stderr.contains(text), "{text:?} not in: {stderr}");
+    };
+    err(
+        &hushfuse(
+            &[
+                "node",
+                "arena-1d",
+                "--sensor",
+                "9",
+                "--connect",
+                "127.0.0.1:9",
+            ],
+            d,
+        ),
+        2,
+        "the scenario has 4 sensors (0 to 3), not 9",
+    );
+    err(
+        &hushfuse(&["center", "arena-1d", "--listen", "127.0.0.1:0", "--scheme", "Nope"], d),
+        2,
+        "--scheme \"Nope\": the scenario has no such scheme; its schemes are: Centralized KF (all data)",
+    );
+    err(
+        &hushfuse(
+            &["node", "arena-1d", "--sensor", "0", "--connect", "nowhere"],
+            d,
+        ),
+        2,
+        "--connect: \"nowhere\" is not an address",
+    );
+    err(
+        &hushfuse(&["live", "arena-1d", "--truth", "t.csv"], d),
+        2,
+        "--truth goes with --measurements",
+    );
+    // A node of another run (other steps): refused.
+    let port = free_port();
+    let listen = format!("127.0.0.1:{port}");
+    let center = spawn(
+        &[
+            "center",
+            "arena-1d",
+            "--listen",
+            &listen,
+            "--steps",
+            "5",
+            "--wait",
+            "3",
+            "--timeout",
+            "0.05",
+            "--scheme",
+            "Send-on-delta",
+            "--out",
+            "c",
+        ],
+        d,
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    let other = hushfuse(
+        &[
+            "node",
+            "arena-1d",
+            "--sensor",
+            "0",
+            "--connect",
+            &listen,
+            "--steps",
+            "6",
+        ],
+        d,
+    );
+    err(
+        &other,
+        1,
+        "the center refused this node: it runs another scenario, seed, number of steps or trial",
+    );
+    wait_ok(center, "the center without nodes");
+    let log = read(&d.join("c/live.log"));
+    assert!(
+        log.contains("starting without sensor(s) 0, 1, 2, 3"),
+        "{log}"
+    );
+    assert!(read(&d.join("c/estimates.csv")).contains(",no_report,0"));
+}

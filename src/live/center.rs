@@ -380,3 +380,126 @@ impl<'a> Center<'a> {
         Ok(record)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::node::{frame_datagram, Node, Recorded};
+    use super::super::wire::{Datagram, Kind};
+    use super::*;
+    use crate::link::Message;
+
+    fn exp() -> Experiment {
+        let text = crate::scenario::builtin::get("arena-1d").unwrap();
+        crate::engine::replay::load_experiment(text, "arena-1d", 5, None, &Default::default())
+            .unwrap()
+            .0
+    }
+
+    fn sod(exp: &Experiment) -> usize {
+        (0..exp.variants.len())
+            .find(|&v| exp.curves[exp.variants[v].curve].label == "Send-on-delta")
+            .unwrap()
+    }
+
+    /// One step of send-on-delta by hand: a frame, a duplicate, a stale frame, a frame with a
+    /// bad FCS, random octets, a silent sensor, one without a reading, one that never reports.
+    #[test]
+    fn a_step_takes_what_arrived_and_drops_the_rest() {
+        let exp = exp();
+        let v = sod(&exp);
+        let mut c = Center::new(&exp, 0, [0; 8], vec![v]).unwrap();
+        assert_eq!(c.announce().unwrap().len(), 4);
+        let z = |x: f64| Message::Measurement(Vector::from_vec(vec![x]));
+        let done = |i: usize, k: usize, reading: bool| {
+            let mut d = Datagram::new(Kind::Done, i, v, k);
+            d.flags = u8::from(reading);
+            d.encode()
+        };
+        let frame = frame_datagram(&z(0.1), 0, v, 1).unwrap();
+        assert!(c.accept(&frame).replies.is_empty());
+        c.accept(&frame);
+        c.accept(&frame_datagram(&z(9.0), 0, v, 2).unwrap());
+        let mut bad = Datagram::decode(&frame_datagram(&z(5.0), 1, v, 1).unwrap()).unwrap();
+        bad.body[12] ^= 1;
+        c.accept(&bad.encode());
+        c.accept(b"random octets, not a datagram");
+        c.accept(&frame[..frame.len() - 1]);
+        c.accept(&done(0, 1, true));
+        c.accept(&done(1, 1, true));
+        c.accept(&done(2, 1, false));
+        assert!(!c.complete());
+        assert_eq!(c.missing(), vec![3]);
+        let r = c.close().unwrap();
+        assert_eq!(
+            r.inbox,
+            vec![
+                Received::Measurement(Vector::from_vec(vec![f64::from(0.1f32)])),
+                Received::Silent,
+                Received::NotScheduled,
+                Received::Silent,
+            ]
+        );
+        let links: Vec<_> = r.sensors.iter().map(|s| (s.link, s.bits)).collect();
+        assert_eq!(
+            links,
+            vec![
+                ("sent", 32),
+                ("silent", 0),
+                ("missing", 0),
+                ("no_report", 0)
+            ]
+        );
+        assert_eq!(
+            c.dropped,
+            Dropped {
+                corrupt: 2,
+                bad_frame: 1,
+                stale: 1,
+                duplicate: 1,
+                unknown_sensor: 0
+            }
+        );
+        assert_eq!(c.position(), (v, 2));
+    }
+
+    /// A node that greets in the middle of a variant, fresh, asks for the steps it missed and
+    /// gets them as catch-up (it sends nothing for them), then the current step.
+    #[test]
+    fn a_fresh_node_catches_up_silently() {
+        let exp = exp();
+        let v = sod(&exp);
+        let fp = [7; 8];
+        let mut c = Center::new(&exp, 0, fp, vec![v]).unwrap();
+        for _ in 0..3 {
+            c.announce().unwrap();
+            c.close().unwrap();
+        }
+        let readings = (1..=5)
+            .map(|k| Some(Vector::from_vec(vec![k as f64])))
+            .collect();
+        let mut node = Node::new(&exp, 1, 0, Box::new(Recorded(readings))).unwrap();
+        c.announce().unwrap();
+        let hello = c.accept(&node.hello(fp));
+        assert_eq!(hello.hello, Some((1, true)));
+        let ask = node.handle(&hello.replies[0]).unwrap().datagrams;
+        assert_eq!(Datagram::decode(&ask[0]).unwrap().kind, Kind::CatchUp);
+        let steps = c.accept(&ask[0]).replies;
+        assert_eq!(steps.len(), 4, "steps 1-3 as catch-up, then step 4");
+        for s in &steps[..3] {
+            assert!(node.handle(s).unwrap().datagrams.is_empty());
+        }
+        let sent = node.handle(&steps[3]).unwrap().datagrams;
+        let kinds: Vec<Kind> = sent
+            .iter()
+            .map(|d| Datagram::decode(d).unwrap().kind)
+            .collect();
+        assert_eq!(*kinds.last().unwrap(), Kind::Done);
+        // Another run's node is refused.
+        let other = c.accept(&node.hello([8; 8]));
+        assert_eq!(other.hello, None);
+        assert!(node
+            .handle(&other.replies[0])
+            .unwrap_err()
+            .contains("refused"));
+    }
+}

@@ -268,9 +268,7 @@ impl Journal {
     }
 
     /// The steps of a journal's text, in order; a last line cut short by a crash is left out.
-    pub fn read(
-        text: &str,
-    ) -> Result<Vec<JournalLine>, String> {
+    pub fn read(text: &str) -> Result<Vec<JournalLine>, String> {
         let mut out = Vec::new();
         let lines: Vec<&str> = text.split_inclusive('\n').collect();
         for (no, line) in lines.iter().enumerate() {

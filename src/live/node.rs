@@ -401,3 +401,37 @@ pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Re
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lines_read_one_reading_per_step_and_keep_them() {
+        let text = "1.5, 2\n\n3 4\n";
+        let mut r = Lines::new(std::io::Cursor::new(text), 2);
+        assert_eq!(
+            r.reading(3).unwrap(),
+            Some(Vector::from_vec(vec![3.0, 4.0]))
+        );
+        assert_eq!(
+            r.reading(1).unwrap(),
+            Some(Vector::from_vec(vec![1.5, 2.0]))
+        );
+        assert_eq!(r.reading(2).unwrap(), None, "an empty line: no reading");
+        let e = r.reading(4).unwrap_err();
+        assert!(e.contains("ended at line 4"), "{e}");
+        let mut bad = Lines::new(std::io::Cursor::new("1 nan\n"), 2);
+        assert!(bad.reading(1).unwrap_err().contains("not finite numbers"));
+        let mut short = Lines::new(std::io::Cursor::new("1\n"), 2);
+        assert!(short.reading(1).unwrap_err().contains("measures 2"));
+    }
+
+    #[test]
+    fn recorded_readings_name_a_step_beyond_the_data() {
+        let mut r = Recorded(vec![None]);
+        assert_eq!(r.reading(1).unwrap(), None);
+        assert!(r.reading(2).unwrap_err().contains("1 steps"));
+        assert!(r.reading(0).is_err());
+    }
+}

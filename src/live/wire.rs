@@ -475,4 +475,17 @@ mod tests {
         let (flags, f) = feedback_frame(&refs, 1, 1).unwrap().unwrap();
         assert_eq!(read_feedback(flags, &f, 1, 2, 2).unwrap(), Some(refs));
     }
+
+    proptest::proptest! {
+        /// Any octets: an error or a datagram, never a panic; frames and feedback likewise.
+        #[test]
+        fn any_octets_decode_without_panic(octets in proptest::collection::vec(proptest::num::u8::ANY, 0..200), flags in 0u8..16) {
+            if let Ok(d) = Datagram::decode(&octets) {
+                proptest::prop_assert_eq!(d.encode(), octets.clone());
+            }
+            let _ = check_mpdu(&octets, 1, CENTER_ADDRESS);
+            let _ = read_feedback(flags, &octets, 0, 3, 2);
+            let _ = read_f32s(&octets, 2);
+        }
+    }
 }
