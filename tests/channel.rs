@@ -223,7 +223,7 @@ fn the_loss_aware_censored_pf_center_is_consistent_where_the_published_one_is_no
 /// the in-order Kalman filter on the measurements that have arrived by then.
 #[test]
 fn late_packets_are_re_fused_into_the_in_order_filter() {
-    use hushfuse::link::Received;
+    use hushfuse::link::{Message, Received, Transmission};
     let text = scalar("[channel]\nkind = \"ideal\"\ndelay = 2\n", KF, 1);
     let exp = build::load(&text, "scalar.toml").unwrap();
     for trial in 0..3 {
@@ -234,7 +234,9 @@ fn late_packets_are_re_fused_into_the_in_order_filter() {
             let mut inst = exp.variants[0].scheme.build_with_seed(0).unwrap();
             for j in 1..=k {
                 let inbox = if j + 2 <= k {
-                    vec![Received::Measurement(data.measurements[j - 1][0].clone())]
+                    // The measurement as it crosses the network (singles).
+                    let z = data.measurements[j - 1][0].clone();
+                    vec![Received::from(Transmission::Send(Message::Measurement(z)))]
                 } else {
                     vec![Received::Silent]
                 };

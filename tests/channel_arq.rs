@@ -307,12 +307,16 @@ fn a_censoring_sensor_keeps_the_last_feedback_it_received() {
             let data = runner::draw_trial(&exp, trial);
             let down = FateTable::draw(specs, exp.steps, exp.seed, trial as u64, true);
             // The loop by hand: variant 0's coins and center seed, as the engine seeds them.
-            let (mut rng, center_seed) = seeding::coins(exp.seed, trial, seeding::coin_stream(0));
+            let ns = exp.system.n_sensors();
+            let (mut coins, center_seed) =
+                seeding::coins(exp.seed, trial, seeding::coin_stream(0), ns);
             let mut inst = exp.variants[0].scheme.build_with_seed(center_seed).unwrap();
-            let mut held = vec![inst.center.feedback(); 2];
+            // Feedback as the sensors receive it (singles), as the engine sends it.
+            let fb = |c: &dyn hushfuse::scheme::FusionCenter| c.feedback().map(|f| f.as_sent());
+            let mut held = vec![fb(inst.center.as_ref()); 2];
             assert!(held[0].is_some(), "the scheme feeds back");
             for k in 1..=exp.steps {
-                let fresh = inst.center.feedback();
+                let fresh = fb(inst.center.as_ref());
                 for (i, h) in held.iter_mut().enumerate() {
                     if k > 1 && !down.get(i, k).lost {
                         h.clone_from(&fresh);
@@ -321,7 +325,12 @@ fn a_censoring_sensor_keeps_the_last_feedback_it_received() {
                 let mut inbox = Vec::new();
                 for (i, node) in inst.sensors.iter_mut().enumerate() {
                     let t = node
-                        .step(k, &data.measurements[k - 1][i], held[i].as_ref(), &mut rng)
+                        .step(
+                            k,
+                            &data.measurements[k - 1][i],
+                            held[i].as_ref(),
+                            &mut coins[i],
+                        )
                         .unwrap();
                     inbox.push(Received::from(t));
                 }

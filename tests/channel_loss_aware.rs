@@ -8,7 +8,7 @@
 use hushfuse::engine::runner;
 use hushfuse::engine::seeding::{coin_stream, coins};
 use hushfuse::engine::trace::{self, Link};
-use hushfuse::link::Received;
+use hushfuse::link::{Message, Received, Transmission};
 use hushfuse::metrics::results;
 use hushfuse::scenario::build;
 #[path = "common/scalar.rs"]
@@ -185,12 +185,15 @@ fn a_lost_reading_is_no_information_for_the_tobit_pf_and_the_federated_tobit_kf(
         let t = trace::trace(&exp, trial, false).unwrap();
         let data = runner::draw_trial(&exp, trial);
         for (v, variant) in t.variants.iter().enumerate() {
-            let (_, center_seed) = coins(exp.seed, trial, coin_stream(v));
+            let (_, center_seed) = coins(exp.seed, trial, coin_stream(v), 0);
             let mut inst = exp.variants[v].scheme.build_with_seed(center_seed).unwrap();
             for k in 1..=exp.steps {
                 let inbox: Vec<Received> = (0..2)
                     .map(|i| match variant.links[k - 1][i] {
-                        Link::Sent => Received::Measurement(data.measurements[k - 1][i].clone()),
+                        // As it crosses the network: a single per component.
+                        Link::Sent => Received::from(Transmission::Send(Message::Measurement(
+                            data.measurements[k - 1][i].clone(),
+                        ))),
                         Link::Lost => {
                             lost += 1;
                             Received::NotScheduled

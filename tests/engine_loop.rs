@@ -5,7 +5,7 @@
 mod common;
 
 use hushfuse::engine::runner::{self, draw_trial};
-use hushfuse::engine::seeding::{coin_stream, coins, trial_rng, DATA_STREAM};
+use hushfuse::engine::seeding::{coin_stream, coins, sensor_coins, trial_rng, DATA_STREAM};
 use hushfuse::engine::trial::{
     run_trial, Link, LoopBuffers, Observer, ObserverError, StepOutput, TrialSpec,
 };
@@ -185,15 +185,24 @@ fn the_fast_path_hook_gives_the_loops_numbers() {
 #[test]
 fn the_seeding_rule_gives_data_and_each_variant_streams_of_their_own() {
     let seed = 11;
-    let (mut c0, center0) = coins(seed, 3, coin_stream(0));
-    let (mut c1, center1) = coins(seed, 3, coin_stream(1));
+    let (mut c0, center0) = coins(seed, 3, coin_stream(0), 2);
+    let (mut c1, center1) = coins(seed, 3, coin_stream(1), 2);
     let mut data = trial_rng(seed, 3, DATA_STREAM);
-    let (x0, x1, d) = (c0.next_u64(), c1.next_u64(), data.next_u64());
+    let (x0, x1, d) = (c0[0].next_u64(), c1[0].next_u64(), data.next_u64());
     assert!(x0 != x1 && x0 != d && x1 != d);
     assert_ne!(center0, center1);
+    // Each sensor has coins of its own, whatever the number of sensors.
+    let y0 = c0[1].next_u64();
+    assert!(y0 != x0 && y0 != x1 && y0 != d);
+    assert_eq!(coins(seed, 3, coin_stream(0), 5).0[1].next_u64(), y0);
+    assert_eq!(
+        sensor_coins(seed, 3, coin_stream(0), 1).next_u64(),
+        y0,
+        "coins gives sensor_coins"
+    );
     // The same (seed, trial, stream) gives the same coins; another trial other ones.
-    assert_eq!(coins(seed, 3, coin_stream(1)).0.next_u64(), x1);
-    assert_ne!(coins(seed, 4, coin_stream(1)).0.next_u64(), x1);
+    assert_eq!(coins(seed, 3, coin_stream(1), 1).0[0].next_u64(), x1);
+    assert_ne!(coins(seed, 4, coin_stream(1), 1).0[0].next_u64(), x1);
     assert_eq!(coin_stream(0), 1);
     assert_eq!(DATA_STREAM, 0);
 }

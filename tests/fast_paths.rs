@@ -6,7 +6,7 @@
 //! of a trial sharing one `TrialCache` as the runner shares it. On a link that loses packets
 //! the engine's trial with the fast paths equals its generic loop, the losses applied by each.
 use hushfuse::engine::runner;
-use hushfuse::engine::seeding::coin_stream;
+use hushfuse::engine::seeding::{self, coin_stream};
 use hushfuse::engine::trial::{
     run_trial, LoopBuffers, Observer, ObserverError, StepOutput, TrialSpec,
 };
@@ -39,7 +39,8 @@ impl StepSink for Collect {
 
 /// The generic loop of `runner::run_variant`, for schemes without feedback or schedules.
 fn generic(exp: &build::Experiment, v: usize, trial: usize, data: &runner::TrialData) -> Steps {
-    let mut rng = runner::trial_rng(exp.seed, trial as u64, 1 + v as u64);
+    let ns = exp.system.n_sensors();
+    let (mut coins, _) = seeding::coins(exp.seed, trial, coin_stream(v), ns);
     let mut inst = exp.variants[v].scheme.build().unwrap();
     let mut inbox = Vec::new();
     let mut out = Vec::new();
@@ -47,9 +48,10 @@ fn generic(exp: &build::Experiment, v: usize, trial: usize, data: &runner::Trial
         let sent: Vec<_> = inst
             .sensors
             .iter_mut()
+            .zip(&mut coins)
             .enumerate()
-            .map(|(i, node)| {
-                node.step(k, &data.measurements[k - 1][i], None, &mut rng)
+            .map(|(i, (node, rng))| {
+                node.step(k, &data.measurements[k - 1][i], None, rng)
                     .unwrap()
             })
             .collect();
@@ -69,7 +71,8 @@ fn check(exp: &build::Experiment, trials: usize) {
         let data = runner::draw_trial(exp, trial);
         let mut cache = TrialCache::new();
         for v in 0..exp.variants.len() {
-            let mut rng = runner::trial_rng(exp.seed, trial as u64, 1 + v as u64);
+            let ns = exp.system.n_sensors();
+            let (mut coins, _) = seeding::coins(exp.seed, trial, coin_stream(v), ns);
             let mut sink = Collect(Vec::new());
             let Some(fast) = exp.variants[v].scheme.fast_path() else {
                 continue;
@@ -78,7 +81,7 @@ fn check(exp: &build::Experiment, trials: usize) {
                 &data.measurements,
                 exp.steps,
                 None,
-                &mut rng,
+                &mut coins,
                 &mut cache,
                 &mut sink,
             ) else {

@@ -39,6 +39,14 @@
 //! the fair rows) and by the new one, compared equal on every pre-existing key
 //! (`scripts/compare-summaries.py`), and all hashes were re-recorded.
 //!
+//! Issue 26 (per-sensor coin streams and f32 delivery) moved numbers on purpose: every sensor now
+//! draws its coins from a generator of its own (`seeding::sensor_coins`), so the schemes whose
+//! sensors draw coins (random-rate centralized KF, DKF random trigger, stochastic triggers,
+//! censored PF) see other coin draws; and measurements, estimates and feedback now arrive as the
+//! IEEE singles they are priced as (`link::as_sent`, `Feedback::as_sent`), which moves the
+//! deterministic schemes at single precision (about 1e-7 relative). `zhang-table7` and
+//! `zhang-tables` (no scheme) kept their hashes; every other hash was re-recorded.
+//!
 //! When a change is *meant* to move numbers, rerun with `HUSHFUSE_PRINT_GOLDEN=1 cargo test
 //! --release --test golden -- --nocapture`, paste the printed table, and say in the commit
 //! which numbers moved and why.
@@ -46,34 +54,34 @@ use std::process::Command;
 
 /// (built-in scenario, trials, FNV-1a 64 of summary.json, its length in bytes).
 const GOLDEN: &[(&str, usize, u64, usize)] = &[
-    ("default", 8, 0x8c71ee02b8a5787b, 553153),
-    ("dormann-fig1", 8, 0xeb93e304a54f4571, 5089836),
-    ("zhang-fig4", 8, 0xca069074a4c14e1a, 222232),
-    ("zhang-fig5", 8, 0x19f3b4ca70c566bd, 221847),
+    ("default", 8, 0x9dc8066d6312d050, 553460),
+    ("dormann-fig1", 8, 0x96482f1429ca80e9, 5088191),
+    ("zhang-fig4", 8, 0x9c29e5e5306fa2d7, 222239),
+    ("zhang-fig5", 8, 0x0126239b2512dc22, 221854),
     ("zhang-table7", 8, 0x583977c3ff48095b, 1066),
     ("zhang-tables", 8, 0xdb5625c0f613852d, 2560),
-    ("zheng-fig1", 8, 0x1c5f4b144bf5b520, 65893),
-    ("zheng-fig10-table3", 2, 0x953ec6737a2c572c, 85561),
-    ("zheng-fig2-table1", 8, 0xb38abd1265b429ec, 151771),
-    ("zheng-fig3", 8, 0x3d03649cb167238f, 80214),
-    ("zheng-fig4", 8, 0x3bd7ea975ac07fad, 66069),
-    ("zheng-fig5-table2", 8, 0x5f78c2f0dc8092a5, 96723),
-    ("zheng-fig6", 8, 0x7c829ec54c378d79, 79928),
-    ("zheng-fig8", 2, 0x082eb91d690d6fb7, 56625),
-    ("zheng-fig9", 2, 0x97706eecade1285f, 252998),
-    ("zheng-nofb-n4", 8, 0x19d8da1e29619980, 135078),
-    ("geng-oscillator", 8, 0xd2dd3b5fb5982578, 1086730),
-    ("geng-tracking", 8, 0x8c09ec5d6c410346, 313966),
-    ("sinopoli-critical", 8, 0xbbfbe79e70d9b327, 846547),
-    ("gilbert-elliott-stability", 8, 0x6957f77732781e89, 718382),
-    ("classic-quantized-kf", 8, 0xae8e662a21d0072a, 200216),
-    ("classic-one-bit-static", 8, 0x0060c26de681ebd4, 158019),
-    ("classic-one-bit-tracking", 8, 0xfe21921e6b198f1f, 305588),
-    ("arena-1d", 4, 0x87244ea5d62a7a32, 810763),
-    ("arena-nca", 4, 0xe711081a962d4c29, 723038),
-    ("arena-rss", 4, 0xd395e6367819e86c, 123579),
-    ("arena-wsn", 4, 0x0692ef29bdfda84d, 344374),
-    ("arena-tobit", 4, 0x898bc3d4bca059f6, 909661),
+    ("zheng-fig1", 8, 0x4f46047d9f849def, 65903),
+    ("zheng-fig10-table3", 2, 0x031c64755a3be578, 85573),
+    ("zheng-fig2-table1", 8, 0x7c656ce3988a14be, 151867),
+    ("zheng-fig3", 8, 0xc1cd51aad0b08203, 80225),
+    ("zheng-fig4", 8, 0x9b74f5bf5b03dacd, 66097),
+    ("zheng-fig5-table2", 8, 0x3e1cf8d06fee44af, 96772),
+    ("zheng-fig6", 8, 0xc47faafb62280ba6, 79991),
+    ("zheng-fig8", 2, 0xb4f1a34a6773c67a, 56611),
+    ("zheng-fig9", 2, 0xdd0a1d83c8ce70ed, 252948),
+    ("zheng-nofb-n4", 8, 0xe5dfac6208f405bf, 135117),
+    ("geng-oscillator", 8, 0xc362010398966367, 1086861),
+    ("geng-tracking", 8, 0x23f25479dc2ccb09, 313880),
+    ("sinopoli-critical", 8, 0xf006849f315e5b33, 845416),
+    ("gilbert-elliott-stability", 8, 0xa394145ecc168962, 717201),
+    ("classic-quantized-kf", 8, 0x443c1caa051be658, 200246),
+    ("classic-one-bit-static", 8, 0x365883d266a1abd0, 157990),
+    ("classic-one-bit-tracking", 8, 0x651320c915f5ddde, 305630),
+    ("arena-1d", 4, 0x4fc75cfbcfecf4e2, 810488),
+    ("arena-nca", 4, 0xd0e15644f3268155, 722385),
+    ("arena-rss", 4, 0xea42c43c4cae5dcd, 123570),
+    ("arena-wsn", 4, 0x606437ab2dbb0ad1, 344571),
+    ("arena-tobit", 4, 0x00f6653446ba6b85, 910210),
 ];
 
 /// FNV-1a, 64 bits: a stable hash written out (std's hasher may change between releases).

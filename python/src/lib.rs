@@ -311,7 +311,8 @@ struct SensorNode {
     /// The last step taken (0: none yet): steps must increase.
     last: Mutex<usize>,
     node: Mutex<Box<dyn scheme::SensorNode>>,
-    rng: Arc<Mutex<Xoshiro256PlusPlus>>,
+    /// The sensor's own coins ([`seeding::sensor_coins`]).
+    rng: Mutex<Xoshiro256PlusPlus>,
     index: usize,
     dim: usize,
 }
@@ -440,11 +441,12 @@ impl FusionCenter {
             cov.into_pyarray(py).into_any(),
         ))
     }
-    /// Feedback for the sensors' next step, or None.
+    /// Feedback for the sensors' next step as they receive it (every number a single, as
+    /// priced and as the simulator delivers it), or None.
     fn feedback(&self) -> Option<Feedback> {
         lock(&self.center)
             .feedback()
-            .map(|inner| Feedback { inner })
+            .map(|f| Feedback { inner: f.as_sent() })
     }
     /// Effective sample size of the particle weights after the last update (particle filters),
     /// or None.
@@ -507,23 +509,25 @@ impl Scheme {
             )));
         };
         // The engine's seeding rule: a notebook's loop draws the coins the runner draws.
-        let (rng, center_seed) = seeding::coins(exp.seed, trial, seeding::coin_stream(variant));
+        let n_sensors = exp.system.n_sensors();
+        let (coins, center_seed) =
+            seeding::coins(exp.seed, trial, seeding::coin_stream(variant), n_sensors);
         let inst = v
             .scheme
             .build_with_seed(center_seed)
             .map_err(|e| RunError::new_err(e.to_string()))?;
-        let rng = Arc::new(Mutex::new(rng));
         let sensors = inst
             .sensors
             .into_iter()
+            .zip(coins)
             .enumerate()
-            .map(|(i, node)| {
+            .map(|(i, (node, rng))| {
                 Py::new(
                     py,
                     SensorNode {
                         last: Mutex::new(0),
                         node: Mutex::new(node),
-                        rng: rng.clone(),
+                        rng: Mutex::new(rng),
                         index: i,
                         dim: exp.system.sensors[i].meas_dim(),
                     },

@@ -1,7 +1,7 @@
 //! The seeding rule of every trial, written once: truth and measurements come from stream
 //! [`DATA_STREAM`] of (seed, trial); variant v's coins from stream [`coin_stream`]`(v)`, so every
 //! variant of a trial sees the same data (common random numbers) and no variant's coins depend
-//! on another's. The fusion center's own generator (particle filters) has a seed of its own
+//! on another's. Within a variant each sensor has coins of its own ([`sensor_coins`]). The fusion center's own generator (particle filters) has a seed of its own
 //! derived from the same stream.
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -14,12 +14,28 @@ pub fn coin_stream(v: usize) -> u64 {
     1 + v as u64
 }
 
-/// The coins of one variant's trial: the sensors' generator and the fusion center's seed.
-pub fn coins(seed: u64, trial: usize, stream: u64) -> (Xoshiro256PlusPlus, u64) {
-    (
-        trial_rng(seed, trial as u64, stream),
-        center_seed(seed, trial as u64, stream),
-    )
+/// The coins of one variant's trial: one generator per sensor ([`sensor_coins`]) and the
+/// fusion center's seed.
+pub fn coins(
+    seed: u64,
+    trial: usize,
+    stream: u64,
+    n_sensors: usize,
+) -> (Vec<Xoshiro256PlusPlus>, u64) {
+    let sensors = (0..n_sensors)
+        .map(|i| sensor_coins(seed, trial as u64, stream, i))
+        .collect();
+    (sensors, center_seed(seed, trial as u64, stream))
+}
+
+/// Sensor `sensor`'s coins in the trial of coin stream `stream`: a generator of its own,
+/// derived from the trial's stream seed and the sensor's index by splitmix steps (after a tag
+/// of its own, so no sensor's seed is the center's or the stream's). A sensor's draws then
+/// depend on (seed, trial, stream, sensor) only, never on how many draws the other sensors
+/// made: a node running in its own process draws exactly what it draws in the simulation.
+pub fn sensor_coins(seed: u64, trial: u64, stream: u64, sensor: usize) -> Xoshiro256PlusPlus {
+    let tagged = splitmix64(trial_seed(seed, trial, stream) ^ 0x5851_F42D_4C95_7F2D);
+    Xoshiro256PlusPlus::seed_from_u64(splitmix64(tagged ^ sensor as u64))
 }
 
 /// The generator of stream `stream` of trial `trial` (see [`DATA_STREAM`] and [`coin_stream`]).

@@ -1,5 +1,5 @@
 //! The time loop of one trial of one scheme variant, written once: sense (every scheduled
-//! sensor node steps on its measurement with the variant's coins), schedule (the scheme's
+//! sensor node steps on its measurement with its own coins of the variant), schedule (the scheme's
 //! mask, and which readings a recording has), deliver (the network counts the bits and fills
 //! the fusion center's inbox), fuse, feed back. The Monte Carlo runner, the trial-0 trace,
 //! replay of recorded data and the report's error bands all run their trials here, seeded by
@@ -165,7 +165,7 @@ pub fn run_trial(
 ) -> Result<(), LoopError> {
     let n_sensors = exp.system.n_sensors();
     let variant = &exp.variants[spec.variant];
-    let (mut rng, center_seed) = coins(exp.seed, spec.trial, spec.stream);
+    let (mut coins, center_seed) = coins(exp.seed, spec.trial, spec.stream, n_sensors);
     // The fast paths take an ideal link, or one that only loses packets (they apply the
     // losses); delays, retransmissions and sequence numbers are the generic loop's.
     let ideal = link_layer::ideal(variant);
@@ -179,8 +179,14 @@ pub fn run_trial(
             let losses = uplink.as_deref().map(Losses::new);
             let cache = buffers.cache_for(spec.trial, measurements);
             let steps = exp.steps;
-            let fast =
-                fast.run_trial_fast(measurements, steps, losses.as_ref(), &mut rng, cache, sink);
+            let fast = fast.run_trial_fast(
+                measurements,
+                steps,
+                losses.as_ref(),
+                &mut coins,
+                cache,
+                sink,
+            );
             if let Some(r) = fast {
                 return r.map_err(|e| match e {
                     FastTrialError::Scheme { k, source } => LoopError::Scheme { k, source },
@@ -203,8 +209,9 @@ pub fn run_trial(
         fates,
         ..
     } = buffers;
-    // What the fusion center tells the sensors before the first measurement.
-    let mut feedback = inst.center.feedback();
+    // What the fusion center tells the sensors before the first measurement, as they receive
+    // it (every real number a single, as priced).
+    let mut feedback = inst.center.feedback().map(|f| f.as_sent());
     // The link's fates of this trial, from its own stream: every scheme meets the same ones.
     let mut link = LinkLayer::new(exp, spec.variant, spec.trial, &feedback, fates);
     for k in 1..=exp.steps {
@@ -216,14 +223,14 @@ pub fn run_trial(
         links.clear();
         bits.clear();
         let mut scheduled_mask = 0u128;
-        for (i, node) in inst.sensors.iter_mut().enumerate() {
+        for (i, (node, rng)) in inst.sensors.iter_mut().zip(&mut coins).enumerate() {
             let fb = match &link {
                 Some(l) => l.feedback(i),
                 None => feedback.as_ref(),
             };
             let t = if scheduled(i) {
                 scheduled_mask |= network::sensor_bit(i);
-                node.step(k, &measurements[k - 1][i], fb, &mut rng)
+                node.step(k, &measurements[k - 1][i], fb, rng)
                     .map_err(|source| LoopError::Scheme { k, source })?
             } else {
                 Transmission::Silent
@@ -281,7 +288,7 @@ pub fn run_trial(
                 .step(k, inbox)
                 .map_err(|source| LoopError::Scheme { k, source })?,
         }
-        feedback = inst.center.feedback();
+        feedback = inst.center.feedback().map(|f| f.as_sent());
         observer
             .step(&StepOutput {
                 k,

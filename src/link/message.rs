@@ -92,12 +92,43 @@ pub enum Received {
     Frame(Vec<u8>),
 }
 
+/// A real number as it crosses the network: the IEEE 754 single that
+/// [`BITS_PER_COMPONENT`] prices, read back as an f64 (round to nearest, ties to even). A
+/// message priced at 32 bits per component must not deliver the 53-bit mantissa it was not
+/// charged for, and a sensor and a center in separate processes exchanging real frames
+/// receive exactly this.
+///
+/// A finite value beyond the single range (|x| > `f32::MAX`, about 3.4e38, after rounding)
+/// becomes ±infinity, as the single on the wire would be, and NaN stays NaN. The conversion
+/// stays infallible: a center then sees a non-finite component exactly as a live one would
+/// decode it, and rejects it as it rejects any non-finite measurement or estimate, at the
+/// step it arrives (see the tests). No model of this crate comes near that range.
+#[inline]
+pub fn as_sent(x: f64) -> f64 {
+    x as f32 as f64
+}
+
+/// [`as_sent`] of every component, in place.
+pub fn round_as_sent(v: &mut [f64]) {
+    for x in v {
+        *x = as_sent(*x);
+    }
+}
+
+/// What crosses the network: measurements and estimates arrive as singles ([`as_sent`]),
+/// frames as their octets.
 impl From<Transmission> for Received {
     fn from(t: Transmission) -> Self {
         match t {
             Transmission::Silent => Received::Silent,
-            Transmission::Send(Message::Measurement(z)) => Received::Measurement(z),
-            Transmission::Send(Message::Estimate(x)) => Received::Estimate(x),
+            Transmission::Send(Message::Measurement(mut z)) => {
+                round_as_sent(z.as_mut_slice());
+                Received::Measurement(z)
+            }
+            Transmission::Send(Message::Estimate(mut x)) => {
+                round_as_sent(x.as_mut_slice());
+                Received::Estimate(x)
+            }
             Transmission::Send(Message::Frame { octets, .. }) => Received::Frame(octets),
         }
     }

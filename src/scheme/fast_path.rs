@@ -7,7 +7,7 @@ use crate::network::channel::FateTable;
 #[cfg(doc)]
 use crate::scheme::Scheme;
 use crate::scheme::SchemeError;
-use rand::RngCore;
+use rand_xoshiro::Xoshiro256PlusPlus;
 
 /// An engine hook: a scheme whose whole trial can run without the generic per-step loop,
 /// reporting each step to a sink with the numbers that loop gives. Offered by
@@ -15,10 +15,11 @@ use rand::RngCore;
 pub trait LockstepFastPath: Send + Sync {
     /// Runs one whole trial on `measurements` (`measurements[k - 1][i]` = z_k^i, k = 1..=steps)
     /// without the generic per-step loop, reporting each step's fused estimate and traffic to
-    /// `sink`, with the same coin draws from `rng` and the same numbers as that loop gives.
+    /// `sink`, with the same coin draws (sensor i's from `coins[i]`) and the same numbers as
+    /// that loop gives: what reaches the center rounded as [`crate::link::as_sent`] rounds it.
     /// `cache` lives for one trial and is shared by its variants (work that depends on the
     /// data but not on the variant is done once). `None`: no fast path for this scheme or this
-    /// data (nothing has been drawn from `rng`; the generic loop runs).
+    /// data (nothing has been drawn from `coins`; the generic loop runs).
     ///
     /// `losses`: the packets a lossy link loses in this trial ([`Losses`]), which the fast
     /// path must apply as the generic loop does; `None` on an ideal link. A fast path that
@@ -28,11 +29,11 @@ pub trait LockstepFastPath: Send + Sync {
         measurements: &[Vec<Vector>],
         steps: usize,
         losses: Option<&Losses>,
-        rng: &mut dyn RngCore,
+        coins: &mut [Xoshiro256PlusPlus],
         cache: &mut TrialCache,
         sink: &mut dyn StepSink,
     ) -> Option<Result<(), FastTrialError>> {
-        let _ = (measurements, steps, losses, rng, cache, sink);
+        let _ = (measurements, steps, losses, coins, cache, sink);
         None
     }
     /// Whether [`LockstepFastPath::run_batch_fast`] may take several trials at once (the

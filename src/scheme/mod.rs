@@ -99,6 +99,28 @@ impl Feedback {
             }
         }
     }
+
+    /// The feedback as the sensors receive it: every real number as the single that
+    /// [`Feedback::bits`] prices ([`crate::link::as_sent`]), as a downlink frame carries it.
+    pub fn as_sent(&self) -> Feedback {
+        use crate::link::{as_sent, round_as_sent};
+        let mut f = self.clone();
+        match &mut f {
+            Feedback::Prediction { mean, cov } => {
+                round_as_sent(mean.as_mut_slice());
+                if let Some(c) = cov {
+                    round_as_sent(c.as_mut_slice());
+                }
+            }
+            Feedback::InnovationReference(refs) => {
+                for r in refs.iter_mut().flatten() {
+                    r.y_hat = as_sent(r.y_hat);
+                    r.delta = as_sent(r.delta);
+                }
+            }
+        }
+        f
+    }
 }
 
 /// Why a scheme could not be built or could not take a step.

@@ -120,17 +120,26 @@ pub fn mat_vec_rows<const C: usize>(y: &mut [f64], a: &[f64], x: &[f64; C]) {
 /// `a x` for a column-major `a` of R rows and `x.len()` columns (a sensor's H^T R^{-1}):
 /// [`gemv`]'s operations with the column count known only at run time.
 #[inline(always)]
-#[allow(clippy::assign_op_pattern)]
 pub fn mat_vec_cols<const R: usize>(a: &[f64], x: &[f64]) -> [f64; R] {
+    mat_vec_cols_by(a, x, |v| v)
+}
+
+/// [`mat_vec_cols`] of `map` of each entry of `x` (a fast path's measurement as it arrives,
+/// without a copy): the same operations on the mapped entries.
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+pub fn mat_vec_cols_by<const R: usize>(a: &[f64], x: &[f64], map: impl Fn(f64) -> f64) -> [f64; R] {
     let mut acc = [0.0; R];
     let Some((&x0, rest)) = x.split_first() else {
         return acc;
     };
     let a = &a[..R * x.len()];
+    let x0 = map(x0);
     for r in 0..R {
         acc[r] = a[r] * x0;
     }
     for (j, &xj) in rest.iter().enumerate() {
+        let xj = map(xj);
         let col = &a[(j + 1) * R..(j + 2) * R];
         for r in 0..R {
             acc[r] = col[r] * xj + acc[r];

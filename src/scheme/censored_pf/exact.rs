@@ -640,7 +640,13 @@ mod tests {
             let mut x = sys.prior.mean.clone();
             for k in 1..=15 {
                 x = sys.transition.sample_next(&x, &mut rng);
-                let zs: Vec<Vector> = sys.sensors.iter().map(|s| s.sample(&x, &mut rng)).collect();
+                // Readings that are singles already: they cross the network unchanged
+                // (`link::as_sent`), so the copies see exactly what the sensors see.
+                let zs: Vec<Vector> = sys
+                    .sensors
+                    .iter()
+                    .map(|s| s.sample(&x, &mut rng).map(crate::link::as_sent))
+                    .collect();
                 let inbox: Vec<Received> = sensors
                     .iter_mut()
                     .zip(&zs)

@@ -6,10 +6,11 @@ use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, Syste
 use crate::filter::{kf, Gaussian};
 use crate::linalg::fixed;
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
-use crate::link::{Message, Received, Transmission};
+use crate::link::{as_sent, round_as_sent, Message, Received, Transmission};
 use multiversion::multiversion;
 use nalgebra::{Cholesky, Dyn};
 use rand::{Rng, RngCore};
+use rand_xoshiro::Xoshiro256PlusPlus;
 use std::sync::Arc;
 use std::sync::RwLock;
 
@@ -619,7 +620,8 @@ fn advance_means<const N: usize>(
 
 /// One scheduled step's mean ([`CentralizedKf::scheduled_step`]) on arrays: from_gaussian's
 /// P^{-1} (F x) by the predicted covariance's factor, plus H_i^T R_i^{-1} z_i of each sensor
-/// in sensor order (add_measurement), back by the fused factor (to_gaussian).
+/// in sensor order (add_measurement) as each arrives ([`crate::link::as_sent`]), back by the
+/// fused factor (to_gaussian).
 #[inline(always)]
 #[allow(clippy::assign_op_pattern)]
 fn scheduled_mean<const N: usize>(
@@ -629,11 +631,11 @@ fn scheduled_mean<const N: usize>(
     x: &[f64; N],
     zs: &[Vector],
 ) -> [f64; N] {
-    use crate::linalg::fixed::{chol_solve_array, mat_vec, mat_vec_cols};
+    use crate::linalg::fixed::{chol_solve_array, mat_vec, mat_vec_cols_by};
     let mut y: [f64; N] = mat_vec(f, x);
     chol_solve_array(step.pred_chol.l_dirty().as_slice(), &mut y);
     for ((_, ht_rinv), z) in linear.iter().zip(zs) {
-        let t: [f64; N] = mat_vec_cols(ht_rinv.as_slice(), z.as_slice());
+        let t: [f64; N] = mat_vec_cols_by(ht_rinv.as_slice(), z.as_slice(), as_sent);
         for (yi, ti) in y.iter_mut().zip(t) {
             *yi = *yi + ti;
         }
@@ -694,7 +696,8 @@ impl CentralizedScheme {
 
 impl CentralizedScheme {
     /// Whether the fast trials take `measurements`: linear sensors, a measurement of the
-    /// sensor's dimension per sensor and step, all finite.
+    /// sensor's dimension per sensor and step, all finite as they arrive ([`as_sent`]; the
+    /// generic center rejects one that is not).
     fn covers(&self, measurements: &[Vec<Vector>], steps: usize) -> bool {
         let Some(linear) = &self.linear else {
             return false;
@@ -711,8 +714,8 @@ impl CentralizedScheme {
                 if z.len() != *m {
                     return false;
                 }
-                for v in z.as_slice() {
-                    if !v.is_finite() {
+                for &v in z.as_slice() {
+                    if !as_sent(v).is_finite() {
                         return false;
                     }
                 }
@@ -761,7 +764,7 @@ impl LockstepFastPath for CentralizedScheme {
         measurements: &[Vec<Vector>],
         steps: usize,
         losses: Option<&Losses>,
-        rng: &mut dyn RngCore,
+        coins: &mut [Xoshiro256PlusPlus],
         cache: &mut TrialCache,
         sink: &mut dyn StepSink,
     ) -> Option<Result<(), FastTrialError>> {
@@ -803,15 +806,19 @@ impl LockstepFastPath for CentralizedScheme {
                 (m.bits(), m.frame_bits())
             })
             .collect();
-        let mut arrived: Vec<Option<&Vector>> = Vec::with_capacity(ns);
+        // Per sensor: its measurement of this step as it arrives ([`as_sent`]), and whether
+        // it arrived.
+        let mut sent: Vec<Vector> = linear.iter().map(|(m, _)| Vector::zeros(*m)).collect();
+        let mut arrives = vec![false; ns];
         let mut run = || -> Result<(), FastTrialError> {
             for (k, zs) in (1..=steps).zip(measurements) {
-                arrived.clear();
                 let mut traffic = crate::network::Traffic {
                     scheduled: crate::network::all_sensors(ns),
                     ..Default::default()
                 };
-                for (i, (z, (bits, frame_bits))) in zs.iter().zip(&cost).enumerate() {
+                for (i, ((z, (bits, frame_bits)), rng)) in
+                    zs.iter().zip(&cost).zip(coins.iter_mut()).enumerate()
+                {
                     // ForwardingSensor::step: always draw, send if u < rate.
                     let u: f64 = rng.random();
                     if u < self.rate {
@@ -820,16 +827,22 @@ impl LockstepFastPath for CentralizedScheme {
                         traffic.bits += bits;
                         traffic.frame_bits += frame_bits;
                         // The link layer: a lost packet is a silence, counted.
-                        if losses.is_some_and(|l| l.lost(i, k)) {
-                            traffic.lost += 1;
-                            arrived.push(None);
+                        arrives[i] = !losses.is_some_and(|l| l.lost(i, k));
+                        if arrives[i] {
+                            sent[i].copy_from(z);
+                            round_as_sent(sent[i].as_mut_slice());
                         } else {
-                            arrived.push(Some(z));
+                            traffic.lost += 1;
                         }
                     } else {
-                        arrived.push(None);
+                        arrives[i] = false;
                     }
                 }
+                let arrived: Vec<Option<&Vector>> = sent
+                    .iter()
+                    .zip(&arrives)
+                    .map(|(z, &a)| a.then_some(z))
+                    .collect();
                 center
                     .step_linear(&arrived)
                     .map_err(|source| FastTrialError::Scheme { k, source })?;

@@ -34,7 +34,8 @@ use crate::link::Message;
 use crate::network::Traffic;
 use crate::scheme::fast_path::{FastTrialError, Losses, StepSink, TrialCache};
 use crate::scheme::SchemeError;
-use rand::{Rng, RngCore};
+use rand::Rng;
+use rand_xoshiro::Xoshiro256PlusPlus;
 use std::sync::Arc;
 
 /// Fused means of one trial for steps without inexact extrapolations, by (k, silence set).
@@ -95,7 +96,7 @@ pub(super) fn run(
     measurements: &[Vec<Vector>],
     steps: usize,
     losses: Option<&Losses>,
-    rng: &mut dyn RngCore,
+    coins: &mut [Xoshiro256PlusPlus],
     cache: &mut TrialCache,
     sink: &mut dyn StepSink,
 ) -> Option<Result<(), FastTrialError>> {
@@ -109,20 +110,24 @@ pub(super) fn run(
     // Whether the trial is covered depends on the plan and the data only (the key), so it is
     // checked once per trial too.
     let track: &mut Option<Track> = cache.get_or_insert_with(key, || {
-        covered(scheme, measurements, steps).then(|| {
-            let sys = &scheme.system;
-            let (n, ns) = (sys.state_dim(), sys.n_sensors());
-            Track {
-                signals: Signals::compute(scheme, measurements, steps),
-                replicas: Replicas::new(n, ns, steps),
-                means: Means::new(n, ns, steps),
-            }
-        })
+        covered(scheme, measurements, steps)
+            .then(|| {
+                let sys = &scheme.system;
+                let (n, ns) = (sys.state_dim(), sys.n_sensors());
+                Track {
+                    signals: Signals::compute(scheme, measurements, steps),
+                    replicas: Replicas::new(n, ns, steps),
+                    means: Means::new(n, ns, steps),
+                }
+            })
+            // An estimate beyond the single range arrives non-finite, which the generic
+            // center rejects at its step.
+            .filter(|t| t.signals.xbar_e.iter().all(|v| v.is_finite()))
     });
     let track = track.as_mut()?;
     Some(match losses {
-        None => run_variant::<false>(scheme, track, steps, None, rng, sink),
-        Some(_) => run_variant::<true>(scheme, track, steps, losses, rng, sink),
+        None => run_variant::<false>(scheme, track, steps, None, coins, sink),
+        Some(_) => run_variant::<true>(scheme, track, steps, losses, coins, sink),
     })
 }
 
@@ -194,7 +199,7 @@ fn run_variant<const LOSSY: bool>(
     track: &mut Track,
     steps: usize,
     losses: Option<&Losses>,
-    rng: &mut dyn RngCore,
+    coins: &mut [Xoshiro256PlusPlus],
     sink: &mut dyn StepSink,
 ) -> Result<(), FastTrialError> {
     let Track {
@@ -237,14 +242,11 @@ fn run_variant<const LOSSY: bool>(
         let mut lost = 0u64;
         let mut senders = 0u128;
         fallback.count = 0;
-        for (
-            i,
-            Node {
+        for (i, (node, rng)) in nodes.iter_mut().zip(coins.iter_mut()).enumerate() {
+            let Node {
                 sensor: st,
                 center: cv,
-            },
-        ) in nodes.iter_mut().enumerate()
-        {
+            } = node;
             // The sensor (DkfSensor::step): its trigger, with Algorithm 2's replica of the
             // center at this step.
             let u: f64 = rng.random();

@@ -202,7 +202,7 @@ impl LockstepFastPath for DistributedKfScheme {
         measurements: &[Vec<crate::linalg::Vector>],
         steps: usize,
         losses: Option<&Losses>,
-        rng: &mut dyn rand::RngCore,
+        coins: &mut [rand_xoshiro::Xoshiro256PlusPlus],
         cache: &mut TrialCache,
         sink: &mut dyn StepSink,
     ) -> Option<Result<(), FastTrialError>> {
@@ -210,7 +210,7 @@ impl LockstepFastPath for DistributedKfScheme {
         if self.loss_aware {
             return None;
         }
-        fast::run(self, measurements, steps, losses, rng, cache, sink)
+        fast::run(self, measurements, steps, losses, coins, cache, sink)
     }
 }
 

@@ -98,8 +98,9 @@ impl Replicas {
         }
     }
 
-    /// Makes entry (i, s, s + 1): the center then holds the sensor's own predictions (the
-    /// same gemv of the same estimate), and Δ^{e,i}_s predicted once.
+    /// Makes entry (i, s, s + 1): the center then holds the prediction of the estimate as it
+    /// arrived ([`Signals::held_p`], which the sensor's replica holds too), the sensor's own
+    /// KF prediction, and Δ^{e,i}_s predicted once.
     #[inline(never)]
     fn make_after_send(
         &mut self,
@@ -110,7 +111,7 @@ impl Replicas {
     ) -> Result<u32, SchemeError> {
         let k = s + 1;
         let (o, n) = self.open_record();
-        self.records[o..o + n].copy_from_slice(signals.xbar_p(k, i));
+        self.records[o..o + n].copy_from_slice(signals.held_p(k, i));
         self.records[o + n..o + 2 * n].copy_from_slice(signals.kf_p(k, i));
         let head = plan
             .delta_head(i, plan.index(s)?)

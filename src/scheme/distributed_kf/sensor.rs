@@ -59,7 +59,9 @@ pub struct DkfSensor {
     xbar: Vector,
     /// Standard local KF estimate x̂^{e,i}_k.
     kf: Vector,
-    /// Replica of the center: last sent globalized estimate, predicted since (x̄^{pp,i}).
+    /// Replica of the center: last sent globalized estimate as the center received it (a
+    /// single per component, [`crate::link::as_sent`]: the rounding is deterministic, so the
+    /// sensor knows it), predicted since (x̄^{pp,i}).
     held: Vector,
     /// Debiasing matrix of the last sent estimate, predicted since (Δ^{pp,i}): a link of the
     /// plan's shared chain ([`GlobalizedPlan::delta_head`]); `None` when A is singular.
@@ -197,6 +199,7 @@ impl SensorNode for DkfSensor {
             };
         if send {
             self.held.copy_from(&self.xbar);
+            crate::link::round_as_sent(self.held.as_mut_slice());
             self.kf_held.copy_from(&self.kf);
             if bounded {
                 self.held_delta = self.plan.delta_head(i, p);

@@ -12,17 +12,20 @@ pub(super) struct Signals {
     pub(super) sensors: usize,
     /// x̄^{p,i}_k = A x̄^{e,i}_{k-1}.
     pub(super) xbar_p: Vec<f64>,
+    /// What the center holds of a sensor that sent at k-1: A times x̄^{e,i}_{k-1} as it
+    /// arrived ([`crate::link::as_sent`]; the common prior's mean, unrounded, for k = 1).
+    pub(super) held_p: Vec<f64>,
     /// The standard local KF's prediction and estimate (Algorithm 2's test (13)).
     pub(super) kf_p: Vec<f64>,
     pub(super) kf: Vec<f64>,
     /// ||K^i_k (z^i_k - H^i x̂^{p,i}_k)||, the norm of test (12); one per (k, i).
     pub(super) correction_norm: Vec<f64>,
-    /// x̄^{e,i}_k: the estimate the sensor sends (what the center keeps of the last one to
-    /// arrive, for the loss fallback of [`super::loss`]).
+    /// x̄^{e,i}_k as it arrives ([`crate::link::as_sent`]): what the center keeps of the last
+    /// one to arrive, for the loss fallback of [`super::loss`].
     pub(super) xbar_e: Vec<f64>,
     /// (C̄^e_k)^{-1} x̄^{e,i}_k: (11)'s term of an estimate that arrived.
     pub(super) info_sent: Vec<f64>,
-    /// (C̄^p_k)^{-1} x̄^{p,i}_k: (11)'s term of an estimate sent at k-1 and omitted at k.
+    /// (C̄^p_k)^{-1} times `held_p`: (11)'s term of an estimate sent at k-1 and omitted at k.
     pub(super) info_omitted: Vec<f64>,
 }
 
@@ -35,6 +38,11 @@ impl Signals {
     /// x̄^{p,i}_k.
     pub fn xbar_p(&self, k: usize, i: usize) -> &[f64] {
         self.at(&self.xbar_p, k, i)
+    }
+
+    /// [`Signals::held_p`] of (k, i).
+    pub fn held_p(&self, k: usize, i: usize) -> &[f64] {
+        self.at(&self.held_p, k, i)
     }
 
     /// The standard local KF's prediction x̂^{p,i}_k.
@@ -63,6 +71,7 @@ impl Signals {
             n,
             sensors: ns,
             xbar_p: Vec::with_capacity(len),
+            held_p: Vec::with_capacity(len),
             kf_p: Vec::with_capacity(len),
             kf: Vec::with_capacity(len),
             correction_norm: Vec::with_capacity(steps * ns),
@@ -73,6 +82,9 @@ impl Signals {
         let a = plan.a();
         let mut xbar: Vec<Vector> = vec![sys.prior.mean.clone(); ns];
         let mut kf: Vec<Vector> = vec![sys.prior.mean.clone(); ns];
+        // Per sensor: its last estimate as it arrived (the prior's mean before any).
+        let mut arrived: Vec<Vector> = vec![sys.prior.mean.clone(); ns];
+        let mut held_p = Vector::zeros(n);
         let mut xbar_p = Vector::zeros(n);
         let mut tmp = Vector::zeros(n);
         let mut tmp2 = Vector::zeros(n);
@@ -88,8 +100,9 @@ impl Signals {
                 let lin = s
                     .as_linear()
                     .expect("the plan exists only for linear sensors");
-                let (xbar, kf) = (&mut xbar[i], &mut kf[i]);
+                let (xbar, kf, arrived) = (&mut xbar[i], &mut kf[i], &mut arrived[i]);
                 crate::linalg::fixed::gemv(&mut xbar_p, a, xbar);
+                crate::linalg::fixed::gemv(&mut held_p, a, arrived);
                 crate::linalg::fixed::gemv(xbar, &m.prediction_weight, &xbar_p);
                 crate::linalg::fixed::gemv(&mut tmp, &m.measurement_weight[i], z);
                 fixed::add_assign(xbar.as_mut_slice(), tmp.as_slice());
@@ -103,11 +116,14 @@ impl Signals {
                 fixed::add_assign(kf.as_mut_slice(), tmp2.as_slice());
                 t.correction_norm.push(fixed::norm(tmp2.as_slice()));
                 t.xbar_p.extend_from_slice(xbar_p.as_slice());
+                t.held_p.extend_from_slice(held_p.as_slice());
                 t.kf.extend_from_slice(kf.as_slice());
-                t.xbar_e.extend_from_slice(xbar.as_slice());
-                crate::linalg::fixed::gemv(&mut tmp, &m.cbar_e_inv, xbar);
+                arrived.copy_from(xbar);
+                crate::link::round_as_sent(arrived.as_mut_slice());
+                t.xbar_e.extend_from_slice(arrived.as_slice());
+                crate::linalg::fixed::gemv(&mut tmp, &m.cbar_e_inv, arrived);
                 t.info_sent.extend_from_slice(tmp.as_slice());
-                crate::linalg::fixed::gemv(&mut tmp, &m.cbar_p_inv, &xbar_p);
+                crate::linalg::fixed::gemv(&mut tmp, &m.cbar_p_inv, &held_p);
                 t.info_omitted.extend_from_slice(tmp.as_slice());
             }
         }

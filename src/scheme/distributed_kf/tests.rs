@@ -57,7 +57,9 @@ fn rel_vec(a: &Vector, b: &Vector) -> f64 {
     (a - b).amax() / b.amax().max(1.0)
 }
 
-/// Drives sensors and center with a prescribed send pattern, bypassing the trigger.
+/// Drives sensors and center with a prescribed send pattern, bypassing the trigger. Estimates
+/// are delivered exactly (not as the singles of `link::as_sent`): the identities checked here
+/// are the algorithm's (exact arithmetic up to rounding), not the wire's.
 fn run_pattern(system: &Arc<System>, data: &[Vec<Vector>], pattern: &[Vec<bool>]) -> Vec<Gaussian> {
     let scheme =
         DistributedKfScheme::new(system.clone(), data.len(), Trigger::Always, None).unwrap();
@@ -73,7 +75,9 @@ fn run_pattern(system: &Arc<System>, data: &[Vec<Vector>], pattern: &[Vec<bool>]
             .zip(&pattern[k0])
             .map(
                 |((s, z), &send)| match s.step(k, z, None, &mut rng).unwrap() {
-                    Transmission::Send(m) if send => Transmission::Send(m).into(),
+                    Transmission::Send(crate::link::Message::Estimate(x)) if send => {
+                        Received::Estimate(x)
+                    }
                     _ => Received::Silent,
                 },
             )

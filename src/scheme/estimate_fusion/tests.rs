@@ -209,7 +209,9 @@ fn replica_covariance_and_send_rate() {
                 for (i, n) in nodes.iter().enumerate() {
                     if inbox[i] != Received::Silent {
                         assert_eq!(c.copies()[i].cov, n.estimate().cov);
-                        assert_eq!(c.copies()[i].mean, n.estimate().mean);
+                        // The copy is the estimate as it arrived: singles.
+                        let sent = n.estimate().mean.map(crate::link::as_sent);
+                        assert_eq!(c.copies()[i].mean, sent);
                     }
                 }
             }
@@ -299,8 +301,15 @@ fn nonlinear_sensors_send_their_covariance() {
             lb.step(k, &z, None, &mut rng).unwrap().into(),
         ];
         c_linear.step(k, &inbox).unwrap();
-        assert!((&c_opaque.estimate().cov - &c_linear.estimate().cov).amax() < 1e-12);
-        assert!((&c_opaque.estimate().mean - &c_linear.estimate().mean).amax() < 1e-10);
+        // The opaque sensors' P crosses the network as singles (`link::as_sent`, relative
+        // error at most 2^-24 per entry) while the linear center computes P itself: equal to
+        // single precision, no longer to double.
+        let d_cov = (&c_opaque.estimate().cov - &c_linear.estimate().cov).amax();
+        let d_mean = (&c_opaque.estimate().mean - &c_linear.estimate().mean).amax();
+        assert!(
+            d_cov < 1e-6 && d_mean < 1e-6,
+            "step {k}: {d_cov:e}, {d_mean:e}"
+        );
     }
     // A bare x where x and P are expected is a protocol error.
     let err = c_opaque
