@@ -126,7 +126,7 @@ impl<'a> Center<'a> {
             .scheme
             .build_for_trial(self.trial, center_seed)
             .map_err(|e| format!("scheme {}: cannot build it: {e}", self.label(v)))?;
-        self.feedback = inst.center.feedback().map(super::as_sent);
+        self.feedback = inst.center.feedback().map(|f| f.as_sent());
         self.center = Some(inst.center);
         self.k = 1;
         self.announced.clear();
@@ -360,7 +360,7 @@ impl<'a> Center<'a> {
             .step(k, &inbox)
             .map_err(|e| format!("scheme {label}, step {k}: {e}"))?;
         let estimate = center.estimate().clone();
-        self.feedback = center.feedback().map(super::as_sent);
+        self.feedback = center.feedback().map(|f| f.as_sent());
         let bits = sensors.iter().map(|s| s.bits).sum();
         let record = StepRecord {
             variant: v,

@@ -74,17 +74,3 @@ pub fn check_live(exp: &Experiment) -> Result<(), String> {
     }
     Ok(())
 }
-
-// TEMPORARY shims until the per-sensor coins and f32 delivery land (helper-coins).
-pub(crate) fn sensor_coins(
-    seed: u64,
-    trial: u64,
-    stream: u64,
-    sensor: usize,
-) -> rand_xoshiro::Xoshiro256PlusPlus {
-    use rand::SeedableRng;
-    rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed ^ trial ^ stream ^ sensor as u64)
-}
-pub(crate) fn as_sent(f: crate::scheme::Feedback) -> crate::scheme::Feedback {
-    f
-}

@@ -247,7 +247,7 @@ impl<'a> Node<'a> {
         Ok(Current {
             variant: v,
             sensor,
-            coins: super::sensor_coins(self.exp.seed, self.trial as u64, stream, self.sensor),
+            coins: seeding::sensor_coins(self.exp.seed, self.trial as u64, stream, self.sensor),
             done: 0,
             held: None,
             last: Vec::new(),
