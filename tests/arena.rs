@@ -1,8 +1,12 @@
 //! The arena (issue 11): calibration reaches its budget for every tunable scheme of an arena,
 //! and the reported point is what the scheme does when run on its own at the calibrated knob.
+#[path = "common/cli.rs"]
+mod common;
+
 use hushfuse::engine::calibrate::{self, Status};
 use hushfuse::engine::runner;
 use hushfuse::metrics::results;
+use hushfuse::output::{arena_files, OutputDir};
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
 
@@ -136,4 +140,81 @@ fn calibration_on_the_energy_axis_reaches_its_budget() {
         calibrate::Axis::parse("energy"),
         Ok(calibrate::Axis::Energy)
     );
+}
+
+/// The arena's folder written by the library ([`arena_files`], what the Python package calls)
+/// is the command line's `run --budgets --report --out`, file for file and byte for byte (the
+/// manifest of kind `arena` and its hash included), but for the seconds the calibration took.
+#[test]
+fn the_library_writes_the_arena_folder_of_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let args = [
+        "run",
+        "arena-1d",
+        "--budgets",
+        "270,330",
+        "--trials",
+        "8",
+        "--report",
+        "--out",
+        "cli",
+    ];
+    let o = common::hushfuse(&args, d);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let text = builtin::get("arena-1d").unwrap();
+    let source = "built-in:arena-1d";
+    let budgets = [270.0, 330.0];
+    let opts = calibrate::Options {
+        axis: calibrate::Axis::Energy,
+        load: build::LoadOptions {
+            trials: Some(8),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let out = calibrate::calibrate(text, source, &budgets, &opts).unwrap();
+    assert!(arena_files::non_finite(&out).is_empty());
+    let mut out_dir = OutputDir::open(&d.join("lib")).unwrap();
+    let listed = arena_files::stage(&mut out_dir, &out, 1.0, (source, &opts.load), true).unwrap();
+    assert_eq!(
+        listed,
+        [
+            "calibration.json",
+            "best_per_budget.md",
+            "budget-270/",
+            "budget-330/",
+            "rmse_position_vs_bits.svg",
+            "anees_vs_bits.svg",
+            "mse_vs_r_eff.svg",
+            "report.html"
+        ]
+    );
+    let hash = arena_files::inputs_sha256(text, source, &budgets, &opts);
+    let files = arena_files::commit(out_dir, &out, &hash).unwrap();
+    assert_eq!(files.len(), 12, "{files:?}");
+
+    let manifest = std::fs::read_to_string(d.join("lib/hushfuse-manifest.json")).unwrap();
+    assert!(manifest.contains("\"kind\": \"arena\""), "{manifest}");
+    for f in files
+        .iter()
+        .map(String::as_str)
+        .chain(["hushfuse-manifest.json"])
+    {
+        let cli = std::fs::read(d.join("cli").join(f)).unwrap();
+        let lib = std::fs::read(d.join("lib").join(f)).unwrap();
+        if f != "calibration.json" {
+            assert!(cli == lib, "{f} differs");
+            continue;
+        }
+        let [mut cli, mut lib] =
+            [cli, lib].map(|b| serde_json::from_slice::<serde_json::Value>(&b).unwrap());
+        assert_eq!(lib["seconds"], 1.0);
+        for j in [&mut cli, &mut lib] {
+            j.as_object_mut().unwrap().remove("seconds");
+        }
+        assert_eq!(cli, lib);
+        assert_eq!(lib["rows"].as_array().unwrap().len(), 2);
+    }
 }

@@ -149,12 +149,17 @@ def run(
         threads: worker threads (0: one per core); the result does not depend on it.
         out: an output folder: the run writes there exactly the files of ``hushfuse run
             --out`` (summary.json, per_step.csv, plots, scenario_as_run.toml, a manifest), and
-            checkpoints its finished trials every ``checkpoint_every`` seconds.
+            checkpoints its finished trials every ``checkpoint_every`` seconds. With ``budget``
+            or ``budgets``: the files of ``hushfuse run --budgets ... --out`` (calibration.json,
+            best_per_budget.md, one ``budget-X/`` folder per budget, the plots, a manifest),
+            written by the same code; a calibration is not checkpointed.
         resume: continue the interrupted run whose checkpoint is in ``out`` (the same
-            arguments; from the first trial when there is none).
+            arguments; from the first trial when there is none). Not with ``budget(s)``: a
+            calibration keeps no checkpoint to continue from (nor shards, nor reproductions).
         shard: ``"I/N"`` or ``(I, N)``: run only shard I of N (1-based) into ``out``;
             ``hushfuse merge`` turns the N shard files into the whole run's folder.
-        report: also write report.html (needs ``out``).
+        report: also write report.html (needs ``out``); with ``budget(s)``, the arena's page
+            (the first budget's run with the calibration and best-per-budget tables).
         reproduce: a reproduction, as ``hushfuse reproduce``: also reproduction.md.
         loss: as ``--loss P``: every sensor behind a Bernoulli link losing each packet with
             probability P (the same losses for every scheme), and a "... (loss-aware)" copy of
@@ -167,9 +172,11 @@ def run(
             ``total`` bits) within ``tolerance`` (relative), on pilot runs of
             ``pilot_trials`` trials (default: the scenario's). Returns the summary at that
             budget with ``budget``, ``axis`` and ``calibration`` (per scheme: ``label``,
-            ``kind``, ``knob``, ``value``, ``target``, ``achieved``, ``status``).
+            ``kind``, ``knob``, ``value``, ``target``, ``achieved``, ``status``); with
+            ``out``, also ``out`` and ``files``.
         budgets: several budgets, as ``--budgets``: returns ``budgets``, ``axis``,
-            ``calibration`` (per budget, per scheme) and ``runs`` (per budget, its summary).
+            ``calibration`` (per budget, per scheme) and ``runs`` (per budget, its summary);
+            with ``out``, also ``out`` and ``files``.
 
     Returns:
         The summary.json of ``hushfuse run`` as Python objects: ``scenario``, ``trials``,
@@ -213,6 +220,7 @@ def run(
     out_r = runs[0]
     out_r.update(budget=many[0], axis=r["axis"], calibration=r["calibration"][0],
                  evaluations=r["evaluations"])
+    out_r.update({k: r[k] for k in ("out", "files") if k in r})
     return out_r
 
 

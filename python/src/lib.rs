@@ -57,6 +57,7 @@ pub(crate) fn python_words(message: &str) -> String {
         .replace(", or pass --allow-large", "")
         .replace(" or pass --allow-large", "")
         .replace("--allow-large", "a smaller request")
+        .replace(" --out", " out=")
 }
 
 /// A scenario error as a Python exception: a request larger than the machine can hold is a

@@ -12,7 +12,7 @@ use hushfuse::engine::run as engine_run;
 use hushfuse::engine::{durable, runner};
 use hushfuse::linalg::Vector;
 use hushfuse::metrics::results;
-use hushfuse::output::run_files;
+use hushfuse::output::{arena_files, run_files, OutputDir};
 use hushfuse::scenario::build;
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyReadonlyArray2};
@@ -185,7 +185,8 @@ fn threads_for(text: &str, threads: usize) -> usize {
 /// `resume=True` continues a run that was killed; `shard="I/N"` runs one shard (for
 /// `hushfuse merge`). Returns a dict; with `out`, also `out` and `files` (or, for a shard,
 /// only `shard`, `blocks` and `done`). `schemes`: JSON of scheme tables added to the
-/// scenario's. With `budgets`: the arena (see [`arena`]).
+/// scenario's. With `budgets`: the arena (see [`arena`]), in memory or, with `out`, into the
+/// folder `hushfuse run --budgets --out` writes.
 #[pyfunction]
 #[pyo3(signature = (scenario, trials=None, seed=None, threads=0, out=None, resume=false, shard=None, report=false, reproduce=false, checkpoint_every=10.0, loss=None, schemes=None, budgets=None, budget_axis="energy", tolerance=0.02, pilot_trials=None))]
 #[allow(clippy::too_many_arguments)]
@@ -211,9 +212,14 @@ pub(crate) fn run<'py>(
     let (text, source) = scenario_text(scenario, schemes, loss)?;
     let threads = threads_for(&text, threads);
     if let Some(budgets) = budgets {
-        if out.is_some() || resume || shard.is_some() || report || reproduce {
+        if resume || shard.is_some() || reproduce {
             return Err(pyo3::exceptions::PyValueError::new_err(
-                "budget=/budgets= run in memory: out=, resume=, shard=, report= and reproduce= are for plain runs (the command line's `hushfuse run --budgets ... --out DIR` writes the arena's files)",
+                "budget=/budgets= take no resume=, shard= or reproduce=: a calibration is not checkpointed (each budget's knobs are searched by pilot runs, one after another, with nothing saved to continue from or to split into shards), and a reproduction runs a paper's scenario as published, not calibrated",
+            ));
+        }
+        if report && out.is_none() {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "report= needs out= (the folder that keeps the arena's files)",
             ));
         }
         let opts = calibrate::Options {
@@ -230,7 +236,8 @@ pub(crate) fn run<'py>(
                 limits: None,
             },
         };
-        return arena(py, &text, &source, &budgets, &opts);
+        let write = out.map(|dir| (dir, report));
+        return arena(py, (&text, &source), &budgets, &opts, write);
     }
     if out.is_none() && (resume || shard.is_some() || report) {
         return Err(pyo3::exceptions::PyValueError::new_err(
@@ -291,21 +298,48 @@ pub(crate) fn run<'py>(
     Ok(d.into_any())
 }
 
-/// The arena in memory, as `hushfuse run --budgets`: every scheme's knob calibrated to each
-/// budget ([`calibrate::calibrate`]). Returns `budgets`, `axis`, `tolerance`, `evaluations`
-/// (pilot runs), `calibration` (per budget, per scheme: label, kind, knob, value, target,
-/// achieved, status) and `runs` (per budget, the summary of every scheme at its knob).
+/// The arena, as `hushfuse run --budgets`: every scheme's knob calibrated to each budget
+/// ([`calibrate::calibrate`]). Returns `budgets`, `axis`, `tolerance`, `evaluations` (pilot
+/// runs), `calibration` (per budget, per scheme: label, kind, knob, value, target, achieved,
+/// status) and `runs` (per budget, the summary of every scheme at its knob). With `write`
+/// (the folder, and whether to add report.html): the command line's arena folder, written by
+/// the same library code ([`arena_files`]), and `out` and `files` in the result.
 fn arena<'py>(
     py: Python<'py>,
-    text: &str,
-    source: &str,
+    (text, source): (&str, &str),
     budgets: &[f64],
     opts: &calibrate::Options,
+    write: Option<(PathBuf, bool)>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    // The folder is checked (and held) before the calibration runs, as the command line
+    // checks it: a folder that cannot take the files costs no pilot run.
+    let mut out_dir = match &write {
+        Some((dir, _)) => Some(open_arena_dir(dir, (text, source), budgets.len(), opts)?),
+        None => None,
+    };
+    let start = std::time::Instant::now();
     let out = py
         .allow_threads(|| calibrate::calibrate(text, source, budgets, opts))
         .map_err(|m| RunError::new_err(python_words(&m)))?;
+    let elapsed = start.elapsed().as_secs_f64();
+    for summary in &out.summaries {
+        python_failure(summary)?;
+    }
     let d = PyDict::new(py);
+    if let (Some(out_dir), Some((dir, report))) = (out_dir.take(), &write) {
+        // As the command line: numbers that are not finite are refused before any file.
+        check_finite(arena_files::non_finite(&out))?;
+        let hash = arena_files::inputs_sha256(text, source, budgets, opts);
+        let files = py
+            .allow_threads(|| {
+                let mut out_dir = out_dir;
+                arena_files::stage(&mut out_dir, &out, elapsed, (source, &opts.load), *report)?;
+                arena_files::commit(out_dir, &out, &hash)
+            })
+            .map_err(RunError::new_err)?;
+        d.set_item("out", dir.display().to_string())?;
+        d.set_item("files", files)?;
+    }
     d.set_item("budgets", out.budgets.clone())?;
     d.set_item("axis", out.axis.name())?;
     d.set_item("tolerance", out.tolerance)?;
@@ -313,11 +347,27 @@ fn arena<'py>(
     d.set_item("calibration", serialize(py, &out.rows)?)?;
     let runs = PyList::empty(py);
     for summary in &out.summaries {
-        python_failure(summary)?;
         runs.append(serialize(py, summary)?)?;
     }
     d.set_item("runs", runs)?;
     Ok(d.into_any())
+}
+
+/// The arena's output folder, opened before the calibration, with room for one run's files
+/// per budget (a scenario that does not load is left to the calibration, which names its
+/// cause).
+fn open_arena_dir(
+    dir: &std::path::Path,
+    (text, source): (&str, &str),
+    budget_count: usize,
+    opts: &calibrate::Options,
+) -> PyResult<OutputDir> {
+    let folder_err = |m: String| ScenarioError::new_err(python_words(&m));
+    let out_dir = OutputDir::open(dir).map_err(folder_err)?;
+    if let Ok(exp) = build::load_with(text, source, &opts.load) {
+        arena_files::check_room(dir, &exp, budget_count).map_err(folder_err)?;
+    }
+    Ok(out_dir)
 }
 
 /// Simulates trial `trial` of a scenario: truth (T, n) and per sensor its measurements

@@ -118,3 +118,20 @@ def test_loss_runs_as_the_command_lines_loss_with_loss_aware_copies(tmp_path):
     assert aware["params"]["link_loss"] == 0.3 and aware["link"]["lost"] > 0
     with pytest.raises(hushfuse.ScenarioError, match="--loss"):
         hushfuse.run("zheng-fig1", trials=4, loss=1.5)
+
+
+def test_an_arena_out_writes_the_command_lines_folder(tmp_path):
+    """budgets= with out= and report=True: the files of `hushfuse run --budgets --report
+    --out`, byte for byte (the manifest and its hash included), but the seconds taken."""
+    args = ("--budgets", "270,330", "--trials", "4", "--report")
+    out = cli("run", "arena-1d", *args, "--out", "cli", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    got = hushfuse.run("arena-1d", trials=4, budgets=[270, 330], out=tmp_path / "py", report=True)
+    manifest = read_json(tmp_path / "cli" / "hushfuse-manifest.json")
+    assert manifest["kind"] == "arena" and got["files"] == manifest["files"]
+    assert "report.html" in got["files"] and "budget-270/summary.json" in got["files"]
+    same_files(tmp_path / "cli", tmp_path / "py",
+               [n for n in got["files"] if n != "calibration.json"] + ["hushfuse-manifest.json"])
+    a, b = (read_json(tmp_path / d / "calibration.json") for d in ("cli", "py"))
+    del a["seconds"], b["seconds"]
+    assert a == b

@@ -1,5 +1,6 @@
 """Schemes written in Python: registered, run beside the built-in ones on the same data,
 charged the same bits, calibrated to budgets; their errors name the trial and the step."""
+import json
 import re
 
 import numpy as np
@@ -190,6 +191,71 @@ def test_budget_works_for_built_in_schemes_and_budgets_gives_every_budget():
         hf.run(scenario(schemes=sod), budget=-1)
     with pytest.raises(TypeError, match="budget"):
         hf.run(scenario(schemes=sod), budget="64")
+
+
+MIXED = """
+[[schemes]]
+kind = "py-send-on-delta"
+delta = 1.0
+[[schemes]]
+kind = "send-on-delta"
+delta = 1.0
+[[schemes]]
+kind = "centralized-kf-random"
+rate = 0.5
+"""
+
+
+def test_an_arena_with_a_python_scheme_writes_its_files_and_report(tmp_path):
+    out = tmp_path / "arena"
+    budgets = [30.0, 60.0]
+    r = hf.run(scenario(trials=6, schemes=MIXED), budgets=budgets, budget_axis="payload",
+               out=out, report=True)
+    assert r["out"] == str(out)
+    for name in ("calibration.json", "best_per_budget.md", "report.html",
+                 "rmse_position_vs_bits.svg", "anees_vs_bits.svg"):
+        assert name in r["files"], name
+    for b in ("30", "60"):
+        for name in ("scenario.toml", "summary.json", "per_step.csv"):
+            assert f"budget-{b}/{name}" in r["files"]
+    for name in r["files"]:
+        assert (out / name).is_file(), name
+    manifest = json.loads((out / "hushfuse-manifest.json").read_text())
+    assert manifest["kind"] == "arena" and manifest["files"] == r["files"]
+    assert manifest["scenario"] == "py-small" and manifest["trials"] == 6
+
+    cal = json.loads((out / "calibration.json").read_text())
+    assert cal["budgets"] == budgets and cal["axis"] == "payload"
+    for b, row in zip(budgets, cal["rows"]):
+        by = {c["kind"]: c for c in row}
+        assert set(by) == {"py-send-on-delta", "send-on-delta", "centralized-kf-random"}
+        py = by["py-send-on-delta"]
+        assert py["status"] == "calibrated", py
+        assert abs(py["achieved"] - b) <= cal["tolerance"] * b
+    # The file holds what the call returned.
+    assert [[c["achieved"] for c in row] for row in cal["rows"]] == [
+        [c["achieved"] for c in row] for row in r["calibration"]]
+    summary = json.loads((out / "budget-30" / "summary.json").read_text())
+    assert "py-send-on-delta" in [s["kind"] for s in summary["schemes"]]
+    html = (out / "report.html").read_text()
+    assert html.startswith("<!DOCTYPE html>") and "py-send-on-delta" in html
+    assert "Best scheme per budget" in html
+
+    # budget= (one budget) writes its folder too, and says where.
+    one = hf.run(scenario(trials=6, schemes=MIXED), budget=30, budget_axis="payload",
+                 out=tmp_path / "one")
+    assert one["out"] == str(tmp_path / "one") and "budget-30/summary.json" in one["files"]
+    assert "report.html" not in one["files"] and one["budget"] == 30.0
+
+
+def test_an_arena_refuses_what_a_calibration_cannot_do():
+    s = scenario(trials=4, schemes=MIXED)
+    for kw in ({"resume": True, "out": "x"}, {"shard": "1/2", "out": "x"}, {"reproduce": True}):
+        with pytest.raises(ValueError, match="not checkpointed") as e:
+            hf.run(s, budgets=[30], budget_axis="payload", **kw)
+        assert "Rust" not in str(e.value) and "::" not in str(e.value)
+    with pytest.raises(ValueError, match="report= needs out="):
+        hf.run(s, budgets=[30], budget_axis="payload", report=True)
 
 
 def test_an_exception_in_user_code_names_the_scheme_trial_step_and_traceback():

@@ -1,6 +1,7 @@
 //! What a run writes: the atomic output folder, CSV/JSON, SVG plots, HTML and paper
 //! reports, arena tables.
 pub mod arena;
+pub mod arena_files;
 pub mod folder;
 pub mod html;
 pub mod notes;

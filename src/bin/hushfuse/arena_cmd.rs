@@ -112,7 +112,10 @@ pub(crate) fn arena_run(
     // not load is reported by the calibration with its full message).
     let loaded = build::load_with(&text, &source, &load).ok();
     check_energy_budgets(axis, loaded.as_ref(), &budgets, args.budget_axis.is_some())?;
-    check_arena_room(&early_dir, loaded.as_ref(), budgets.len())?;
+    // Room for one run's output per budget, checked before the first pilot run.
+    if let (Some(d), Some(exp)) = (&early_dir, &loaded) {
+        arena_files::check_room(d.dir(), exp, budgets.len()).map_err(Failure::Input)?;
+    }
     if let (Some(p), Some(exp)) = (args.pilot_trials, &loaded) {
         if p > exp.trials {
             eprintln!(
@@ -137,7 +140,7 @@ pub(crate) fn arena_run(
         }
     })?;
     let elapsed = start.elapsed().as_secs_f64();
-    check_arena_finite(&out, &budgets)?;
+    check_finite(arena_files::non_finite(&out))?;
     let first = &out.summaries[0];
     let group = first.group_order[0].clone();
     let msg = arena_message(&out, &budgets, &axis, elapsed, &group);
@@ -151,34 +154,16 @@ pub(crate) fn arena_run(
     };
     // The results first: a failed write below loses no computed number from sight.
     print_out(&msg);
-    let mut files = write_arena_files(
+    let files = arena_files::stage(
         &mut out_dir,
         &out,
-        &budgets,
-        &axis,
         elapsed,
-        &group,
         (&source, &opts.load),
-    )?;
-    if args.report {
-        write_arena_report(&mut out_dir, &out, &source, &opts)?;
-        files.push("report.html".into());
-    }
-    let hash = output::sha256_hex(
-        format!(
-            "{source}\0{text}\0{:?}\0{:?}\0{:?}\0{}\0{:?}",
-            args.trials,
-            args.seed,
-            budgets,
-            budget_axis(args),
-            args.pilot_trials
-        )
-        .as_bytes(),
-    );
-    let mut manifest = output::Manifest::new("arena", &first.scenario, &hash);
-    manifest.seed = Some(first.seed);
-    manifest.trials = Some(first.trials);
-    out_dir.commit(manifest, false).map_err(Failure::Run)?;
+        args.report,
+    )
+    .map_err(Failure::Run)?;
+    let hash = arena_files::inputs_sha256(&text, &source, &budgets, &opts);
+    arena_files::commit(out_dir, &out, &hash).map_err(Failure::Run)?;
     print_out(&format!(
         "\nwrote {}: {}\n",
         dir.display(),
@@ -204,42 +189,6 @@ fn early_out_dir(args: &RunArgs, text: &str) -> Result<Option<OutputDir>, Failur
         .transpose()
         .map_err(Failure::Input)?;
     Ok(early_dir)
-}
-
-/// Refuses a calibration whose outputs (one run's per budget) would not fit on the disk of the
-/// early output folder.
-fn check_arena_room(
-    early_dir: &Option<OutputDir>,
-    exp: Option<&build::Experiment>,
-    budget_count: usize,
-) -> Result<(), Failure> {
-    // Room for one run's output per budget, checked before the first pilot run.
-    if let (Some(d), Some(exp)) = (early_dir, exp) {
-        let per_budget = hushfuse::scenario::limits::output_bytes(
-            exp.groups.len(),
-            exp.variants.len(),
-            exp.steps,
-            exp.trials,
-        );
-        output::check_free_space(d.dir(), per_budget * budget_count as f64)
-            .map_err(Failure::Input)?;
-    }
-    Ok(())
-}
-
-/// Refuses a calibration outcome with a non-finite number in any budget's summary.
-fn check_arena_finite(out: &calibrate::Outcome, budgets: &[f64]) -> Result<(), Failure> {
-    let bad: Vec<String> = out
-        .summaries
-        .iter()
-        .zip(budgets)
-        .flat_map(|(s, b)| {
-            hushfuse::metrics::finite::non_finite(s)
-                .into_iter()
-                .map(move |m| format!("budget {}: {m}", calibrate::dir_label(*b)))
-        })
-        .collect();
-    check_finite(bad)
 }
 
 /// The printed comparison: the headline, one table per budget, the best scheme per budget.
@@ -283,104 +232,6 @@ fn arena_message(
         msg.push_str(&format!("floor: none for this scenario ({note})\n"));
     }
     msg
-}
-
-/// Stages the arena's files (calibration.json, best_per_budget.md, each budget's folder, the
-/// plots) and returns their names as listed to the user.
-fn write_arena_files(
-    out_dir: &mut OutputDir,
-    out: &calibrate::Outcome,
-    budgets: &[f64],
-    axis: &calibrate::Axis,
-    elapsed: f64,
-    group: &str,
-    (source, load): (&str, &build::LoadOptions),
-) -> Result<Vec<String>, Failure> {
-    let first = &out.summaries[0];
-    let mut write =
-        |name: &str, text: &str| out_dir.stage(name, text.as_bytes()).map_err(Failure::Run);
-    let json = serde_json::json!({
-        "scenario": first.scenario,
-        "axis": axis.name(),
-        "tolerance": out.tolerance,
-        "pilot_runs": out.evaluations,
-        "seconds": elapsed,
-        "budgets": budgets,
-        "rows": out.rows.iter().map(|row| row.iter().map(|c| serde_json::json!({
-            "scheme": c.label, "kind": c.kind, "knob": c.knob, "value": c.value,
-            "target": c.target, "achieved": c.achieved, "status": c.status, "end": c.end,
-            "bits_per_step": c.result.bits_per_step,
-            "frame_bits_per_step": c.result.frame_bits_per_step,
-            "downlink_bits_per_step": c.result.downlink_bits_per_step,
-            "mean_rmse": c.result.mean_rmse, "anees": c.result.anees,
-            "steady_state": c.result.steady_state,
-        })).collect::<Vec<_>>()).collect::<Vec<_>>(),
-    });
-    write(
-        "calibration.json",
-        &serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?,
-    )?;
-    write("best_per_budget.md", &arena::best_markdown(out, group))?;
-    let mut files = vec![
-        "calibration.json".to_string(),
-        "best_per_budget.md".to_string(),
-    ];
-    for (b, s) in out.summaries.iter().enumerate() {
-        let sub = format!("budget-{}/", calibrate::dir_label(budgets[b]));
-        // The budget's scenario as run, rebuilt: the same files as a run of it would write.
-        let exp = build::load_with(&out.texts[b], source, load)
-            .map_err(|e| Failure::Run(e.to_string()))?;
-        let results = run_files::Results {
-            exp: &exp,
-            summary: Some(s),
-            paper: None,
-            replay: None,
-        };
-        let parts = [
-            run_files::Part::Scenario {
-                name: "scenario.toml",
-                text: &out.texts[b],
-            },
-            run_files::Part::Summary,
-            run_files::Part::PerStep,
-        ];
-        run_files::stage(out_dir, &sub, &results, &parts).map_err(Failure::Run)?;
-        files.push(sub);
-    }
-    let plots = arena::write_plots(
-        out,
-        group,
-        &first.scenario,
-        out_dir.staging().map_err(Failure::Run)?,
-    )
-    .map_err(Failure::Run)?;
-    out_dir.record(plots.iter().cloned());
-    files.extend(plots);
-    Ok(files)
-}
-
-/// `--report`: stages report.html, the page of the first budget's run with the arena's tables.
-fn write_arena_report(
-    out_dir: &mut OutputDir,
-    out: &calibrate::Outcome,
-    source: &str,
-    opts: &calibrate::Options,
-) -> Result<(), Failure> {
-    let exp = build::load_with(&out.texts[0], source, &opts.load)
-        .map_err(|e| Failure::Run(e.to_string()))?;
-    let page = html::render(&html::Input {
-        exp: &exp,
-        summary: &out.summaries[0],
-        scenario_text: &out.texts[0],
-        alone: true,
-        arena: Some(out),
-        se_trials: exp.trials.min(200),
-    })
-    .map_err(Failure::Run)?;
-    out_dir
-        .stage("report.html", page.as_bytes())
-        .map_err(Failure::Run)?;
-    Ok(())
 }
 
 /// `hushfuse` without arguments: the quick arena, and which scheme wins at which budget, on

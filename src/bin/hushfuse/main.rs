@@ -18,7 +18,7 @@ use hushfuse::engine::run as engine_run;
 use hushfuse::engine::runner;
 use hushfuse::metrics::results;
 use hushfuse::output::arena;
-use hushfuse::output::html;
+use hushfuse::output::arena_files;
 use hushfuse::output::run_files;
 use hushfuse::output::tables;
 use hushfuse::output::{self, OutputDir};
