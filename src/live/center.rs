@@ -65,6 +65,9 @@ struct Pending {
     frames: Vec<Option<(Received, u64)>>,
     /// Each sensor's report: `Some(had a reading)`.
     done: Vec<Option<bool>>,
+    /// Sensors that missed a step and have sent nothing since: a step does not wait for them
+    /// (a dead node would otherwise cost every step the whole timeout).
+    away: Vec<bool>,
 }
 
 /// The center of a live run of trial `trial` of `exp`, over the variants `variants` in order.
@@ -111,6 +114,7 @@ impl<'a> Center<'a> {
             pending: Pending {
                 frames: vec![None; n],
                 done: vec![None; n],
+                away: vec![false; n],
             },
             dropped: Dropped::default(),
         };
@@ -186,9 +190,14 @@ impl<'a> Center<'a> {
         self.pending.done.len()
     }
 
-    /// Whether every sensor has reported the current step.
+    /// Whether every sensor has reported the current step, but those that are away (they
+    /// missed a step and have sent nothing since).
     pub fn complete(&self) -> bool {
-        self.pending.done.iter().all(Option::is_some)
+        let p = &self.pending;
+        p.done
+            .iter()
+            .zip(&p.away)
+            .all(|(d, &away)| d.is_some() || away)
     }
 
     /// Sensors that have reported the current step.
@@ -214,6 +223,8 @@ impl<'a> Center<'a> {
             self.dropped.unknown_sensor += 1;
             return Accepted::default();
         }
+        // Whatever it says, the sensor is back.
+        self.pending.away[i] = false;
         match d.kind {
             Kind::Hello => self.hello(i, &d),
             Kind::CatchUp => self.catch_up(i, &d),
@@ -323,7 +334,9 @@ impl<'a> Center<'a> {
         let mut sensors = Vec::with_capacity(n);
         for i in 0..n {
             let frame = self.pending.frames[i].take();
-            let (r, rec) = match (self.pending.done[i].take(), frame) {
+            let done = self.pending.done[i].take();
+            self.pending.away[i] = done.is_none();
+            let (r, rec) = match (done, frame) {
                 (Some(false), _) => (Received::NotScheduled, ("missing", 0)),
                 _ if !schedule.allows(k, i, n) => (Received::NotScheduled, ("not_scheduled", 0)),
                 (_, Some((r, bits))) => (r, ("sent", bits)),
@@ -460,6 +473,14 @@ mod tests {
             }
         );
         assert_eq!(c.position(), (v, 2));
+        // Sensor 3 is away: step 2 is complete without it, until it says anything.
+        for i in 0..3 {
+            c.accept(&done(i, 2, true));
+        }
+        assert!(c.complete());
+        c.accept(&done(3, 1, true)); // stale, but it is back
+        assert!(!c.complete());
+        assert_eq!(c.missing(), vec![3]);
     }
 
     /// A node that greets in the middle of a variant, fresh, asks for the steps it missed and
