@@ -22,7 +22,7 @@ use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use rand_xoshiro::Xoshiro256PlusPlus;
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 
 create_exception!(
     _hushfuse,

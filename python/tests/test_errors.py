@@ -132,7 +132,8 @@ def test_readings_that_overflow_the_filters_are_a_run_error_naming_the_scheme():
     text = (EXAMPLE / "scenario.toml").read_text()
     kf = text.split("[[schemes]]")[0] + '[[schemes]]\nkind = "centralized-kf"\n'
     data = hushfuse.simulate(kf)
-    # Readings near the largest double, alternating in sign: the filter's sums overflow.
+    # Readings near the largest double, alternating in sign. They cross the network as IEEE
+    # singles (issue 26), so they arrive as infinities and the center rejects step 1.
     def huge_like(m):
         m = np.asarray(m, dtype=float)
         sign = np.where(np.arange(m.shape[0]) % 2 == 0, 1.0, -1.0).reshape(-1, *[1] * (m.ndim - 1))
@@ -141,5 +142,4 @@ def test_readings_that_overflow_the_filters_are_a_run_error_naming_the_scheme():
     huge = [huge_like(m) for m in data["measurements"]]
     with pytest.raises(hushfuse.RunError, match="not finite") as e:
         hushfuse.replay(kf, huge)
-    assert "Centralized KF" in str(e.value) and "variant 0" in str(e.value), str(e.value)
-    assert "from step 1 on" in str(e.value), str(e.value)
+    assert "Centralized KF" in str(e.value) and "step 1:" in str(e.value), str(e.value)

@@ -24,7 +24,7 @@ use crate::scheme::fast_path::LockstepFastPath;
 use crate::scheme::fast_path::{FastTrialError, Losses, StepSink, TrialCache};
 #[cfg(doc)]
 use crate::scheme::Scheme;
-use crate::scheme::SchemeError;
+use crate::scheme::{Feedback, SchemeError};
 
 /// One fused step, as an [`Observer`] sees it.
 #[derive(Debug)]
@@ -211,7 +211,7 @@ pub fn run_trial(
     } = buffers;
     // What the fusion center tells the sensors before the first measurement, as they receive
     // it (every real number a single, as priced).
-    let mut feedback = inst.center.feedback().map(|f| f.as_sent());
+    let mut feedback = inst.center.feedback().map(Feedback::into_sent);
     // The link's fates of this trial, from its own stream: every scheme meets the same ones.
     let mut link = LinkLayer::new(exp, spec.variant, spec.trial, &feedback, fates);
     for k in 1..=exp.steps {
@@ -288,7 +288,7 @@ pub fn run_trial(
                 .step(k, inbox)
                 .map_err(|source| LoopError::Scheme { k, source })?,
         }
-        feedback = inst.center.feedback().map(|f| f.as_sent());
+        feedback = inst.center.feedback().map(Feedback::into_sent);
         observer
             .step(&StepOutput {
                 k,

@@ -103,9 +103,13 @@ impl Feedback {
     /// The feedback as the sensors receive it: every real number as the single that
     /// [`Feedback::bits`] prices ([`crate::link::as_sent`]), as a downlink frame carries it.
     pub fn as_sent(&self) -> Feedback {
+        self.clone().into_sent()
+    }
+
+    /// [`Feedback::as_sent`], rounding in place (no copy).
+    pub fn into_sent(mut self) -> Feedback {
         use crate::link::{as_sent, round_as_sent};
-        let mut f = self.clone();
-        match &mut f {
+        match &mut self {
             Feedback::Prediction { mean, cov } => {
                 round_as_sent(mean.as_mut_slice());
                 if let Some(c) = cov {
@@ -119,7 +123,7 @@ impl Feedback {
                 }
             }
         }
-        f
+        self
     }
 }
 
