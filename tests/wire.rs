@@ -131,3 +131,92 @@ fn feedback_reaches_the_sensors_as_singles() {
     // The bits priced are the bits sent: rounding changes no count.
     assert_eq!(refs.as_sent().bits(2), refs.bits(2));
 }
+
+/// A scalar random walk, one sensor, the all-data KF; `extra` appended to the file.
+fn doubles_scenario(reals: &str, extra: &str) -> build::Experiment {
+    let text = format!(
+        r#"
+name = "reals"
+trials = 3
+steps = 30
+seed = 5
+{reals}
+[model]
+kind = "matrix"
+F = [[1.2]]
+Q = [[1.0]]
+[prior]
+mean = [0.0]
+cov_diag = [1.0]
+[[sensors]]
+observe = [0]
+R_diag = [1.0]
+[[schemes]]
+kind = "centralized-kf"
+{extra}
+"#
+    );
+    build::load_with(&text, "reals.toml", &Default::default()).unwrap()
+}
+
+/// `reals = "f64"`: the center fuses the readings as they were (the estimate of a KF on the
+/// exact readings, which differs from the singles' one), and every real costs 64 bits, its
+/// frame 4 octets more.
+#[test]
+fn with_doubles_the_readings_arrive_exact_and_cost_64_bits() {
+    use hushfuse::engine::trace::{run_variant_with, LoopOptions};
+    let run = |exp: &build::Experiment| {
+        let data = hushfuse::engine::runner::draw_trial(exp, 0);
+        let mut out = Vec::new();
+        let opts = LoopOptions {
+            trial: 0,
+            alone: false,
+            available: None,
+        };
+        run_variant_with(exp, &data.measurements, 0, opts, &mut |s| {
+            out.push((
+                s.estimate.mean[0],
+                s.traffic.bits,
+                s.traffic.frame_bits,
+                s.bits.to_vec(),
+            ));
+            Ok(())
+        })
+        .unwrap();
+        (out, data)
+    };
+    let (doubles, data) = run(&doubles_scenario("reals = \"f64\"", ""));
+    let (singles, _) = run(&doubles_scenario("", ""));
+    for (k, (d, s)) in doubles.iter().zip(&singles).enumerate() {
+        assert_eq!((d.1, d.2), (64, 88 + 64), "step {}", k + 1);
+        assert_eq!((s.1, s.2), (32, 88 + 32));
+        assert_eq!(d.3, vec![64]);
+    }
+    // The first update from the prior N(0, 1) with r = 1 fuses z_1 exactly: x = P z / (P + r).
+    let z1 = data.measurements[0][0][0];
+    let p = 1.2 * 1.2 * 1.0 + 1.0;
+    assert_eq!(doubles[0].0, p * z1 / (p + 1.0));
+    assert_ne!(doubles[0].0, singles[0].0, "singles round z_1");
+    assert_eq!(singles[0].0, p * as_sent(z1) / (p + 1.0));
+}
+
+#[test]
+fn doubles_are_refused_where_the_loop_cannot_carry_them() {
+    let text = |extra: &str| {
+        format!(
+            "name = \"r\"\ntrials = 1\nsteps = 3\nseed = 1\nreals = \"f64\"\n[model]\nkind = \"matrix\"\nF = [[1.0]]\nQ = [[1.0]]\n[prior]\nmean = [0.0]\ncov_diag = [1.0]\n[[sensors]]\nobserve = [0]\nR_diag = [1.0]\n[[schemes]]\nkind = \"centralized-kf\"\n{extra}\n"
+        )
+    };
+    let e = build::load_with(&text("sequence_bits = 4"), "r.toml", &Default::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("reals") && e.contains("sequence numbers"), "{e}");
+    let e = build::load_with(
+        &text("reals2 = 1").replace("reals = \"f64\"", "reals = \"f16\""),
+        "r.toml",
+        &Default::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("f16") || e.contains("reals"), "{e}");
+}

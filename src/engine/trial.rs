@@ -15,7 +15,7 @@ use crate::engine::link_layer::{self, FateCache, LinkLayer};
 use crate::engine::seeding::coins;
 use crate::filter::Gaussian;
 use crate::linalg::{LinalgError, Vector};
-use crate::link::{Received, Transmission};
+use crate::link::{Message, Received, Transmission};
 use crate::network::channel::Fate;
 use crate::network::{self, Schedule, Traffic};
 use crate::scenario::experiment::Experiment;
@@ -166,35 +166,10 @@ pub fn run_trial(
     let n_sensors = exp.system.n_sensors();
     let variant = &exp.variants[spec.variant];
     let (mut coins, center_seed) = coins(exp.seed, spec.trial, spec.stream, n_sensors);
-    // The fast paths take an ideal link, or one that only loses packets (they apply the
-    // losses); delays, retransmissions and sequence numbers are the generic loop's.
-    let ideal = link_layer::ideal(variant);
-    if spec.available.is_none() && (ideal || link_layer::losses_only(variant)) {
-        // One virtual call per trial: the scheme's hook, then its whole trial.
-        if let (Some(fast), Some(sink)) = (variant.scheme.fast_path(), observer.fast_sink()) {
-            let uplink = match variant.channel.as_deref() {
-                Some(specs) if !ideal => Some(buffers.fates.get(exp, specs, spec.trial, false)),
-                _ => None,
-            };
-            let losses = uplink.as_deref().map(Losses::new);
-            let cache = buffers.cache_for(spec.trial, measurements);
-            let steps = exp.steps;
-            let fast = fast.run_trial_fast(
-                measurements,
-                steps,
-                losses.as_ref(),
-                &mut coins,
-                cache,
-                sink,
-            );
-            if let Some(r) = fast {
-                return r.map_err(|e| match e {
-                    FastTrialError::Scheme { k, source } => LoopError::Scheme { k, source },
-                    FastTrialError::Sink { k, source } => LoopError::Covariance { k, source },
-                });
-            }
-        }
+    if let Some(r) = fast_path(exp, measurements, spec, buffers, observer, &mut coins) {
+        return r;
     }
+    let singles = exp.reals.is_f32();
     let mut inst = variant
         .scheme
         .build_for_trial(spec.trial, center_seed)
@@ -211,7 +186,8 @@ pub fn run_trial(
     } = buffers;
     // What the fusion center tells the sensors before the first measurement, as they receive
     // it (every real number a single, as priced).
-    let mut feedback = inst.center.feedback().map(Feedback::into_sent);
+    let sent = |f: Feedback| if singles { f.into_sent() } else { f };
+    let mut feedback = inst.center.feedback().map(sent);
     // The link's fates of this trial, from its own stream: every scheme meets the same ones.
     let mut link = LinkLayer::new(exp, spec.variant, spec.trial, &feedback, fates);
     for k in 1..=exp.steps {
@@ -223,6 +199,7 @@ pub fn run_trial(
         links.clear();
         bits.clear();
         let mut scheduled_mask = 0u128;
+        let mut doubles = Doubles::new(exp.reals);
         for (i, (node, rng)) in inst.sensors.iter_mut().zip(&mut coins).enumerate() {
             let fb = match &link {
                 Some(l) => l.feedback(i),
@@ -235,11 +212,12 @@ pub fn run_trial(
             } else {
                 Transmission::Silent
             };
+            doubles.record(&t);
             if with_links {
                 let (link, b) = match &t {
                     _ if !scheduled(i) => (Link::NotScheduled, 0),
                     Transmission::Send(m) => {
-                        let b = m.bits_with_sequence(variant.sequence_bits);
+                        let b = m.bits_with_sequence(variant.sequence_bits) + doubles.extra(m);
                         (link.as_ref().map_or(Link::Sent, |l| l.link(i, k)), b)
                     }
                     Transmission::Silent => (Link::Silent, 0),
@@ -260,12 +238,14 @@ pub fn run_trial(
                 variant.sequence_bits,
             ),
         };
-        traffic.downlink_bits = feedback.as_ref().map_or(0, |f| f.bits(n_sensors));
+        traffic.downlink_bits =
+            feedback.as_ref().map_or(0, |f| f.bits(n_sensors)) * if singles { 1 } else { 2 };
         traffic.scheduled = scheduled_mask;
         if let Some(l) = &mut link {
             l.uplink(k, inbox, &mut traffic);
             traffic.downlink_lost = downlink_lost;
         }
+        doubles.restore(inbox, &mut traffic);
         if schedule != Schedule::All || spec.available.is_some() {
             for (i, r) in inbox.iter_mut().enumerate() {
                 if !scheduled(i) {
@@ -288,7 +268,7 @@ pub fn run_trial(
                 .step(k, inbox)
                 .map_err(|source| LoopError::Scheme { k, source })?,
         }
-        feedback = inst.center.feedback().map(Feedback::into_sent);
+        feedback = inst.center.feedback().map(sent);
         observer
             .step(&StepOutput {
                 k,
@@ -304,4 +284,97 @@ pub fn run_trial(
             })?;
     }
     Ok(())
+}
+
+/// The scheme's fast path for this trial, when it has one that applies: an ideal link, or one
+/// that only loses packets (the fast path applies the losses); every reading present; reals
+/// as singles (the fast paths deliver singles). Delays, retransmissions, sequence numbers and
+/// doubles are the generic loop's. `None`: run the generic loop (nothing was drawn).
+fn fast_path(
+    exp: &Experiment,
+    measurements: &[Vec<Vector>],
+    spec: TrialSpec,
+    buffers: &mut LoopBuffers,
+    observer: &mut dyn Observer,
+    coins: &mut [rand_xoshiro::Xoshiro256PlusPlus],
+) -> Option<Result<(), LoopError>> {
+    let variant = &exp.variants[spec.variant];
+    let ideal = link_layer::ideal(variant);
+    if !exp.reals.is_f32()
+        || spec.available.is_some()
+        || !(ideal || link_layer::losses_only(variant))
+    {
+        return None;
+    }
+    // One virtual call per trial: the scheme's hook, then its whole trial.
+    let (fast, sink) = (variant.scheme.fast_path()?, observer.fast_sink()?);
+    let uplink = match variant.channel.as_deref() {
+        Some(specs) if !ideal => Some(buffers.fates.get(exp, specs, spec.trial, false)),
+        _ => None,
+    };
+    let losses = uplink.as_deref().map(Losses::new);
+    let cache = buffers.cache_for(spec.trial, measurements);
+    let r = fast.run_trial_fast(measurements, exp.steps, losses.as_ref(), coins, cache, sink)?;
+    Some(r.map_err(|e| match e {
+        FastTrialError::Scheme { k, source } => LoopError::Scheme { k, source },
+        FastTrialError::Sink { k, source } => LoopError::Covariance { k, source },
+    }))
+}
+
+/// Reals sent as doubles (`reals = "f64"`) through one step: each message's reals as the
+/// sensor sent them (the network layer delivers singles), and the bits beyond the singles'
+/// count. Inert for singles.
+struct Doubles {
+    extra_per_real: u64,
+    sent: Vec<Option<Vector>>,
+    bits: u64,
+}
+
+impl Doubles {
+    fn new(reals: crate::link::Reals) -> Self {
+        Self {
+            extra_per_real: reals.extra_bits(),
+            sent: Vec::new(),
+            bits: 0,
+        }
+    }
+
+    /// The bits message `m` costs beyond its singles.
+    fn extra(&self, m: &Message) -> u64 {
+        real_count(m) * self.extra_per_real
+    }
+
+    /// The next sensor's transmission.
+    fn record(&mut self, t: &Transmission) {
+        if self.extra_per_real == 0 {
+            return;
+        }
+        let reals = match t {
+            Transmission::Send(m @ (Message::Measurement(v) | Message::Estimate(v))) => {
+                self.bits += self.extra(m);
+                Some(v.clone())
+            }
+            _ => None,
+        };
+        self.sent.push(reals);
+    }
+
+    /// What arrived as singles arrives as the doubles that were sent, and costs their bits.
+    fn restore(&mut self, inbox: &mut [Received], traffic: &mut Traffic) {
+        traffic.bits += self.bits;
+        traffic.frame_bits += self.bits;
+        for (r, exact) in inbox.iter_mut().zip(self.sent.drain(..)) {
+            if let (Received::Measurement(v) | Received::Estimate(v), Some(exact)) = (r, exact) {
+                *v = exact;
+            }
+        }
+    }
+}
+
+/// Real components a message carries (measurements and estimates; a codec's frame has none).
+fn real_count(m: &Message) -> u64 {
+    match m {
+        Message::Measurement(v) | Message::Estimate(v) => v.len() as u64,
+        Message::Frame { .. } => 0,
+    }
 }

@@ -92,6 +92,33 @@ pub enum Received {
     Frame(Vec<u8>),
 }
 
+/// How real numbers cross the network: as IEEE 754 singles (the default, 32 bits per component,
+/// [`BITS_PER_COMPONENT`]), or as doubles (`reals = "f64"` in a scenario, 64 bits per
+/// component) for the papers whose analysis assumes real-valued delivery, where the rounding
+/// of a single would be a noise of its own (an unstable plant whose state grows to 1e10, where
+/// a single's step is about 1000).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Reals {
+    #[default]
+    F32,
+    F64,
+}
+
+impl Reals {
+    /// Bits per component beyond the [`BITS_PER_COMPONENT`] that [`Message::bits`] counts.
+    pub fn extra_bits(self) -> u64 {
+        match self {
+            Reals::F32 => 0,
+            Reals::F64 => 64 - BITS_PER_COMPONENT,
+        }
+    }
+
+    pub fn is_f32(&self) -> bool {
+        *self == Reals::F32
+    }
+}
+
 /// A real number as it crosses the network: the IEEE 754 single that
 /// [`BITS_PER_COMPONENT`] prices, read back as an f64 (round to nearest, ties to even). A
 /// message priced at 32 bits per component must not deliver the 53-bit mantissa it was not

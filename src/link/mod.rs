@@ -4,4 +4,6 @@ pub mod codec802154;
 pub mod message;
 pub mod quantizer;
 
-pub use message::{as_sent, round_as_sent, Message, Received, Transmission, BITS_PER_COMPONENT};
+pub use message::{
+    as_sent, round_as_sent, Message, Reals, Received, Transmission, BITS_PER_COMPONENT,
+};

@@ -54,6 +54,11 @@ use crate::scenario::experiment::Experiment;
 /// travel in the frame, which the live frames do not carry), and links that delay or
 /// retransmit (the live link is the real one, or the proxy's losses).
 pub fn check_live(exp: &Experiment) -> Result<(), String> {
+    if !exp.reals.is_f32() {
+        return Err(
+            "reals = \"f64\" is not supported in a live run: its frames carry singles".into(),
+        );
+    }
     for v in &exp.variants {
         let label = &exp.curves[v.curve].label;
         if v.sequence_bits > 0 {

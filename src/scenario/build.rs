@@ -261,6 +261,7 @@ pub fn build_with(
         workers,
     );
     limits::check(&estimate, &limits, file)?;
+    check_reals(&ctx, file_spec.reals, &curves, &variants)?;
     if let Some(paper) = &file_spec.paper {
         crate::scenario::paper_check::check(
             &ctx,
@@ -288,5 +289,37 @@ pub fn build_with(
         paper: file_spec.paper,
         channel,
         radio,
+        reals: file_spec.reals,
     })
+}
+
+/// `reals = "f64"` is carried by the engine's generic loop on links that deliver at once:
+/// refused with sequence numbers, delays and retransmissions (whose packets the loop keeps
+/// as they were priced, singles).
+fn check_reals(
+    ctx: &crate::scenario::error::Ctx,
+    reals: crate::link::Reals,
+    curves: &[crate::scenario::experiment::Curve],
+    variants: &[crate::scenario::experiment::Variant],
+) -> Result<(), ScenarioError> {
+    if reals.is_f32() {
+        return Ok(());
+    }
+    for v in variants {
+        let delays = v.channel.as_deref().is_some_and(|specs| {
+            specs
+                .iter()
+                .any(|s| !s.delay().is_zero() || s.arq.is_some())
+        });
+        if v.sequence_bits > 0 || delays {
+            return Err(ctx.err(
+                "reals",
+                format!(
+                    "\"f64\" is not supported with sequence numbers, delays or retransmissions (scheme {})",
+                    curves[v.curve].label
+                ),
+            ));
+        }
+    }
+    Ok(())
 }

@@ -62,4 +62,6 @@ pub struct Experiment {
     /// The sensors' radio and battery (`[radio]`, validated; absent: the CC2420's values):
     /// what the summary prices the traffic with.
     pub radio: crate::network::radio::RadioSpec,
+    /// How real numbers cross the network (`reals`; singles by default).
+    pub reals: crate::link::Reals,
 }

@@ -115,6 +115,10 @@ pub struct ScenarioFile {
     /// Published numbers and claims to check (`hushfuse reproduce`).
     #[serde(default)]
     pub paper: Option<PaperSpec>,
+    /// How real numbers cross the network: `"f32"` (default: singles, 32 bits each) or
+    /// `"f64"` (doubles, 64 bits each, for analyses that assume real-valued delivery).
+    #[serde(default, skip_serializing_if = "crate::link::Reals::is_f32")]
+    pub reals: crate::link::Reals,
 }
 
 /// Motion model: a preset or explicit matrices.
