@@ -182,7 +182,13 @@ impl<'a> Center<'a> {
             }
             self.announced.push(all);
         }
-        Ok(self.announced[k - 1].clone())
+        // Every step before k was announced (by the driver, or by `fuse` on a resume).
+        self.announced.get(k - 1).cloned().ok_or_else(|| {
+            format!(
+                "step {k} announced before step {}",
+                self.announced.len() + 1
+            )
+        })
     }
 
     /// The scenario's number of sensors.
@@ -367,6 +373,9 @@ impl<'a> Center<'a> {
                 self.position()
             ));
         }
+        // The step's announcement (its feedback), kept for nodes that catch up: a resumed center
+        // fuses its journal without announcing.
+        self.announce()?;
         let label = self.label(v).to_string();
         let center = self.center.as_mut().expect("a variant is running");
         center
@@ -515,6 +524,19 @@ mod tests {
             .map(|d| Datagram::decode(d).unwrap().kind)
             .collect();
         assert_eq!(*kinds.last().unwrap(), Kind::Done);
+        // A center resumed from its journal at step 4 serves the catch-up as well.
+        let mut resumed = Center::new(&exp, 0, fp, vec![v]).unwrap();
+        for k in 1..=3 {
+            resumed
+                .fuse(v, k, vec![Received::Silent; 4], Vec::new())
+                .unwrap();
+        }
+        let fresh = Node::new(&exp, 1, 0, Box::new(Recorded(vec![None; 5]))).unwrap();
+        let hello = resumed.accept(&fresh.hello(fp));
+        assert!(hello.replies.is_empty(), "step 4 not yet announced");
+        resumed.announce().unwrap();
+        let ask = Datagram::new(Kind::CatchUp, 1, v, 0).encode();
+        assert_eq!(resumed.accept(&ask).replies.len(), 4);
         // Another run's node is refused.
         let other = c.accept(&node.hello([8; 8]));
         assert_eq!(other.hello, None);
