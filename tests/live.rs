@@ -56,6 +56,21 @@ fn arena_data(d: &Path, steps: usize) {
     std::fs::write(d.join("data/holes.csv"), kept).unwrap();
 }
 
+/// `hushfuse live arena-1d` on the readings with holes, into `live/`, with `extra` arguments.
+fn live_run(d: &Path, extra: &[&str]) -> String {
+    let mut args = vec![
+        "live",
+        "arena-1d",
+        "--measurements",
+        "data/holes.csv",
+        "--out",
+        "live",
+    ];
+    args.extend_from_slice(extra);
+    ok(&hushfuse(&args, d));
+    read(&d.join("live/estimates.csv"))
+}
+
 fn replay(d: &Path, out: &str, extra: &[&str]) -> String {
     let mut args = vec![
         "replay",
@@ -79,18 +94,7 @@ fn live_equals_replay_for_every_arena_scheme() {
     let d = dir.path();
     arena_data(d, 100);
     let expected = replay(d, "rep", &[]);
-    ok(&hushfuse(
-        &[
-            "live",
-            "arena-1d",
-            "--measurements",
-            "data/holes.csv",
-            "--out",
-            "live",
-        ],
-        d,
-    ));
-    let got = read(&d.join("live/estimates.csv"));
+    let got = live_run(d, &[]);
     assert!(expected.contains(",missing,0"), "the data has holes");
     assert_eq!(got.lines().count(), 1 + 17 * 100, "17 schemes x 100 steps");
     assert_eq!(got, expected);
@@ -125,20 +129,7 @@ fn proxy_at_loss_equals_the_simulated_link() {
     let d = dir.path();
     arena_data(d, 60);
     let expected = replay(d, "rep", &["--loss", "0.2"]);
-    ok(&hushfuse(
-        &[
-            "live",
-            "arena-1d",
-            "--measurements",
-            "data/holes.csv",
-            "--loss",
-            "0.2",
-            "--out",
-            "live",
-        ],
-        d,
-    ));
-    let got = read(&d.join("live/estimates.csv"));
+    let got = live_run(d, &["--loss", "0.2"]);
     assert!(expected.contains(",lost,"), "the link loses packets");
     assert_eq!(estimates_only(&got), estimates_only(&expected));
     let mut lost = 0;

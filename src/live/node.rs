@@ -292,23 +292,17 @@ impl<'a> Node<'a> {
 /// The [`Kind::Frame`] datagram of sensor `i`'s message at step `k` of variant `v`.
 pub fn frame_datagram(m: &Message, i: usize, v: usize, k: usize) -> Result<Vec<u8>, String> {
     let (kind, body) = match m {
-        Message::Measurement(z) => (
-            MessageKind::Measurement,
+        Message::Measurement(v) | Message::Estimate(v) => (
+            if matches!(m, Message::Measurement(_)) {
+                MessageKind::Measurement
+            } else {
+                MessageKind::Estimate
+            },
             wire::mpdu(
                 k as u8,
                 wire::CENTER_ADDRESS,
                 wire::sensor_address(i),
-                &wire::f32_payload(z.iter().copied()),
-            )
-            .map_err(|e| e.to_string())?,
-        ),
-        Message::Estimate(x) => (
-            MessageKind::Estimate,
-            wire::mpdu(
-                k as u8,
-                wire::CENTER_ADDRESS,
-                wire::sensor_address(i),
-                &wire::f32_payload(x.iter().copied()),
+                &wire::f32_payload(v.iter().copied()),
             )
             .map_err(|e| e.to_string())?,
         ),
