@@ -98,6 +98,60 @@ fn live_equals_replay_for_every_arena_scheme() {
     assert!(expected.contains(",missing,0"), "the data has holes");
     assert_eq!(got.lines().count(), 1 + 17 * 100, "17 schemes x 100 steps");
     assert_eq!(got, expected);
+    // With the truth, the table live prints scores every scheme as replay's does.
+    let args = ["--truth", "data/truth.csv"];
+    let rep = hushfuse(
+        &[
+            "replay",
+            "arena-1d",
+            "--measurements",
+            "data/holes.csv",
+            "--out",
+            "rep2",
+            args[0],
+            args[1],
+        ],
+        d,
+    );
+    let live = hushfuse(
+        &[
+            "live",
+            "arena-1d",
+            "--measurements",
+            "data/holes.csv",
+            "--out",
+            "live2",
+            args[0],
+            args[1],
+        ],
+        d,
+    );
+    ok(&live);
+    let (rep, live) = (
+        String::from_utf8_lossy(&rep.stdout),
+        String::from_utf8_lossy(&live.stdout),
+    );
+    let row = |text: &str, scheme: &str| -> Vec<String> {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(scheme))
+            .unwrap_or_else(|| panic!("{scheme} in {text}"));
+        line[scheme.len()..]
+            .split_whitespace()
+            .map(str::to_string)
+            .collect()
+    };
+    for scheme in ["Centralized KF (all data)", "Censored PF", "Send-on-delta"] {
+        let (r, l) = (row(&rep, scheme), row(&live, scheme));
+        // replay: [params...] RMSE position, RMSE velocity, ...; live: bits, RMSE position, velocity.
+        let at = r.iter().position(|x| x.contains('.')).unwrap();
+        let at = if r[at].contains('=') { at + 1 } else { at };
+        assert_eq!(
+            &l[1..3],
+            &r[at..at + 2],
+            "{scheme}: live {l:?}, replay {r:?}"
+        );
+    }
 }
 
 /// The fields of a line of `estimates.csv` (labels and parameters are quoted and may hold

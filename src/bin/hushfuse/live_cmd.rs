@@ -1,6 +1,7 @@
 //! `hushfuse center`, `node`, `live` and `channel-proxy`: a live run over UDP
 //! ([`hushfuse::live`]).
 use super::*;
+use hushfuse::linalg::Vector;
 use hushfuse::live::{self, Center, CenterOptions, LiveFolder, Node, NodeOptions, Pace};
 use hushfuse::scenario::experiment::Experiment;
 use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
@@ -127,12 +128,12 @@ fn serve(
     socket: &UdpSocket,
     dir: &Path,
     resume: bool,
-    status: bool,
-) -> Result<(), Failure> {
+    truth: Option<&[Vector]>,
+) -> Result<String, Failure> {
     let fp = live::fingerprint(exp, text, run.trial);
     let mut center =
         Center::new(exp, run.trial, fp, variants(exp, pacing)?).map_err(Failure::Input)?;
-    let mut folder = if resume {
+    let folder = if resume {
         LiveFolder::resume(exp, dir, &mut center)
             .map_err(Failure::Input)?
             .0
@@ -140,8 +141,79 @@ fn serve(
         let hash = output::sha256_hex(format!("{text}\0{:?}\0{}", run.seed, run.trial).as_bytes());
         LiveFolder::create(exp, dir, &hash).map_err(Failure::Input)?
     };
-    let opts = center_options(pacing, status)?;
-    live::run_center(socket, &mut center, &opts, &mut folder).map_err(Failure::Run)
+    let opts = center_options(pacing, true)?;
+    let mut tally = Tally {
+        exp,
+        inner: folder,
+        truth,
+        rows: Vec::new(),
+    };
+    live::run_center(socket, &mut center, &opts, &mut tally).map_err(Failure::Run)?;
+    Ok(tally.table())
+}
+
+/// The center's folder, and per scheme what arrived and (with the truth) the errors: the table
+/// printed at the end.
+struct Tally<'a> {
+    exp: &'a Experiment,
+    inner: LiveFolder<'a>,
+    truth: Option<&'a [Vector]>,
+    /// (variant, steps, payload bits arrived, per group the summed error norms: their mean is
+    /// the "RMSE" of a one-trial replay, the mean over steps of the per-step RMSE).
+    rows: Vec<(usize, usize, u64, Vec<f64>)>,
+}
+
+impl live::StepSink for Tally<'_> {
+    fn record(&mut self, center: &Center, r: &live::StepRecord) -> Result<(), String> {
+        self.inner.record(center, r)?;
+        if self.rows.last().is_none_or(|row| row.0 != r.variant) {
+            self.rows
+                .push((r.variant, 0, 0, vec![0.0; self.exp.groups.len()]));
+        }
+        let row = self.rows.last_mut().expect("just pushed");
+        row.1 += 1;
+        row.2 += r.bits;
+        if let Some(x) = self.truth.and_then(|t| t.get(r.k - 1)) {
+            for ((_, idx), sq) in self.exp.groups.iter().zip(row.3.iter_mut()) {
+                let e2 = idx.iter().map(|&j| (r.estimate.mean[j] - x[j]).powi(2));
+                *sq += e2.sum::<f64>().sqrt();
+            }
+        }
+        Ok(())
+    }
+
+    fn event(&mut self, text: &str) {
+        self.inner.event(text);
+    }
+}
+
+impl Tally<'_> {
+    fn table(&self) -> String {
+        let mut header = vec!["scheme".to_string(), "arrived bits/step".to_string()];
+        if self.truth.is_some() {
+            header.extend(self.exp.groups.iter().map(|(g, _)| format!("RMSE {g}")));
+        }
+        let rows: Vec<Vec<String>> = self
+            .rows
+            .iter()
+            .map(|(v, steps, bits, sq)| {
+                let mut row = vec![
+                    self.exp.curves[self.exp.variants[*v].curve].label.clone(),
+                    format!("{:.1}", *bits as f64 / (*steps).max(1) as f64),
+                ];
+                if self.truth.is_some() {
+                    row.extend(
+                        sq.iter()
+                            .map(|s| format!("{:.4}", s / (*steps).max(1) as f64)),
+                    );
+                }
+                row
+            })
+            .collect();
+        let mut all = vec![header];
+        all.extend(rows);
+        results::text_table(&all, 1)
+    }
 }
 
 /// `hushfuse center`.
@@ -167,7 +239,9 @@ pub(crate) fn center(
             .map_err(|e| Failure::Run(e.to_string()))?,
         dir.display()
     );
-    serve(&exp, &text, run, pacing, &socket, &dir, resume, true)
+    let table = serve(&exp, &text, run, pacing, &socket, &dir, resume, None)?;
+    print_out(&table);
+    Ok(())
 }
 
 /// Where a node's readings come from.
@@ -270,6 +344,7 @@ pub(crate) fn live_all(
     truth: Option<&Path>,
     out: Option<&Path>,
 ) -> Result<(), Failure> {
+    let mut tables = None;
     let data_steps = match measurements {
         Some(p) => {
             let name = p.display().to_string();
@@ -289,10 +364,10 @@ pub(crate) fn live_all(
                 }
                 None => None,
             };
-            Some(
-                replay::steps_of(&meas, truth_table.as_ref())
-                    .map_err(|e| Failure::Input(e.to_string()))?,
-            )
+            let steps = replay::steps_of(&meas, truth_table.as_ref())
+                .map_err(|e| Failure::Input(e.to_string()))?;
+            tables = Some((meas, truth_table));
+            Some(steps)
         }
         None if truth.is_some() => {
             return Err(Failure::Input(
@@ -377,8 +452,27 @@ pub(crate) fn live_all(
         dir.display()
     );
     let start = Instant::now();
-    serve(&exp, &text, &run, pacing, &socket, &dir, false, true)?;
+    // The truth to score the estimates with: the recording's, or the simulated trial's.
+    let truth = match &tables {
+        Some((meas, truth)) => {
+            replay::recorded(&exp, meas, truth.as_ref())
+                .map_err(|e| Failure::Input(e.to_string()))?
+                .truth
+        }
+        None => Some(runner::draw_trial(&exp, run.trial).truth),
+    };
+    let table = serve(
+        &exp,
+        &text,
+        &run,
+        pacing,
+        &socket,
+        &dir,
+        false,
+        truth.as_deref(),
+    )?;
     children.wait()?;
+    print_out(&table);
     print_out(&format!(
         "{}: {} schemes x {} steps live in {:.1} s\nwrote {}: {}, {}, {}\n",
         exp.name,
