@@ -82,9 +82,6 @@ pub(crate) fn load(
     let (exp, _) = replay::load_experiment(&text, &source, steps, run.seed, &Default::default())
         .map_err(|e| Failure::Input(e.to_string()))?;
     live::check_live(&exp).map_err(Failure::Input)?;
-    if run.trial > 0 && data_steps.is_none() && run.trial >= u32::MAX as usize {
-        return Err(Failure::Input("--trial is too large".into()));
-    }
     Ok((exp, text))
 }
 
