@@ -236,6 +236,14 @@ fn node(i: usize, port: u16, d: &Path) -> Child {
     )
 }
 
+/// `hushfuse center arena-1d` on `port`, `steps` steps, with `extra` arguments.
+fn center(port: u16, steps: &str, extra: &[&str], d: &Path) -> Child {
+    let listen = format!("127.0.0.1:{port}");
+    let mut args = vec!["center", "arena-1d", "--listen", &listen, "--steps", steps];
+    args.extend_from_slice(extra);
+    spawn(&args, d)
+}
+
 fn wait_ok(mut c: Child, what: &str) {
     let deadline = Instant::now() + Duration::from_secs(120);
     loop {
@@ -264,11 +272,7 @@ fn killed_center_resumes_to_the_same_estimates() {
     arena_data(d, 100);
     let expected = replay(d, "rep", &[]);
     let port = free_port();
-    let listen = format!("127.0.0.1:{port}");
-    let center_args = [
-        "center", "arena-1d", "--listen", &listen, "--steps", "100", "--out", "live",
-    ];
-    let mut center = spawn(&center_args, d);
+    let mut center = center(port, "100", &["--out", "live"], d);
     let nodes: Vec<Child> = (0..4).map(|i| node(i, port, d)).collect();
     // Kill it once it has fused some steps, well before the end (17 x 100).
     let csv = d.join("live/estimates.csv");
@@ -284,9 +288,7 @@ fn killed_center_resumes_to_the_same_estimates() {
     center.wait().unwrap();
     let at_kill = lines(&csv);
     assert!(at_kill < 1701, "killed before the end ({at_kill} lines)");
-    let mut resumed = center_args.to_vec();
-    resumed.push("--resume");
-    let center = spawn(&resumed, d);
+    let center = self::center(port, "100", &["--out", "live", "--resume"], d);
     wait_ok(center, "the resumed center");
     for (i, n) in nodes.into_iter().enumerate() {
         wait_ok(n, &format!("node {i}"));
@@ -297,34 +299,24 @@ fn killed_center_resumes_to_the_same_estimates() {
 
 /// A node killed in the middle of the run and started again: the center closes the step it
 /// missed after its timeout and the next ones without waiting for it (they are "no_report",
-/// silences, and logged), the restarted node catches up and reports again; every step has its row, and the estimates are those of the
-/// same run in one process with that node's datagrams of exactly those steps lost.
+/// silences, and logged), the restarted node catches up and reports again; every step has its
+/// row, and the estimates are those of the same run in one process with that node's datagrams
+/// of exactly those steps lost.
 #[test]
 fn killed_node_ends_as_a_run_with_its_missed_steps_lost() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     arena_data(d, 100);
     let port = free_port();
-    let listen = format!("127.0.0.1:{port}");
-    let center = spawn(
-        &[
-            "center",
-            "arena-1d",
-            "--listen",
-            &listen,
-            "--steps",
-            "100",
-            "--timeout",
-            "0.2",
-            "--scheme",
-            "Send-on-delta",
-            "--scheme",
-            "Censored PF",
-            "--out",
-            "live",
-        ],
-        d,
-    );
+    let extra = [
+        "--timeout",
+        "0.2",
+        "--scheme",
+        "Send-on-delta",
+        "--scheme",
+        "Censored PF",
+    ];
+    let center = center(port, "100", &[&extra[..], &["--out", "live"]].concat(), d);
     let mut nodes: Vec<Option<Child>> = (0..4).map(|i| Some(node(i, port, d))).collect();
     let csv = d.join("live/estimates.csv");
     let start = Instant::now();
@@ -418,13 +410,7 @@ fn junk_datagrams_are_counted_and_dropped() {
     arena_data(d, 100);
     let expected = replay(d, "rep", &[]);
     let port = free_port();
-    let listen = format!("127.0.0.1:{port}");
-    let center = spawn(
-        &[
-            "center", "arena-1d", "--listen", &listen, "--steps", "100", "--out", "live",
-        ],
-        d,
-    );
+    let center = center(port, "100", &["--out", "live"], d);
     let nodes: Vec<Child> = (0..4).map(|i| node(i, port, d)).collect();
     let junk = UdpSocket::bind("127.0.0.1:0").unwrap();
     let to = format!("127.0.0.1:{port}");
@@ -524,25 +510,17 @@ fn bad_requests_are_refused_with_their_reason() {
     // A node of another run (other steps): refused.
     let port = free_port();
     let listen = format!("127.0.0.1:{port}");
-    let center = spawn(
-        &[
-            "center",
-            "arena-1d",
-            "--listen",
-            &listen,
-            "--steps",
-            "5",
-            "--wait",
-            "3",
-            "--timeout",
-            "0.05",
-            "--scheme",
-            "Send-on-delta",
-            "--out",
-            "c",
-        ],
-        d,
-    );
+    let extra = [
+        "--wait",
+        "3",
+        "--timeout",
+        "0.05",
+        "--scheme",
+        "Send-on-delta",
+        "--out",
+        "c",
+    ];
+    let center = center(port, "5", &extra, d);
     std::thread::sleep(Duration::from_millis(300));
     let other = hushfuse(
         &[
