@@ -24,8 +24,9 @@ const MAGIC: &[u8; 8] = b"HUSHFUSE";
 /// 2: `Sums::per_trial` flat. 3: `Sums::link` (the link's per-step counts). 4: `Sums::link`
 /// rows of 8 counters (ARQ's retransmissions, duplicates, ACK frames and ACK bits added). 5:
 /// `Sums::failure` (a variant's first failed trial). 6: `Sums::sensors` (per-sensor scheduled and
-/// sent steps, for the entropy-coded rate).
-pub const FORMAT: u32 = 6;
+/// sent steps, for the entropy-coded rate). 7: `Sums::reading_peaks` (the largest reading per
+/// measurement component, for the singles' rounding warning).
+pub const FORMAT: u32 = 7;
 const HEADER: usize = 8 + 4 + 8 + 32;
 
 /// What a run is, for telling whether a checkpoint or shard belongs to it, and how to rebuild
@@ -657,6 +658,14 @@ pub fn validate_sums(
         }
         if let Some((got, expected)) = sensors_problem(s) {
             return bad("sensors", got, expected);
+        }
+        let components: usize = exp.system.sensors.iter().map(|m| m.meas_dim()).sum();
+        if s.reading_peaks.len() > components || s.reading_peaks.iter().any(|p| !(*p >= 0.0)) {
+            return bad(
+                "reading_peaks",
+                format!("{} values", s.reading_peaks.len()),
+                format!("at most {components} magnitudes (one per measurement component), none negative or NaN"),
+            );
         }
         if !counted {
             continue;

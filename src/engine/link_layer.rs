@@ -81,6 +81,34 @@ pub(crate) fn losses_only(variant: &Variant) -> bool {
             .is_some_and(|specs| specs.iter().all(|s| s.delay().is_zero() && s.arq.is_none()))
 }
 
+/// How a variant's trials may run: the one rule, asked by the runner (may a block batch?) and
+/// by the trial loop (may this trial take the fast path?), so that the two cannot disagree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Route {
+    /// The generic per-step loop: delays, retransmissions, sequence numbers, doubles
+    /// (`reals = "f64"`: the fast paths deliver singles), or recorded readings with holes.
+    Generic,
+    /// A fast trial that applies the link's losses (the fast paths draw no fate of their own).
+    FastWithLosses,
+    /// A fast trial on an ideal link; a block of such trials may also run as a batch when the
+    /// scheme's fast path batches.
+    FastIdeal,
+}
+
+/// The [`Route`] of variant `variant` of `exp`; `every_reading` says whether every reading of
+/// the trial is present (a replay with holes runs the generic loop).
+pub(crate) fn route(exp: &Experiment, variant: &Variant, every_reading: bool) -> Route {
+    if !exp.reals.is_f32() || !every_reading {
+        Route::Generic
+    } else if ideal(variant) {
+        Route::FastIdeal
+    } else if losses_only(variant) {
+        Route::FastWithLosses
+    } else {
+        Route::Generic
+    }
+}
+
 /// The fate tables of one trial, shared by its variants whose links are the same: a table is a
 /// function of the links, the trial and the experiment's seed and steps only
 /// ([`FateTable::draw`]), so it is drawn once per trial rather than once per variant.

@@ -274,6 +274,8 @@ struct Worker<'e> {
     scratch: LoopBuffers,
     /// The trial states of a lockstep batch, restarted for each variant of each block.
     states: Vec<crate::metrics::TrialState<'e>>,
+    /// A trial's largest readings ([`note_readings`]).
+    peaks: Vec<f64>,
 }
 
 impl<'e> Worker<'e> {
@@ -282,6 +284,7 @@ impl<'e> Worker<'e> {
             drawers: vec![Drawer::new(exp)],
             scratch: LoopBuffers::new(exp.system.n_sensors()),
             states: Vec::new(),
+            peaks: Vec::new(),
         }
     }
 }
@@ -333,10 +336,10 @@ fn run_block<'e>(
     on_trial: &dyn Fn(usize),
 ) -> Result<bool, RunError> {
     let batch = (2..=BLOCK).contains(&trials.len())
-        // A lossy link is applied by the generic loop only (the fast paths assume every
-        // packet arrives), and sequence numbers are priced there.
+        // The one rule of the fast paths (`link_layer::route`): a batch needs ideal links and
+        // singles for every variant.
         && exp.variants.iter().all(|v| {
-            crate::engine::link_layer::ideal(v)
+            crate::engine::link_layer::route(exp, v, true) == crate::engine::link_layer::Route::FastIdeal
                 && v.scheme.fast_path().is_some_and(|f| f.batches())
         });
     if !batch {
@@ -347,6 +350,7 @@ fn run_block<'e>(
             let drawer = &mut worker.drawers[0];
             drawer.draw(exp, trial);
             run_trial_with(exp, trial, &drawer.data, sums, &mut worker.scratch)?;
+            note_readings(exp, &drawer.data, sums, &mut worker.peaks);
             on_trial(1);
         }
         return Ok(true);
@@ -408,8 +412,30 @@ fn run_block<'e>(
             }
         }
     }
+    for d in drawn {
+        note_readings(exp, &d.data, sums, &mut worker.peaks);
+    }
     on_trial(n);
     Ok(true)
+}
+
+/// One trial's largest readings into every variant's sums
+/// ([`crate::metrics::Sums::reading_peaks`], for [`crate::metrics::precision`]); nothing when
+/// the scenario sends doubles, whose rounding is never coarse.
+pub(crate) fn note_readings(
+    exp: &Experiment,
+    data: &TrialData,
+    sums: &mut [Sums],
+    peaks: &mut Vec<f64>,
+) {
+    if !exp.reals.is_f32() {
+        return;
+    }
+    peaks.clear();
+    crate::metrics::precision::note_peaks(&data.measurements, peaks);
+    for s in sums.iter_mut().take(exp.variants.len()) {
+        s.merge_peaks(peaks);
+    }
 }
 
 /// The sink of a batch: one trial state per trial of the block, all adding into the

@@ -299,13 +299,11 @@ fn fast_path(
     coins: &mut [rand_xoshiro::Xoshiro256PlusPlus],
 ) -> Option<Result<(), LoopError>> {
     let variant = &exp.variants[spec.variant];
-    let ideal = link_layer::ideal(variant);
-    if !exp.reals.is_f32()
-        || spec.available.is_some()
-        || !(ideal || link_layer::losses_only(variant))
-    {
-        return None;
-    }
+    let ideal = match link_layer::route(exp, variant, spec.available.is_none()) {
+        link_layer::Route::Generic => return None,
+        link_layer::Route::FastWithLosses => false,
+        link_layer::Route::FastIdeal => true,
+    };
     // One virtual call per trial: the scheme's hook, then its whole trial.
     let (fast, sink) = (variant.scheme.fast_path()?, observer.fast_sink()?);
     let uplink = match variant.channel.as_deref() {

@@ -8,6 +8,7 @@ pub mod link;
 pub mod notes;
 pub mod pcrb;
 pub mod per_step_csv;
+pub mod precision;
 pub mod results;
 pub mod sums;
 

@@ -227,6 +227,11 @@ pub struct Summary {
     /// Why `rate_distortion_floor` is null.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rate_distortion_floor_note: Option<String>,
+    /// Warnings about the run as a whole, not one scheme's health (readings that singles round
+    /// coarser than their noise, [`crate::metrics::precision`]); [`warnings`] prints them after
+    /// the schemes' own. Absent when there are none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 /// Turns sums into per-scheme results, with the model's posterior Cramér–Rao bound where it is
@@ -395,6 +400,11 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
         pcrb: None,
         rate_distortion_floor: None,
         rate_distortion_floor_note: None,
+        // The readings are the same for every variant: the first's peaks are the run's.
+        warnings: sums
+            .first()
+            .map(|s| crate::metrics::precision::rounding_warnings(exp, &s.reading_peaks))
+            .unwrap_or_default(),
     }
 }
 
@@ -673,6 +683,7 @@ pub fn warnings(summary: &Summary) -> Vec<String> {
             ));
         }
     }
+    out.extend(summary.warnings.iter().cloned());
     out
 }
 

@@ -311,6 +311,12 @@ pub fn replay(exp: &Experiment, rec: &Recorded, trial: usize) -> Result<Replayed
             Some(truth) => {
                 let mut s = Sums::new(exp.groups.len(), exp.steps, exp.system.state_dim());
                 trace::run_variant_into(exp, &rec.measurements, truth, v, opts, &mut s, &mut f)?;
+                // The readings' peaks as a run notes them (a hole, NaN, is not a reading).
+                if exp.reals.is_f32() {
+                    let mut peaks = Vec::new();
+                    crate::metrics::precision::note_peaks(&rec.measurements, &mut peaks);
+                    s.merge_peaks(&peaks);
+                }
                 sums.push(s);
             }
             None => trace::run_variant_with(exp, &rec.measurements, v, opts, &mut f)?,

@@ -70,6 +70,12 @@ pub struct Sums {
     /// (Always written: checkpoints are postcard, which has no optional fields.)
     #[serde(default)]
     pub sensors: Vec<[u64; 2]>,
+    /// The largest |reading| of each measurement component (sensors in order, each sensor's
+    /// components in order), over every trial and step: whether a single (32-bit) rounds the
+    /// readings coarser than their noise ([`crate::metrics::precision`]). A maximum, so the
+    /// order of merging changes nothing; empty until a trial is noted.
+    #[serde(default)]
+    pub reading_peaks: Vec<f64>,
 }
 
 /// Where and why a variant's trial failed.
@@ -179,6 +185,7 @@ impl Sums {
             link: Vec::new(),
             failure: None,
             sensors: Vec::new(),
+            reading_peaks: Vec::new(),
         }
     }
 
@@ -198,6 +205,16 @@ impl Sums {
                 self.sensors[mask.trailing_zeros() as usize][field] += trials;
                 mask &= mask - 1;
             }
+        }
+    }
+
+    /// Raises [`Sums::reading_peaks`] to `peaks` where they are larger (a NaN changes nothing).
+    pub fn merge_peaks(&mut self, peaks: &[f64]) {
+        if self.reading_peaks.len() < peaks.len() {
+            self.reading_peaks.resize(peaks.len(), 0.0);
+        }
+        for (a, b) in self.reading_peaks.iter_mut().zip(peaks) {
+            *a = a.max(*b);
         }
     }
 
@@ -301,6 +318,7 @@ impl Sums {
         self.link.clear();
         self.failure = None;
         self.sensors.clear();
+        self.reading_peaks.clear();
     }
 
     /// Adds another block's sums (same shape).
@@ -337,6 +355,7 @@ impl Sums {
             a[0] += b[0];
             a[1] += b[1];
         }
+        self.merge_peaks(&o.reading_peaks);
         if !o.link.is_empty() {
             if self.link.is_empty() {
                 self.link = vec![[0; LINK_FIELDS]; self.steps];
