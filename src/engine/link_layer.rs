@@ -261,16 +261,17 @@ impl LinkLayer {
         if specs.iter().all(ChannelSpec::is_lossless) {
             return None;
         }
-        let horizon = specs.iter().map(|s| s.delay().horizon()).max().unwrap_or(0);
+        // A packet later than the run's last step never arrives: no longer horizon is needed.
+        let horizon = specs
+            .iter()
+            .map(|s| s.delay().horizon() as usize)
+            .max()
+            .unwrap_or(0)
+            .min(exp.steps);
         let down = (!specs.iter().all(|s| s.downlink_spec().is_lossless()))
             .then(|| fates.get(exp, specs, trial, true));
         let up = fates.get(exp, specs, trial, false);
-        let mut link = Self::with_fates(
-            up,
-            down,
-            horizon as usize,
-            exp.variants[variant].sequence_bits,
-        );
+        let mut link = Self::with_fates(up, down, horizon, exp.variants[variant].sequence_bits);
         link.held = vec![initial.clone(); link.held.len()];
         Some(link)
     }

@@ -45,7 +45,8 @@ pub use driver::{run_center, CenterOptions, Journal, Pace, StepSink};
 pub use folder::{LiveFolder, ESTIMATES, JOURNAL, LOG};
 pub use local::run_local;
 pub use node::{
-    fingerprint, frame_datagram, run_node, Lines, Node, NodeOptions, Readings, Recorded, Reply,
+    fingerprint, frame_datagram, run_node, BackgroundLines, Lines, Node, NodeOptions, Readings,
+    Recorded, Reply,
 };
 
 use crate::scenario::experiment::Experiment;

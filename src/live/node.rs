@@ -17,6 +17,12 @@ pub trait Readings {
     /// The sensor's reading at step `k` (1-based) of every variant (each variant reads the
     /// same data from step 1); `None`: no reading at that step.
     fn reading(&mut self, k: usize) -> Result<Option<Vector>, String>;
+
+    /// Whether [`Readings::reading`] of step `k` would answer at once; a node waits for it
+    /// while still hearing the center ([`run_node`]). Readings held in memory always are.
+    fn ready(&mut self, _k: usize) -> bool {
+        true
+    }
 }
 
 /// Readings held in memory: a simulated trial's, or a recording's.
@@ -38,60 +44,195 @@ impl Readings for Recorded {
 /// so the next variant reads them again.
 pub struct Lines<R> {
     input: R,
-    dim: usize,
-    read: Vec<Option<Vector>>,
+    parsed: ParsedLines,
 }
 
 impl<R: std::io::BufRead> Lines<R> {
     pub fn new(input: R, dim: usize) -> Self {
         Self {
             input,
-            dim,
-            read: Vec::new(),
+            parsed: ParsedLines::new(dim),
         }
     }
 }
 
 impl<R: std::io::BufRead> Readings for Lines<R> {
     fn reading(&mut self, k: usize) -> Result<Option<Vector>, String> {
-        while self.read.len() < k {
-            let line_no = self.read.len() + 1;
+        while self.parsed.read.len() < k {
             let mut line = String::new();
-            let n = self
-                .input
-                .read_line(&mut line)
-                .map_err(|e| format!("cannot read line {line_no}: {e}"))?;
-            if n == 0 {
-                return Err(format!(
-                    "the input ended at line {line_no}: one line per step is needed (an empty line for no reading)"
-                ));
-            }
-            let fields: Vec<&str> = line
-                .split(|c: char| c == ',' || c.is_whitespace())
-                .filter(|s| !s.is_empty())
-                .collect();
-            if fields.is_empty() {
-                self.read.push(None);
-                continue;
-            }
-            let values = fields
-                .iter()
-                .map(|s| s.parse::<f64>().ok().filter(|x| x.is_finite()))
-                .collect::<Option<Vec<f64>>>()
-                .ok_or_else(|| {
-                    format!("line {line_no}: {:?} is not finite numbers", line.trim())
-                })?;
-            if values.len() != self.dim {
-                return Err(format!(
-                    "line {line_no}: {} numbers, the sensor measures {}",
-                    values.len(),
-                    self.dim
-                ));
-            }
-            self.read.push(Some(Vector::from_vec(values)));
+            let n = self.input.read_line(&mut line);
+            self.parsed.push(n.map(|n| (n > 0).then_some(line)))?;
         }
-        Ok(self.read[k - 1].clone())
+        Ok(self.parsed.read[k - 1].clone())
     }
+}
+
+/// [`Lines`] read by a thread of their own, so that a node waiting for a reading that has not
+/// come yet still hears the center (it ends the run, or moves on without this sensor): an input
+/// that stays open but silent never keeps the node alive after the run ([`Readings::ready`]).
+pub struct BackgroundLines {
+    lines: std::sync::mpsc::Receiver<std::io::Result<Option<String>>>,
+    parsed: ParsedLines,
+    /// The input ended or failed: what is read is all there will be.
+    over: bool,
+}
+
+impl BackgroundLines {
+    /// Reads `input` (e.g. standard input) line by line on a thread of its own.
+    pub fn spawn<R: std::io::BufRead + Send + 'static>(mut input: R, dim: usize) -> Self {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || loop {
+            let mut line = String::new();
+            let r = input.read_line(&mut line).map(|n| (n > 0).then_some(line));
+            let end = !matches!(r, Ok(Some(_)));
+            if tx.send(r).is_err() || end {
+                return;
+            }
+        });
+        Self {
+            lines: rx,
+            parsed: ParsedLines::new(dim),
+            over: false,
+        }
+    }
+
+    /// Takes one line from the reader thread (waiting for it when `block`); false when none
+    /// was there (or the input is over).
+    fn take(&mut self, block: bool) -> Result<bool, String> {
+        if self.over {
+            return Ok(false);
+        }
+        let r = if block {
+            self.lines.recv().ok()
+        } else {
+            self.lines.try_recv().ok()
+        };
+        let Some(r) = r else {
+            return Ok(false);
+        };
+        if !matches!(r, Ok(Some(_))) {
+            self.over = true;
+        }
+        self.parsed.push(r)?;
+        Ok(true)
+    }
+}
+
+impl Readings for BackgroundLines {
+    fn reading(&mut self, k: usize) -> Result<Option<Vector>, String> {
+        while self.parsed.read.len() < k {
+            if !self.take(true)? && self.over {
+                return Err(self.parsed.ended());
+            }
+        }
+        Ok(self.parsed.read[k - 1].clone())
+    }
+
+    fn ready(&mut self, k: usize) -> bool {
+        while self.parsed.read.len() < k {
+            match self.take(false) {
+                Ok(true) => {}
+                // An error or the end of the input: `reading` reports it now.
+                Err(_) => return true,
+                Ok(false) => return self.over,
+            }
+        }
+        true
+    }
+}
+
+/// The lines of a reading source parsed so far.
+struct ParsedLines {
+    dim: usize,
+    read: Vec<Option<Vector>>,
+    /// A line that could not be read or parsed: every later reading reports it.
+    failed: Option<String>,
+}
+
+/// Characters of a bad line shown in its error (a 5 MB line is not echoed whole).
+const ECHO_CHARS: usize = 60;
+
+impl ParsedLines {
+    fn new(dim: usize) -> Self {
+        Self {
+            dim,
+            read: Vec::new(),
+            failed: None,
+        }
+    }
+
+    fn ended(&self) -> String {
+        self.failed.clone().unwrap_or_else(|| {
+            format!(
+                "the input ended at line {}: one line per step is needed (an empty line for no reading)",
+                self.read.len() + 1
+            )
+        })
+    }
+
+    /// Parses the next line (`Ok(None)`: the input ended).
+    fn push(&mut self, line: std::io::Result<Option<String>>) -> Result<(), String> {
+        if let Some(f) = &self.failed {
+            return Err(f.clone());
+        }
+        let line_no = self.read.len() + 1;
+        let parsed = match line {
+            Err(e) => Err(format!("cannot read line {line_no}: {e}")),
+            Ok(None) => Err(self.ended()),
+            Ok(Some(line)) => parse_line(&line, line_no, self.dim),
+        };
+        match parsed {
+            Ok(z) => {
+                self.read.push(z);
+                Ok(())
+            }
+            Err(e) => {
+                self.failed = Some(e.clone());
+                Err(e)
+            }
+        }
+    }
+}
+
+/// Line `line_no` as a reading of `dim` components (`None`: an empty line, no reading). Every
+/// value must be finite and fit the 32-bit single that carries it on the wire.
+fn parse_line(line: &str, line_no: usize, dim: usize) -> Result<Option<Vector>, String> {
+    let echo = || {
+        let t = line.trim();
+        match t.char_indices().nth(ECHO_CHARS) {
+            Some((cut, _)) => format!("{:?}… ({} characters)", &t[..cut], t.chars().count()),
+            None => format!("{t:?}"),
+        }
+    };
+    let fields: Vec<&str> = line
+        .split(|c: char| c == ',' || c.is_whitespace())
+        .filter(|s| !s.is_empty())
+        .collect();
+    if fields.is_empty() {
+        return Ok(None);
+    }
+    let mut values = Vec::with_capacity(fields.len());
+    for f in &fields {
+        let x = f
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("line {line_no}: {} is not finite numbers", echo()))?;
+        if x.abs() > f64::from(f32::MAX) {
+            return Err(format!(
+                "line {line_no}: {f} does not fit the 32-bit single that carries a reading on the wire (at most {:e} in magnitude); rescale the readings",
+                f32::MAX
+            ));
+        }
+        values.push(x);
+    }
+    if values.len() != dim {
+        return Err(format!(
+            "line {line_no}: {} numbers, the sensor measures {dim}",
+            values.len()
+        ));
+    }
+    Ok(Some(Vector::from_vec(values)))
 }
 
 /// What the node does after a datagram.
@@ -170,6 +311,17 @@ impl<'a> Node<'a> {
         d.flags = if self.fresh { HELLO_FRESH } else { 0 };
         d.body = fingerprint.to_vec();
         d.encode()
+    }
+
+    /// Whether [`Node::handle`] would answer `octets` at once: false for the announcement of a
+    /// step whose reading has not come yet ([`Readings::ready`]).
+    pub fn ready(&mut self, octets: &[u8]) -> bool {
+        match Datagram::decode(octets) {
+            Ok(d) if d.kind == Kind::Step && usize::from(d.sensor) == self.sensor => {
+                self.readings.ready(d.step as usize)
+            }
+            _ => true,
+        }
     }
 
     /// Handles one datagram from the center. Datagrams that are not for this node, corrupt,
@@ -349,9 +501,6 @@ pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Re
         "[::]:0".parse().expect("address")
     };
     let socket = UdpSocket::bind(bind).map_err(|e| format!("cannot open a UDP socket: {e}"))?;
-    socket
-        .set_read_timeout(Some(opts.hello_every))
-        .map_err(|e| e.to_string())?;
     let send = |octets: &[u8]| {
         // A datagram that cannot be sent now is as good as lost: the center asks again.
         let _ = socket.send_to(octets, opts.center);
@@ -359,13 +508,38 @@ pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Re
     send(&node.hello(fingerprint));
     let mut heard = Instant::now();
     let mut buf = [0u8; 2048];
+    // A step announced before its reading came (readings from a live input): handled once the
+    // reading is there, while the center is still heard (it may end the run meanwhile).
+    let mut waiting: Option<Vec<u8>> = None;
     loop {
+        if let Some(w) = waiting.take_if(|w| node.ready(w)) {
+            let reply = node.handle(&w)?;
+            for d in &reply.datagrams {
+                send(d);
+            }
+            if reply.finished {
+                return Ok(());
+            }
+        }
+        let wait = if waiting.is_some() {
+            Duration::from_millis(20)
+        } else {
+            opts.hello_every
+        };
+        socket
+            .set_read_timeout(Some(wait))
+            .map_err(|e| e.to_string())?;
         match socket.recv_from(&mut buf) {
             Ok((len, from)) => {
                 if from != opts.center {
                     continue;
                 }
                 heard = Instant::now();
+                if !node.ready(&buf[..len]) {
+                    // The newest announcement replaces an older one still waiting.
+                    waiting = Some(buf[..len].to_vec());
+                    continue;
+                }
                 let reply = node.handle(&buf[..len])?;
                 for d in &reply.datagrams {
                     send(d);
@@ -382,6 +556,15 @@ pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Re
                         | std::io::ErrorKind::ConnectionRefused
                 ) =>
             {
+                if waiting.is_some() {
+                    // Waiting for a reading, and the center is quiet: keep waiting (it announces
+                    // again, or ends the run), but greet it now and then.
+                    if heard.elapsed() >= opts.hello_every {
+                        heard = Instant::now();
+                        send(&node.hello(fingerprint));
+                    }
+                    continue;
+                }
                 if heard.elapsed() >= opts.give_up_after {
                     return Err(format!(
                         "no word from the center at {} for {:.0} s",

@@ -260,6 +260,14 @@ pub fn build_with(
         file_spec.steps,
         workers,
     );
+    let estimate = limits::with_refusion(
+        estimate,
+        &system,
+        &variants,
+        file_spec.trials,
+        file_spec.steps,
+        workers,
+    );
     limits::check(&estimate, &limits, file)?;
     check_reals(&ctx, file_spec.reals, &curves, &variants)?;
     if let Some(paper) = &file_spec.paper {

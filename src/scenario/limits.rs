@@ -118,6 +118,9 @@ pub struct Estimate {
     pub seconds: f64,
     /// Worker threads the estimate assumes.
     pub threads: f64,
+    /// The part of `seconds` that late packets and revealed gaps spend re-fusing
+    /// ([`with_refusion`]).
+    pub refusion_seconds: f64,
 }
 
 /// Accumulator columns per step and variant (groups, errors, traffic, consistency).
@@ -151,14 +154,13 @@ pub fn baseline(
     let block = steps * columns(groups) * variants * 16.0;
     let sums = block + (block * blocks).max(WINDOW_MAX_BYTES as f64);
     let per_trial = trials * variants * (columns(groups) * 8.0 + 24.0);
-    // A Kalman step: prediction n^3 plus an update per measured component.
-    let kf_flops = 2.0 * n * n * n + 4.0 * n * n * m.max(1.0);
-    let per_step = STEP_OVERHEAD_SECONDS + kf_flops / FLOPS_PER_SECOND;
+    let per_step = step_seconds(system);
     let plans = variants * steps * (PLAN_BYTES_PER_STEP_N2 * n * n + PLAN_BYTES_PER_STEP);
     Estimate {
         memory_bytes: trial_data + sums + per_trial + plans,
         seconds: trials * steps * (variants * per_step + m * 1e-7) / workers,
         threads: workers,
+        refusion_seconds: 0.0,
     }
 }
 
@@ -178,6 +180,71 @@ pub fn with_schemes<'a>(
         }
     }
     e
+}
+
+/// Adds the re-fusion work of links with delays or sequence numbers: a late packet, or a gap
+/// that a sequence number reveals, makes the center re-fuse the trial so far
+/// ([`crate::engine::link_layer`]), so a trial of T steps in which such an arrival comes at a
+/// step with probability p re-fuses about p T²/2 steps. (A delay of 1 at every step over 10⁶
+/// steps is 5·10¹¹ re-fused steps a trial: the work grows as steps², and a run that cannot end
+/// in the time limit is refused here rather than started.) p is taken from above: every sensor
+/// sending at every step, a gap at every loss.
+pub fn with_refusion(
+    mut e: Estimate,
+    system: &System,
+    variants: &[crate::scenario::experiment::Variant],
+    trials: usize,
+    steps: usize,
+    threads: usize,
+) -> Estimate {
+    let step = step_seconds(system);
+    for v in variants {
+        let Some(specs) = v.channel.as_deref() else {
+            continue;
+        };
+        let quiet: f64 = specs
+            .iter()
+            .map(|s| 1.0 - refusion_chance(s, v.sequence_bits))
+            .product();
+        let p = 1.0 - quiet;
+        if p <= 0.0 {
+            continue;
+        }
+        let flops = v.scheme.footprint().map_or(0.0, |f| f.flops_per_step);
+        let refused = p * steps as f64 * (steps as f64 + 1.0) / 2.0;
+        let seconds =
+            refused * trials as f64 * (step + flops / FLOPS_PER_SECOND) / threads.max(1) as f64;
+        e.seconds += seconds;
+        e.refusion_seconds += seconds;
+    }
+    e
+}
+
+/// The chance, from above, that one sensor's packet of a step makes the center re-fuse: it is
+/// late (any delay), or (with sequence numbers) it is lost, which the next arrival reveals.
+fn refusion_chance(s: &crate::network::channel::ChannelSpec, sequence_bits: u32) -> f64 {
+    use crate::network::channel::{ChannelKind, Delay};
+    let late = match s.delay() {
+        Delay::Fixed(0) => 0.0,
+        Delay::Fixed(_) => 1.0,
+        Delay::Geometric(g) => g.mean / (1.0 + g.mean),
+    };
+    let lost = match s.kind {
+        _ if sequence_bits == 0 => 0.0,
+        ChannelKind::Ideal => 0.0,
+        ChannelKind::Bernoulli => s.loss.unwrap_or(0.0),
+        ChannelKind::GilbertElliott => s.loss_good().max(s.loss_bad()),
+    };
+    (late + lost).clamp(0.0, 1.0)
+}
+
+/// Seconds of one Kalman-sized step of `system` (prediction n³ plus an update per measured
+/// component), the baseline's cost of a scheme step.
+fn step_seconds(system: &System) -> f64 {
+    let n = system.state_dim() as f64;
+    let m: f64 = system.sensors.iter().map(|s| s.meas_dim() as f64).sum();
+    let kf_flops = 2.0 * n * n * n + 4.0 * n * n * m.max(1.0);
+    STEP_OVERHEAD_SECONDS + kf_flops / FLOPS_PER_SECOND
 }
 
 /// Bytes a run writes into its output folder, from above: the per-step table, the summary and
@@ -214,10 +281,15 @@ pub fn check(e: &Estimate, limits: &Limits, file: &str) -> Result<(), ScenarioEr
         ));
     }
     if e.seconds.is_nan() || e.seconds > limits.max_seconds {
+        let why = if e.refusion_seconds > 0.5 * e.seconds {
+            " (most of it re-fusing: each late packet, or gap a sequence number reveals, makes the center re-fuse the trial so far, so the work grows as steps squared; shorten `steps` or the link's `delay`)"
+        } else {
+            ""
+        };
         return Err(err(
             Limit::Time,
             format!(
-            "this run would take about {:.0} hours on {} threads, more than the limit of {:.0} hours; lower `steps`, `trials` (or --trials), the number of variants or particles, or pass --allow-large",
+            "this run would take about {:.0} hours on {} threads{why}, more than the limit of {:.0} hours; lower `steps`, `trials` (or --trials), the number of variants or particles, or pass --allow-large",
             e.seconds / 3600.0,
             e.threads,
             limits.max_seconds / 3600.0

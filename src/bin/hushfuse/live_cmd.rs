@@ -282,7 +282,8 @@ pub(crate) fn node(
         Source::Stdin => {
             let (exp, text) = load(scenario, run, None)?;
             let dim = exp.system.sensors.get(sensor).map_or(1, |s| s.meas_dim());
-            let lines = live::Lines::new(std::io::stdin().lock(), dim);
+            let lines =
+                live::BackgroundLines::spawn(std::io::BufReader::new(std::io::stdin()), dim);
             (exp, text, Box::new(lines))
         }
     };

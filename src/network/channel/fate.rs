@@ -288,6 +288,10 @@ fn retransmit(
     (acks == 0, retries, acks)
 }
 
+/// Below this success probability (a mean delay above 1e9 steps) a geometric delay is drawn by
+/// inverting its CDF, see [`draw_delay`].
+const TINY_SUCCESS: f64 = 1e-9;
+
 /// A delay in steps. Geometric with mean μ: the number of failures before the first success of
 /// trials with success probability p = 1/(1+μ), whose mean is (1−p)/p = μ; μ = 0 gives 0.
 fn draw_delay(delay: &Delay, rng: &mut Xoshiro256PlusPlus) -> u32 {
@@ -302,7 +306,21 @@ fn draw_delay(delay: &Delay, rng: &mut Xoshiro256PlusPlus) -> u32 {
             if mean == 0.0 {
                 return 0;
             }
-            match rand_distr::Geometric::new(1.0 / (1.0 + mean)) {
+            let p = 1.0 / (1.0 + mean);
+            if p < TINY_SUCCESS {
+                // `rand_distr`'s sampler loops for ever where 1 − p rounds to 1 (a mean of
+                // 1e17 steps). Such a delay outlasts any run (at most 1e7 steps) with
+                // probability above 0.99: invert the CDF instead, P(D ≥ n) = (1 − p)^n, with
+                // ln(1 − p) taken exactly for tiny p. One uniform, never a loop.
+                let u: f64 = 1.0 - rng.random::<f64>(); // in (0, 1]
+                let d = (u.ln() / (-p).ln_1p()).floor();
+                return if d.is_finite() && d < f64::from(u32::MAX) {
+                    d as u32
+                } else {
+                    u32::MAX
+                };
+            }
+            match rand_distr::Geometric::new(p) {
                 Ok(geo) => u32::try_from(geo.sample(rng)).unwrap_or(u32::MAX),
                 // Unreachable for a finite mean > 0 (p lies in (0, 1)); no delay is the safe
                 // reading of a value validation should have rejected.

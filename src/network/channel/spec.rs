@@ -82,7 +82,13 @@ impl Delay {
                     return 0;
                 }
                 let q = g.mean / (1.0 + g.mean);
-                ((0.001f64.ln() / q.ln()).ceil() - 1.0).clamp(0.0, 1e6) as u32
+                // ln q, exactly where q rounds to 1 (a mean above about 1e16): ln q = −ln(1 + 1/μ).
+                let ln_q = if q < 1.0 {
+                    q.ln()
+                } else {
+                    -(1.0 / g.mean).ln_1p()
+                };
+                ((0.001f64.ln() / ln_q).ceil() - 1.0).clamp(0.0, 1e6) as u32
             }),
         }
     }
@@ -252,6 +258,13 @@ impl ChannelSpec {
             if down.arq.is_some() {
                 return Err(format!(
                     "{path}.downlink.arq is not allowed: retransmission applies to the uplink (its acknowledgements travel on the downlink)"
+                ));
+            }
+            // Feedback is read at the step it is sent or not at all (a lost one leaves the
+            // sensor with what it last heard): a delay on it was accepted and ignored before.
+            if !down.delay().is_zero() {
+                return Err(format!(
+                    "{path}.downlink.delay is not supported: feedback reaches a sensor at its step or is lost (the sensor keeps what it last heard); remove the delay, or model a slow downlink by its loss"
                 ));
             }
             down.validate_at(&format!("{path}.downlink"))?;
@@ -445,10 +458,23 @@ mod tests {
         assert!(!doc.channel.is_ideal());
     }
 
+    /// A delay on the downlink was accepted and ignored (the run was byte for byte the one
+    /// without it): now refused, naming the key; a zero delay is no delay.
+    #[test]
+    fn a_downlink_delay_is_refused() {
+        for d in ["3", "{ kind = \"geometric\", mean = 2.0 }"] {
+            let e = invalid(&format!(
+                "kind = \"bernoulli\"\nloss = 0.1\ndownlink = {{ delay = {d} }}"
+            ));
+            assert!(e.contains("channel.downlink.delay is not supported"), "{e}");
+        }
+        assert!(parse_ok("downlink = { delay = 0 }").validate().is_ok());
+    }
+
     #[test]
     fn is_ideal_needs_every_part_ideal() {
         assert!(parse_ok("downlink = { kind = \"ideal\" }").is_ideal());
-        assert!(!parse_ok("downlink = { delay = 1 }").is_ideal());
+        assert!(!parse_ok("downlink = { kind = \"bernoulli\", loss = 0.1 }").is_ideal());
         assert!(!parse_ok("arq = { max_retries = 0 }").is_ideal());
         assert!(ChannelSpec::default().downlink_spec().is_ideal());
     }
