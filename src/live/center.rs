@@ -12,7 +12,7 @@ use crate::filter::Gaussian;
 use crate::linalg::Vector;
 use crate::link::Received;
 use crate::scenario::experiment::Experiment;
-use crate::scheme::{Feedback, FusionCenter};
+use crate::scheme::{Feedback, FusionCenter, SchemeError};
 
 /// Counts of datagrams that were not used, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -27,6 +27,28 @@ pub struct Dropped {
     pub duplicate: u64,
     /// From a sensor index the scenario does not have.
     pub unknown_sensor: u64,
+    /// A well-formed frame whose content the center cannot use: a reading or estimate that is
+    /// not finite, an envelope that claims other payload bits than the frame carries, or a
+    /// message the scheme refuses (an estimate where it fuses readings, a codec frame of another
+    /// scheme). Dropped, and the step fused without it: a forged frame never stops the center.
+    pub rejected: u64,
+}
+
+/// Whether a sensor's entry of an inbox is a message that arrived.
+fn carries_message(r: &Received) -> bool {
+    matches!(
+        r,
+        Received::Measurement(_) | Received::Estimate(_) | Received::Frame(_)
+    )
+}
+
+/// Why a frame is not used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Unusable {
+    /// Its 802.15.4 frame (or message kind) is malformed: [`Dropped::bad_frame`].
+    Corrupt,
+    /// Well-formed, but its content is not usable: [`Dropped::rejected`].
+    Content,
 }
 
 /// What became of one sensor at a fused step, as `estimates.csv` says it.
@@ -86,6 +108,9 @@ pub struct Center<'a> {
     /// catch up).
     announced: Vec<Vec<Vec<u8>>>,
     pending: Pending,
+    /// The inboxes fused so far in the current variant: a step whose fusion refused a frame is
+    /// fused again without it on a center rebuilt from them ([`Center::rebuild`]).
+    history: Vec<Vec<Received>>,
     pub dropped: Dropped,
 }
 
@@ -116,6 +141,7 @@ impl<'a> Center<'a> {
                 done: vec![None; n],
                 away: vec![false; n],
             },
+            history: Vec::new(),
             dropped: Dropped::default(),
         };
         c.start_variant()?;
@@ -134,6 +160,28 @@ impl<'a> Center<'a> {
         self.center = Some(inst.center);
         self.k = 1;
         self.announced.clear();
+        self.history.clear();
+        Ok(())
+    }
+
+    /// The current variant's center built afresh and brought through the steps fused so far
+    /// (the same estimates: a particle filter draws again from its own seed).
+    fn rebuild(&mut self) -> Result<(), String> {
+        let v = self.variants[self.at];
+        let center_seed =
+            seeding::center_seed(self.exp.seed, self.trial as u64, seeding::coin_stream(v));
+        let label = self.label(v).to_string();
+        let mut center = self.exp.variants[v]
+            .scheme
+            .build_for_trial(self.trial, center_seed)
+            .map_err(|e| format!("scheme {label}: cannot build it: {e}"))?
+            .center;
+        for (j, inbox) in self.history.iter().enumerate() {
+            center
+                .step(j + 1, inbox)
+                .map_err(|e| format!("scheme {label}, step {}: {e}", j + 1))?;
+        }
+        self.center = Some(center);
         Ok(())
     }
 
@@ -242,8 +290,11 @@ impl<'a> Center<'a> {
                 let (v, k) = self.position();
                 // A corrupt frame is counted as such whichever step it claims.
                 let frame = (d.kind == Kind::Frame).then(|| self.read_frame(i, &d));
-                if let Some(None) = frame {
-                    self.dropped.bad_frame += 1;
+                if let Some(Err(why)) = frame {
+                    match why {
+                        Unusable::Corrupt => self.dropped.bad_frame += 1,
+                        Unusable::Content => self.dropped.rejected += 1,
+                    }
                 } else if usize::from(d.variant) != v || d.step as usize != k {
                     self.dropped.stale += 1;
                 } else if d.kind == Kind::Done {
@@ -253,8 +304,8 @@ impl<'a> Center<'a> {
                     }
                 } else if self.pending.frames[i].is_some() {
                     self.dropped.duplicate += 1;
-                } else if let Some(Some(r)) = frame {
-                    self.pending.frames[i] = Some((r, u64::from(d.aux)));
+                } else if let Some(Ok((r, bits))) = frame {
+                    self.pending.frames[i] = Some((r, bits));
                 }
                 Accepted::default()
             }
@@ -313,22 +364,48 @@ impl<'a> Center<'a> {
         }
     }
 
-    /// The message of a [`Kind::Frame`], or `None` when it is corrupt.
-    fn read_frame(&self, i: usize, d: &Datagram) -> Option<Received> {
+    /// The message of a [`Kind::Frame`] and the payload bits that arrived in it (what is
+    /// counted, never the envelope's claim, which must agree with it), or why it is unusable.
+    fn read_frame(&self, i: usize, d: &Datagram) -> Result<(Received, u64), Unusable> {
         let src = wire::sensor_address(i);
-        let payload = wire::check_mpdu(&d.body, src, wire::CENTER_ADDRESS).ok()?;
+        let payload =
+            wire::check_mpdu(&d.body, src, wire::CENTER_ADDRESS).map_err(|_| Unusable::Corrupt)?;
         let sys = &self.exp.system;
-        match MessageKind::from_code(d.flags)? {
+        let reals = |dim: usize| -> Result<Vector, Unusable> {
+            let v = wire::read_f32s(payload, dim).map_err(|_| Unusable::Corrupt)?;
+            match v.iter().all(|x| x.is_finite()) {
+                true => Ok(Vector::from_vec(v)),
+                false => Err(Unusable::Content),
+            }
+        };
+        let claimed = u64::from(d.aux);
+        let (r, bits) = match MessageKind::from_code(d.flags).ok_or(Unusable::Corrupt)? {
             MessageKind::Measurement => {
-                let v = wire::read_f32s(payload, sys.sensors[i].meas_dim()).ok()?;
-                Some(Received::Measurement(Vector::from_vec(v)))
+                let z = reals(sys.sensors[i].meas_dim())?;
+                let bits = 32 * z.len() as u64;
+                (Received::Measurement(z), bits)
             }
             MessageKind::Estimate => {
-                let v = wire::read_f32s(payload, sys.state_dim()).ok()?;
-                Some(Received::Estimate(Vector::from_vec(v)))
+                let x = reals(sys.state_dim())?;
+                let bits = 32 * x.len() as u64;
+                (Received::Estimate(x), bits)
             }
-            MessageKind::Codec => Some(Received::Frame(d.body.clone())),
+            // A codec's payload bits need not fill its octets: the claim must fit the frame
+            // exactly (the MAC frame of that many payload bits is the frame that arrived).
+            MessageKind::Codec => {
+                let fits = claimed > 0
+                    && crate::link::codec802154::mpdu_bits_for_payload(claimed)
+                        == 8 * d.body.len() as u64;
+                if !fits {
+                    return Err(Unusable::Content);
+                }
+                (Received::Frame(d.body.clone()), claimed)
+            }
+        };
+        if claimed != bits {
+            return Err(Unusable::Content);
         }
+        Ok((r, bits))
     }
 
     /// Ends the current step: fuses what arrived, readies the next step (or variant).
@@ -355,7 +432,7 @@ impl<'a> Center<'a> {
                 bits: rec.1,
             });
         }
-        self.fuse(v, k, inbox, sensors)
+        self.fuse_from(v, k, inbox, sensors, true)
     }
 
     /// Fuses step `k` of variant `v` on `inbox` (the current step), as [`Center::close`] or a
@@ -367,6 +444,21 @@ impl<'a> Center<'a> {
         inbox: Vec<Received>,
         sensors: Vec<SensorRecord>,
     ) -> Result<StepRecord, String> {
+        self.fuse_from(v, k, inbox, sensors, false)
+    }
+
+    /// [`Center::fuse`]; `from_network`: the inbox was made of datagrams, and a frame the
+    /// scheme refuses ([`SchemeError::Protocol`], naming its sensor) is dropped, counted in
+    /// [`Dropped::rejected`], and the step fused without it (a journal's inbox was fused once
+    /// already: a refusal there is an error).
+    fn fuse_from(
+        &mut self,
+        v: usize,
+        k: usize,
+        mut inbox: Vec<Received>,
+        mut sensors: Vec<SensorRecord>,
+        from_network: bool,
+    ) -> Result<StepRecord, String> {
         if self.finished() || (v, k) != self.position() {
             return Err(format!(
                 "step {k} of variant {v} is not the one the center is at ({:?})",
@@ -377,10 +469,27 @@ impl<'a> Center<'a> {
         // fuses its journal without announcing.
         self.announce()?;
         let label = self.label(v).to_string();
+        loop {
+            let center = self.center.as_mut().expect("a variant is running");
+            match center.step(k, &inbox) {
+                Ok(()) => break,
+                Err(SchemeError::Protocol { sensor, .. })
+                    if from_network && inbox.get(sensor).is_some_and(carries_message) =>
+                {
+                    // The center may have changed before it refused: build it again.
+                    self.dropped.rejected += 1;
+                    inbox[sensor] = Received::Silent;
+                    sensors[sensor] = SensorRecord {
+                        link: "rejected",
+                        bits: 0,
+                    };
+                    self.rebuild()?;
+                }
+                Err(e) => return Err(format!("scheme {label}, step {k}: {e}")),
+            }
+        }
+        self.history.push(inbox.clone());
         let center = self.center.as_mut().expect("a variant is running");
-        center
-            .step(k, &inbox)
-            .map_err(|e| format!("scheme {label}, step {k}: {e}"))?;
         let estimate = center.estimate().clone();
         self.feedback = center.feedback().map(|f| f.as_sent());
         let bits = sensors.iter().map(|s| s.bits).sum();

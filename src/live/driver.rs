@@ -138,8 +138,8 @@ pub fn run_center(
     }
     let d = center.dropped;
     sink.event(&format!(
-        "datagrams dropped: {} corrupt, {} bad frames, {} stale, {} duplicates, {} of unknown sensors",
-        d.corrupt, d.bad_frame, d.stale, d.duplicate, d.unknown_sensor
+        "datagrams dropped: {} corrupt, {} bad frames, {} stale, {} duplicates, {} of unknown sensors, {} rejected (content not usable)",
+        d.corrupt, d.bad_frame, d.stale, d.duplicate, d.unknown_sensor, d.rejected
     ));
     Ok(())
 }
@@ -348,6 +348,7 @@ fn parse_line(line: &str) -> Option<JournalLine> {
             "not_scheduled" => "not_scheduled",
             "missing" => "missing",
             "no_report" => "no_report",
+            "rejected" => "rejected",
             _ => return None,
         };
         let bits = f.next()?.parse().ok()?;
