@@ -587,7 +587,8 @@ mod tests {
                 bad_frame: 1,
                 stale: 1,
                 duplicate: 1,
-                unknown_sensor: 0
+                unknown_sensor: 0,
+                rejected: 0
             }
         );
         assert_eq!(c.position(), (v, 2));
@@ -599,6 +600,95 @@ mod tests {
         c.accept(&done(3, 1, true)); // stale, but it is back
         assert!(!c.complete());
         assert_eq!(c.missing(), vec![3]);
+    }
+
+    /// Forged frames of the current step that pass the FCS never stop the center: a NaN or
+    /// infinite reading, an envelope that claims 0 or 65535 payload bits, are dropped on
+    /// arrival (the honest frame after them is taken); an estimate where the scheme fuses
+    /// readings, or another scheme's codec frame, is refused by the scheme at fusion and the
+    /// step is fused without it, on a rebuilt center, as a run without that frame would be.
+    #[test]
+    fn forged_frames_are_rejected_and_the_center_fuses_on() {
+        let exp = exp();
+        let v = sod(&exp);
+        let qi = (0..exp.variants.len())
+            .find(|&v| exp.variants[v].kind == "quantized-innovation")
+            .unwrap();
+        let done = |i: usize, k: usize| {
+            let mut d = Datagram::new(Kind::Done, i, v, k);
+            d.flags = 1;
+            d.encode()
+        };
+        let z = |x: f64| Message::Measurement(Vector::from_vec(vec![x]));
+        // Reference: a center fed only honest frames.
+        let mut clean = Center::new(&exp, 0, [0; 8], vec![v]).unwrap();
+        let mut c = Center::new(&exp, 0, [0; 8], vec![v]).unwrap();
+        for k in 1..=3 {
+            clean.announce().unwrap();
+            c.announce().unwrap();
+            let honest = frame_datagram(&z(0.5 * k as f64), 0, v, k).unwrap();
+            let mut forged = Vec::new();
+            for bad in [f64::NAN, f64::INFINITY] {
+                let mut d = Datagram::decode(&frame_datagram(&z(1.0), 0, v, k).unwrap()).unwrap();
+                let at = d.body.len() - 6; // the payload's single, before the FCS
+                d.body[at..at + 4].copy_from_slice(&(bad as f32).to_le_bytes());
+                let fcs = crate::link::codec802154::crc16_kermit(&d.body[..d.body.len() - 2]);
+                let n = d.body.len();
+                d.body[n - 2..].copy_from_slice(&fcs.to_le_bytes());
+                forged.push(d.encode());
+            }
+            for claim in [0u16, 65535] {
+                let mut d = Datagram::decode(&honest).unwrap();
+                d.aux = claim;
+                forged.push(d.encode());
+            }
+            for f in &forged {
+                c.accept(f);
+            }
+            c.accept(&honest);
+            clean.accept(&honest);
+            // Sensor 1: an estimate at step 2, a frame of the quantized scheme at step 3.
+            let foreign = match k {
+                2 => Some(Message::Estimate(Vector::from_vec(vec![1.0, 2.0]))),
+                3 => {
+                    let mut inst = exp.variants[qi].scheme.build().unwrap();
+                    let mut rng = crate::engine::seeding::sensor_coins(1, 0, 0, 1);
+                    let fb = inst.center.feedback();
+                    match inst.sensors[1].step(
+                        1,
+                        &Vector::from_vec(vec![5.0]),
+                        fb.as_ref(),
+                        &mut rng,
+                    ) {
+                        Ok(crate::link::Transmission::Send(m)) => Some(m),
+                        other => panic!("the quantized sensor sends: {other:?}"),
+                    }
+                }
+                _ => None,
+            };
+            if let Some(m) = foreign {
+                let mut d = Datagram::decode(&frame_datagram(&m, 1, v, k).unwrap()).unwrap();
+                d.variant = v as u16;
+                c.accept(&d.encode());
+            }
+            for i in 0..4 {
+                c.accept(&done(i, k));
+                clean.accept(&done(i, k));
+            }
+            let (r, want) = (c.close().unwrap(), clean.close().unwrap());
+            assert_eq!(r.estimate, want.estimate, "step {k}");
+            assert_eq!(
+                r.sensors[0],
+                SensorRecord {
+                    link: "sent",
+                    bits: 32
+                }
+            );
+            let expected_link = if k >= 2 { "rejected" } else { "silent" };
+            assert_eq!(r.sensors[1].link, expected_link, "step {k}");
+        }
+        assert_eq!(c.dropped.rejected, 3 * 4 + 2, "{:?}", c.dropped);
+        assert_eq!(c.dropped.bad_frame, 0);
     }
 
     /// A node that greets in the middle of a variant, fresh, asks for the steps it missed and

@@ -4,6 +4,7 @@
 use super::center::{Center, SensorRecord, StepRecord};
 use crate::linalg::Vector;
 use crate::link::Received;
+use crate::scenario::experiment::Experiment;
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -267,21 +268,19 @@ impl Journal {
             .map_err(|e| format!("cannot write the journal: {e}"))
     }
 
-    /// The steps of a journal's text, in order; a last line cut short by a crash is left out.
-    pub fn read(text: &str) -> Result<Vec<JournalLine>, String> {
+    /// The steps of a journal's text (after its head line), in order; a last line cut short by
+    /// a crash is left out. Every line is checked against `exp`: a sensor entry per sensor, each
+    /// entry's link agreeing with what it holds, a reading or estimate of the right dimension,
+    /// finite, priced as it is, a frame that fits 802.15.4. Errors: (line index, what).
+    pub fn read(text: &str, exp: &Experiment) -> Result<Vec<JournalLine>, (usize, String)> {
         let mut out = Vec::new();
         let lines: Vec<&str> = text.split_inclusive('\n').collect();
         for (no, line) in lines.iter().enumerate() {
             if !line.ends_with('\n') {
                 break; // cut short
             }
-            let parsed = parse_line(line.trim_end()).ok_or_else(|| {
-                format!(
-                    "journal line {}: cannot be read; it is not a hushfuse journal",
-                    no + 1
-                )
-            })?;
-            out.push(parsed);
+            // The head line is line 0 of the file; these are lines 1, 2, ...
+            out.push(parse_line(line.trim_end(), exp).map_err(|e| (no + 1, e))?);
         }
         Ok(out)
     }
@@ -334,28 +333,107 @@ fn parse_token(t: &str) -> Option<Received> {
 /// One journaled step: variant, step, the inbox, what each sensor did.
 pub type JournalLine = (usize, usize, Vec<Received>, Vec<SensorRecord>);
 
-fn parse_line(line: &str) -> Option<JournalLine> {
+fn parse_line(line: &str, exp: &Experiment) -> Result<JournalLine, String> {
     let mut parts = line.split(' ');
-    let v = parts.next()?.parse().ok()?;
-    let k = parts.next()?.parse().ok()?;
+    let number = |p: Option<&str>, what: &str| -> Result<usize, String> {
+        p.and_then(|t| t.parse().ok())
+            .ok_or_else(|| format!("the {what} is not a number"))
+    };
+    let v = number(parts.next(), "variant")?;
+    let k = number(parts.next(), "step")?;
+    if v >= exp.variants.len() || k == 0 || k > exp.steps {
+        return Err(format!(
+            "variant {v}, step {k}: the scenario has {} variants of {} steps",
+            exp.variants.len(),
+            exp.steps
+        ));
+    }
+    let sys = &exp.system;
     let mut inbox = Vec::new();
     let mut sensors = Vec::new();
-    for p in parts {
+    for (i, p) in parts.enumerate() {
+        if i >= sys.n_sensors() {
+            return Err(format!(
+                "more sensor entries than the scenario's {} sensors",
+                sys.n_sensors()
+            ));
+        }
+        let bad = |what: String| format!("sensor {i}'s entry: {what}");
         let mut f = p.splitn(3, ':');
-        let link = match f.next()? {
+        let link = match f.next().unwrap_or_default() {
             "sent" => "sent",
             "silent" => "silent",
             "not_scheduled" => "not_scheduled",
             "missing" => "missing",
             "no_report" => "no_report",
             "rejected" => "rejected",
-            _ => return None,
+            other => return Err(bad(format!("{other:?} is not a link"))),
         };
-        let bits = f.next()?.parse().ok()?;
-        inbox.push(parse_token(f.next()?)?);
+        let bits: u64 = f
+            .next()
+            .and_then(|b| b.parse().ok())
+            .ok_or_else(|| bad("its bits are not a number".into()))?;
+        let got = f
+            .next()
+            .and_then(parse_token)
+            .ok_or_else(|| bad("its message cannot be read".into()))?;
+        let reals = |v: &Vector, dim: usize| -> Result<u64, String> {
+            if v.len() != dim || !v.iter().all(|x| x.is_finite()) {
+                return Err(bad(format!(
+                    "{} values, {dim} finite ones expected",
+                    v.len()
+                )));
+            }
+            Ok(32 * dim as u64)
+        };
+        let priced = match (link, &got) {
+            ("sent", Received::Measurement(z)) => reals(z, sys.sensors[i].meas_dim())?,
+            ("sent", Received::Estimate(x)) => reals(x, sys.state_dim())?,
+            ("sent", Received::Frame(o)) if o.len() <= super::wire::MAX_MPDU_OCTETS => {
+                if bits == 0
+                    || crate::link::codec802154::mpdu_bits_for_payload(bits) != 8 * o.len() as u64
+                {
+                    return Err(bad(format!(
+                        "{bits} payload bits in a frame of {} octets",
+                        o.len()
+                    )));
+                }
+                bits
+            }
+            ("silent" | "no_report" | "rejected", Received::Silent)
+            | ("not_scheduled" | "missing", Received::NotScheduled) => 0,
+            _ => {
+                return Err(bad(format!(
+                    "a {link} entry cannot hold {}",
+                    token_kind(&got)
+                )))
+            }
+        };
+        if bits != priced {
+            return Err(bad(format!("{bits} bits, {priced} expected")));
+        }
+        inbox.push(got);
         sensors.push(SensorRecord { link, bits });
     }
-    Some((v, k, inbox, sensors))
+    if inbox.len() != sys.n_sensors() {
+        return Err(format!(
+            "{} sensor entries, the scenario has {} sensors",
+            inbox.len(),
+            sys.n_sensors()
+        ));
+    }
+    Ok((v, k, inbox, sensors))
+}
+
+/// What a journal token holds, in words.
+fn token_kind(r: &Received) -> &'static str {
+    match r {
+        Received::Silent => "a silence",
+        Received::NotScheduled => "no reading",
+        Received::Measurement(_) => "a reading",
+        Received::Estimate(_) => "an estimate",
+        Received::Frame(_) => "a frame",
+    }
 }
 
 #[cfg(test)]
@@ -375,13 +453,50 @@ mod tests {
         }
         assert_eq!(parse_token("x"), None);
         assert_eq!(parse_token("fz0"), None);
-        let text = "0 1 sent:32:m3ff0000000000000 silent:0:s\n0 2 sent:3";
-        let read = Journal::read(text).unwrap();
+        let text = crate::scenario::builtin::get("arena-1d").unwrap();
+        let exp =
+            crate::engine::replay::load_experiment(text, "arena-1d", 5, None, &Default::default())
+                .unwrap()
+                .0;
+        let one = "sent:32:m3ff0000000000000";
+        let good = format!("0 1 {one} silent:0:s no_report:0:s not_scheduled:0:n\n0 2 sent:3");
+        let read = Journal::read(&good, &exp).unwrap();
         assert_eq!(read.len(), 1, "the cut last line is left out");
         assert_eq!(
             read[0].2[0],
             Received::Measurement(Vector::from_vec(vec![1.0]))
         );
-        assert!(Journal::read("garbage\n").is_err());
+        // A hand-edited line is refused, naming the line and what is wrong.
+        let rest = "silent:0:s silent:0:s silent:0:s";
+        for (line, says) in [
+            ("garbage".to_string(), "variant is not a number"),
+            (
+                format!("0 1 {one} {rest} silent:0:s"),
+                "more sensor entries",
+            ),
+            (
+                format!("0 1 {one} silent:0:s silent:0:s"),
+                "3 sensor entries",
+            ),
+            (
+                format!("0 1 silent:0:m3ff0000000000000 {rest}"),
+                "a silent entry cannot hold a reading",
+            ),
+            (
+                format!("0 1 sent:100000000000:m3ff0000000000000 {rest}"),
+                "100000000000 bits, 32 expected",
+            ),
+            (format!("0 1 sent:32:m7ff8000000000000 {rest}"), "finite"),
+            (
+                format!("0 1 sent:64:m3ff0000000000000,0 {rest}"),
+                "2 values",
+            ),
+            (format!("0 99999 {one} {rest}"), "steps"),
+        ] {
+            let text = format!("0 1 {one} {rest}\n{line}\n");
+            let (no, e) = Journal::read(&text, &exp).unwrap_err();
+            assert_eq!(no, 2, "{line}");
+            assert!(e.contains(says), "{line}: {e}");
+        }
     }
 }

@@ -36,19 +36,169 @@ fn append(path: &Path) -> Result<std::fs::File, String> {
         .map_err(|e| format!("cannot open {}: {e}", path.display()))
 }
 
-impl<'a> LiveFolder<'a> {
-    /// Claims `dir` for a new live run of `exp` (scenario `name`, inputs hashed in `hash`).
-    pub fn create(exp: &'a Experiment, dir: &Path, hash: &str) -> Result<Self, String> {
-        let mut out = OutputDir::open(dir)?;
-        out.stage(ESTIMATES, replay::estimates_header(exp).as_bytes())?;
-        out.stage(JOURNAL, b"")?;
-        out.stage(LOG, b"")?;
-        out.commit(output::Manifest::new("live", &exp.name, hash), false)?;
-        Self::open(exp, dir)
+/// What a live run is, the first line of its journal: a center resumed from the journal must
+/// be the same run, and a mismatch is refused naming what differs.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunId {
+    pub seed: u64,
+    pub trial: usize,
+    /// `--loss P`, or the scenario's own link.
+    pub link: String,
+    /// The labels of the schemes run, in order.
+    pub schemes: Vec<String>,
+    pub steps: usize,
+    /// SHA-256 of the scenario's text as run.
+    pub scenario_sha256: String,
+}
+
+/// The journal's first line starts so, the [`RunId`] in JSON after it.
+const JOURNAL_HEAD: &str = "# hushfuse live journal ";
+
+impl RunId {
+    /// The run of `exp` (loaded from `text`), trial `trial`, `--loss` `loss`, schemes
+    /// `variants`.
+    pub fn new(
+        exp: &Experiment,
+        text: &str,
+        trial: usize,
+        loss: Option<f64>,
+        variants: &[usize],
+    ) -> Self {
+        Self {
+            seed: exp.seed,
+            trial,
+            link: loss.map_or("the scenario's".to_string(), |p| format!("--loss {p}")),
+            schemes: variants
+                .iter()
+                .map(|&v| exp.curves[exp.variants[v].curve].label.clone())
+                .collect(),
+            steps: exp.steps,
+            scenario_sha256: output::sha256_hex(text.as_bytes()),
+        }
     }
 
-    fn open(exp: &'a Experiment, dir: &Path) -> Result<Self, String> {
+    /// Steps of the whole run (every scheme's).
+    fn total_steps(&self) -> usize {
+        self.steps.saturating_mul(self.schemes.len())
+    }
+
+    /// The journal's first line (with its newline).
+    fn head_line(&self) -> String {
+        format!(
+            "{JOURNAL_HEAD}{}\n",
+            serde_json::to_string(self).expect("plain fields")
+        )
+    }
+
+    /// What differs between the run that wrote a journal (`self`) and this center's (`now`),
+    /// in words naming the option; `None`: the same run.
+    fn mismatch(&self, now: &RunId) -> Option<String> {
+        let differ = |what: &str, a: String, b: String| {
+            Some(format!("its {what} is {a}, this center's {b}"))
+        };
+        if self.seed != now.seed {
+            return differ("seed (--seed)", self.seed.to_string(), now.seed.to_string());
+        }
+        if self.trial != now.trial {
+            return differ(
+                "trial (--trial)",
+                self.trial.to_string(),
+                now.trial.to_string(),
+            );
+        }
+        if self.link != now.link {
+            return differ("link", self.link.clone(), now.link.clone());
+        }
+        if self.schemes != now.schemes {
+            return differ(
+                "schemes (--scheme)",
+                self.schemes.join(", "),
+                now.schemes.join(", "),
+            );
+        }
+        if self.steps != now.steps {
+            return differ(
+                "steps (--steps)",
+                self.steps.to_string(),
+                now.steps.to_string(),
+            );
+        }
+        if self.scenario_sha256 != now.scenario_sha256 {
+            return differ(
+                "scenario (SHA-256 of its text)",
+                self.scenario_sha256.clone(),
+                now.scenario_sha256.clone(),
+            );
+        }
+        None
+    }
+}
+
+/// The run and the steps of a journal's text; errors name the file and the line.
+fn read_journal(
+    exp: &Experiment,
+    path: &Path,
+    text: &str,
+) -> Result<(RunId, Vec<super::driver::JournalLine>), String> {
+    let name = path.display();
+    let (head, rest) = text.split_once('\n').unwrap_or((text, ""));
+    let run: RunId = head
+        .strip_prefix(JOURNAL_HEAD)
+        .and_then(|j| serde_json::from_str(j).ok())
+        .ok_or_else(|| {
+            format!(
+                "{name} line 1: not the head of a hushfuse live journal (`{JOURNAL_HEAD}{{…}}`)"
+            )
+        })?;
+    let steps =
+        Journal::read(rest, exp).map_err(|(line, e)| format!("{name} line {}: {e}", line + 1))?;
+    Ok((run, steps))
+}
+
+impl<'a> LiveFolder<'a> {
+    /// Claims `dir` for a new live run `run` of `exp` (scenario `name`, inputs hashed in
+    /// `hash`). A folder that holds an interrupted run's journal is refused: it would be lost;
+    /// `--resume` continues it.
+    pub fn create(
+        exp: &'a Experiment,
+        dir: &Path,
+        hash: &str,
+        run: &RunId,
+    ) -> Result<Self, String> {
+        {
+            // Looked at under the lock, so a running center's journal is never judged mid-write.
+            let _lock = output::lock_folder(dir, output::LOCK)?;
+            let path = dir.join(JOURNAL);
+            if let Ok(text) = std::fs::read_to_string(&path) {
+                let fused = match read_journal(exp, &path, &text) {
+                    Ok((old, steps)) if steps.len() >= old.total_steps() => None,
+                    Ok((old, steps)) => Some(format!(
+                        "{} fused steps of {}",
+                        steps.len(),
+                        old.total_steps()
+                    )),
+                    Err(_) if text.lines().count() > 1 => Some("a journal of another run".into()),
+                    Err(_) => None,
+                };
+                if let Some(what) = fused {
+                    return Err(format!(
+                        "{} holds an interrupted live run ({what}); continue it with --resume, or choose another --out (or remove the folder) to start afresh",
+                        dir.display()
+                    ));
+                }
+            }
+        }
+        let mut out = OutputDir::open(dir)?;
+        out.stage(ESTIMATES, replay::estimates_header(exp).as_bytes())?;
+        out.stage(JOURNAL, run.head_line().as_bytes())?;
+        out.stage(LOG, b"")?;
+        out.commit(output::Manifest::new("live", &exp.name, hash), false)?;
         let lock = output::lock_folder(dir, output::LOCK)?;
+        Self::open(exp, dir, lock)
+    }
+
+    fn open(exp: &'a Experiment, dir: &Path, lock: output::FolderLock) -> Result<Self, String> {
         Ok(Self {
             exp,
             dir: dir.to_path_buf(),
@@ -67,7 +217,17 @@ impl<'a> LiveFolder<'a> {
         exp: &'a Experiment,
         dir: &Path,
         center: &mut Center,
+        run: &RunId,
     ) -> Result<(Self, usize), String> {
+        // The lock first: a center running in this folder is refused before anything is read
+        // or rewritten.
+        if !dir.is_dir() {
+            return Err(format!(
+                "{} is not a folder; --resume needs the folder of an interrupted center",
+                dir.display()
+            ));
+        }
+        let lock = output::lock_folder(dir, output::LOCK)?;
         let journal_path = dir.join(JOURNAL);
         let text = std::fs::read_to_string(&journal_path).map_err(|e| {
             format!(
@@ -75,9 +235,15 @@ impl<'a> LiveFolder<'a> {
                 journal_path.display()
             )
         })?;
-        let steps = Journal::read(&text)?;
+        let (old, steps) = read_journal(exp, &journal_path, &text)?;
+        if let Some(why) = old.mismatch(run) {
+            return Err(format!(
+                "{} was written by another run: {why}; resume with the options of that run, or choose another --out",
+                journal_path.display()
+            ));
+        }
         let mut csv = replay::estimates_header(exp);
-        let mut journal = String::new();
+        let mut journal = run.head_line();
         for (v, k, inbox, sensors) in steps.iter().cloned() {
             let r = center.fuse(v, k, inbox, sensors).map_err(|e| {
                 format!(
@@ -90,7 +256,7 @@ impl<'a> LiveFolder<'a> {
         }
         output::write_file(&dir.join(JOURNAL), journal.as_bytes())?;
         output::write_file(&dir.join(ESTIMATES), csv.as_bytes())?;
-        let mut me = Self::open(exp, dir)?;
+        let mut me = Self::open(exp, dir, lock)?;
         me.event(&format!("resumed after {} fused steps", steps.len()));
         Ok((me, steps.len()))
     }

@@ -42,7 +42,7 @@ pub mod wire;
 
 pub use center::{Accepted, Center, Dropped, SensorRecord, StepRecord};
 pub use driver::{run_center, CenterOptions, Journal, Pace, StepSink};
-pub use folder::{LiveFolder, ESTIMATES, JOURNAL, LOG};
+pub use folder::{LiveFolder, RunId, ESTIMATES, JOURNAL, LOG};
 pub use local::run_local;
 pub use node::{
     fingerprint, frame_datagram, run_node, BackgroundLines, Lines, Node, NodeOptions, Readings,

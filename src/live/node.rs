@@ -604,6 +604,51 @@ mod tests {
         assert!(short.reading(1).unwrap_err().contains("measures 2"));
     }
 
+    /// A value the wire's single cannot carry is refused at the node, naming the line; a long
+    /// bad line is not echoed whole.
+    #[test]
+    fn lines_refuse_what_a_single_cannot_carry_and_cut_long_echoes() {
+        for big in ["1e39", "-1e300"] {
+            let mut r = Lines::new(std::io::Cursor::new(format!("1\n{big}\n")), 1);
+            assert!(r.reading(1).is_ok());
+            let e = r.reading(2).unwrap_err();
+            assert!(
+                e.starts_with("line 2:") && e.contains(big) && e.contains("32-bit single"),
+                "{e}"
+            );
+        }
+        let long = "x".repeat(5_000_000);
+        let mut r = Lines::new(std::io::Cursor::new(format!("{long}\n")), 1);
+        let e = r.reading(1).unwrap_err();
+        assert!(
+            e.len() < 200 && e.contains("5000000 characters"),
+            "{}",
+            &e[..e.len().min(300)]
+        );
+    }
+
+    /// Lines read on a thread: not ready before the line comes, ready after; the end of the
+    /// input makes the reading report it at once.
+    #[test]
+    fn background_lines_say_when_a_reading_is_there() {
+        let (r, mut w) = std::io::pipe().unwrap();
+        let mut lines = BackgroundLines::spawn(std::io::BufReader::new(r), 1);
+        assert!(!lines.ready(1));
+        use std::io::Write;
+        writeln!(w, "2.5").unwrap();
+        let start = Instant::now();
+        while !lines.ready(1) && start.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert_eq!(lines.reading(1).unwrap(), Some(Vector::from_vec(vec![2.5])));
+        assert!(!lines.ready(2));
+        drop(w);
+        while !lines.ready(2) && start.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert!(lines.reading(2).unwrap_err().contains("ended at line 2"));
+    }
+
     #[test]
     fn recorded_readings_name_a_step_beyond_the_data() {
         let mut r = Recorded(vec![None]);

@@ -20,7 +20,15 @@ type Tables = (Option<Arc<FateTable>>, Option<Arc<FateTable>>);
 /// The fates of one trial, per variant (variants share the tables of equal links).
 pub struct Fates {
     per_variant: Vec<Tables>,
+    /// The scenario's sensors: the proxy relays for at most a few peers per sensor.
+    sensors: usize,
 }
+
+/// Peers (node addresses) the proxy relays for, per sensor of the scenario, beyond
+/// [`EXTRA_PEERS`]: room for restarted nodes, never a socket and a thread per junk sender.
+const PEERS_PER_SENSOR: usize = 4;
+/// Peers beyond [`PEERS_PER_SENSOR`] per sensor.
+const EXTRA_PEERS: usize = 16;
 
 impl Fates {
     pub fn new(exp: &Experiment, trial: usize) -> Result<Self, String> {
@@ -56,7 +64,10 @@ impl Fates {
             };
             per_variant.push((Some(up), down));
         }
-        Ok(Self { per_variant })
+        Ok(Self {
+            per_variant,
+            sensors: exp.system.n_sensors(),
+        })
     }
 
     /// The datagram as the link lets it through (`None`: lost).
@@ -128,6 +139,14 @@ pub fn run_proxy(listen: &UdpSocket, center: SocketAddr, fates: Fates) -> Result
             let mut map = upstream.lock().expect("no panic holds it");
             match map.get(&node) {
                 Some(s) => s.clone(),
+                // A new peer only for a datagram of ours from one of the scenario's sensors, and
+                // only while the table has room: junk from many ports opens nothing.
+                None if !Datagram::decode(&buf[..len])
+                    .is_ok_and(|d| usize::from(d.sensor) < fates.sensors)
+                    || map.len() >= PEERS_PER_SENSOR * fates.sensors + EXTRA_PEERS =>
+                {
+                    continue
+                }
                 None => {
                     let bind = if center.is_ipv4() {
                         "0.0.0.0:0"
@@ -144,7 +163,13 @@ pub fn run_proxy(listen: &UdpSocket, center: SocketAddr, fates: Fates) -> Result
                         fates.clone(),
                         ended.clone(),
                     );
-                    std::thread::spawn(move || downstream(&s2, &back, node, &fates, &ended));
+                    let spawned = std::thread::Builder::new()
+                        .spawn(move || downstream(&s2, &back, node, &fates, &ended));
+                    if spawned.is_err() {
+                        // No thread to be had: this peer is not relayed (as if lost).
+                        map.remove(&node);
+                        continue;
+                    }
                     s
                 }
             }

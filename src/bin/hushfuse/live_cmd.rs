@@ -44,13 +44,16 @@ pub(crate) struct Pacing {
     pub(crate) schemes: Vec<String>,
 }
 
+/// Longest wait a live option takes: a day (beyond it a deadline on the clock can overflow).
+const MAX_WAIT_SECONDS: f64 = 86_400.0;
+
 fn seconds(name: &str, s: f64) -> Result<Duration, Failure> {
     Duration::try_from_secs_f64(s)
         .ok()
-        .filter(|d| !d.is_zero())
+        .filter(|d| !d.is_zero() && s <= MAX_WAIT_SECONDS)
         .ok_or_else(|| {
             Failure::Input(format!(
-                "{name}: expected a positive number of seconds, got {s}"
+                "{name}: expected a positive number of seconds up to {MAX_WAIT_SECONDS} (a day), got {s}"
             ))
         })
 }
@@ -128,17 +131,19 @@ fn serve(
     truth: Option<&[Vector]>,
 ) -> Result<String, Failure> {
     let fp = live::fingerprint(exp, text, run.trial);
-    let mut center =
-        Center::new(exp, run.trial, fp, variants(exp, pacing)?).map_err(Failure::Input)?;
+    // Every option checked before the folder is touched.
+    let opts = center_options(pacing, true)?;
+    let chosen = variants(exp, pacing)?;
+    let id = live::RunId::new(exp, text, run.trial, run.loss, &chosen);
+    let mut center = Center::new(exp, run.trial, fp, chosen).map_err(Failure::Input)?;
     let folder = if resume {
-        LiveFolder::resume(exp, dir, &mut center)
+        LiveFolder::resume(exp, dir, &mut center, &id)
             .map_err(Failure::Input)?
             .0
     } else {
         let hash = output::sha256_hex(format!("{text}\0{:?}\0{}", run.seed, run.trial).as_bytes());
-        LiveFolder::create(exp, dir, &hash).map_err(Failure::Input)?
+        LiveFolder::create(exp, dir, &hash, &id).map_err(Failure::Input)?
     };
-    let opts = center_options(pacing, true)?;
     let mut tally = Tally {
         exp,
         inner: folder,
@@ -223,6 +228,8 @@ pub(crate) fn center(
     resume: bool,
 ) -> Result<(), Failure> {
     let (exp, text) = load(scenario, run, None)?;
+    center_options(pacing, true)?;
+    variants(&exp, pacing)?;
     let socket = UdpSocket::bind(address(listen, "--listen")?)
         .map_err(|e| Failure::Input(format!("--listen {listen}: {e}")))?;
     let dir = out
@@ -379,6 +386,9 @@ pub(crate) fn live_all(
         ..run.clone()
     };
     let (exp, text) = load(scenario, &run, None)?;
+    // Every option checked before a process starts or the folder is touched.
+    center_options(pacing, true)?;
+    variants(&exp, pacing)?;
     let socket = UdpSocket::bind("127.0.0.1:0").map_err(|e| Failure::Run(e.to_string()))?;
     let center_addr = socket
         .local_addr()
@@ -398,6 +408,7 @@ pub(crate) fn live_all(
         }
     };
     let mut children = Children(Vec::new());
+    stop_children_on_signal();
     let lossy = exp.variants.iter().any(|v| v.channel.is_some());
     let node_target = if lossy {
         let mut cmd = std::process::Command::new(&exe);
@@ -411,8 +422,7 @@ pub(crate) fn live_all(
         .arg(center_addr.to_string())
         .stdout(std::process::Stdio::piped());
         common(&mut cmd);
-        let mut child = cmd
-            .spawn()
+        let mut child = spawn_child(&mut cmd)
             .map_err(|e| Failure::Run(format!("cannot start the channel proxy: {e}")))?;
         let mut line = String::new();
         let stdout = child.stdout.take().expect("piped");
@@ -433,8 +443,7 @@ pub(crate) fn live_all(
         if let Some(m) = measurements {
             cmd.arg("--measurements").arg(m);
         }
-        let child = cmd
-            .spawn()
+        let child = spawn_child(&mut cmd)
             .map_err(|e| Failure::Run(format!("cannot start node {i}: {e}")))?;
         children.0.push((format!("node {i}"), child));
     }
@@ -483,6 +492,52 @@ pub(crate) fn live_all(
         live::JOURNAL
     ));
     Ok(())
+}
+
+/// The process ids of the children `hushfuse live` started, for its signal handler.
+static CHILD_PIDS: std::sync::Mutex<Vec<u32>> = std::sync::Mutex::new(Vec::new());
+
+/// Starts a child of `hushfuse live` that cannot outlive it: its id is kept for the Ctrl-C /
+/// SIGTERM handler ([`stop_children_on_signal`]), and on Linux the kernel sends it SIGTERM
+/// when this process dies in any way (`PR_SET_PDEATHSIG`, for a SIGKILL no handler sees).
+fn spawn_child(cmd: &mut std::process::Command) -> std::io::Result<std::process::Child> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: prctl is async-signal-safe and touches only the child being started.
+        unsafe {
+            cmd.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
+    let child = cmd.spawn()?;
+    if let Ok(mut pids) = CHILD_PIDS.lock() {
+        pids.push(child.id());
+    }
+    Ok(child)
+}
+
+/// On Ctrl-C or SIGTERM: SIGTERM to every child, then exit 130. The center's journal is
+/// synced at every step, so what was fused is kept.
+fn stop_children_on_signal() {
+    let _ = ctrlc::set_handler(|| {
+        if let Ok(pids) = CHILD_PIDS.lock() {
+            for &pid in pids.iter() {
+                if let Ok(pid) = i32::try_from(pid) {
+                    // SAFETY: kill(2) on a process id; at worst the child is already gone.
+                    unsafe {
+                        libc::kill(pid, libc::SIGTERM);
+                    }
+                }
+            }
+        }
+        eprintln!("stopped: the node processes were ended");
+        std::process::exit(130);
+    });
 }
 
 /// The processes `hushfuse live` started: waited for (nodes end when the center ends the
