@@ -95,7 +95,9 @@ impl RunId {
     /// in words naming the option; `None`: the same run.
     fn mismatch(&self, now: &RunId) -> Option<String> {
         let differ = |what: &str, a: String, b: String| {
-            Some(format!("its {what} is {a}, this center's {b}"))
+            Some(format!(
+                "{what} differs (the journal's: {a}; this center's: {b})"
+            ))
         };
         if self.seed != now.seed {
             return differ("seed (--seed)", self.seed.to_string(), now.seed.to_string());
