@@ -660,7 +660,9 @@ pub fn validate_sums(
             return bad("sensors", got, expected);
         }
         let components: usize = exp.system.sensors.iter().map(|m| m.meas_dim()).sum();
-        if s.reading_peaks.len() > components || s.reading_peaks.iter().any(|p| p.is_nan() || *p < 0.0) {
+        if s.reading_peaks.len() > components
+            || s.reading_peaks.iter().any(|p| p.is_nan() || *p < 0.0)
+        {
             return bad(
                 "reading_peaks",
                 format!("{} values", s.reading_peaks.len()),
