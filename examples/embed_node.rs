@@ -31,14 +31,16 @@ fn main() -> Result<(), String> {
     let fingerprint = live::fingerprint(&exp, &text, 0);
     let socket = UdpSocket::bind("127.0.0.1:0").map_err(|e| e.to_string())?;
     let center_addr = socket.local_addr().map_err(|e| e.to_string())?;
-    let send_on_delta = (0..exp.variants.len())
+    let send_on_delta: Vec<usize> = (0..exp.variants.len())
         .filter(|&v| exp.curves[exp.variants[v].curve].label == "Send-on-delta")
         .collect();
+    // What the journal's first line names: a resumed center must be this run.
+    let run = live::RunId::new(&exp, &text, 0, None, &send_on_delta);
     let out = std::env::temp_dir().join("hushfuse-embed-node");
     std::thread::scope(|s| {
         s.spawn(|| -> Result<(), String> {
             let mut center = Center::new(&exp, 0, fingerprint, send_on_delta)?;
-            let mut folder = LiveFolder::create(&exp, &out, "example")?;
+            let mut folder = LiveFolder::create(&exp, &out, "example", &run)?;
             let opts = CenterOptions {
                 pace: Pace::Lockstep {
                     timeout: Duration::from_secs(5),
