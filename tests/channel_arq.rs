@@ -253,7 +253,7 @@ fn the_kalman_variance_follows_the_arrivals_after_retries() {
     // 3000 slots lost at 0.36: SE = sqrt(0.36 * 0.64 / 3000) = 0.0088; 4 SE.
     let rate = lost as f64 / 3000.0;
     assert!((rate - 0.36).abs() < 4.0 * 0.0088, "{rate}");
-    assert!((link(&s).loss_fraction - rate).abs() < 1e-12);
+    assert!((link(&s).loss_fraction.unwrap() - rate).abs() < 1e-12);
 }
 
 /// Gilbert–Elliott with loss_bad = 1 and loss_good = 0: the retries of a step see its state, so

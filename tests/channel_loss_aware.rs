@@ -214,8 +214,8 @@ fn a_lost_reading_is_no_information_for_the_tobit_pf_and_the_federated_tobit_kf(
     for sc in &s.schemes {
         let link = sc.link.as_ref().unwrap();
         assert!(
-            (link.loss_fraction - 0.3).abs() < 0.1,
-            "{}",
+            (link.loss_fraction.unwrap() - 0.3).abs() < 0.1,
+            "{:?}",
             link.loss_fraction
         );
         assert!(sc.steady_state.anees.is_finite());

@@ -18,6 +18,8 @@ pub fn non_finite(summary: &Summary) -> Vec<String> {
         // No floor (none for the scenario, or a rate too low for a finite one) is a null by
         // design: `rate_distortion_floor_note` says why.
         bad.retain(|path| path != "floor_mse");
+        // A link that carried no packet has no loss fraction: null by design ("no packets").
+        bad.retain(|path| path != "link.loss_fraction");
         bad.dedup();
         if !bad.is_empty() {
             out.push(format!(

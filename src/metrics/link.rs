@@ -42,8 +42,9 @@ pub struct LinkSummary {
     pub duplicates: f64,
     pub ack_frames: f64,
     pub ack_bits: f64,
-    /// Lost / sent over the whole run (NaN when nothing was sent).
-    pub loss_fraction: f64,
+    /// Lost / sent over the whole run; `None` (null) when nothing was sent: no packets, not a
+    /// non-finite result.
+    pub loss_fraction: Option<f64>,
 }
 
 /// The link summary of `sums` (`sent_per_step`: the scheme's mean messages per step).
@@ -73,11 +74,7 @@ pub fn summarize(sums: &Sums, trials: usize, sent_per_step: Vec<f64>) -> LinkSum
         duplicates: mean(&duplicates),
         ack_frames: mean(&ack_frames),
         ack_bits: mean(&ack_bits),
-        loss_fraction: if sent_mean > 0.0 {
-            lost_mean / sent_mean
-        } else {
-            f64::NAN
-        },
+        loss_fraction: (sent_mean > 0.0).then(|| lost_mean / sent_mean),
         sent_per_step,
         delivered_per_step: delivered,
         lost_per_step: lost,

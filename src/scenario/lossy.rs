@@ -62,10 +62,13 @@ pub fn with_loss(text: &str, file: &str, p: f64) -> Result<String, ScenarioError
     table.remove("every_scheme");
     // The copies come after every published entry: a variant's coins come from its index, so
     // the published schemes keep the numbers they have with the same `[channel]` in a file.
+    // Labels already taken (written, or the kind's default), so that a copy never clashes
+    // with an entry the user wrote, e.g. one already labelled "… (loss-aware)".
+    let mut taken: Vec<String> = spec.schemes.iter().filter_map(entry_label).collect();
     let copies: Vec<toml::Table> = spec
         .schemes
         .iter()
-        .filter_map(|e| loss_aware_copy(e, p))
+        .filter_map(|e| loss_aware_copy(e, p, &mut taken))
         .collect();
     let schemes: Vec<toml::Value> = spec
         .schemes
@@ -80,21 +83,31 @@ pub fn with_loss(text: &str, file: &str, p: f64) -> Result<String, ScenarioError
 /// The loss-aware copy of a `[[schemes]]` entry at loss `p`, or `None` when its kind has no
 /// loss-aware fusion, it already sets one, or there is nothing to be aware of (`p = 0`; `p = 1`
 /// is outside `link_loss`'s range: nothing ever arrives, so there is nothing to weigh).
-fn loss_aware_copy(entry: &toml::Table, p: f64) -> Option<toml::Table> {
+fn loss_aware_copy(entry: &toml::Table, p: f64, taken: &mut Vec<String>) -> Option<toml::Table> {
     let kind = entry.get("kind")?.as_str()?;
     let param = loss_aware_param(kind)?;
-    if !(p > 0.0 && p < 1.0) || entry.contains_key(param) {
+    // An entry that sets or sweeps its loss awareness itself is what the user asked for.
+    let swept = entry
+        .get("sweep")
+        .and_then(toml::Value::as_table)
+        .is_some_and(|t| t.contains_key(param));
+    if !(p > 0.0 && p < 1.0) || entry.contains_key(param) || swept {
         return None;
     }
-    let label = match entry.get("label").and_then(toml::Value::as_str) {
-        Some(l) => l.to_string(),
-        None => registry::find(kind)?.label.to_string(),
-    };
+    let label = entry_label(entry)?;
+    // "X (loss-aware)", else "X (loss-aware, --loss)", else numbered.
+    let mut free = format!("{label}{LOSS_AWARE_SUFFIX}");
+    let mut n = 1;
+    while taken.contains(&free) {
+        n += 1;
+        free = match n {
+            2 => format!("{label} (loss-aware, --loss)"),
+            _ => format!("{label} (loss-aware, --loss {n})"),
+        };
+    }
+    taken.push(free.clone());
     let mut copy = entry.clone();
-    copy.insert(
-        "label".into(),
-        toml::Value::String(format!("{label}{LOSS_AWARE_SUFFIX}")),
-    );
+    copy.insert("label".into(), toml::Value::String(free));
     let value = if param == LOSS_AWARE_FLAG {
         toml::Value::Boolean(true)
     } else {
@@ -102,6 +115,14 @@ fn loss_aware_copy(entry: &toml::Table, p: f64) -> Option<toml::Table> {
     };
     copy.insert(param.into(), value);
     Some(copy)
+}
+
+/// The label of a `[[schemes]]` entry: its own, or its kind's.
+fn entry_label(entry: &toml::Table) -> Option<String> {
+    match entry.get("label").and_then(toml::Value::as_str) {
+        Some(l) => Some(l.to_string()),
+        None => Some(registry::find(entry.get("kind")?.as_str()?)?.label.to_string()),
+    }
 }
 
 #[cfg(test)]
@@ -113,6 +134,40 @@ mod tests {
     fn labels(text: &str) -> Vec<String> {
         let exp = load(text, "t").expect("the lossy scenario loads");
         exp.curves.iter().map(|c| c.label.clone()).collect()
+    }
+
+    /// A scalar walk, two sensors, with the `[[schemes]]` entries `schemes`.
+    fn scalar(schemes: &str) -> String {
+        format!(
+            "name = \"t\"\ntrials = 2\nsteps = 5\nseed = 1\n[model]\nkind = \"matrix\"\nF = [[0.9]]\nQ = [[1.0]]\n[prior]\nmean = [0.0]\ncov_diag = [1.0]\n[[sensors]]\nobserve = [0]\nR_diag = [1.0]\n[[sensors]]\nobserve = [0]\nR_diag = [1.0]\n{schemes}"
+        )
+    }
+
+    /// An entry that sweeps its loss awareness is left as it is (it was refused: the copy set
+    /// the key the sweep sweeps).
+    #[test]
+    fn a_swept_loss_awareness_gets_no_copy() {
+        for entry in [
+            "[[schemes]]\nkind = \"censored-pf\"\nl = 1.0\nparticles = 50\nsweep.link_loss = [0.0, 0.2]\n",
+            "[[schemes]]\nkind = \"dkf-alg2-event\"\nalpha = 0.4\nb = 10.0\nsweep.loss_aware = [false, true]\n",
+        ] {
+            let text = scalar(entry);
+            let lossy = with_loss(&text, "t", 0.2).unwrap();
+            assert_eq!(labels(&lossy), labels(&text), "{entry}");
+        }
+    }
+
+    /// A copy's label never clashes with one the user wrote.
+    #[test]
+    fn a_copy_takes_a_free_label() {
+        let text = scalar(
+            "[[schemes]]\nkind = \"censored-pf\"\nlabel = \"PF\"\nl = 1.0\nparticles = 50\n[[schemes]]\nkind = \"censored-pf\"\nlabel = \"PF (loss-aware)\"\nl = 1.0\nparticles = 50\nlink_loss = 0.1\n",
+        );
+        let lossy = with_loss(&text, "t", 0.2).unwrap();
+        assert_eq!(
+            labels(&lossy),
+            ["PF", "PF (loss-aware)", "PF (loss-aware, --loss)"]
+        );
     }
 
     #[test]
