@@ -121,7 +121,11 @@ fn loss_aware_copy(entry: &toml::Table, p: f64, taken: &mut Vec<String>) -> Opti
 fn entry_label(entry: &toml::Table) -> Option<String> {
     match entry.get("label").and_then(toml::Value::as_str) {
         Some(l) => Some(l.to_string()),
-        None => Some(registry::find(entry.get("kind")?.as_str()?)?.label.to_string()),
+        None => Some(
+            registry::find(entry.get("kind")?.as_str()?)?
+                .label
+                .to_string(),
+        ),
     }
 }
 
