@@ -659,15 +659,8 @@ pub fn validate_sums(
         if let Some((got, expected)) = sensors_problem(s) {
             return bad("sensors", got, expected);
         }
-        let components: usize = exp.system.sensors.iter().map(|m| m.meas_dim()).sum();
-        if s.reading_peaks.len() > components
-            || s.reading_peaks.iter().any(|p| p.is_nan() || *p < 0.0)
-        {
-            return bad(
-                "reading_peaks",
-                format!("{} values", s.reading_peaks.len()),
-                format!("at most {components} magnitudes (one per measurement component), none negative or NaN"),
-            );
+        if let Some((got, expected)) = peaks_problem(exp, s) {
+            return bad("reading_peaks", got, expected);
         }
         if !counted {
             continue;
@@ -732,6 +725,20 @@ pub fn validate(exp: &Experiment, state: &State) -> Result<(), String> {
             )
         }),
     }
+}
+
+/// What is wrong with a checkpoint's reading peaks ([`Sums::reading_peaks`]), as (got,
+/// expected): more than one per measurement component, or one negative or NaN.
+fn peaks_problem(exp: &Experiment, s: &Sums) -> Option<(String, String)> {
+    let components: usize = exp.system.sensors.iter().map(|m| m.meas_dim()).sum();
+    let bad = s.reading_peaks.len() > components
+        || s.reading_peaks.iter().any(|p| p.is_nan() || *p < 0.0);
+    bad.then(|| {
+        (
+            format!("{} values", s.reading_peaks.len()),
+            format!("at most {components} magnitudes (one per measurement component), none negative or NaN"),
+        )
+    })
 }
 
 /// What is wrong with a checkpoint's per-sensor counts ([`Sums::sensors`]), as (got,

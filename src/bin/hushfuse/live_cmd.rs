@@ -339,16 +339,18 @@ pub(crate) fn channel_proxy(
     live::proxy::run_proxy(&socket, center, fates).map_err(Failure::Run)
 }
 
-/// `hushfuse live`: the center here, a proxy when the scenario's link loses packets, and one
-/// node process per sensor, all on localhost.
-pub(crate) fn live_all(
-    scenario: &str,
-    run: &LiveRun,
-    pacing: &Pacing,
+/// The recording `hushfuse live` replays (`--measurements`, `--truth`) and its steps.
+#[allow(clippy::type_complexity)]
+fn recorded_tables(
     measurements: Option<&Path>,
     truth: Option<&Path>,
-    out: Option<&Path>,
-) -> Result<(), Failure> {
+) -> Result<
+    (
+        Option<(replay::MeasTable, Option<replay::TruthTable>)>,
+        Option<usize>,
+    ),
+    Failure,
+> {
     let mut tables = None;
     let data_steps = match measurements {
         Some(p) => {
@@ -381,6 +383,20 @@ pub(crate) fn live_all(
         }
         None => None,
     };
+    Ok((tables, data_steps))
+}
+
+/// `hushfuse live`: the center here, a proxy when the scenario's link loses packets, and one
+/// node process per sensor, all on localhost.
+pub(crate) fn live_all(
+    scenario: &str,
+    run: &LiveRun,
+    pacing: &Pacing,
+    measurements: Option<&Path>,
+    truth: Option<&Path>,
+    out: Option<&Path>,
+) -> Result<(), Failure> {
+    let (tables, data_steps) = recorded_tables(measurements, truth)?;
     let run = LiveRun {
         steps: run.steps.or(data_steps),
         ..run.clone()
