@@ -8,10 +8,17 @@
 //!   silence): [`scheme::censored_pf`];
 //! - Zhang, Li and Liu, 2016 (quantized innovations and 802.15.4 bits):
 //!   [`scheme::quantized_innovation`], [`link::quantizer`], [`link::codec802154`];
-//! - the baselines every scheme is measured against: [`scheme::centralized`].
+//! - Geng, Wang et al. (federated Tobit Kalman filter: two-sided censoring, dynamical bias,
+//!   round-robin with zero-order hold): [`scheme::federated_tobit`], [`filter::tobit`];
+//! - event-triggered and estimate-fusion baselines: [`scheme::event_triggered`],
+//!   [`scheme::estimate_fusion`]; the baselines every scheme is measured against:
+//!   [`scheme::centralized`].
 //!
-//! The simulator ([`sim`]) owns the only time loop; filters, sensor nodes and fusion centers do
-//! one step per call and can be used on their own. The sensor side and the fusion side of a
+//! The engine ([`engine`]: [`engine::trial`] the one trial loop, [`engine::runner`] the Monte
+//! Carlo runner) owns the only time loop; filters, sensor nodes and fusion centers do one step
+//! per call and can be used on their own. [`network`] says how messages cross (channels, radio
+//! energy), [`metrics`] what a run measures, [`output`] what it writes, and [`live`] runs the
+//! same sensor and fusion sides as processes exchanging real 802.15.4 frames over UDP. The sensor side and the fusion side of a
 //! scheme are separate pieces:
 //!
 //! ```

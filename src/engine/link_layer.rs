@@ -16,7 +16,7 @@
 //! With retransmission (`arq`) a slot's fate already holds its attempts (drawn with the slot,
 //! [`crate::network::channel::fate`]): the packet is lost only when every attempt was, every
 //! attempt costs its bits and frame, and the acknowledgements, retries and duplicates are
-//! counted ([`LinkLayer::deliver`]). The center fuses one copy, as without ARQ.
+//! counted (`LinkLayer::deliver`). The center fuses one copy, as without ARQ.
 //!
 //! # Sequence numbers
 //!

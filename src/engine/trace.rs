@@ -43,7 +43,7 @@ pub struct LoopOptions<'a> {
     pub alone: bool,
     /// `available[k - 1][i]`: whether sensor i has a reading at step k. A sensor without one
     /// is not asked (its node does not step) and reaches the fusion center as
-    /// [`Received::NotScheduled`]. `None`: every reading exists.
+    /// [`crate::link::Received::NotScheduled`]. `None`: every reading exists.
     pub available: Option<&'a [Vec<bool>]>,
 }
 

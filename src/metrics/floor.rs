@@ -236,7 +236,7 @@ impl Floor {
     }
 
     /// The floor on the steady-state MSE at `rate` bits per step, or a lower bound of it
-    /// within [`NEGLIGIBLE`] (relative) of it: from [`Floor::plateau`] bits per step on, where
+    /// within [`NEGLIGIBLE`] (relative) of it: from `Floor::plateau` bits per step on, where
     /// the estimate-process term has fallen below that, the all-data error itself (the floor
     /// decreases with the rate, so the all-data error bounds it from below everywhere, and
     /// there it is as tight as the solver; this spares one program per scheme).
@@ -270,7 +270,7 @@ impl Floor {
         Ok(self.all_data_mse + est)
     }
 
-    /// The curve at [`CURVE_RATES`] above the minimum rate (points that could not be solved
+    /// The curve at `CURVE_RATES` above the minimum rate (points that could not be solved
     /// are left out); `Err` when no point could.
     pub fn curve(&self) -> Result<FloorCurve, String> {
         if self.points.is_empty() {

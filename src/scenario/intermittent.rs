@@ -24,7 +24,7 @@ pub struct ScalarModel {
 
 impl ScalarModel {
     /// The scalar model of `system`, or why it is not one (one state, one linear sensor with
-    /// H = [1]).
+    /// H = \[1\]).
     pub fn of(system: &System) -> Result<Self, String> {
         if system.state_dim() != 1 || system.n_sensors() != 1 {
             return Err(format!(

@@ -222,7 +222,7 @@ fn parse_components(
 }
 
 /// Reads a measurements file: numbers, step order and duplicates are checked here, sensor
-/// indices and dimensions against a scenario by [`recorded`].
+/// indices and dimensions against a scenario by [`super::recorded`].
 pub fn parse_measurements(text: &str, file: &str) -> Result<MeasTable, DataError> {
     let mut rdr = reader(text);
     let header = header_of(&mut rdr, file, &["step", "sensor"])?;

@@ -22,13 +22,13 @@ pub enum Fusion {
     /// the protocol a sensor is never silent twice in a row, so an estimate missing twice in a
     /// row was lost by the link: the center then uses the debiased extrapolation of its last
     /// estimate to arrive and inflates the covariance by that extrapolation's computed second
-    /// moment (the loss fallback of [`super::loss`]).
+    /// moment (the loss fallback of `distributed_kf::loss`).
     OmittedEstimates,
     /// Algorithm 2 (Section IV): silent sensors contribute their debiased extrapolation x̃^{pp,i}
     /// and the covariance is inflated by (N - m - l)^2 C (C̄^p)^{-1} B (C̄^p)^{-1} C^T, which
     /// keeps the estimate consistent when the sensors use test (13) with the same B and every
     /// sent estimate arrives. A loss-aware center ([`DkfCenter::set_loss_aware`]) inflates by
-    /// B plus the extrapolation's second moment instead (see [`super::loss`]).
+    /// B plus the extrapolation's second moment instead (see `distributed_kf::loss`).
     Bounded { b: Matrix },
 }
 
@@ -53,7 +53,7 @@ type CovKey = (usize, u64, usize);
 /// Both sets are capped; beyond the caps the covariance is simply recomputed. Which entries
 /// are kept never changes a number, only how often one is recomputed.
 ///
-/// The fast trial does not use these entries but the dense tables of [`DenseMemo`], which
+/// The fast trial does not use these entries but the dense tables of `DenseMemo`, which
 /// the memos made by [`CovarianceMemo::shared`] carry.
 #[derive(Debug, Default)]
 pub struct CovarianceMemo {
@@ -121,7 +121,7 @@ impl CovarianceMemo {
     /// at one B) see each other's entries instead of each computing its own.
     ///
     /// Memos of one plan share the fast trial's table of fused bases (which does not depend
-    /// on the rule, see [`DenseMemo`]).
+    /// on the rule, see `DenseMemo`).
     pub fn shared(plan: &Arc<GlobalizedPlan>, fusion: &Fusion) -> Arc<Self> {
         type Entry = (
             std::sync::Weak<GlobalizedPlan>,
@@ -338,7 +338,7 @@ impl DkfCenter {
 
     /// Algorithm 2's center made loss-aware: a sensor silent twice or more in a row may have
     /// been lost, so its term is inflated by B plus the computed second moment of its
-    /// extrapolation (see [`super::loss`]). Algorithm 1's center always treats such a sensor
+    /// extrapolation (see `distributed_kf::loss`). Algorithm 1's center always treats such a sensor
     /// as lost (the protocol never omits twice), so the flag changes nothing there.
     pub fn set_loss_aware(&mut self, on: bool) {
         self.loss_aware = on;

@@ -4,7 +4,7 @@
 //!
 //! Clarabel's PSD cone calls BLAS/LAPACK (Fortran symbols such as `dsyevr_`); the system OpenBLAS
 //! provides them when the build found it (`build.rs`, cfg `hushfuse_openblas`). Without it a
-//! program is not solved: [`ConeProgram::minimize`] says what to install.
+//! program is not solved: `ConeProgram::minimize` says what to install.
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::SupportedConeT;
 #[cfg(hushfuse_openblas)]
