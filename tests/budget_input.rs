@@ -279,3 +279,36 @@ fn a_table_report_naming_an_unknown_row_is_refused_before_it_runs() {
     let o = hushfuse(&["run", "ok.toml", "--out", "o"], d.path());
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
 }
+
+/// `--pilot-trials 0` ran one pilot trial without a word: refused, naming the flag. A NaN
+/// budget on the energy axis (the default) says µJ, on a bits axis bits.
+#[test]
+fn zero_pilot_trials_and_nan_budgets_name_flag_and_unit() {
+    let d = dir_with_tiny();
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", "tiny.toml", "--trials", "2", "--out", "o"];
+        args.extend_from_slice(extra);
+        hushfuse(&args, d.path())
+    };
+    let o = run(&["--budget", "300", "--pilot-trials", "0"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("--pilot-trials: expected at least 1"),
+        "{}",
+        stderr(&o)
+    );
+    let o = run(&["--budget", "NaN"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("finite number of µJ per step"),
+        "{}",
+        stderr(&o)
+    );
+    let o = run(&["--budget", "NaN", "--budget-axis", "payload"]);
+    assert!(
+        stderr(&o).contains("finite number of bits per step"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!d.path().join("o").exists());
+}

@@ -4,10 +4,20 @@ use super::*;
 
 /// Budgets from `--budget` or `--budgets`: positive finite numbers, no two equal.
 pub(crate) fn budgets_of(args: &RunArgs) -> Result<Vec<f64>, Failure> {
+    if args.pilot_trials == Some(0) {
+        return Err(Failure::Input(
+            "--pilot-trials: expected at least 1 trial per pilot run, got 0".into(),
+        ));
+    }
     if let Some(b) = args.budget {
         if !(b.is_finite() && b > 0.0) {
+            // The unit of the axis: energy (the default) is µJ, the others bits.
+            let unit = match args.budget_axis.as_deref() {
+                None | Some("energy") => "µJ",
+                Some(_) => "bits",
+            };
             return Err(Failure::Input(format!(
-                "--budget: expected a positive finite number of bits per step, got {b}"
+                "--budget: expected a positive finite number of {unit} per step, got {b}"
             )));
         }
         return Ok(vec![b]);
