@@ -98,7 +98,7 @@ impl PyScheme {
                     v
                 }
             };
-            let params = crate::runs::to_py(py, &self.params)
+            let params = crate::helpers::to_py(py, &self.params)
                 .map_err(|e| origin.fail(py, "reading the parameters", &e))?;
             let made = self
                 .factory

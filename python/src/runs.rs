@@ -2,6 +2,7 @@
 //! objects (never JSON or CSV text in between), and the engine's own run layer
 //! ([`hushfuse::engine::run`]) for output folders, resuming and shards.
 use crate::external;
+use crate::helpers::to_py;
 use crate::{
     estimates_arrays, load, python_words, resolve, vectors_to_array2, DataError, RunError,
     ScenarioError,
@@ -20,36 +21,6 @@ use pyo3::exceptions::PyMemoryError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use std::path::PathBuf;
-
-/// A serde value as the Python object `json.loads` would give (`null` -> `None`), made
-/// without text in between.
-pub(crate) fn to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
-    use serde_json::Value;
-    Ok(match v {
-        Value::Null => py.None().into_bound(py),
-        Value::Bool(b) => b.into_pyobject(py)?.to_owned().into_any(),
-        Value::Number(n) => match (n.as_u64(), n.as_i64()) {
-            (Some(u), _) => u.into_pyobject(py)?.into_any(),
-            (None, Some(i)) => i.into_pyobject(py)?.into_any(),
-            _ => n.as_f64().unwrap_or(f64::NAN).into_pyobject(py)?.into_any(),
-        },
-        Value::String(s) => s.into_pyobject(py)?.into_any(),
-        Value::Array(a) => {
-            let list = PyList::empty(py);
-            for x in a {
-                list.append(to_py(py, x)?)?;
-            }
-            list.into_any()
-        }
-        Value::Object(o) => {
-            let d = PyDict::new(py);
-            for (k, x) in o {
-                d.set_item(k, to_py(py, x)?)?;
-            }
-            d.into_any()
-        }
-    })
-}
 
 pub(crate) fn serialize<'py>(
     py: Python<'py>,
