@@ -271,3 +271,32 @@ fn the_free_space_estimate_bounds_what_a_run_writes_without_refusing_ordinary_ru
         "estimate {estimate} bytes for {written} written"
     );
 }
+
+/// A hand-made manifest that lists a folder: refused (exit 2) before any trial, and the earlier
+/// output is untouched (the run used to fail at its end with exit 1, "Is a directory", its new
+/// files already beside the old manifest).
+#[test]
+fn a_manifest_listing_a_folder_is_refused_before_anything_moves() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(d.path().join("tiny.toml"), TINY).unwrap();
+    let run = |out: &str| {
+        hushfuse(
+            &["run", "tiny.toml", "--trials", "2", "--out", out],
+            d.path(),
+        )
+    };
+    assert_eq!(run("o").status.code(), Some(0));
+    let o = d.path().join("o");
+    std::fs::create_dir(o.join("sub")).unwrap();
+    let m = o.join("hushfuse-manifest.json");
+    let mut manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&m).unwrap()).unwrap();
+    manifest["files"].as_array_mut().unwrap().push("sub".into());
+    std::fs::write(&m, serde_json::to_string(&manifest).unwrap()).unwrap();
+    let before = snapshot(&o);
+    let out = run("o");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("lists \"sub\", which is a folder"), "{err}");
+    assert_eq!(snapshot(&o), before, "the earlier output changed");
+}

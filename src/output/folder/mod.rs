@@ -83,10 +83,17 @@ fn is_own_file(rel: &str) -> bool {
 /// Every file under `dir`, relative to it with `/` separators, sorted.
 fn list_files(dir: &Path) -> Result<Vec<String>, String> {
     fn walk(root: &Path, dir: &Path, out: &mut Vec<String>) -> Result<(), String> {
-        let entries =
-            std::fs::read_dir(dir).map_err(|e| format!("cannot read {}: {e}", dir.display()))?;
+        // A folder that cannot be read holds files no manifest lists (`--out /`: /proc).
+        let unreadable = |e: std::io::Error| {
+            format!(
+                "output folder {} holds other files ({} cannot be read: {e}); choose another --out",
+                root.display(),
+                dir.display()
+            )
+        };
+        let entries = std::fs::read_dir(dir).map_err(unreadable)?;
         for entry in entries {
-            let entry = entry.map_err(|e| format!("cannot read {}: {e}", dir.display()))?;
+            let entry = entry.map_err(unreadable)?;
             let path = entry.path();
             let ft = entry
                 .file_type()
@@ -129,7 +136,15 @@ pub fn read_manifest(dir: &Path) -> Result<Option<Manifest>, String> {
         Err(e) => return Err(format!("cannot read {}: {e}", path.display())),
     };
     for f in &manifest.files {
-        check_entry(f).map_err(|why| {
+        // A listed name that is a folder (hand-made, or left by something else) would make the
+        // run fail at its very end, after its files moved in beside the old manifest: refused
+        // here, before anything runs or moves.
+        let is_folder = std::fs::symlink_metadata(dir.join(f)).is_ok_and(|m| m.is_dir());
+        let checked = check_entry(f).and_then(|()| match is_folder {
+            true => Err("is a folder".to_string()),
+            false => Ok(()),
+        });
+        checked.map_err(|why| {
             format!(
                 "{}: lists {f:?}, which {why}; a manifest may only name files inside its folder (remove it or choose another output folder)",
                 path.display()
