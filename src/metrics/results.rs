@@ -457,13 +457,29 @@ pub fn consistency(
     } else {
         0.0
     };
+    let steady_dominated = per_trial.len() >= 10 && share > 0.5;
+    // The printed ANEES averages every step, not the steady state alone: a trial that collapses
+    // at step 2 carries it without touching the steady-state values. From the per-trial sums of
+    // the whole run's NEES (x_t >= 0), the largest trial carries at least Σx²/(Σx)² of it
+    // (Σx² <= max x · Σx); more than half is dominance of what is printed.
+    let whole = &s.whole_run[Layout::NEES];
+    let whole_share = if whole.sum > 0.0 {
+        whole.sum_sq / (whole.sum * whole.sum)
+    } else {
+        0.0
+    };
+    let whole_dominated = trials >= 10 && whole_share > 0.5;
     Consistency {
         median_nees: s.nees_hist.median().unwrap_or(f64::NAN),
         median_nees_expected: q(n, 0.5) / n,
         anees_interval_95: interval,
         anees_steps_in_interval: inside as f64 / steady.len().max(1) as f64,
-        top_trials_share: share,
-        mean_dominated: per_trial.len() >= 10 && share > 0.5,
+        top_trials_share: if whole_dominated {
+            share.max(whole_share)
+        } else {
+            share
+        },
+        mean_dominated: steady_dominated || whole_dominated,
     }
 }
 
@@ -819,6 +835,38 @@ mod tests {
             .map(|k| sums.at(k, Layout::NEES) / trials as f64 / n as f64)
             .collect();
         (sums, anees)
+    }
+
+    /// One trial that collapses before the steady state (at step 2 of 50) carries the printed
+    /// ANEES (every step) but no steady-state value: flagged all the same (it printed ANEES 10.0
+    /// unmarked at 20,000 trials).
+    #[test]
+    fn a_trial_collapsed_before_the_steady_state_is_flagged() {
+        let (n, trials, steps) = (2, 1000, 50);
+        let mut sums = Sums::new(1, steps, n);
+        let groups = vec![("all".to_string(), vec![0, 1])];
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(9);
+        let truth = Vector::zeros(n);
+        for t in 0..trials {
+            let mut obs = sums.trial(&groups, 11);
+            for k in 1..=steps {
+                let scale = if t == 3 && k == 2 { 1e-12 } else { 1.0 };
+                let mean = Vector::from_fn(n, |_, _| StandardNormal.sample(&mut rng));
+                let est = Gaussian::new(mean, Matrix::identity(n, n) * scale);
+                obs.record(k, &truth, &est, Traffic::default()).unwrap();
+            }
+            obs.finish();
+        }
+        let anees: Vec<f64> = (0..steps)
+            .map(|k| sums.at(k, Layout::NEES) / trials as f64 / n as f64)
+            .collect();
+        let c = consistency(n, trials, 11, &sums, &anees);
+        let mean = anees.iter().sum::<f64>() / steps as f64;
+        assert!(mean > 100.0, "the printed ANEES is ruined: {mean}");
+        assert!(c.mean_dominated && c.top_trials_share > 0.99, "{c:?}");
+        // Without the collapse: not flagged.
+        let (good, good_anees) = synthetic(false);
+        assert!(!consistency(2, 1000, 11, &good, &good_anees).mean_dominated);
     }
 
     #[test]
