@@ -153,6 +153,15 @@ impl scheme::Scheme for PyScheme {
     }
 }
 
+/// An error once Ctrl-C was pressed ([`helpers::INTERRUPTED`]): the run winds down without
+/// calling Python again.
+fn interrupted() -> Result<(), SchemeError> {
+    match helpers::INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst) {
+        true => Err(SchemeError::Unsupported("interrupted (Ctrl-C)".into())),
+        false => Ok(()),
+    }
+}
+
 /// A Python sensor node.
 struct PySensor {
     obj: Py<PyAny>,
@@ -169,6 +178,7 @@ impl scheme::SensorNode for PySensor {
         _rng: &mut dyn RngCore,
     ) -> Result<link::Transmission, SchemeError> {
         let what = || format!("sensor {}.step(k={k})", self.index);
+        interrupted()?;
         Python::with_gil(|py| {
             let z = PyArray1::from_slice(py, z.as_slice());
             let fb = feedback.map(|f| Feedback { inner: f.clone() });
@@ -241,6 +251,7 @@ impl PyCenter {
 
 impl scheme::FusionCenter for PyCenter {
     fn step(&mut self, k: usize, inbox: &[Received]) -> Result<(), SchemeError> {
+        interrupted()?;
         Python::with_gil(|py| {
             let list = PyList::empty(py);
             for r in inbox {

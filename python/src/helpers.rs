@@ -319,3 +319,44 @@ pub(crate) fn to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bou
         }
     })
 }
+
+/// Raised while a Ctrl-C is being handled ([`interruptible`]): Python nodes called after it
+/// return an error at once instead of running, so the run winds down.
+pub(crate) static INTERRUPTED: std::sync::atomic::AtomicBool =
+    std::sync::atomic::AtomicBool::new(false);
+
+/// Runs `work` (which gets a stop flag) off the Python thread while this thread, every 50 ms,
+/// lets Python handle its signals: a Ctrl-C raises the stop flag and [`INTERRUPTED`], and once
+/// `work` has wound down it is raised as `KeyboardInterrupt`. Without this a Ctrl-C during a
+/// run whose Python sensor is slow was never seen: the signal handler runs only on the main
+/// thread, which waited for the run with the GIL released.
+pub(crate) fn interruptible<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce(&std::sync::atomic::AtomicBool) -> T + Send,
+) -> PyResult<T> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    INTERRUPTED.store(false, Ordering::SeqCst);
+    let stop = AtomicBool::new(false);
+    let (out, interrupt) = py.allow_threads(|| {
+        std::thread::scope(|s| {
+            let handle = s.spawn(|| work(&stop));
+            let mut interrupt: Option<PyErr> = None;
+            while !handle.is_finished() {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+                if interrupt.is_none() {
+                    if let Err(e) = Python::with_gil(|py| py.check_signals()) {
+                        stop.store(true, Ordering::SeqCst);
+                        INTERRUPTED.store(true, Ordering::SeqCst);
+                        interrupt = Some(e);
+                    }
+                }
+            }
+            (handle.join(), interrupt)
+        })
+    });
+    INTERRUPTED.store(false, Ordering::SeqCst);
+    if let Some(e) = interrupt {
+        return Err(e);
+    }
+    out.map_err(|_| PyRuntimeError::new_err("the run's thread panicked"))
+}

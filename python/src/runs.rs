@@ -207,6 +207,20 @@ pub(crate) fn run<'py>(
                 limits: None,
             },
         };
+        if pilot_trials == Some(0) {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "pilot_trials: expected at least 1 trial per pilot run, got 0",
+            ));
+        }
+        // As the command line: a budget no scheme can meet is refused before any pilot run
+        // (a scenario that does not load is left to the calibration, which names its error).
+        if let Ok(exp) = build::load_with(&text, &source, &opts.load) {
+            if let Some(m) = calibrate::energy_floor_problem(&exp, opts.axis, &budgets) {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "{m}; budgets are on the energy axis by default (µJ per step): for bits give budget_axis=\"payload\", \"frame\" or \"total\""
+                )));
+            }
+        }
         let write = out.map(|dir| (dir, report));
         return arena(py, (&text, &source), &budgets, &opts, write);
     }
@@ -217,9 +231,10 @@ pub(crate) fn run<'py>(
     }
     let Some(out) = out else {
         let exp = crate::load_text(&text, &source, trials, seed, threads)?;
-        let sums = py
-            .allow_threads(|| runner::run(&exp, runner::RunOptions { threads }, &|_| {}))
-            .map_err(|e| RunError::new_err(e.to_string()))?;
+        let sums = crate::helpers::interruptible(py, |stop| {
+            runner::run_until(&exp, runner::RunOptions { threads }, &|_| {}, stop)
+        })?
+        .map_err(|e| RunError::new_err(e.to_string()))?;
         let summary = results::summarize(&exp, &sums);
         python_failure(&summary)?;
         check_finite(hushfuse::metrics::finite::non_finite(&summary))?;
@@ -243,9 +258,14 @@ pub(crate) fn run<'py>(
         resume,
         checkpoint_every,
     };
-    let outcome = py
-        .allow_threads(|| engine_run::execute(&request, &engine_run::Hooks::default()))
-        .map_err(run_failure)?;
+    let outcome = crate::helpers::interruptible(py, |stop| {
+        let hooks = engine_run::Hooks {
+            stop: Some(stop),
+            ..Default::default()
+        };
+        engine_run::execute(&request, &hooks)
+    })?
+    .map_err(run_failure)?;
     let d = PyDict::new(py);
     match outcome {
         engine_run::Outcome::Whole(done) => {

@@ -426,3 +426,76 @@ def test_wrong_returns_of_user_code_are_named():
     finally:
         hf.unregister("py-five")
         hf.unregister("py-shapeless")
+
+
+def test_budgets_below_the_sleep_energy_and_zero_pilot_trials_are_refused():
+    # As the command line: no scheme spends less than the radios asleep (240 µJ for 4 sensors
+    # at the CC2420 defaults), so such a budget is refused before any pilot run.
+    s = scenario(trials=4, schemes=MIXED)
+    with pytest.raises(ValueError, match="asleep") as e:
+        hf.run(s, budget=10)
+    assert "budget_axis" in str(e.value)
+    with pytest.raises(ValueError, match="pilot_trials"):
+        hf.run(s, budget=30, budget_axis="payload", pilot_trials=0)
+
+
+def test_a_payload_larger_than_an_802154_frame_is_refused():
+    # 116 payload octets fill a 127-octet MPDU; 1000 octets fit no frame.
+    assert hf.Payload(bytes(116), 8 * 116).bits == 8 * 116
+    with pytest.raises(ValueError, match="does not fit one IEEE 802.15.4 frame"):
+        hf.Payload(bytes(1000), 8000)
+
+
+SLOW = r'''
+import sys, time
+sys.path[:0] = {path!r}
+import hushfuse as hf
+
+class Slow(hf.SensorNode):
+    def step(self, k, z, feedback):
+        time.sleep(0.05)
+        return hf.Measurement(z)
+
+class Center(hf.FusionCenter):
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        self.mean, self.cov = self.system.prior
+    def step(self, k, inbox):
+        pass
+    def estimate(self):
+        return self.mean, self.cov
+
+@hf.register
+class PySlow(hf.SchemeSpec):
+    kind = "py-slow"
+    sensor, center = Slow, Center
+
+print("started", flush=True)
+try:
+    hf.run({scenario!r}, threads=1)
+except KeyboardInterrupt:
+    print("interrupted", flush=True)
+    sys.exit(7)
+print("finished", flush=True)
+'''
+
+
+def test_ctrl_c_stops_a_run_whose_python_sensor_is_slow():
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    s = scenario(trials=50, steps=100, schemes='[[schemes]]\nkind = "py-slow"\n')
+    code = SLOW.format(path=sys.path, scenario=s)
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "started"
+    time.sleep(1.0)
+    p.send_signal(signal.SIGINT)
+    try:
+        out, _ = p.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        raise AssertionError("Ctrl-C did not stop the run")
+    assert p.returncode == 7, out
+    assert "interrupted" in out

@@ -795,6 +795,24 @@ fn assemble(ev: &Evaluator, s: &Setup, per_scheme: &[Vec<Calibrated>]) -> Outcom
     }
 }
 
+/// Why `budgets` cannot be met on `axis`, before any pilot run: on the energy axis, a budget
+/// below what the sensors' radios spend asleep, which no scheme goes under. The command line
+/// and Python both ask it.
+pub fn energy_floor_problem(exp: &Experiment, axis: Axis, budgets: &[f64]) -> Option<String> {
+    if axis != Axis::Energy {
+        return None;
+    }
+    let asleep = exp.radio.asleep_step_uj(exp.system.n_sensors());
+    budgets.iter().find(|&&b| b < asleep).map(|b| {
+        format!(
+            "budget {} µJ/step is below what the {} sensors' radios spend asleep ({} µJ/step), which no scheme goes under",
+            short(*b),
+            exp.system.n_sensors(),
+            short(asleep)
+        )
+    })
+}
+
 /// A number with at most 4 significant decimals.
 pub fn short(v: f64) -> String {
     // Beyond a billion bits the digits say nothing and would widen a table past any screen.

@@ -805,12 +805,32 @@ pub fn run(
     opts: RunOptions,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<Sums>, RunError> {
+    run_maybe_until(exp, opts, progress, None)
+}
+
+/// [`run`] that stops between trials once `stop` is raised (Python's Ctrl-C): the sums are then
+/// those of the blocks finished, not the run's.
+pub fn run_until(
+    exp: &Experiment,
+    opts: RunOptions,
+    progress: &(dyn Fn(usize) + Sync),
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<Vec<Sums>, RunError> {
+    run_maybe_until(exp, opts, progress, Some(stop))
+}
+
+fn run_maybe_until(
+    exp: &Experiment,
+    opts: RunOptions,
+    progress: &(dyn Fn(usize) + Sync),
+    stop: Option<&std::sync::atomic::AtomicBool>,
+) -> Result<Vec<Sums>, RunError> {
     let mut total = empty_sums(exp);
     run_windows(
         exp,
         opts,
         0..n_blocks(exp.trials),
-        None,
+        stop,
         progress,
         &mut |_, blocks| {
             for block in blocks.iter() {

@@ -110,6 +110,9 @@ pub fn is_external(kind: &str) -> bool {
     registry::find_runtime(kind).is_some()
 }
 
+/// Octets of an 802.15.4 MPDU at most (aMaxPHYPacketSize, 2006 §6.4.1).
+pub const MAX_MPDU_OCTETS: usize = 127;
+
 /// Octets of the MAC header before a payload frame's payload.
 const HEADER: usize = codec802154::MHR_OCTETS;
 
@@ -121,6 +124,15 @@ const HEADER: usize = codec802154::MHR_OCTETS;
 /// ([`codec802154::mpdu_bits_for_payload`]).
 pub fn payload_message(payload: &[u8], payload_bits: u32, sensor: u16) -> Result<Message, String> {
     let octets = (payload_bits as usize).div_ceil(8);
+    // aMaxPHYPacketSize: an MPDU holds at most 127 octets, 11 of them MAC header and FCS.
+    // Fragmentation is not modelled, so a larger payload is refused rather than priced as one
+    // frame no radio could send.
+    let most = MAX_MPDU_OCTETS - HEADER - codec802154::FCS_OCTETS;
+    if octets > most {
+        return Err(format!(
+            "a payload of {octets} octets ({payload_bits} bits) does not fit one IEEE 802.15.4 frame (at most {most} payload octets in its {MAX_MPDU_OCTETS}-octet MPDU); fragmentation is not priced: send fewer bits per message"
+        ));
+    }
     if payload.len() != octets {
         return Err(format!(
             "a payload of {payload_bits} bits needs {octets} octets, got {}",
@@ -182,6 +194,15 @@ mod tests {
         assert_eq!(frame_payload(&bad), None);
         assert!(payload_message(&[0b1000], 3, 0).is_err());
         assert!(payload_message(&[1, 2], 3, 0).is_err());
+        // 116 payload octets fill a 127-octet MPDU; one more does not fit any 802.15.4 frame.
+        let full = payload_message(&[0; 116], 8 * 116, 0).unwrap();
+        assert_eq!(full.frame_bits(), 8 * 127);
+        let e = payload_message(&[0; 1000], 8000, 0).unwrap_err();
+        assert!(
+            e.contains("1000 octets") && e.contains("does not fit"),
+            "{e}"
+        );
+        assert!(payload_message(&[0; 117], 8 * 117, 0).is_err());
     }
 
     const SYSTEM: &str = r#"

@@ -61,16 +61,12 @@ fn check_energy_budgets(
     budgets: &[f64],
     given: bool,
 ) -> Result<(), Failure> {
-    let Some(exp) = exp.filter(|_| axis == calibrate::Axis::Energy) else {
+    let Some(exp) = exp else {
         return Ok(());
     };
-    let asleep = exp.radio.asleep_step_uj(exp.system.n_sensors());
-    match budgets.iter().find(|&&b| b < asleep) {
-        Some(b) => Err(Failure::Input(format!(
-            "budget {} µJ/step is below what the {} sensors' radios spend asleep ({} µJ/step), which no scheme goes under{}",
-            calibrate::short(*b),
-            exp.system.n_sensors(),
-            calibrate::short(asleep),
+    match calibrate::energy_floor_problem(exp, axis, budgets) {
+        Some(m) => Err(Failure::Input(format!(
+            "{m}{}",
             if given {
                 ""
             } else {
