@@ -157,6 +157,17 @@ const CURVE_RATES: [f64; 12] = [
     0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 24.0,
 ];
 
+/// Why the floor's curve could not be solved, in words for the user: a solver's own message
+/// (Clarabel's status) says nothing about what it means for the run.
+fn note_of(e: &FloorError) -> String {
+    match e {
+        FloorError::Solver(raw) => format!(
+            "the rate–distortion floor's semidefinite program (Tanaka et al.) could not be solved for this system, so no floor is given; the run's own numbers are unaffected (solver: {raw})"
+        ),
+        other => other.to_string(),
+    }
+}
+
 impl Floor {
     /// The floor of `exp`'s system with every sensor, or why there is none.
     pub fn of(exp: &Experiment) -> Result<Self, String> {
@@ -274,10 +285,7 @@ impl Floor {
     /// are left out); `Err` when no point could.
     pub fn curve(&self) -> Result<FloorCurve, String> {
         if self.points.is_empty() {
-            return Err(self
-                .curve_error
-                .as_ref()
-                .map_or("no point".into(), |e| e.to_string()));
+            return Err(self.curve_error.as_ref().map_or("no point".into(), note_of));
         }
         Ok(FloorCurve {
             rate: self.points.iter().map(|p| p.0).collect(),
@@ -297,6 +305,16 @@ impl Floor {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_solver_failure_reads_as_what_it_means() {
+        let n = note_of(&FloorError::Solver("InsufficientProgress".into()));
+        assert!(
+            n.contains("could not be solved") && n.contains("unaffected"),
+            "{n}"
+        );
+        assert!(n.ends_with("(solver: InsufficientProgress)"));
+    }
 
     #[test]
     fn binary_entropy_by_hand() {
