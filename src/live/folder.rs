@@ -185,7 +185,7 @@ impl<'a> LiveFolder<'a> {
                 };
                 if let Some(what) = fused {
                     return Err(format!(
-                        "{} holds an interrupted live run ({what}); continue it with --resume, or choose another --out (or remove the folder) to start afresh",
+                        "{} holds an interrupted live run ({what}); continue it with `hushfuse center … --resume` on this folder (and its nodes), or choose another --out (or remove the folder) to start afresh",
                         dir.display()
                     ));
                 }
