@@ -51,6 +51,13 @@
 //! 1e10: `scripts/compare-summaries.py` against the summaries of the commit before the f32
 //! delivery (a93043d) showed every estimate, error and link number equal, only the bits, frame
 //! bits, energy, lifetime and R_eff changed (32 -> 64 bits per reading); both were re-recorded.
+//! Issue 38 (item 10, the floor's cost) moved only the rate–distortion floor of the
+//! multi-state systems (`default`, `dormann-fig1`, `arena-nca`: two independent axes, solved
+//! as one program of two parts; `arena-1d`): the curve's points by at most 1.4e-6 relative (a
+//! solver tolerance; the 0.5-bit point now converges and is added), and a scheme's
+//! `floor_mse` by at most 3.4e-4 relative, downwards (read from the curve's tangents where
+//! they bound it within 1e-3), plateau floors now exactly the all-data error. No estimate,
+//! error or link number moved (`scripts/compare-summaries.py` against 7143c70).
 //!
 //! When a change is *meant* to move numbers, rerun with `HUSHFUSE_PRINT_GOLDEN=1 cargo test
 //! --release --test golden -- --nocapture`, paste the printed table, and say in the commit
@@ -59,8 +66,8 @@ use std::process::Command;
 
 /// (built-in scenario, trials, FNV-1a 64 of summary.json, its length in bytes).
 const GOLDEN: &[(&str, usize, u64, usize)] = &[
-    ("default", 8, 0x9dc8066d6312d050, 553460),
-    ("dormann-fig1", 8, 0x96482f1429ca80e9, 5088191),
+    ("default", 8, 0xb2027506fb417a2c, 553496),
+    ("dormann-fig1", 8, 0x4795f7cf04b686eb, 5088235),
     ("zhang-fig4", 8, 0x9c29e5e5306fa2d7, 222239),
     ("zhang-fig5", 8, 0x0126239b2512dc22, 221854),
     ("zhang-table7", 8, 0x583977c3ff48095b, 1066),
@@ -82,8 +89,8 @@ const GOLDEN: &[(&str, usize, u64, usize)] = &[
     ("classic-quantized-kf", 8, 0x443c1caa051be658, 200246),
     ("classic-one-bit-static", 8, 0x365883d266a1abd0, 157990),
     ("classic-one-bit-tracking", 8, 0x651320c915f5ddde, 305630),
-    ("arena-1d", 4, 0x4fc75cfbcfecf4e2, 810488),
-    ("arena-nca", 4, 0xd0e15644f3268155, 722385),
+    ("arena-1d", 4, 0xcbb4d0e4d04e2586, 810489),
+    ("arena-nca", 4, 0x7d6f5d20dcb128cc, 722424),
     ("arena-rss", 4, 0xea42c43c4cae5dcd, 123570),
     ("arena-wsn", 4, 0x606437ab2dbb0ad1, 344571),
     ("arena-tobit", 4, 0x00f6653446ba6b85, 910210),

@@ -22,7 +22,11 @@ fn builds(
     system: &Arc<System>,
     steps: usize,
 ) -> Result<(), String> {
-    let cx = BuildContext { system, steps };
+    let cx = BuildContext {
+        system,
+        steps,
+        link_loss: None,
+    };
     let scheme = (e.build)(table, &cx).map_err(|err| err.to_string())?;
     scheme
         .build_with_seed(1)

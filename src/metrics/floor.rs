@@ -139,11 +139,24 @@ pub struct Floor {
     all_data_mse: f64,
     /// The rate from which [`Floor::mse_at`] gives the all-data error (see there).
     plateau: Option<f64>,
-    /// The floor at [`CURVE_RATES`] above the minimum rate, where the program was solved.
-    points: Vec<(f64, f64)>,
+    /// The curve at [`CURVE_RATES`] above the minimum rate, where the program was solved.
+    points: Vec<CurvePoint>,
     /// Why the first point of the curve that was not solved failed.
     curve_error: Option<FloorError>,
 }
+
+/// A solved point of the curve: the floor and its slope in the rate (MSE per bit per step).
+#[derive(Debug, Clone, Copy)]
+struct CurvePoint {
+    rate: f64,
+    mse: f64,
+    slope: f64,
+}
+
+/// Largest relative gap between the curve's chord and its tangents at which [`Floor::mse_at`]
+/// takes the tangents' bound instead of solving a program of its own: the floor it gives then
+/// lies below the exact floor by at most this much (relative).
+pub const TANGENT_GAP: f64 = 1e-3;
 
 /// Relative excess of the floor over the all-data error below which [`Floor::mse_at`] gives the
 /// all-data error.
@@ -197,9 +210,19 @@ impl Floor {
         let a = sys.transition.f().clone();
         let kf =
             rd::kalman_steady_state(&a, sys.transition.q(), &h, &v).map_err(|e| e.to_string())?;
+        Ok(Self::from_split(
+            a,
+            kf.estimate_noise(),
+            kf.posterior.trace(),
+        ))
+    }
+
+    /// The floor of the Kalman split: the estimate process `x̂' = A x̂ + e`, `e ~ N(0,
+    /// estimate_noise)`, on top of the all-data error.
+    fn from_split(a: Matrix, estimate_noise: Matrix, all_data_mse: f64) -> Self {
         let mut floor = Self {
-            estimate_noise: kf.estimate_noise(),
-            all_data_mse: kf.posterior.trace(),
+            estimate_noise,
+            all_data_mse,
             a,
             plateau: None,
             points: Vec::new(),
@@ -210,12 +233,12 @@ impl Floor {
         floor.plateau = floor
             .points
             .last()
-            .filter(|(r, d)| {
-                (r - floor.min_rate() - PLATEAU_RATE).abs() < 1e-12
-                    && d - floor.all_data_mse <= NEGLIGIBLE * floor.all_data_mse
+            .filter(|p| {
+                (p.rate - floor.min_rate() - PLATEAU_RATE).abs() < 1e-12
+                    && p.mse - floor.all_data_mse <= NEGLIGIBLE * floor.all_data_mse
             })
-            .map(|(r, _)| *r);
-        Ok(floor)
+            .map(|p| p.rate);
+        floor
     }
 
     /// Solves the program at every rate of [`CURVE_RATES`] (in parallel: independent
@@ -223,18 +246,47 @@ impl Floor {
     fn solve_curve(&mut self) {
         use rayon::prelude::*;
         let min = self.min_rate();
-        let points: Vec<(f64, Result<f64, FloorError>)> = CURVE_RATES
+        let points: Vec<_> = CURVE_RATES
             .par_iter()
             .map(|r| (r + min, self.solve(r + min)))
             .collect();
-        for (r, d) in points {
+        for (rate, d) in points {
             match d {
-                Ok(d) => self.points.push((r, d)),
+                Ok((mse, slope)) => self.points.push(CurvePoint { rate, mse, slope }),
                 Err(e) => {
                     self.curve_error.get_or_insert(e);
                 }
             }
         }
+    }
+
+    /// The floor at `rate` from the solved curve alone, when that is tight: the largest of the
+    /// tangents at the solved points (the floor is convex in the rate, so each lies below it)
+    /// and the all-data error, provided the chord of the two points around `rate` (which lies
+    /// above the floor) is within [`TANGENT_GAP`] of it. Beyond the curve's last rate the
+    /// floor lies between that point and the all-data error. `None` below the curve's first
+    /// rate (the floor is steep there) or where the bound is looser.
+    fn bound_from_curve(&self, rate: f64) -> Option<f64> {
+        let first = self.points.first()?;
+        let last = self.points.last()?;
+        if rate < first.rate {
+            return None;
+        }
+        let tangents = self
+            .points
+            .iter()
+            .map(|p| p.mse + p.slope * (rate - p.rate))
+            .fold(self.all_data_mse, f64::max);
+        let above = match self.points.iter().position(|p| p.rate >= rate) {
+            Some(0) => first.mse,
+            Some(k) => {
+                let (lo, hi) = (self.points[k - 1], self.points[k]);
+                let t = (rate - lo.rate) / (hi.rate - lo.rate);
+                lo.mse + t * (hi.mse - lo.mse)
+            }
+            None => last.mse,
+        };
+        (above - tangents <= TANGENT_GAP * tangents).then_some(tangents)
     }
 
     /// The smallest rate with a finite floor.
@@ -258,27 +310,40 @@ impl Floor {
         if self.plateau.is_some_and(|p| rate >= p) {
             return Ok(self.all_data_mse);
         }
+        if self.a.nrows() > 1 {
+            if let Some(d) = self.bound_from_curve(rate) {
+                return Ok(d);
+            }
+        }
         match self.solve(rate) {
+            Ok((d, _)) => Ok(d),
             // Where the solver does not converge (very low rates on a marginally stable
             // system): the floor at the next rate of the curve that was solved, or the all-data
             // error; both lie below the floor at `rate`, which decreases with the rate.
             Err(FloorError::Solver(_)) => Ok(self
                 .points
                 .iter()
-                .find(|(r, _)| *r >= rate)
-                .map_or(self.all_data_mse, |(_, d)| *d)),
-            other => other,
+                .find(|p| p.rate >= rate)
+                .map_or(self.all_data_mse, |p| p.mse)),
+            Err(e) => Err(e),
         }
     }
 
-    /// The floor at `rate` from the program (or the closed form for one state).
-    fn solve(&self, rate: f64) -> Result<f64, FloorError> {
-        let est = if self.a.nrows() == 1 {
-            scalar::distortion(self.a[(0, 0)], self.estimate_noise[(0, 0)], rate)?
+    /// The floor at `rate` and its slope in the rate, from the program (or the closed form
+    /// for one state, whose slope is `dD/dR = −2 ln 2 · 2^{2R} w / (2^{2R} − a²)²`).
+    fn solve(&self, rate: f64) -> Result<(f64, f64), FloorError> {
+        let (est, slope) = if self.a.nrows() == 1 {
+            let (a, w) = (self.a[(0, 0)], self.estimate_noise[(0, 0)]);
+            let d = scalar::distortion(a, w, rate)?;
+            let g = 2f64.powf(2.0 * rate);
+            (
+                d,
+                -2.0 * std::f64::consts::LN_2 * g * w / (g - a * a).powi(2),
+            )
         } else {
-            rd::floor_mse(&self.a, &self.estimate_noise, rate)?
+            rd::floor_point(&self.a, &self.estimate_noise, rate)?
         };
-        Ok(self.all_data_mse + est)
+        Ok((self.all_data_mse + est, slope))
     }
 
     /// The curve at `CURVE_RATES` above the minimum rate (points that could not be solved
@@ -288,8 +353,8 @@ impl Floor {
             return Err(self.curve_error.as_ref().map_or("no point".into(), note_of));
         }
         Ok(FloorCurve {
-            rate: self.points.iter().map(|p| p.0).collect(),
-            mse: self.points.iter().map(|p| p.1).collect(),
+            rate: self.points.iter().map(|p| p.rate).collect(),
+            mse: self.points.iter().map(|p| p.mse).collect(),
             all_data_mse: self.all_data_mse,
             min_rate: self.min_rate(),
             method: if self.a.nrows() == 1 {
@@ -314,6 +379,59 @@ mod tests {
             "{n}"
         );
         assert!(n.ends_with("(solver: InsufficientProgress)"));
+    }
+
+    /// Between the curve's points `mse_at` may take the tangents' bound instead of a program:
+    /// it must lie below the exact floor (up to the solver's accuracy) and within
+    /// [`TANGENT_GAP`] of it, and the tangent path must be taken somewhere.
+    #[test]
+    #[cfg_attr(not(hushfuse_openblas), ignore = "no BLAS/LAPACK in this build")]
+    fn a_floor_read_from_the_curve_is_below_the_exact_floor_and_close() {
+        let a = Matrix::from_row_slice(2, 2, &[1.0, 0.5, 0.0, 0.9]);
+        let w = Matrix::from_row_slice(2, 2, &[0.3, 0.05, 0.05, 0.2]);
+        let floor = Floor::from_split(a, w, 0.7);
+        assert_eq!(
+            floor.points.len(),
+            CURVE_RATES.len(),
+            "{:?}",
+            floor.curve_error
+        );
+        let mut from_curve = 0;
+        for k in 0..200 {
+            let rate = floor.min_rate() + 0.3 + 0.15 * k as f64;
+            let got = floor.mse_at(rate).unwrap();
+            let (exact, _) = floor.solve(rate).unwrap();
+            assert!(got <= exact * (1.0 + 1e-7), "R={rate}: {got} above {exact}");
+            assert!(
+                got >= exact * (1.0 - TANGENT_GAP) - 1e-12,
+                "R={rate}: {got} too far below {exact}"
+            );
+            from_curve += usize::from(floor.bound_from_curve(rate).is_some());
+        }
+        assert!(
+            from_curve > 10,
+            "the tangent bound was used {from_curve} times"
+        );
+    }
+
+    /// The closed form's slope is the derivative of the closed form.
+    #[test]
+    fn the_scalar_slope_is_the_derivative() {
+        let floor = Floor::from_split(
+            Matrix::from_element(1, 1, 1.3),
+            Matrix::from_element(1, 1, 0.4),
+            0.2,
+        );
+        for rate in [0.5, 1.0, 3.0] {
+            let (_, slope) = floor.solve(rate).unwrap();
+            let h = 1e-5;
+            let fd =
+                (floor.solve(rate + h).unwrap().0 - floor.solve(rate - h).unwrap().0) / (2.0 * h);
+            assert!(
+                (slope - fd).abs() < 1e-6 * fd.abs(),
+                "R={rate}: {slope} vs {fd}"
+            );
+        }
     }
 
     #[test]

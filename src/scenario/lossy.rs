@@ -91,7 +91,9 @@ fn loss_aware_copy(entry: &toml::Table, p: f64, taken: &mut Vec<String>) -> Opti
         .get("sweep")
         .and_then(toml::Value::as_table)
         .is_some_and(|t| t.contains_key(param));
-    if !(p > 0.0 && p < 1.0) || entry.contains_key(param) || swept {
+    // Zheng et al.'s exact fusion (CFwMD-exact) has no loss-aware likelihood.
+    let exact = entry.get("fusion").and_then(toml::Value::as_str) == Some("exact");
+    if !(p > 0.0 && p < 1.0) || entry.contains_key(param) || swept || exact {
         return None;
     }
     let label = entry_label(entry)?;

@@ -97,7 +97,14 @@ pub(crate) fn build_schemes(
             let variant_channel =
                 link.channel(ctx, (&field, &note), system.n_sensors(), channel)?;
             let sequence_bits = link.sequence_bits(ctx, (&field, &note))?;
-            let cx = BuildContext { system, steps };
+            let link_loss: Option<Vec<f64>> = variant_channel
+                .as_deref()
+                .map(|specs| specs.iter().map(ChannelSpec::delivery_loss).collect());
+            let cx = BuildContext {
+                system,
+                steps,
+                link_loss: link_loss.as_deref(),
+            };
             let scheme = registry::build_entry(entry, t, &cx).map_err(|e| match &e.field {
                 Some(f) => ctx.err(format!("{at}.{f}"), e.message.clone()),
                 None => ctx.err(&at, e.message.clone()),

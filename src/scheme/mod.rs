@@ -8,6 +8,7 @@ pub mod event_triggered;
 pub mod external;
 pub mod fast_path;
 pub mod federated_tobit;
+pub mod link_loss;
 pub mod quantized_innovation;
 pub mod registry;
 

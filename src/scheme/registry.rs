@@ -18,6 +18,10 @@ pub struct BuildContext<'a> {
     pub system: &'a Arc<System>,
     /// Time steps of the run (schemes precompute data-independent recursions this far).
     pub steps: usize,
+    /// Each sensor's long-run probability that its link never delivers a packet
+    /// ([`crate::network::channel::ChannelSpec::delivery_loss`]), for `link_loss = "channel"`;
+    /// `None` on ideal links.
+    pub link_loss: Option<&'a [f64]>,
 }
 
 /// A parameter that is missing, malformed or inconsistent.
@@ -544,6 +548,7 @@ mod tests {
         let cx = BuildContext {
             system: &system,
             steps: 10,
+            link_loss: None,
         };
         for e in SCHEMES {
             let table = example(e);
@@ -569,6 +574,7 @@ mod tests {
         let cx = BuildContext {
             system: &system,
             steps: 10,
+            link_loss: None,
         };
         for e in SCHEMES {
             let mut table = example(e);
@@ -598,6 +604,7 @@ mod tests {
         let cx = BuildContext {
             system: &system,
             steps: 10,
+            link_loss: None,
         };
         for e in SCHEMES {
             for p in e.params {

@@ -175,6 +175,26 @@ impl ChannelSpec {
         self.delay.unwrap_or_default()
     }
 
+    /// The probability that an uplink packet is never delivered, in the long run: what a
+    /// loss-aware center assumes for this link (`link_loss = "channel"`). Bernoulli `p`, and
+    /// with `arq` of `n` retries `p^(1+n)` (each attempt draws its own loss); Gilbert–Elliott
+    /// at its stationary state, `π_good loss_good^(1+n) + π_bad loss_bad^(1+n)` (the retries of
+    /// a step see that step's state; π_bad = p_gb / (p_gb + p_bg), 0 when the chain never
+    /// moves, as the fates take it). A delay is not a loss and counts nothing here. Assumes a
+    /// validated spec.
+    pub fn delivery_loss(&self) -> f64 {
+        let attempts = 1 + self.arq.map_or(0, |a| a.max_retries.min(Arq::MAX_RETRIES)) as i32;
+        match self.kind {
+            ChannelKind::Ideal => 0.0,
+            ChannelKind::Bernoulli => self.loss.unwrap_or(0.0).powi(attempts),
+            ChannelKind::GilbertElliott => {
+                let (gb, bg) = (self.p_gb.unwrap_or(0.0), self.p_bg.unwrap_or(0.0));
+                let bad = if gb + bg > 0.0 { gb / (gb + bg) } else { 0.0 };
+                (1.0 - bad) * self.loss_good().powi(attempts) + bad * self.loss_bad().powi(attempts)
+            }
+        }
+    }
+
     /// The downlink model (`None` in the file means ideal).
     pub fn downlink_spec(&self) -> ChannelSpec {
         self.downlink.as_deref().cloned().unwrap_or_default()

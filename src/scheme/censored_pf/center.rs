@@ -75,6 +75,9 @@ pub struct CensoredPfCenter {
     silent: Vec<usize>,
     /// Scratch: the log weights before a silence's band factor (loss-aware fusion).
     before_band: Vec<f64>,
+    /// The loss probability assumed for each sensor's link (`options.link_loss` for all,
+    /// unless [`CensoredPfCenter::with_link_losses`] gave one per sensor).
+    link_loss: Vec<f64>,
 }
 
 impl CensoredPfCenter {
@@ -125,7 +128,15 @@ impl CensoredPfCenter {
             plan: None,
             silent: Vec::with_capacity(n),
             before_band: Vec::new(),
+            link_loss: vec![options.link_loss; n],
         })
+    }
+
+    /// Each sensor's loss probability, in place of `options.link_loss` for all (checked by
+    /// [`super::CensoredPfScheme::with_link_losses`]).
+    pub fn with_link_losses(mut self, per_sensor: &[f64]) -> Self {
+        self.link_loss = per_sensor.to_vec();
+        self
     }
 
     /// Takes the replicas' local covariances from `plan` (the one computed for this system)
@@ -179,7 +190,7 @@ impl CensoredPfCenter {
         s: &Matrix,
         eta: f64,
     ) -> Result<(), SchemeError> {
-        let p = self.options.link_loss;
+        let p = self.link_loss[i];
         if p == 0.0 {
             return self.add_band(i, x_ref, s, eta);
         }

@@ -263,6 +263,8 @@ pub struct CensoredPfScheme {
     options: PfOptions,
     /// The linear sensors' local covariances for the horizon, shared by every instance.
     plan: Option<Arc<LocalPlan>>,
+    /// Each sensor's assumed loss probability, where they differ (else `options.link_loss`).
+    link_losses: Option<Arc<[f64]>>,
 }
 
 impl CensoredPfScheme {
@@ -309,6 +311,11 @@ impl CensoredPfScheme {
                         .into(),
                 ));
             }
+            if options.link_loss > 0.0 {
+                return Err(SchemeError::Unsupported(
+                    "CFwMD-exact has no loss-aware likelihood: `link_loss` needs fusion = \"full\" or \"simple\"".into(),
+                ));
+            }
             if system.sensors.iter().any(|s| s.as_linear().is_none()) {
                 return Err(SchemeError::Unsupported(
                     "CFwMD-exact needs linear sensors: an EKF's gain depends on its own estimate, which the fusion center would have to carry per particle".into(),
@@ -330,6 +337,7 @@ impl CensoredPfScheme {
             protocol,
             options,
             plan: None,
+            link_losses: None,
         })
     }
 
@@ -338,6 +346,23 @@ impl CensoredPfScheme {
     /// Instances then refuse to run past the horizon unless the covariances converged.
     pub fn with_horizon(mut self, horizon: usize) -> Result<Self, SchemeError> {
         self.plan = Some(Arc::new(LocalPlan::new(&self.system, horizon)?));
+        Ok(self)
+    }
+
+    /// Loss-aware fusion with each sensor's own loss probability (in [0, 1), one per sensor)
+    /// in place of `options.link_loss` for all. The exact fusion (`Fusion::Exact`) does not
+    /// read losses: refused there unless every one is 0.
+    pub fn with_link_losses(mut self, per_sensor: Vec<f64>) -> Result<Self, SchemeError> {
+        let ps = crate::scheme::event_triggered::loss_aware::effective_link_loss(
+            Some(per_sensor),
+            self.system.n_sensors(),
+        )?;
+        if ps.is_some() && self.options.fusion == Fusion::Exact {
+            return Err(SchemeError::Unsupported(
+                "CFwMD-exact has no loss-aware likelihood: `link_loss` needs fusion = \"full\" or \"simple\"".into(),
+            ));
+        }
+        self.link_losses = ps.map(Arc::from);
         Ok(self)
     }
 }
@@ -393,6 +418,10 @@ impl Scheme for CensoredPfScheme {
             _ => {
                 let center =
                     CensoredPfCenter::new(self.system.clone(), self.protocol, self.options, seed)?;
+                let center = match &self.link_losses {
+                    Some(ps) => center.with_link_losses(ps),
+                    None => center,
+                };
                 Box::new(match &self.plan {
                     Some(plan) => center.with_plan(plan.clone()),
                     None => center,

@@ -2,6 +2,7 @@
 //! [`Protocol::for_target`], the only place where `l` becomes eta.
 use super::{BandMethod, CensoredPfScheme, FeedbackMode, Fusion, PfOptions, Policy, Protocol};
 use crate::filter::particle::{ResamplePolicy, Resampling};
+use crate::scheme::link_loss::LinkLoss;
 use crate::scheme::registry::{
     self, BuildContext, ParamDoc, ParamError, SchemeEntry, SchemeParams,
 };
@@ -47,7 +48,7 @@ pub struct CensoredPfParams {
     #[serde(default = "default_prop3_samples")]
     pub prop3_samples: usize,
     #[serde(default)]
-    pub link_loss: f64,
+    pub link_loss: Option<LinkLoss>,
 }
 
 fn default_policy() -> Policy {
@@ -101,12 +102,12 @@ impl CensoredPfParams {
                 ));
             }
         }
-        if !(0.0..1.0).contains(&self.link_loss) {
-            return Err(ParamError::at(
-                "link_loss",
-                format!("expected a probability in [0, 1), got {}", self.link_loss),
-            ));
-        }
+        // One number for all sensors goes in the options; a list or "channel" is set per
+        // sensor on the built scheme.
+        let link_loss = match self.link_loss {
+            Some(LinkLoss::All(p)) => crate::scheme::link_loss::check(p)?,
+            _ => 0.0,
+        };
         let resample_policy = match self.ess_threshold {
             None => ResamplePolicy::Always,
             Some(t) if (0.0..=1.0).contains(&t) => ResamplePolicy::EssBelow(t),
@@ -142,7 +143,7 @@ impl CensoredPfParams {
             resample_policy,
             band,
             prop3_samples: self.prop3_samples,
-            link_loss: self.link_loss,
+            link_loss,
         })
     }
 }
@@ -151,8 +152,11 @@ impl SchemeParams for CensoredPfParams {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
         let protocol = self.protocol(cx)?;
         let options = self.options(protocol.eta().is_some())?;
-        let scheme =
+        let mut scheme =
             CensoredPfScheme::new(cx.system.clone(), protocol, options)?.with_horizon(cx.steps)?;
+        if let Some(l @ (LinkLoss::PerSensor(_) | LinkLoss::FromChannel(_))) = &self.link_loss {
+            scheme = scheme.with_link_losses(l.per_sensor(cx)?)?;
+        }
         Ok(Box::new(scheme))
     }
 }
@@ -214,7 +218,7 @@ pub const ENTRY: SchemeEntry = SchemeEntry {
         },
         ParamDoc {
             name: "link_loss",
-            values: "number in [0, 1)",
+            values: crate::scheme::link_loss::VALUES,
             default: "0",
             meaning: "loss-aware fusion (beyond the paper): the loss probability the center assumes, so that nothing arriving has likelihood P(silent | x) + link_loss P(sent | x); 0: the published likelihood (a missing packet is a silence)",
         },

@@ -331,6 +331,7 @@ fn params_and_validation() {
     let cx = BuildContext {
         system: &system,
         steps: 10,
+        link_loss: None,
     };
     for kind in ["ci-fusion", "naive-fusion"] {
         let entry = registry::find(kind).unwrap();

@@ -303,10 +303,11 @@ impl InnovationTriggerCenter {
     pub fn with_link_loss(
         mut self,
         delta: f64,
-        link_loss: Option<f64>,
+        link_loss: Option<Vec<f64>>,
     ) -> Result<Self, SchemeError> {
-        if let Some(p) = loss_aware::effective_link_loss(link_loss)? {
-            for (beta, s) in self.betas.iter_mut().zip(&self.system.sensors) {
+        let n = self.system.n_sensors();
+        if let Some(ps) = loss_aware::effective_link_loss(link_loss, n)? {
+            for ((beta, s), p) in self.betas.iter_mut().zip(&self.system.sensors).zip(ps) {
                 *beta = 1.0 - loss_aware::no_arrival_variance(delta, s.meas_dim(), p);
             }
         }
@@ -428,8 +429,9 @@ impl FusionCenter for InnovationTriggerCenter {
 pub struct InnovationTriggerScheme {
     system: Arc<System>,
     delta: f64,
-    /// The loss probability a loss-aware center assumes (`None`: the published center).
-    link_loss: Option<f64>,
+    /// The loss probability a loss-aware center assumes for each sensor (`None`: the
+    /// published center).
+    link_loss: Option<Vec<f64>>,
 }
 
 impl InnovationTriggerScheme {
@@ -445,8 +447,8 @@ impl InnovationTriggerScheme {
 
     /// The loss-aware center ([`InnovationTriggerCenter::with_link_loss`]); `None` or 0: the
     /// published one.
-    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
-        self.link_loss = loss_aware::effective_link_loss(link_loss)?;
+    pub fn with_link_loss(mut self, link_loss: Option<Vec<f64>>) -> Result<Self, SchemeError> {
+        self.link_loss = loss_aware::effective_link_loss(link_loss, self.system.n_sensors())?;
         Ok(self)
     }
 }
@@ -463,7 +465,7 @@ impl Scheme for InnovationTriggerScheme {
             sensors,
             center: Box::new(
                 InnovationTriggerCenter::new(self.system.clone(), self.delta)?
-                    .with_link_loss(self.delta, self.link_loss)?,
+                    .with_link_loss(self.delta, self.link_loss.clone())?,
             ),
         })
     }

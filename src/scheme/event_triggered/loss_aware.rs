@@ -38,27 +38,30 @@ use crate::model::MeasurementModel;
 use crate::scheme::SchemeError;
 use crate::stats::{normal, truncated_normal};
 
-/// Checks a `link_loss` parameter: a probability in [0, 1) (p = 1 would make every message a
-/// loss and every silence uninformative; the trigger then sends for nothing).
-pub fn check_link_loss(p: f64) -> Result<f64, SchemeError> {
-    if (0.0..1.0).contains(&p) {
-        Ok(p)
-    } else {
-        Err(SchemeError::Invalid {
+/// The loss probabilities a center assumes, one per sensor of `sensors` (each checked to lie
+/// in [0, 1), [`crate::scheme::link_loss::check`]): `None` (the published update) for an absent
+/// `link_loss` and where every sensor's is 0, where the loss-aware update is the published one,
+/// so that the published code runs and its numbers stay bit for bit.
+pub fn effective_link_loss(
+    link_loss: Option<Vec<f64>>,
+    sensors: usize,
+) -> Result<Option<Vec<f64>>, SchemeError> {
+    let Some(ps) = link_loss else {
+        return Ok(None);
+    };
+    if ps.len() != sensors {
+        return Err(SchemeError::Invalid {
             field: "link_loss",
-            message: format!("expected a probability in [0, 1), got {p}"),
-        })
+            message: format!(
+                "expected one probability per sensor ({sensors}), got {}",
+                ps.len()
+            ),
+        });
     }
-}
-
-/// The loss probability a center assumes: `None` (the published update) for an absent
-/// `link_loss` and for 0, where the loss-aware update is the published one, so that the
-/// published code runs and its numbers stay bit for bit.
-pub fn effective_link_loss(link_loss: Option<f64>) -> Result<Option<f64>, SchemeError> {
-    match link_loss {
-        None => Ok(None),
-        Some(p) => Ok(Some(check_link_loss(p)?).filter(|&p| p > 0.0)),
+    for &p in &ps {
+        crate::scheme::link_loss::check(p)?;
     }
+    Ok(Some(ps).filter(|ps| ps.iter().any(|&p| p > 0.0)))
 }
 
 /// The Gaussian closest to the mixture `(1 - w1) N(prior) + w1 N(post)` (the KL projection:

@@ -5,6 +5,7 @@ use super::{
     InnovationTriggerScheme, SendOnDeltaScheme, SilenceModel, StochasticTrigger,
     StochasticTriggerScheme, TriggerLoop,
 };
+use crate::scheme::link_loss::LinkLoss;
 use crate::scheme::registry::{
     self, BuildContext, ParamDoc, ParamError, SchemeEntry, SchemeParams,
 };
@@ -17,16 +18,16 @@ use serde::{Deserialize, Serialize};
 pub struct InnovationTriggerParams {
     /// Threshold on the largest whitened innovation component, >= 0.
     pub delta: f64,
-    /// Loss-aware fusion: the link's loss probability the center assumes (absent: published).
+    /// Loss-aware fusion: each link's loss probability the center assumes (absent: published).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub link_loss: Option<f64>,
+    pub link_loss: Option<LinkLoss>,
 }
 
 impl SchemeParams for InnovationTriggerParams {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
         Ok(Box::new(
             InnovationTriggerScheme::new(cx.system.clone(), self.delta)?
-                .with_link_loss(self.link_loss)?,
+                .with_link_loss(per_sensor(&self.link_loss, cx)?)?,
         ))
     }
 }
@@ -40,9 +41,9 @@ pub struct StochasticTriggerParams {
     pub tau: Option<f64>,
     #[serde(default, rename = "Y")]
     pub y: Option<Vec<Vec<f64>>>,
-    /// Loss-aware fusion: the link's loss probability the center assumes (absent: published).
+    /// Loss-aware fusion: each link's loss probability the center assumes (absent: published).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub link_loss: Option<f64>,
+    pub link_loss: Option<LinkLoss>,
 }
 
 impl StochasticTriggerParams {
@@ -74,7 +75,7 @@ fn build_stochastic(
     let p: StochasticTriggerParams = registry::parse(table)?;
     Ok(Box::new(
         StochasticTriggerScheme::new(cx.system.clone(), p.trigger(cx, kind)?)
-            .with_link_loss(p.link_loss)?,
+            .with_link_loss(per_sensor(&p.link_loss, cx)?)?,
     ))
 }
 
@@ -93,25 +94,33 @@ pub struct SendOnDeltaParams {
     pub delta: f64,
     #[serde(default)]
     pub silence: SilenceModel,
-    /// Loss-aware fusion: the link's loss probability the center assumes (absent: published).
+    /// Loss-aware fusion: each link's loss probability the center assumes (absent: published).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub link_loss: Option<f64>,
+    pub link_loss: Option<LinkLoss>,
 }
 
 impl SchemeParams for SendOnDeltaParams {
     fn build(&self, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
         Ok(Box::new(
             SendOnDeltaScheme::new(cx.system.clone(), self.delta, self.silence)?
-                .with_link_loss(self.link_loss)?,
+                .with_link_loss(per_sensor(&self.link_loss, cx)?)?,
         ))
     }
+}
+
+/// Each sensor's loss probability from a written `link_loss`.
+fn per_sensor(
+    link_loss: &Option<LinkLoss>,
+    cx: &BuildContext,
+) -> Result<Option<Vec<f64>>, ParamError> {
+    Ok(link_loss.as_ref().map(|l| l.per_sensor(cx)).transpose()?)
 }
 
 /// `link_loss` of every event-triggered kind.
 const fn link_loss(meaning: &'static str) -> ParamDoc {
     ParamDoc {
         name: "link_loss",
-        values: "number in [0, 1)",
+        values: crate::scheme::link_loss::VALUES,
         default: "none",
         meaning,
     }

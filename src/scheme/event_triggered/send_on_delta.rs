@@ -133,7 +133,7 @@ pub struct SendOnDeltaCenter {
     out: Gaussian,
     /// The loss-aware reading (uniform model, p > 0) and, per sensor, the probability q that
     /// its reference is the last received value; `None`: the published center.
-    loss: Option<(loss_aware::SendOnDeltaMixture, Vec<f64>)>,
+    loss: Option<(Vec<loss_aware::SendOnDeltaMixture>, Vec<f64>)>,
 }
 
 impl SendOnDeltaCenter {
@@ -171,16 +171,18 @@ impl SendOnDeltaCenter {
 
     /// The loss-aware center (module note); `None` or 0, or `silence = "ignore"`: the published
     /// one.
-    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
-        let p = loss_aware::effective_link_loss(link_loss)?;
-        self.loss = p
+    pub fn with_link_loss(mut self, link_loss: Option<Vec<f64>>) -> Result<Self, SchemeError> {
+        let n = self.system.n_sensors();
+        let ps = loss_aware::effective_link_loss(link_loss, n)?;
+        self.loss = ps
             .filter(|_| self.silence == SilenceModel::Uniform)
-            .map(|p| {
-                let mixture = loss_aware::SendOnDeltaMixture {
-                    delta: self.delta,
-                    p,
-                };
-                (mixture, vec![1.0; self.system.n_sensors()])
+            .map(|ps| {
+                let delta = self.delta;
+                let mixtures = ps
+                    .into_iter()
+                    .map(|p| loss_aware::SendOnDeltaMixture { delta, p })
+                    .collect();
+                (mixtures, vec![1.0; n])
             });
         Ok(self)
     }
@@ -190,7 +192,7 @@ impl SendOnDeltaCenter {
     fn step_loss_aware(
         &mut self,
         inbox: &[Received],
-        mixture: loss_aware::SendOnDeltaMixture,
+        mixtures: &[loss_aware::SendOnDeltaMixture],
         q: &mut [f64],
     ) -> Result<(), SchemeError> {
         self.fusion
@@ -202,7 +204,7 @@ impl SendOnDeltaCenter {
                 Received::Measurement(_) => q_next[i] = 1.0,
                 Received::Silent if self.received[i] => {
                     let sensor = self.system.sensors[i].as_ref();
-                    let u = mixture.update(
+                    let u = mixtures[i].update(
                         sensor,
                         &self.out,
                         &self.last_received[i],
@@ -240,9 +242,9 @@ impl FusionCenter for SendOnDeltaCenter {
                 self.received[i] = true;
             }
         }
-        if let Some((mixture, mut q)) = self.loss.take() {
-            let r = self.step_loss_aware(inbox, mixture, &mut q);
-            self.loss = Some((mixture, q));
+        if let Some((mixtures, mut q)) = self.loss.take() {
+            let r = self.step_loss_aware(inbox, &mixtures, &mut q);
+            self.loss = Some((mixtures, q));
             return r;
         }
         self.fusion.start(&self.pred)?;
@@ -278,7 +280,7 @@ pub struct SendOnDeltaScheme {
     delta: f64,
     silence: SilenceModel,
     /// The loss probability a loss-aware center assumes (`None`: the published center).
-    link_loss: Option<f64>,
+    link_loss: Option<Vec<f64>>,
 }
 
 impl SendOnDeltaScheme {
@@ -299,8 +301,8 @@ impl SendOnDeltaScheme {
 
     /// The loss-aware center ([`SendOnDeltaCenter::with_link_loss`]); `None` or 0: the
     /// published one.
-    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
-        self.link_loss = loss_aware::effective_link_loss(link_loss)?;
+    pub fn with_link_loss(mut self, link_loss: Option<Vec<f64>>) -> Result<Self, SchemeError> {
+        self.link_loss = loss_aware::effective_link_loss(link_loss, self.system.n_sensors())?;
         Ok(self)
     }
 }
@@ -320,7 +322,7 @@ impl Scheme for SendOnDeltaScheme {
             sensors,
             center: Box::new(
                 SendOnDeltaCenter::new(self.system.clone(), self.delta, self.silence)?
-                    .with_link_loss(self.link_loss)?,
+                    .with_link_loss(self.link_loss.clone())?,
             ),
         })
     }

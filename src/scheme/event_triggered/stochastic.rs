@@ -244,7 +244,7 @@ pub struct StochasticTriggerCenter {
     pseudo: Vec<Vector>,
     /// The loss-aware center: the loss probability p > 0 and, per sensor, log det Y_i^{-1}
     /// (`None` for τ = 0); `None`: the published center.
-    loss: Option<(f64, Vec<Option<f64>>)>,
+    loss: Option<(Vec<f64>, Vec<Option<f64>>)>,
 }
 
 impl StochasticTriggerCenter {
@@ -271,8 +271,8 @@ impl StochasticTriggerCenter {
 
     /// The loss-aware center (module note, [`loss_aware::stochastic_no_arrival`]); `None` or 0:
     /// the published one.
-    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
-        self.loss = match loss_aware::effective_link_loss(link_loss)? {
+    pub fn with_link_loss(mut self, link_loss: Option<Vec<f64>>) -> Result<Self, SchemeError> {
+        self.loss = match loss_aware::effective_link_loss(link_loss, self.system.n_sensors())? {
             None => None,
             Some(p) => {
                 let log_dets = (0..self.system.n_sensors())
@@ -289,7 +289,7 @@ impl StochasticTriggerCenter {
     fn step_loss_aware(
         &mut self,
         inbox: &[Received],
-        p: f64,
+        p: &[f64],
         log_dets: &[Option<f64>],
     ) -> Result<(), SchemeError> {
         self.fusion
@@ -308,7 +308,7 @@ impl StochasticTriggerCenter {
                 &self.pseudo[i],
                 noise,
                 log_det,
-                p,
+                p[i],
             )?
             .estimate;
         }
@@ -346,7 +346,7 @@ impl FusionCenter for StochasticTriggerCenter {
             }
         }
         if let Some((p, log_dets)) = self.loss.take() {
-            let r = self.step_loss_aware(inbox, p, &log_dets);
+            let r = self.step_loss_aware(inbox, &p, &log_dets);
             self.loss = Some((p, log_dets));
             return r;
         }
@@ -388,7 +388,7 @@ pub struct StochasticTriggerScheme {
     system: Arc<System>,
     trigger: StochasticTrigger,
     /// The loss probability a loss-aware center assumes (`None`: the published center).
-    link_loss: Option<f64>,
+    link_loss: Option<Vec<f64>>,
 }
 
 impl StochasticTriggerScheme {
@@ -402,8 +402,8 @@ impl StochasticTriggerScheme {
 
     /// The loss-aware center ([`StochasticTriggerCenter::with_link_loss`]); `None` or 0: the
     /// published one.
-    pub fn with_link_loss(mut self, link_loss: Option<f64>) -> Result<Self, SchemeError> {
-        self.link_loss = loss_aware::effective_link_loss(link_loss)?;
+    pub fn with_link_loss(mut self, link_loss: Option<Vec<f64>>) -> Result<Self, SchemeError> {
+        self.link_loss = loss_aware::effective_link_loss(link_loss, self.system.n_sensors())?;
         Ok(self)
     }
 }
@@ -422,7 +422,7 @@ impl Scheme for StochasticTriggerScheme {
                 .collect(),
             center: Box::new(
                 StochasticTriggerCenter::new(self.system.clone(), self.trigger.clone())
-                    .with_link_loss(self.link_loss)?,
+                    .with_link_loss(self.link_loss.clone())?,
             ),
         })
     }

@@ -521,6 +521,7 @@ fn constructors_and_params_name_the_field() {
     let cx = BuildContext {
         system: &system,
         steps: 10,
+        link_loss: None,
     };
     let build = |kind: &str, toml_text: &str| {
         let table: toml::Table = toml::from_str(toml_text).unwrap();

@@ -53,7 +53,22 @@ pub(super) struct ConeProgram {
     cones: Vec<SupportedConeT<f64>>,
 }
 
+/// A solved program: the primal point and the constraints' multipliers.
+#[derive(Debug, Clone)]
+pub struct Solution {
+    /// The minimizer.
+    pub x: Vec<f64>,
+    /// One multiplier per row (the dual cone's point): for a row `e >= 0`, the rate at which
+    /// the optimal value falls as the row's constant grows.
+    pub z: Vec<f64>,
+}
+
 impl ConeProgram {
+    /// Number of variables.
+    pub fn n_vars(&self) -> usize {
+        self.n_vars
+    }
+
     pub fn new(n_vars: usize) -> Self {
         ConeProgram {
             n_vars,
@@ -62,10 +77,11 @@ impl ConeProgram {
         }
     }
 
-    /// `expression >= 0`.
-    pub fn nonnegative(&mut self, expression: Affine) {
+    /// `expression >= 0`; returns the row, where [`Solution::z`] holds its multiplier.
+    pub fn nonnegative(&mut self, expression: Affine) -> usize {
         self.rows.push(expression);
         self.cones.push(SupportedConeT::NonnegativeConeT(1));
+        self.rows.len() - 1
     }
 
     /// `(x, y, z)` in the exponential cone `y e^{x/y} <= z`, `y > 0`: with `y = 1`,
@@ -98,7 +114,7 @@ impl ConeProgram {
     /// Errors: [`FloorError::Solver`] for any status but `Solved` (infeasible, iteration limit,
     /// numerical trouble), and for a problem Clarabel refuses to set up.
     #[cfg(not(hushfuse_openblas))]
-    pub fn minimize(&self, q: &[f64]) -> Result<Vec<f64>, FloorError> {
+    pub fn minimize(&self, q: &[f64]) -> Result<Solution, FloorError> {
         let _ = q;
         Err(FloorError::Solver(
             "the vector rate-distortion floor needs a BLAS/LAPACK library, which this build did \
@@ -109,7 +125,7 @@ impl ConeProgram {
 
     /// Solves and returns the primal solution (see above).
     #[cfg(hushfuse_openblas)]
-    pub fn minimize(&self, q: &[f64]) -> Result<Vec<f64>, FloorError> {
+    pub fn minimize(&self, q: &[f64]) -> Result<Solution, FloorError> {
         single_threaded_blas();
         let (a, b) = self.constraint_matrix();
         let p = CscMatrix::zeros((self.n_vars, self.n_vars));
@@ -124,7 +140,10 @@ impl ConeProgram {
             .map_err(|e| FloorError::Solver(format!("setup: {e:?}")))?;
         solver.solve();
         match solver.solution.status {
-            SolverStatus::Solved => Ok(solver.solution.x.clone()),
+            SolverStatus::Solved => Ok(Solution {
+                x: solver.solution.x.clone(),
+                z: solver.solution.z.clone(),
+            }),
             status => Err(FloorError::Solver(format!("status {status:?}"))),
         }
     }
@@ -207,7 +226,10 @@ mod tests {
         for k in 0..2 {
             prog.exponential(Affine::var(6 + k), Affine::constant(1.0), z(k, k));
         }
-        let x = prog.minimize(&[0., 0., 0., 0., 0., 0., -1., -1.]).unwrap();
+        let x = prog
+            .minimize(&[0., 0., 0., 0., 0., 0., -1., -1.])
+            .unwrap()
+            .x;
         // The optimal value is as accurate as the gap (1e-8); the maximizer, where log det is
         // flat to second order, only to about its square root.
         assert!((x[6] + x[7]).abs() < 1e-7, "{x:?}");

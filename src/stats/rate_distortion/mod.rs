@@ -61,7 +61,7 @@ pub mod scalar;
 pub mod sdp;
 
 pub use noisy::{floor_mse_noisy, kalman_steady_state, KalmanSteadyState};
-pub use sdp::{floor_covariance, floor_mse, min_rate, rate, stationary_covariance};
+pub use sdp::{floor_covariance, floor_mse, floor_point, min_rate, rate, stationary_covariance};
 
 /// Why a floor could not be given.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

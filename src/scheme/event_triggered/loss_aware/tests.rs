@@ -41,11 +41,15 @@ fn posterior(m: f64, pv: f64, lik: impl Fn(f64) -> f64) -> (f64, f64) {
 
 #[test]
 fn link_loss_must_be_a_probability_below_one_and_zero_is_the_published_update() {
-    assert_eq!(effective_link_loss(None).unwrap(), None);
-    assert_eq!(effective_link_loss(Some(0.0)).unwrap(), None);
-    assert_eq!(effective_link_loss(Some(0.3)).unwrap(), Some(0.3));
+    assert_eq!(effective_link_loss(None, 2).unwrap(), None);
+    assert_eq!(effective_link_loss(Some(vec![0.0, 0.0]), 2).unwrap(), None);
+    assert_eq!(
+        effective_link_loss(Some(vec![0.3, 0.0]), 2).unwrap(),
+        Some(vec![0.3, 0.0])
+    );
+    assert!(effective_link_loss(Some(vec![0.3]), 2).is_err());
     for bad in [1.0, -0.1, f64::NAN, 2.0] {
-        match effective_link_loss(Some(bad)) {
+        match effective_link_loss(Some(vec![0.0, bad]), 2) {
             Err(SchemeError::Invalid { field, .. }) => assert_eq!(field, "link_loss"),
             other => panic!("{bad}: {other:?}"),
         }

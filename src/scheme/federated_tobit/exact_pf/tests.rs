@@ -522,6 +522,7 @@ fn build(text: &str) -> Result<Box<dyn Scheme>, registry::ParamError> {
     let cx = BuildContext {
         system: &sys,
         steps: 10,
+        link_loss: None,
     };
     (registry::find("tobit-pf").expect("registered").build)(table, &cx)
 }
