@@ -108,6 +108,24 @@ pub(crate) fn load_text(
     seed: Option<u64>,
     threads: usize,
 ) -> PyResult<build::Experiment> {
+    load_text_with(text, source, trials, seed, threads, false)
+}
+
+/// The system, data and links of a scenario, without its schemes
+/// ([`build::LoadOptions::data_only`]): what drawing a trial needs.
+pub(crate) fn load_data(scenario: &str, seed: Option<u64>) -> PyResult<build::Experiment> {
+    let (text, source) = resolve_with_loss(scenario, None)?;
+    load_text_with(&text, &source, None, seed, 1, true)
+}
+
+fn load_text_with(
+    text: &str,
+    source: &str,
+    trials: Option<usize>,
+    seed: Option<u64>,
+    threads: usize,
+    data_only: bool,
+) -> PyResult<build::Experiment> {
     let (text, source) = (text.to_string(), source.to_string());
     let kind = build::file_kind(&text, &source).map_err(scenario_err)?;
     if kind == build::FileKind::TableReport {
@@ -120,6 +138,7 @@ pub(crate) fn load_text(
         seed,
         threads,
         limits: None,
+        data_only,
     };
     build::load_with(&text, &source, &opts).map_err(scenario_err)
 }

@@ -4,8 +4,7 @@
 use crate::external;
 use crate::helpers::to_py;
 use crate::{
-    estimates_arrays, load, python_words, resolve, vectors_to_array2, DataError, RunError,
-    ScenarioError,
+    estimates_arrays, python_words, resolve, vectors_to_array2, DataError, RunError, ScenarioError,
 };
 use hushfuse::engine::calibrate;
 use hushfuse::engine::replay::{self, arrays};
@@ -205,6 +204,7 @@ pub(crate) fn run<'py>(
                 seed,
                 threads,
                 limits: None,
+                ..Default::default()
             },
         };
         if pilot_trials == Some(0) {
@@ -371,7 +371,9 @@ pub(crate) fn simulate<'py>(
     trial: usize,
     seed: Option<u64>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let exp = load(scenario, None, seed, 0, None)?;
+    // One trial's data is all it holds: no scheme is built, and the memory check is that of
+    // one trial (not the whole run's).
+    let exp = crate::load_data(scenario, seed)?;
     let data = runner::draw_trial(&exp, trial);
     let d = PyDict::new(py);
     d.set_item(

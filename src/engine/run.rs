@@ -156,6 +156,7 @@ pub fn execute(req: &Request, hooks: &Hooks) -> Result<Outcome, RunFailure> {
         seed: req.seed,
         threads: req.threads,
         limits: req.allow_large.then(limits::Limits::none),
+        ..Default::default()
     };
     let exp = build::load_with(&req.text, &req.source, &options).map_err(|e| match e.limit {
         Some(crate::scenario::error::Limit::Memory) => RunFailure::TooLarge(e.to_string()),
@@ -508,6 +509,7 @@ fn check_shard_files(
             seed: key.seed_override,
             threads: 0,
             limits: key.allow_large.then(limits::Limits::none),
+            ..Default::default()
         },
     )
     .map_err(|e| RunFailure::Input(format!("the shards' scenario: {e}")))?;

@@ -22,6 +22,11 @@ pub struct LoadOptions {
     pub threads: usize,
     /// `None`: the default limits.
     pub limits: Option<Limits>,
+    /// Build the system, its data and its links only, no scheme (`variants` and `curves`
+    /// empty): what drawing a trial's truth and readings needs, so that it is neither refused
+    /// for nor made to compute the schemes' memory (Python's `simulate`). The memory estimate
+    /// is then one trial's data on one thread.
+    pub data_only: bool,
 }
 
 /// Most steps per trial: every step is stored per variant, and data-independent recursions
@@ -226,16 +231,44 @@ pub fn build_with(
             crate::scenario::every_scheme::expand(&ctx, &file_spec.schemes, &system)?;
     }
 
+    if opts.data_only {
+        let data = limits::baseline(&system, parts.groups.len(), 0, 1, file_spec.steps, 1);
+        limits::check(&data, &limits, file)?;
+        return Ok(Experiment {
+            name: file_spec.name,
+            description: file_spec.description,
+            source: file.to_string(),
+            system,
+            initial_truth: parts.initial_truth,
+            groups: parts.groups,
+            curves: Vec::new(),
+            variants: Vec::new(),
+            trials: file_spec.trials,
+            steps: file_spec.steps,
+            seed: file_spec.seed,
+            steady_from,
+            paper: file_spec.paper,
+            channel,
+            radio,
+            reals: file_spec.reals,
+        });
+    }
     // What the run needs before any scheme precomputes anything for `steps`.
     let workers = threads(opts);
     let entries = file_spec.schemes.len().max(1);
-    let before = limits::baseline(
+    // Any entry may build a per-step plan for `steps` steps as it is built.
+    let before = limits::with_plans(
+        limits::baseline(
+            &system,
+            parts.groups.len(),
+            entries,
+            file_spec.trials,
+            file_spec.steps,
+            workers,
+        ),
         &system,
-        parts.groups.len(),
         entries,
-        file_spec.trials,
         file_spec.steps,
-        workers,
     );
     limits::check(&before, &limits, file)?;
 
@@ -260,6 +293,11 @@ pub fn build_with(
         file_spec.steps,
         workers,
     );
+    let with_plan = variants
+        .iter()
+        .filter(|v| v.scheme.keeps_step_plan())
+        .count();
+    let estimate = limits::with_plans(estimate, &system, with_plan, file_spec.steps);
     let estimate = limits::with_refusion(
         estimate,
         &system,

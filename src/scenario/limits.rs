@@ -155,16 +155,29 @@ pub fn baseline(
     let sums = block + (block * blocks).max(WINDOW_MAX_BYTES as f64);
     let per_trial = trials * variants * (columns(groups) * 8.0 + 24.0);
     let per_step = step_seconds(system);
-    let plans = variants * steps * (PLAN_BYTES_PER_STEP_N2 * n * n + PLAN_BYTES_PER_STEP);
     Estimate {
-        memory_bytes: trial_data + sums + per_trial + plans,
+        memory_bytes: trial_data + sums + per_trial,
         seconds: trials * steps * (variants * per_step + m * 1e-7) / workers,
         threads: workers,
         refusion_seconds: 0.0,
     }
 }
 
-/// Adds what each scheme declares beyond the baseline.
+/// Bytes of `count` per-step plans over `steps` steps ([`Scheme::keeps_step_plan`]): an upper
+/// bound (a plan whose recursion settles stops storing steps).
+pub fn plans(system: &System, count: usize, steps: usize) -> f64 {
+    let n = system.state_dim() as f64;
+    count as f64 * steps as f64 * (PLAN_BYTES_PER_STEP_N2 * n * n + PLAN_BYTES_PER_STEP)
+}
+
+/// Adds the plans of `count` schemes ([`plans`]).
+pub fn with_plans(mut e: Estimate, system: &System, count: usize, steps: usize) -> Estimate {
+    e.memory_bytes += plans(system, count, steps);
+    e
+}
+
+/// Adds what each scheme declares beyond the baseline: its instances' footprint on every
+/// worker (its shared plan is [`with_plans`]).
 pub fn with_schemes<'a>(
     mut e: Estimate,
     schemes: impl IntoIterator<Item = &'a dyn Scheme>,

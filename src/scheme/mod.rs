@@ -213,6 +213,12 @@ pub trait Scheme: Send + Sync + Debug {
     fn schedule(&self) -> Schedule {
         Schedule::All
     }
+    /// Whether the scheme keeps a plan of per-step matrices for the run's horizon, shared by its
+    /// instances (the covariance recursions of the linear sensors, computed once for every
+    /// trial): the memory estimate counts [`crate::scenario::limits::plans`] for it.
+    fn keeps_step_plan(&self) -> bool {
+        false
+    }
     /// What one instance costs beyond the Kalman-filter baseline that the simulator assumes for
     /// every scheme (particles, banks of filters), so that runs that cannot fit are refused
     /// before they start. `None`: nothing beyond the baseline.

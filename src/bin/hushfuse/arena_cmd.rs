@@ -113,6 +113,7 @@ pub(crate) fn arena_run(
         limits: args
             .allow_large
             .then(hushfuse::scenario::limits::Limits::none),
+        ..Default::default()
     };
     // The scenario as run, loaded once for the checks before the first pilot run (one that does
     // not load is reported by the calibration with its full message).

@@ -349,7 +349,10 @@ fn quoted(s: &str) -> String {
 /// sensor what it did (`sent`, `silent`, `not_scheduled`, `missing`: no reading) and the
 /// payload bits it sent.
 pub fn estimates_csv(exp: &Experiment, rec: &Recorded, rep: &Replayed) -> String {
-    let mut out = estimates_header(exp);
+    // Reserved at its bound, so that the string does not double past it as it grows (the
+    // memory estimate counts the bound once).
+    let mut out = String::with_capacity(estimates_csv_bytes(exp, exp.steps) as usize);
+    out.push_str(&estimates_header(exp));
     for (v, vr) in rep.variants.iter().enumerate() {
         for (k, est) in vr.estimates.iter().enumerate() {
             let sensors = (0..exp.system.n_sensors()).map(|i| {
@@ -610,10 +613,10 @@ pub fn check_read(
     Ok(())
 }
 
-/// Bytes a replay of `steps` steps and `rows` readings holds beyond what the experiment's own
-/// estimate counts ([`crate::scenario::limits::baseline`] of one trial on one thread): the per-step
-/// grid of readings and their flags, the truth, every variant's estimates (mean and
-/// covariance on the heap), links and bits, and `estimates.csv` as a growing string (plus
+/// Bytes a replay of `steps` steps and `rows` readings holds besides its schemes' instances and
+/// plans ([`estimated_bytes`]): the per-step grid of readings and their flags, the truth, every
+/// variant's estimates (mean and covariance on the heap), links and bits, and `estimates.csv`
+/// as a string reserved at its bound (plus
 /// `summary.json` and `per_step.csv` with truth).
 pub fn replay_bytes(exp: &Experiment, steps: usize, rows: usize, truth: bool) -> f64 {
     use std::mem::size_of;
@@ -637,7 +640,7 @@ pub fn replay_bytes(exp: &Experiment, steps: usize, rows: usize, truth: bool) ->
         + 8.0 * (n + n * n)
         + 2.0 * (VEC_BYTES + ALLOC_BYTES)
         + ns * (f(size_of::<Link>()) + 8.0);
-    let csv = 2.0 * estimates_csv_bytes(exp, steps);
+    let csv = estimates_csv_bytes(exp, steps);
     let metrics = if truth {
         t * f(exp.variants.len()) * (f(exp.groups.len()) + 12.0) * 80.0
     } else {
@@ -690,9 +693,41 @@ impl<'a> Readings<'a> {
     }
 }
 
-/// Refuses a replay whose data would not fit: the experiment (one trial, one thread) and
-/// [`replay_bytes`], from a build of the scenario for one step (dimensions and variants do not
-/// depend on the steps). A scenario that does not build for one step is left to the real load.
+/// About how many bytes a replay of `steps` steps and `rows` readings of the scenario holds
+/// at its peak: the experiment (one trial, one thread) and [`replay_bytes`], from a build of
+/// the scenario for one step (dimensions and variants do not depend on the steps), with that
+/// build. `None` when the scenario does not build for one step (left to the real load).
+pub fn estimated_bytes(
+    scenario_text: &str,
+    source: &str,
+    rows: usize,
+    steps: usize,
+    truth: bool,
+    load: &LoadOptions,
+    seed: Option<u64>,
+) -> Option<(f64, Experiment)> {
+    use crate::scenario::limits;
+    let probe_opts = LoadOptions {
+        limits: Some(limits::Limits::none()),
+        threads: 1,
+        ..*load
+    };
+    let (probe, _) = load_experiment(scenario_text, source, 1, seed, &probe_opts).ok()?;
+    // The replay holds its own data, estimates and metrics (`replay_bytes`), not the runner's
+    // trial buffers and sums: of the run's estimate only the schemes' instances and plans.
+    let schemes = probe.variants.iter().map(|v| v.scheme.as_ref());
+    let instances = limits::with_schemes(limits::Estimate::default(), schemes, 1, steps, 1);
+    let with_plan = probe
+        .variants
+        .iter()
+        .filter(|v| v.scheme.keeps_step_plan())
+        .count();
+    let plans = limits::plans(&probe.system, with_plan, steps);
+    let bytes = instances.memory_bytes + plans + replay_bytes(&probe, steps, rows, truth);
+    Some((bytes, probe))
+}
+
+/// Refuses a replay whose data would not fit ([`estimated_bytes`]).
 pub(super) fn check_replay_memory(
     scenario_text: &str,
     source: &str,
@@ -706,30 +741,17 @@ pub(super) fn check_replay_memory(
     if limits.max_memory_bytes.is_infinite() {
         return Ok(());
     }
-    let probe_opts = LoadOptions {
-        limits: Some(limits::Limits::none()),
-        threads: 1,
-        ..opts.load
-    };
-    let Ok((probe, _)) = load_experiment(scenario_text, source, 1, opts.seed, &probe_opts) else {
+    let Some((bytes, probe)) = estimated_bytes(
+        scenario_text,
+        source,
+        meas.rows,
+        steps,
+        truth,
+        &opts.load,
+        opts.seed,
+    ) else {
         return Ok(());
     };
-    let schemes = probe.variants.iter().map(|v| v.scheme.as_ref());
-    let base = limits::with_schemes(
-        limits::baseline(
-            &probe.system,
-            probe.groups.len(),
-            probe.variants.len(),
-            1,
-            steps,
-            1,
-        ),
-        schemes,
-        1,
-        steps,
-        1,
-    );
-    let bytes = base.memory_bytes + replay_bytes(&probe, steps, meas.rows, truth);
     if bytes.is_nan() || bytes > limits.max_memory_bytes {
         let last = meas.last_step;
         return Err(err_at(

@@ -368,6 +368,10 @@ impl CensoredPfScheme {
 }
 
 impl Scheme for CensoredPfScheme {
+    fn keeps_step_plan(&self) -> bool {
+        self.plan.is_some()
+    }
+
     fn build(&self) -> Result<SchemeInstance, SchemeError> {
         self.build_with_seed(0)
     }

@@ -164,6 +164,10 @@ impl DistributedKfScheme {
 }
 
 impl Scheme for DistributedKfScheme {
+    fn keeps_step_plan(&self) -> bool {
+        true
+    }
+
     fn build(&self) -> Result<SchemeInstance, SchemeError> {
         let sensors = self
             .system
