@@ -3,8 +3,12 @@
 //! [`crate::scenario::system`] (model, prior, sensors, groups), [`crate::scenario::sweep`] (sweep expansion),
 //! [`crate::scenario::schemes`] (schemes through the registry), [`crate::scenario::paper_check`] (the `[paper]`
 //! section) and [`crate::scenario::limits`] (what the run would ask of the machine).
+use crate::filter::Gaussian;
+use crate::network::channel::ChannelSpec;
+use crate::network::radio::RadioSpec;
 use crate::scenario::limits::{self, Limits};
 use crate::scenario::ScenarioFile;
+use crate::scheme::System;
 use std::sync::Arc;
 
 pub(crate) use crate::scenario::error::Ctx;
@@ -231,27 +235,18 @@ pub fn build_with(
             crate::scenario::every_scheme::expand(&ctx, &file_spec.schemes, &system)?;
     }
 
+    let link = (channel, radio);
     if opts.data_only {
         let data = limits::baseline(&system, parts.groups.len(), 0, 1, file_spec.steps, 1);
         limits::check(&data, &limits, file)?;
-        return Ok(Experiment {
-            name: file_spec.name,
-            description: file_spec.description,
-            source: file.to_string(),
-            system,
-            initial_truth: parts.initial_truth,
-            groups: parts.groups,
-            curves: Vec::new(),
-            variants: Vec::new(),
-            trials: file_spec.trials,
-            steps: file_spec.steps,
-            seed: file_spec.seed,
-            steady_from,
-            paper: file_spec.paper,
-            channel,
-            radio,
-            reals: file_spec.reals,
-        });
+        let built = (system, parts.initial_truth, parts.groups, steady_from);
+        return Ok(assemble(
+            file_spec,
+            file,
+            built,
+            (Vec::new(), Vec::new()),
+            link,
+        ));
     }
     // What the run needs before any scheme precomputes anything for `steps`.
     let workers = threads(opts);
@@ -277,7 +272,7 @@ pub fn build_with(
         &file_spec.schemes,
         &system,
         file_spec.steps,
-        &channel.clone().map(std::sync::Arc::new),
+        &link.0.clone().map(std::sync::Arc::new),
     )?;
     let estimate = limits::with_schemes(
         limits::baseline(
@@ -319,13 +314,29 @@ pub fn build_with(
         )?;
     }
 
-    Ok(Experiment {
+    let built = (system, parts.initial_truth, parts.groups, steady_from);
+    Ok(assemble(file_spec, file, built, (curves, variants), link))
+}
+
+/// Named state-component groups, as [`Experiment::groups`].
+type Groups = Vec<(String, Vec<usize>)>;
+
+/// The experiment of a checked scenario: its system (with the initial truth, the groups and
+/// the first steady-state step), schemes and link.
+fn assemble(
+    file_spec: ScenarioFile,
+    file: &str,
+    (system, initial_truth, groups, steady_from): (Arc<System>, Gaussian, Groups, usize),
+    (curves, variants): (Vec<Curve>, Vec<Variant>),
+    (channel, radio): (Option<Vec<ChannelSpec>>, RadioSpec),
+) -> Experiment {
+    Experiment {
         name: file_spec.name,
         description: file_spec.description,
         source: file.to_string(),
         system,
-        initial_truth: parts.initial_truth,
-        groups: parts.groups,
+        initial_truth,
+        groups,
         curves,
         variants,
         trials: file_spec.trials,
@@ -336,7 +347,7 @@ pub fn build_with(
         channel,
         radio,
         reals: file_spec.reals,
-    })
+    }
 }
 
 /// `reals = "f64"` is carried by the engine's generic loop on links that deliver at once:
