@@ -5,6 +5,7 @@ use crate::link::{Received, Transmission};
 
 pub mod channel;
 pub mod radio;
+pub mod topology;
 
 use channel::Fate;
 

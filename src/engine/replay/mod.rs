@@ -551,13 +551,15 @@ pub fn replay_csv(
         &limits,
     )
     .map_err(too_large)?;
-    // One trial, replayed on this thread.
+    // One trial, replayed on this thread. Its memory was checked above, against what a replay
+    // allocates: the run's estimate (the runner's sums and trial buffers) does not apply.
     let load = LoadOptions {
         threads: if opts.load.threads == 0 {
             1
         } else {
             opts.load.threads
         },
+        limits: Some(crate::scenario::limits::Limits::none()),
         ..opts.load
     };
     let (exp, notes) = load_experiment(scenario_text, source, steps, opts.seed, &load)
