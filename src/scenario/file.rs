@@ -108,6 +108,10 @@ pub struct ScenarioFile {
     /// without a `channel` of its own (`scenario::channel`).
     #[serde(default)]
     pub channel: Option<crate::network::channel::ChannelSpec>,
+    /// The network's graph: relays, a sink, links and routes (`network::topology`); absent:
+    /// the one-hop star.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub network: Option<crate::network::topology::spec::NetworkSpec>,
     /// The sensors' radio and battery, for the energy in `summary.json` (default: the CC2420's
     /// datasheet values, [`crate::network::radio`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
