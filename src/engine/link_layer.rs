@@ -43,7 +43,9 @@
 //! replay of the trial so far per step at which a gap is revealed, and the history of every
 //! inbox is kept whenever sequence numbers are on.
 use crate::link::{Received, Transmission};
+use crate::network::channel::route::{RouteFates, Routes};
 use crate::network::channel::{ChannelSpec, FateTable};
+use crate::network::topology::tally::{NodeCounts, Tally};
 use crate::network::{self, Traffic};
 use crate::scenario::experiment::{Experiment, Variant};
 use crate::scheme::{Feedback, FusionCenter, Scheme, SchemeError};
@@ -98,7 +100,8 @@ pub(crate) enum Route {
 /// The [`Route`] of variant `variant` of `exp`; `every_reading` says whether every reading of
 /// the trial is present (a replay with holes runs the generic loop).
 pub(crate) fn route(exp: &Experiment, variant: &Variant, every_reading: bool) -> Route {
-    if !exp.reals.is_f32() || !every_reading {
+    // A multi-hop network counts every hop of every report: the generic loop's work.
+    if !exp.reals.is_f32() || !every_reading || exp.network.is_some() {
         Route::Generic
     } else if ideal(variant) {
         Route::FastIdeal
@@ -118,6 +121,8 @@ pub(crate) struct FateCache {
     of: Option<(usize, u64, usize)>,
     /// (links, downlink?, table).
     tables: Vec<(Vec<ChannelSpec>, bool, Arc<FateTable>)>,
+    /// The multi-hop network's fates (one network per experiment, shared by every variant).
+    routes: Option<Arc<RouteFates>>,
 }
 
 impl FateCache {
@@ -130,10 +135,7 @@ impl FateCache {
         downlink: bool,
     ) -> Arc<FateTable> {
         let of = Some((trial, exp.seed, exp.steps));
-        if self.of != of {
-            self.tables.clear();
-            self.of = of;
-        }
+        self.renew(of);
         if let Some((_, _, t)) = self
             .tables
             .iter()
@@ -150,6 +152,25 @@ impl FateCache {
         ));
         self.tables.push((specs.to_vec(), downlink, table.clone()));
         table
+    }
+
+    /// Forgets the tables of another (trial, seed, steps).
+    fn renew(&mut self, of: Option<(usize, u64, usize)>) {
+        if self.of != of {
+            self.tables.clear();
+            self.routes = None;
+            self.of = of;
+        }
+    }
+
+    /// The fates of `routes` (the experiment's network) in trial `trial` of `exp`.
+    fn routes(&mut self, exp: &Experiment, routes: &Routes, trial: usize) -> Arc<RouteFates> {
+        self.renew(Some((trial, exp.seed, exp.steps)));
+        self.routes
+            .get_or_insert_with(|| {
+                Arc::new(RouteFates::draw(routes, exp.steps, exp.seed, trial as u64))
+            })
+            .clone()
     }
 }
 
@@ -241,6 +262,15 @@ pub(crate) struct LinkLayer {
     sequencing: Option<Sequencing>,
     /// Bits of each packet's sequence number (0: none).
     sequence_bits: u32,
+    /// Over a multi-hop network: every hop's fates and what each node did this step.
+    hops: Option<Hops>,
+}
+
+/// A multi-hop network's share of the link: the routes, their fates, the nodes' counters.
+struct Hops {
+    routes: Routes,
+    fates: Arc<RouteFates>,
+    tally: Tally,
 }
 
 impl LinkLayer {
@@ -257,6 +287,28 @@ impl LinkLayer {
         initial: &Option<Feedback>,
         fates: &mut FateCache,
     ) -> Option<Self> {
+        if let Some(net) = &exp.network {
+            let routes = net.routes();
+            let route_fates = fates.routes(exp, &routes, trial);
+            let horizon = (0..routes.senders.len())
+                .map(|i| routes.horizon(i))
+                .max()
+                .unwrap_or(0)
+                .min(exp.steps as u64) as usize;
+            let mut link = Self::with_fates(
+                route_fates.up.clone(),
+                route_fates.down.clone(),
+                horizon,
+                exp.variants[variant].sequence_bits,
+            );
+            link.held = vec![initial.clone(); link.held.len()];
+            link.hops = Some(Hops {
+                tally: Tally::new(net),
+                routes,
+                fates: route_fates,
+            });
+            return Some(link);
+        }
         let specs = exp.variants[variant].channel.as_deref()?;
         if specs.iter().all(ChannelSpec::is_lossless) {
             return None;
@@ -294,6 +346,7 @@ impl LinkLayer {
             in_flight: Vec::new(),
             history: Vec::new(),
             sequence_bits,
+            hops: None,
         }
     }
 
@@ -336,18 +389,50 @@ impl LinkLayer {
 
     /// Step `k`'s transmissions into `inbox`, counted with every attempt the link's fates give
     /// them ([`network::deliver_attempts`]); [`LinkLayer::uplink`] then applies the fates.
+    ///
+    /// Over a multi-hop network every hop of a report is counted ([`crate::network::Traffic`]'s
+    /// bits are on air, summed over the hops) and each node's share goes to its counters
+    /// ([`LinkLayer::nodes`]).
     pub(crate) fn deliver(
-        &self,
+        &mut self,
         k: usize,
         transmissions: impl IntoIterator<Item = Transmission>,
         inbox: &mut Vec<Received>,
     ) -> Traffic {
-        network::deliver_sequenced(
-            transmissions,
-            inbox,
-            |i| self.up.get(i, k),
-            self.sequence_bits,
-        )
+        let bits = self.sequence_bits;
+        let Some(hops) = &mut self.hops else {
+            return network::deliver_sequenced(transmissions, inbox, |i| self.up.get(i, k), bits);
+        };
+        hops.tally.start_step();
+        let (tally, fates, routes) = (&mut hops.tally, &hops.fates, &hops.routes);
+        let mut i = 0;
+        let counted = transmissions.into_iter().inspect(|t| {
+            if let Transmission::Send(m) = t {
+                tally.report(
+                    routes,
+                    fates.hops(i, k),
+                    i,
+                    m.frame_bits_with_sequence(bits),
+                );
+            }
+            i += 1;
+        });
+        network::deliver_sequenced(counted, inbox, |i| fates.up.get(i, k), bits)
+    }
+
+    /// Over a multi-hop network: the feedback of step `k` (`payload_bits` on air, 0 for none)
+    /// going down the tree, and every relay's listening.
+    pub(crate) fn feedback_down(&mut self, k: usize, payload_bits: u64) {
+        if let Some(h) = &mut self.hops {
+            let (fates, routes) = (&h.fates, &h.routes);
+            h.tally
+                .feedback(routes, payload_bits, |n| fates.node_holds(routes, n, k));
+        }
+    }
+
+    /// Over a multi-hop network: what every node did this step (empty on a star).
+    pub(crate) fn nodes(&self) -> &[NodeCounts] {
+        self.hops.as_ref().map_or(&[], |h| h.tally.counts())
     }
 
     /// Step `k`'s packets through the link: a lost or late one becomes a silence in `inbox`,

@@ -40,6 +40,8 @@ pub struct StepOutput<'a> {
     pub traffic: Traffic,
     /// Effective sample size of a particle filter's fusion center.
     pub ess: Option<f64>,
+    /// Over a multi-hop network: what each node did this step (empty on a star).
+    pub nodes: &'a [crate::network::topology::tally::NodeCounts],
 }
 
 /// Why an observer stopped the loop.
@@ -227,7 +229,7 @@ pub fn run_trial(
             }
             transmissions.push(t);
         }
-        let mut traffic = match &link {
+        let mut traffic = match &mut link {
             Some(l) => l.deliver(k, transmissions.drain(..), inbox),
             None if variant.sequence_bits == 0 => network::deliver(transmissions.drain(..), inbox),
             // Ideal links (nothing goes missing, so the numbers reveal nothing): only their cost.
@@ -243,6 +245,7 @@ pub fn run_trial(
         traffic.scheduled = scheduled_mask;
         if let Some(l) = &mut link {
             l.uplink(k, inbox, &mut traffic);
+            l.feedback_down(k, traffic.downlink_bits);
             traffic.downlink_lost = downlink_lost;
         }
         doubles.restore(inbox, &mut traffic);
@@ -277,6 +280,7 @@ pub fn run_trial(
                 bits,
                 traffic,
                 ess: inst.center.ess(),
+                nodes: link.as_ref().map_or(&[], |l| l.nodes()),
             })
             .map_err(|e| match e {
                 ObserverError::Covariance(source) => LoopError::Covariance { k, source },

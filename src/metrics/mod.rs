@@ -5,6 +5,7 @@ mod failed;
 pub mod finite;
 pub mod floor;
 pub mod link;
+pub mod network;
 pub mod notes;
 pub mod pcrb;
 pub mod per_step_csv;

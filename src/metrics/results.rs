@@ -112,8 +112,14 @@ pub struct SchemeSummary {
     pub downlink_bits_per_step_se: f64,
     /// What the traffic costs the sensors' radios (`[radio]`): `energy_per_step_uj`, per sensor,
     /// by part, and the average sensor's `lifetime_days` ([`crate::metrics::energy`]).
+    /// Over a multi-hop `[network]`: the network's, every battery-powered node's energy added
+    /// and the first node to die as `lifetime_days` ([`crate::metrics::network`]).
     #[serde(flatten)]
     pub energy: crate::metrics::energy::EnergySummary,
+    /// Over a multi-hop `[network]`: every node's frames, energy and lifetime, and the first
+    /// node to die ([`crate::metrics::network`]); absent on a star.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub network: Option<crate::metrics::network::NetworkSummary>,
     /// The entropy-coded rate `R_eff`, bits per step: each sensor's send-or-silence decision
     /// (its binary entropy) plus its payload once per message ([`crate::metrics::floor`]).
     pub r_eff_per_step: f64,
@@ -293,6 +299,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
             let per_sensor =
                 |v: Vec<f64>| -> Vec<f64> { v.into_iter().map(|x| x / n_sensors).collect() };
             let traffic_per_step = TrafficPerStep::of(&col, &col_se, &per_sensor);
+            let network = crate::metrics::network::summarize(exp, s);
             let p_div = s.diverged as f64 / trials;
             let anees_per_step: Vec<f64> = col(Layout::NEES).into_iter().map(|x| x / n).collect();
             let messages: f64 = col(Layout::MESSAGES).iter().sum();
@@ -351,7 +358,11 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 frame_bits_per_step_se: run_se(Layout::FRAME_BITS, 1.0),
                 downlink_bits_per_step: downlink_bits / steps as f64,
                 downlink_bits_per_step_se: run_se(Layout::DOWNLINK_BITS, 1.0),
-                energy: crate::metrics::energy::of_variant(exp, v, s),
+                energy: network.as_ref().map_or_else(
+                    || crate::metrics::energy::of_variant(exp, v, s),
+                    |n| n.1.clone(),
+                ),
+                network: network.map(|n| n.0),
                 r_eff_per_step: crate::metrics::floor::r_eff_of(exp, s, bits, messages),
                 floor_mse: None,
                 traffic_per_step,

@@ -158,6 +158,14 @@ pub struct Activity {
     pub listens: f64,
     /// Feedback bits on air that the listening sensors received, PHY and MAC overhead included.
     pub downlink_rx_bits: f64,
+    /// A multi-hop network's node ([`crate::network::topology::tally`]): data frames' bits it
+    /// received (PHY header included); 0 for a star's sensors.
+    pub rx_ppdu_bits: f64,
+    /// Acknowledgements it sent for them (`arq`).
+    pub acks_sent: f64,
+    /// Feedback frames it sent down the tree, and their bits on air.
+    pub downlink_tx_frames: f64,
+    pub downlink_tx_bits: f64,
 }
 
 impl Activity {
@@ -187,6 +195,7 @@ impl Activity {
             } else {
                 0.0
             },
+            ..Activity::default()
         }
     }
 }
@@ -202,12 +211,20 @@ pub struct EnergyParts {
     pub downlink: f64,
     /// The rest of the time, asleep.
     pub sleep: f64,
+    /// A multi-hop network's node: receiving the frames it forwards or sinks, acknowledging
+    /// them, sending the feedback down (absent, 0, for a star's sensors).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub relay: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl EnergyParts {
     /// All of it.
     pub fn total(&self) -> f64 {
-        self.tx + self.ack + self.downlink + self.sleep
+        self.tx + self.ack + self.downlink + self.sleep + self.relay
     }
 
     /// Every part divided by `d` (a total over a run into a mean per step).
@@ -217,6 +234,7 @@ impl EnergyParts {
             ack: self.ack / d,
             downlink: self.downlink / d,
             sleep: self.sleep / d,
+            relay: self.relay / d,
         }
     }
 }
@@ -307,13 +325,24 @@ impl RadioSpec {
         let heard_us = self.turnaround_us + self.airtime_us(ACK_PPDU_BITS as f64);
         let ack_us = a.acks_heard * heard_us + (a.ack_waits - a.acks_heard) * self.ack_wait_us;
         let down_us = a.listens * self.listen_us + self.airtime_us(a.downlink_rx_bits);
-        let asleep_us =
-            (a.sensor_steps * self.step_seconds * 1e6 - tx_us - ack_us - down_us).max(0.0);
+        // A network node's receiving side: the frames in, the ACKs and the feedback out.
+        let relay_rx_us = self.airtime_us(a.rx_ppdu_bits);
+        let relay_tx_us = a.acks_sent * heard_us
+            + self.airtime_us(a.downlink_tx_bits)
+            + a.downlink_tx_frames * self.turnaround_us;
+        let asleep_us = (a.sensor_steps * self.step_seconds * 1e6
+            - tx_us
+            - ack_us
+            - down_us
+            - relay_rx_us
+            - relay_tx_us)
+            .max(0.0);
         EnergyParts {
             tx: self.tx_mw() * tx_us / 1000.0,
             ack: self.rx_mw() * ack_us / 1000.0,
             downlink: self.rx_mw() * down_us / 1000.0,
             sleep: self.sleep_mw() * asleep_us / 1000.0,
+            relay: (self.rx_mw() * relay_rx_us + self.tx_mw() * relay_tx_us) / 1000.0,
         }
     }
 

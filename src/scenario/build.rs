@@ -226,7 +226,10 @@ pub fn build_with(
     let parts = crate::scenario::system::build_system(&ctx, &file_spec)?;
     let system = Arc::new(parts.system);
     let channel = crate::scenario::channel::build_channel(&ctx, &file_spec, system.n_sensors())?;
-    check_network(&ctx, &file_spec, system.n_sensors())?;
+    let network = build_network(&ctx, &file_spec, system.n_sensors())?;
+    let path_loss: Option<Vec<f64>> = network
+        .as_ref()
+        .map(|t| (0..system.n_sensors()).map(|i| t.path_loss(i)).collect());
     let radio = file_spec.radio.unwrap_or_default();
     radio
         .validate()
@@ -236,7 +239,7 @@ pub fn build_with(
             crate::scenario::every_scheme::expand(&ctx, &file_spec.schemes, &system)?;
     }
 
-    let link = (channel, radio);
+    let link = (channel, radio, network);
     if opts.data_only {
         let data = limits::baseline(&system, parts.groups.len(), 0, 1, file_spec.steps, 1);
         limits::check(&data, &limits, file)?;
@@ -273,8 +276,14 @@ pub fn build_with(
         &file_spec.schemes,
         &system,
         file_spec.steps,
-        &link.0.clone().map(std::sync::Arc::new),
+        (
+            &link.0.clone().map(std::sync::Arc::new),
+            path_loss.as_deref(),
+        ),
     )?;
+    if link.2.is_some() {
+        check_network_variants(&ctx, &link.0, &curves, &variants, file_spec.reals)?;
+    }
     let estimate = limits::with_schemes(
         limits::baseline(
             &system,
@@ -319,29 +328,65 @@ pub fn build_with(
     Ok(assemble(file_spec, file, built, (curves, variants), link))
 }
 
-/// Checks `[network]` ([`crate::network::topology`]): every bad topology is refused by field
-/// and node. The engine runs the one-hop star; a network with relays, a sensor more than one
-/// hop from the sink or links of their own is checked and then refused with that reason
-/// (multi-hop runs are being built: issue "Networks are graphs").
-fn check_network(ctx: &Ctx, file: &ScenarioFile, sensors: usize) -> Result<(), ScenarioError> {
+/// Builds `[network]` ([`crate::network::topology`]): every bad topology is refused by field
+/// and node. `None` without `[network]`, and for the one-hop star without links of its own
+/// (today's network, run exactly as without the table). A sensor's own `channel` is refused
+/// with a network: its links are `[[network.links]]`.
+fn build_network(
+    ctx: &Ctx,
+    file: &ScenarioFile,
+    sensors: usize,
+) -> Result<Option<Arc<crate::network::topology::Topology>>, ScenarioError> {
     use crate::network::topology::Topology;
     let Some(spec) = &file.network else {
-        return Ok(());
+        return Ok(None);
     };
     let positions: Vec<Option<[f64; 2]>> = (0..sensors)
         .map(|i| file.sensors.get(i).and_then(|s| s.position))
         .collect();
     let topology = Topology::build(spec, &positions, file.channel.as_ref())
         .map_err(|e| ctx.err(format!("network.{}", e.field), e.message))?;
-    if !topology.is_star() || !spec.links.is_empty() {
-        let deepest = (0..sensors).map(|i| topology.hops(i)).max().unwrap_or(0);
+    if topology.is_star() && spec.links.is_empty() {
+        return Ok(None);
+    }
+    if let Some(i) = file.sensors.iter().position(|s| s.channel.is_some()) {
         return Err(ctx.err(
-            "network",
+            format!("sensors[{i}].channel"),
             format!(
-                "a valid network of {} nodes (up to {deepest} hops to the sink), but the engine runs the one-hop star only so far: multi-hop runs, with every hop paid, are not built yet; use edges = \"star\" without relays or links (a sensor's own link is its `channel`)",
-                topology.nodes.len()
+                "with a [network], a link's channel is given in [[network.links]] (between = [\"s{i}\", \"{}\"]), not by the sensor",
+                topology.nodes[topology.parent[i].unwrap_or(topology.sink())].name
             ),
         ));
+    }
+    Ok(Some(Arc::new(topology)))
+}
+
+/// With a multi-hop `[network]` every hop's channel comes from the network, so a scheme entry
+/// may not bring its own (`channel`, a sweep of channel keys, `--loss`), and reals are singles
+/// (the doubles' extra bits are not priced per hop).
+fn check_network_variants(
+    ctx: &Ctx,
+    channel: &Option<Vec<ChannelSpec>>,
+    curves: &[crate::scenario::experiment::Curve],
+    variants: &[crate::scenario::experiment::Variant],
+    reals: crate::link::Reals,
+) -> Result<(), ScenarioError> {
+    if !reals.is_f32() {
+        return Err(ctx.err(
+            "reals",
+            "\"f64\" is not supported with a multi-hop [network] yet (the extra bits are not priced per hop)",
+        ));
+    }
+    for v in variants {
+        if v.channel.as_deref() != channel.as_ref() {
+            return Err(ctx.err(
+                "network",
+                format!(
+                    "scheme {} brings its own channel (a `channel` key, a swept channel key or --loss); with a multi-hop [network] every hop's channel is the network's: give it in [channel] or [[network.links]]",
+                    curves[v.curve].label
+                ),
+            ));
+        }
     }
     Ok(())
 }
@@ -356,7 +401,11 @@ fn assemble(
     file: &str,
     (system, initial_truth, groups, steady_from): (Arc<System>, Gaussian, Groups, usize),
     (curves, variants): (Vec<Curve>, Vec<Variant>),
-    (channel, radio): (Option<Vec<ChannelSpec>>, RadioSpec),
+    (channel, radio, network): (
+        Option<Vec<ChannelSpec>>,
+        RadioSpec,
+        Option<Arc<crate::network::topology::Topology>>,
+    ),
 ) -> Experiment {
     Experiment {
         name: file_spec.name,
@@ -374,6 +423,7 @@ fn assemble(
         paper: file_spec.paper,
         channel,
         radio,
+        network,
         reals: file_spec.reals,
     }
 }

@@ -62,6 +62,9 @@ pub struct Experiment {
     /// The sensors' radio and battery (`[radio]`, validated; absent: the CC2420's values):
     /// what the summary prices the traffic with.
     pub radio: crate::network::radio::RadioSpec,
+    /// The multi-hop network (`[network]`), whose sink is every scheme's center; `None` for
+    /// the one-hop star (no `[network]`, or `edges = "star"` without links of its own).
+    pub network: Option<Arc<crate::network::topology::Topology>>,
     /// How real numbers cross the network (`reals`; singles by default).
     pub reals: crate::link::Reals,
 }

@@ -22,7 +22,7 @@ pub(crate) fn build_schemes(
     tables: &[toml::Table],
     system: &Arc<System>,
     steps: usize,
-    channel: &Option<Arc<Vec<ChannelSpec>>>,
+    (channel, path_loss): (&Option<Arc<Vec<ChannelSpec>>>, Option<&[f64]>),
 ) -> Result<(Vec<Curve>, Vec<Variant>), ScenarioError> {
     if tables.is_empty() {
         return Err(ctx.err("schemes", "expected at least one [[schemes]] entry"));
@@ -97,9 +97,13 @@ pub(crate) fn build_schemes(
             let variant_channel =
                 link.channel(ctx, (&field, &note), system.n_sensors(), channel)?;
             let sequence_bits = link.sequence_bits(ctx, (&field, &note))?;
-            let link_loss: Option<Vec<f64>> = variant_channel
-                .as_deref()
-                .map(|specs| specs.iter().map(ChannelSpec::delivery_loss).collect());
+            // Over a multi-hop network, the loss of each sensor's whole route.
+            let link_loss: Option<Vec<f64>> = match path_loss {
+                Some(p) => Some(p.to_vec()),
+                None => variant_channel
+                    .as_deref()
+                    .map(|specs| specs.iter().map(ChannelSpec::delivery_loss).collect()),
+            };
             let cx = BuildContext {
                 system,
                 steps,

@@ -76,6 +76,11 @@ pub struct Sums {
     /// order of merging changes nothing; empty until a trial is noted.
     #[serde(default)]
     pub reading_peaks: Vec<f64>,
+    /// Over a multi-hop network: per node (sensors, relays, sink), its counters
+    /// ([`crate::network::topology::tally::NODE_COUNTERS`]) summed over trials and steps.
+    /// Integers; empty on a star.
+    #[serde(default)]
+    pub nodes: Vec<crate::network::topology::tally::NodeCounts>,
 }
 
 /// Where and why a variant's trial failed.
@@ -186,6 +191,19 @@ impl Sums {
             failure: None,
             sensors: Vec::new(),
             reading_peaks: Vec::new(),
+            nodes: Vec::new(),
+        }
+    }
+
+    /// Adds one step's counters of every node of a multi-hop network.
+    pub fn add_nodes(&mut self, nodes: &[crate::network::topology::tally::NodeCounts]) {
+        if self.nodes.len() < nodes.len() {
+            self.nodes.resize(nodes.len(), Default::default());
+        }
+        for (a, b) in self.nodes.iter_mut().zip(nodes) {
+            for (x, y) in a.iter_mut().zip(b) {
+                *x += y;
+            }
         }
     }
 
@@ -319,6 +337,7 @@ impl Sums {
         self.failure = None;
         self.sensors.clear();
         self.reading_peaks.clear();
+        self.nodes.clear();
     }
 
     /// Adds another block's sums (same shape).
@@ -356,6 +375,7 @@ impl Sums {
             a[1] += b[1];
         }
         self.merge_peaks(&o.reading_peaks);
+        self.add_nodes(&o.nodes);
         if !o.link.is_empty() {
             if self.link.is_empty() {
                 self.link = vec![[0; LINK_FIELDS]; self.steps];
@@ -685,6 +705,14 @@ impl TrialObserver<'_> {
     /// [`TrialState::record_ess`].
     pub fn record_ess(&mut self, k: usize, ess: Option<f64>) {
         self.state.record_ess(self.sums, k, ess);
+    }
+
+    /// [`Sums::add_nodes`]: a step's counters of a multi-hop network's nodes (nothing on a
+    /// star).
+    pub fn record_nodes(&mut self, nodes: &[crate::network::topology::tally::NodeCounts]) {
+        if !nodes.is_empty() {
+            self.sums.add_nodes(nodes);
+        }
     }
 
     /// Closes the trial.

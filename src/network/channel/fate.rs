@@ -52,18 +52,25 @@ pub struct Fate {
     /// ARQ: acknowledgment frames the receiver sent, one per attempt that arrived (0 without
     /// `arq`); every one after the first acknowledges a duplicate.
     pub acks: u32,
+    /// Over a multi-hop route ([`super::route`]): the hops after the first that the packet was
+    /// sent over (each one frame more, its retries in `retries`, its ACKs in `acks`). 0 on a
+    /// one-hop link.
+    pub relayed: u32,
 }
 
 impl Fate {
     /// Times the packet went on air: the first attempt and the retries.
     pub fn attempts(&self) -> u32 {
-        1 + self.retries
+        1 + self.relayed + self.retries
     }
 
     /// Attempts that arrived after one had already arrived (their ACK was lost): copies the
     /// center discards.
     pub fn duplicates(&self) -> u32 {
-        self.acks.saturating_sub(1)
+        // Every hop crossed has one ACK that was not a duplicate's: the hops before the last
+        // one tried, and that one too when the packet got through.
+        self.acks
+            .saturating_sub(self.relayed + u32::from(!self.lost))
     }
 }
 
@@ -118,9 +125,8 @@ impl FateTable {
         }
     }
 
-    /// A table of given fates, sensor-major (`fates[sensor * steps + step - 1]`): hand-built
-    /// links for the link layer's tests.
-    #[cfg(test)]
+    /// A table of given fates, sensor-major (`fates[sensor * steps + step - 1]`): composed
+    /// routes ([`super::route`]) and hand-built links for the link layer's tests.
     pub(crate) fn from_fates(sensors: usize, steps: usize, fates: Vec<Fate>) -> FateTable {
         assert_eq!(fates.len(), sensors * steps);
         FateTable {
@@ -162,7 +168,8 @@ struct Retries {
 }
 
 /// Appends the fates of one sensor's steps `1..=steps`. `slot(k)` is the generator of slot k;
-/// each slot's loss coin, delay and (with `arq`) retries come from its own generator.
+/// each slot's loss coin, delay and (with `arq`) retries come from its own generator, the
+/// Gilbert–Elliott state from `slot(CHAIN_STEP)` ([`loss_path`]).
 fn draw_sensor(
     spec: &ChannelSpec,
     steps: usize,
@@ -170,44 +177,38 @@ fn draw_sensor(
     arq: Option<&Retries>,
     out: &mut Vec<Fate>,
 ) {
+    let losses = loss_path(spec, steps, &slot);
+    for k in 1..=steps {
+        let arq = arq.map(|r| (r.max, r.ack_loss[k - 1]));
+        out.push(slot_fate(spec, losses[k - 1], || slot(k), arq));
+    }
+}
+
+/// The fate of one packet on the link `spec` whose loss at its step is `loss` (the state's,
+/// for Gilbert–Elliott), drawn from `slot()`: the loss coin, then the delay and the retries
+/// ([`fate`]). An ideal link draws no loss coin (its first attempt always arrives); one of fixed
+/// delay without `arq` draws nothing, and its generator is not even made. `arq`: (retry limit,
+/// probability an ACK is lost).
+pub(super) fn slot_fate(
+    spec: &ChannelSpec,
+    loss: f64,
+    slot: impl FnOnce() -> Xoshiro256PlusPlus,
+    arq: Option<(u32, f64)>,
+) -> Fate {
     let delay = spec.delay();
-    // The ARQ of slot k: its retry limit and its ACKs' loss probability.
-    let arq_at = |k: usize| arq.map(|r| (r.max, r.ack_loss[k - 1]));
     match spec.kind {
-        ChannelKind::Ideal => {
-            // No loss coin: the first attempt always arrives (retries only follow lost ACKs).
-            for k in 1..=steps {
-                match (delay, arq) {
-                    // Nothing to draw: the slot's generator is not even made.
-                    (Delay::Fixed(d), None) => out.push(Fate {
-                        delay: d,
-                        ..Fate::default()
-                    }),
-                    _ => out.push(fate(false, 0.0, &delay, &mut slot(k), arq_at(k))),
-                }
-            }
-        }
-        ChannelKind::Bernoulli => {
-            let loss = clamp_probability(spec.loss.unwrap_or(0.0));
-            for k in 1..=steps {
-                let mut rng = slot(k);
-                let lost = rng.random::<f64>() < loss;
-                out.push(fate(lost, loss, &delay, &mut rng, arq_at(k)));
-            }
-        }
-        ChannelKind::GilbertElliott => {
-            let chain = GilbertElliott::from_spec(spec);
-            // The state is a Markov chain, so it is drawn in order from one generator per sensor
-            // (the slot generator of step CHAIN_STEP); the slot generators then only decide the
-            // loss given the state, and the delay.
-            let mut states = chain.states(slot(CHAIN_STEP));
-            for k in 1..=steps {
-                let loss = chain.loss(states.next_bad());
-                let mut rng = slot(k);
-                let lost = rng.random::<f64>() < loss;
-                // Retries within the step see the same state, hence the same loss.
-                out.push(fate(lost, loss, &delay, &mut rng, arq_at(k)));
-            }
+        ChannelKind::Ideal => match (&delay, arq) {
+            (Delay::Fixed(d), None) => Fate {
+                delay: *d,
+                ..Fate::default()
+            },
+            _ => fate(false, 0.0, &delay, &mut slot(), arq),
+        },
+        ChannelKind::Bernoulli | ChannelKind::GilbertElliott => {
+            let mut rng = slot();
+            let lost = rng.random::<f64>() < loss;
+            // Retries within the step see the same state, hence the same loss.
+            fate(lost, loss, &delay, &mut rng, arq)
         }
     }
 }
@@ -216,7 +217,7 @@ fn draw_sensor(
 /// for ideal and Bernoulli links, the state's for Gilbert–Elliott, whose chain is drawn from
 /// `slot(CHAIN_STEP)` exactly as [`draw_sensor`] draws it (so the ACKs of an uplink see the
 /// states that decide its downlink's feedback).
-fn loss_path(
+pub(super) fn loss_path(
     spec: &ChannelSpec,
     steps: usize,
     slot: impl Fn(usize) -> Xoshiro256PlusPlus,
@@ -254,6 +255,7 @@ fn fate(
         delay: if lost { 0 } else { d },
         retries,
         acks,
+        relayed: 0,
     }
 }
 

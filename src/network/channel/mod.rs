@@ -6,9 +6,11 @@
 //! - [`fate`]: the fate of every (sensor, step) slot of a trial (with ARQ, its attempts and
 //!   acknowledgements), drawn once from the link's own random stream so that every scheme meets
 //!   the same losses;
+//! - [`route`]: the fates of multi-hop routes, every hop drawn, added up per sensor;
 //! - [`stability`]: the classical stability checks of Kalman filtering with intermittent
 //!   observations (Sinopoli et al. 2004), used to sanity-check a scenario's link.
 pub mod fate;
+pub mod route;
 pub mod spec;
 pub mod stability;
 

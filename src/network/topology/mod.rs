@@ -11,6 +11,7 @@
 //! from the links' channels: every hop pays a frame, its acknowledgement and its retries.
 pub mod cost;
 pub mod spec;
+pub mod tally;
 
 use crate::network::channel::ChannelSpec;
 use petgraph::graph::{NodeIndex, UnGraph};
@@ -227,6 +228,32 @@ impl Topology {
             .iter()
             .map(|l| 1.0 - l.channel.delivery_loss())
             .product::<f64>()
+    }
+
+    /// The routing tree as the link's fates take it ([`crate::network::channel::route`]): every
+    /// node's parent and uplink channel, every sensor's senders.
+    pub fn routes(&self) -> crate::network::channel::route::Routes {
+        let uplinks = (0..self.nodes.len())
+            .map(|n| {
+                self.parent[n].map(|p| {
+                    let link = self.link(n, p).expect("a parent is linked");
+                    (p, link.channel.clone())
+                })
+            })
+            .collect();
+        let senders = (0..self.sensors())
+            .map(|s| {
+                let mut r = self.route(s);
+                r.pop();
+                r
+            })
+            .collect();
+        crate::network::channel::route::Routes { uplinks, senders }
+    }
+
+    /// How many nodes have `node` as their parent.
+    pub fn children(&self, node: usize) -> usize {
+        self.parent.iter().filter(|p| **p == Some(node)).count()
     }
 
     /// Whether this is the one-hop star: no relay, and every sensor linked straight to the sink.

@@ -1,0 +1,135 @@
+//! A multi-hop network's share of `summary.json`: per node (sensor, relay, sink) the frames it
+//! sent, received and forwarded, its radio's energy per step by part and its lifetime on the
+//! `[radio]` battery, and the network's lifetime: the first node to die, named. The counters
+//! are [`crate::network::topology::tally`]'s, summed over trials and steps in
+//! [`Sums::nodes`]; the energy is [`crate::network::radio`]'s model applied to them (linear in
+//! the counters, so the mean per step is the energy of the mean counters).
+use crate::metrics::energy::EnergySummary;
+use crate::metrics::Sums;
+use crate::network::radio::EnergyParts;
+use crate::network::topology::tally::{activity, frames};
+use crate::network::topology::{NodeKind, Topology};
+use crate::scenario::build::Experiment;
+use serde::{Deserialize, Serialize};
+
+/// One node of the network.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct NodeSummary {
+    /// `s0`, `r0`, `sink`.
+    pub name: String,
+    /// `sensor`, `relay` or `sink`.
+    pub kind: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub position: Option<[f64; 2]>,
+    /// Its next hop to the sink (absent for the sink).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub parent: Option<String>,
+    /// Hops from it to the sink.
+    pub hops: usize,
+    /// Data frames on air per step, every attempt, its own reports and those it forwards.
+    pub frames_sent_per_step: f64,
+    /// Data frames it received per step (every attempt that arrived).
+    pub frames_received_per_step: f64,
+    /// Reports of other nodes it sent on, per step (packets, not attempts).
+    pub forwarded_per_step: f64,
+    /// Its radio's energy per step, µJ, and by part.
+    pub energy_per_step_uj: f64,
+    pub energy_parts_per_step_uj: EnergyParts,
+    /// Whether it runs on mains (the sink by default): no battery to run out.
+    pub mains: bool,
+    /// Days it lasts on the `[radio]` battery (absent on mains, or when it spends nothing).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lifetime_days: Option<f64>,
+}
+
+/// The first node to die.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct FirstToDie {
+    pub node: String,
+    pub lifetime_days: f64,
+}
+
+/// The network of a variant.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct NetworkSummary {
+    pub nodes: Vec<NodeSummary>,
+    /// The network's lifetime: the battery-powered node that dies first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub first_to_die: Option<FirstToDie>,
+}
+
+/// The network summary of a variant's `sums` over `exp`'s multi-hop network, and its energy as
+/// the scheme's [`EnergySummary`]: every battery-powered node's energy per step added
+/// (`energy_per_sensor_step_uj` is that over the sensors), and the network's lifetime as
+/// `lifetime_days`. `None` on a star.
+pub fn summarize(exp: &Experiment, sums: &Sums) -> Option<(NetworkSummary, EnergySummary)> {
+    let net: &Topology = exp.network.as_deref()?;
+    let node_steps = (sums.trials * sums.steps) as f64;
+    let per = node_steps.max(1.0);
+    let mut total = EnergyParts::default();
+    let mut nodes = Vec::with_capacity(net.nodes.len());
+    for (i, node) in net.nodes.iter().enumerate() {
+        let counts = sums.nodes.get(i).copied().unwrap_or_default();
+        let parts = exp.radio.energy(&activity(&counts, node_steps)).per(per);
+        let mains = node.kind == NodeKind::Sink && net.sink_mains;
+        if !mains {
+            total = add(total, parts);
+        }
+        let (sent, received, forwarded) = frames(&counts);
+        nodes.push(NodeSummary {
+            name: node.name.clone(),
+            kind: match node.kind {
+                NodeKind::Sensor(_) => "sensor",
+                NodeKind::Relay(_) => "relay",
+                NodeKind::Sink => "sink",
+            }
+            .into(),
+            position: node.position,
+            parent: net.parent[i].map(|p| net.nodes[p].name.clone()),
+            hops: net.hops(i),
+            frames_sent_per_step: sent as f64 / per,
+            frames_received_per_step: received as f64 / per,
+            forwarded_per_step: forwarded as f64 / per,
+            energy_per_step_uj: parts.total(),
+            energy_parts_per_step_uj: parts,
+            mains,
+            lifetime_days: if mains {
+                None
+            } else {
+                exp.radio.lifetime_days(parts.total())
+            },
+        });
+    }
+    let first_to_die = nodes
+        .iter()
+        .filter_map(|n| n.lifetime_days.map(|d| (d, &n.name)))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(d, name)| FirstToDie {
+            node: name.clone(),
+            lifetime_days: d,
+        });
+    let per_step = total.total();
+    let energy = EnergySummary {
+        energy_per_step_uj: per_step,
+        energy_per_sensor_step_uj: per_step / net.sensors().max(1) as f64,
+        energy_parts_per_step_uj: total,
+        lifetime_days: first_to_die.as_ref().map(|f| f.lifetime_days),
+    };
+    Some((
+        NetworkSummary {
+            nodes,
+            first_to_die,
+        },
+        energy,
+    ))
+}
+
+fn add(a: EnergyParts, b: EnergyParts) -> EnergyParts {
+    EnergyParts {
+        tx: a.tx + b.tx,
+        ack: a.ack + b.ack,
+        downlink: a.downlink + b.downlink,
+        sleep: a.sleep + b.sleep,
+        relay: a.relay + b.relay,
+    }
+}

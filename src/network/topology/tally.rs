@@ -1,0 +1,167 @@
+//! What every node of a multi-hop network does in a step, counted from the hops' fates
+//! ([`crate::network::channel::route`]) as the trial loop runs: the frames it sends (its own
+//! and those it forwards, every attempt), the frames it receives, the acknowledgements on both
+//! sides, the feedback it passes down the tree and the windows it listens. Integers, summed over
+//! trials and steps in [`crate::metrics::Sums::nodes`]; the energy is the radio model's
+//! ([`crate::network::radio`]) applied to them ([`activity`]).
+//!
+//! The counting rules (`../shared/notes/decentralized.md` §4):
+//! - each attempt of a hop is a frame on air at the sender (its PPDU: MAC frame and PHY
+//!   header); each attempt that arrives is received by the next node;
+//! - with ARQ the receiver acknowledges every attempt that arrives (an ACK frame sent), and the
+//!   sender waits after every attempt, hearing the ACK when the hop delivered (as the star's
+//!   model, [`crate::network::radio`], a delivered frame whose every ACK was lost is charged as
+//!   heard);
+//! - the hops after a loss are not tried;
+//! - a node with children keeps its receiver on for a window (`listen_us`) per child per step,
+//!   the slot in which that child may send (it cannot know whether it will);
+//! - a step with feedback: every node holding it that has children sends it down in one frame
+//!   (header and the whole payload, as on the star), every node but the sink listens for it
+//!   (one window) and receives the frame when its parent sent it.
+use super::Topology;
+use crate::network::channel::route::Routes;
+use crate::network::channel::Fate;
+use crate::network::radio::{Activity, DOWNLINK_OVERHEAD_BITS, PHY_OVERHEAD_BITS};
+
+/// Number of counters of a node.
+pub const NODE_FIELDS: usize = 12;
+
+/// The names of a node's counters, in order (`summary.json`'s `network.nodes[]`).
+pub const NODE_COUNTERS: [&str; NODE_FIELDS] = [
+    "frames_sent",
+    "frame_bits_sent",
+    "frames_received",
+    "frame_bits_received",
+    "acks_sent",
+    "acks_heard",
+    "ack_waits",
+    "forwarded",
+    "feedback_frames_sent",
+    "feedback_bits_sent",
+    "feedback_bits_received",
+    "listens",
+];
+
+/// A node's counters ([`NODE_COUNTERS`]).
+pub type NodeCounts = [u64; NODE_FIELDS];
+
+const TX: usize = 0;
+const TX_BITS: usize = 1;
+const RX: usize = 2;
+const RX_BITS: usize = 3;
+const ACKS_SENT: usize = 4;
+const ACKS_HEARD: usize = 5;
+const ACK_WAITS: usize = 6;
+const FORWARDED: usize = 7;
+const FB_TX: usize = 8;
+const FB_TX_BITS: usize = 9;
+const FB_RX_BITS: usize = 10;
+const LISTENS: usize = 11;
+
+/// One step's counters of every node.
+#[derive(Debug, Clone)]
+pub struct Tally {
+    counts: Vec<NodeCounts>,
+    children: Vec<u64>,
+}
+
+impl Tally {
+    /// Counters for the nodes of `net`, all zero.
+    pub fn new(net: &Topology) -> Self {
+        Tally {
+            counts: vec![[0; NODE_FIELDS]; net.nodes.len()],
+            children: (0..net.nodes.len())
+                .map(|n| net.children(n) as u64)
+                .collect(),
+        }
+    }
+
+    /// A new step: every counter back to zero.
+    pub fn start_step(&mut self) {
+        self.counts.fill([0; NODE_FIELDS]);
+    }
+
+    /// The report of sensor `source` (a MAC frame of `mac_bits` bits) over its route, whose
+    /// hops met `hops`.
+    pub fn report(&mut self, routes: &Routes, hops: &[Fate], source: usize, mac_bits: u64) {
+        let ppdu = mac_bits + PHY_OVERHEAD_BITS;
+        for (h, (&n, f)) in routes.senders[source].iter().zip(hops).enumerate() {
+            let Some((parent, channel)) = &routes.uplinks[n] else {
+                break;
+            };
+            let attempts = u64::from(1 + f.retries);
+            let arq = channel.arq.is_some();
+            let arrived = if arq {
+                u64::from(f.acks)
+            } else {
+                u64::from(!f.lost)
+            };
+            let c = &mut self.counts[n];
+            c[TX] += attempts;
+            c[TX_BITS] += attempts * ppdu;
+            c[FORWARDED] += u64::from(h > 0);
+            if arq {
+                c[ACK_WAITS] += attempts;
+                c[ACKS_HEARD] += u64::from(!f.lost);
+            }
+            let p = &mut self.counts[*parent];
+            p[RX] += arrived;
+            p[RX_BITS] += arrived * ppdu;
+            p[ACKS_SENT] += if arq { arrived } else { 0 };
+            if f.lost {
+                break;
+            }
+        }
+    }
+
+    /// The step's listening and its feedback of `payload_bits` (0: none) going down the tree;
+    /// `holds(n)`: whether node n got it.
+    pub fn feedback(&mut self, routes: &Routes, payload_bits: u64, holds: impl Fn(usize) -> bool) {
+        let frame = DOWNLINK_OVERHEAD_BITS + payload_bits;
+        for n in 0..self.counts.len() {
+            self.counts[n][LISTENS] += self.children[n];
+            if payload_bits == 0 {
+                continue;
+            }
+            if self.children[n] > 0 && holds(n) {
+                self.counts[n][FB_TX] += 1;
+                self.counts[n][FB_TX_BITS] += frame;
+            }
+            if let Some((parent, _)) = &routes.uplinks[n] {
+                self.counts[n][LISTENS] += 1;
+                if holds(*parent) {
+                    self.counts[n][FB_RX_BITS] += frame;
+                }
+            }
+        }
+    }
+
+    /// Every node's counters of this step.
+    pub fn counts(&self) -> &[NodeCounts] {
+        &self.counts
+    }
+}
+
+/// What a node's radio did over `node_steps` steps (trials × steps) with `counts` summed over
+/// them, for [`crate::network::radio::RadioSpec::energy`].
+pub fn activity(counts: &NodeCounts, node_steps: f64) -> Activity {
+    let f = |i: usize| counts[i] as f64;
+    Activity {
+        sensor_steps: node_steps,
+        frames: f(TX),
+        frame_ppdu_bits: f(TX_BITS),
+        ack_waits: f(ACK_WAITS),
+        acks_heard: f(ACKS_HEARD),
+        listens: f(LISTENS),
+        downlink_rx_bits: f(FB_RX_BITS),
+        rx_ppdu_bits: f(RX_BITS),
+        acks_sent: f(ACKS_SENT),
+        downlink_tx_frames: f(FB_TX),
+        downlink_tx_bits: f(FB_TX_BITS),
+    }
+}
+
+/// Frames a node sent (every attempt, its own and forwarded) and received, from its counters.
+pub fn frames(counts: &NodeCounts) -> (u64, u64, u64) {
+    (counts[TX], counts[RX], counts[FORWARDED])
+}
