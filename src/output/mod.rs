@@ -4,6 +4,7 @@ pub mod arena;
 pub mod arena_files;
 pub mod folder;
 pub mod html;
+pub mod network_map;
 pub mod notes;
 pub mod plot;
 pub mod report;

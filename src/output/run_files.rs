@@ -186,7 +186,9 @@ fn stage_part(
                 let dir = out_dir.staging()?.join(prefix);
                 std::fs::create_dir_all(&dir)
                     .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
-                let plots: Vec<String> = plot::write_all(r.exp, summary, &dir)?
+                let mut plots = plot::write_all(r.exp, summary, &dir)?;
+                plots.extend(crate::output::network_map::write(r.exp, summary, &dir)?);
+                let plots: Vec<String> = plots
                     .into_iter()
                     .map(|p| format!("{prefix}{p}"))
                     .collect();

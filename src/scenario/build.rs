@@ -341,9 +341,13 @@ fn build_network(
     let Some(spec) = &file.network else {
         return Ok(None);
     };
-    let positions: Vec<Option<[f64; 2]>> = (0..sensors)
-        .map(|i| file.sensors.get(i).and_then(|s| s.position))
-        .collect();
+    // Sensors in the system's order: the file's, then each field's at its placement.
+    let mut positions: Vec<Option<[f64; 2]>> = file.sensors.iter().map(|s| s.position).collect();
+    for (j, field) in file.sensor_fields.iter().enumerate() {
+        let placed = crate::scenario::system::sensor_field(ctx, j, field)?;
+        positions.extend(placed.iter().map(|s| s.position));
+    }
+    positions.resize(sensors, None);
     let topology = Topology::build(spec, &positions, file.channel.as_ref())
         .map_err(|e| ctx.err(format!("network.{}", e.field), e.message))?;
     if topology.is_star() && spec.links.is_empty() {

@@ -118,6 +118,16 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/classic-one-bit-tracking.toml"),
     ),
     (
+        "mesh-line",
+        "Multi-hop line: arena-1d's sensors 2 to 5 hops from the sink, every hop lossy and paid; energy and error against hops",
+        include_str!("../../scenarios/mesh-line.toml"),
+    ),
+    (
+        "mesh-grid",
+        "Multi-hop grid: 16 range sensors and 2 relays to a corner sink, every hop paid; the energy hole on the network map",
+        include_str!("../../scenarios/mesh-grid.toml"),
+    ),
+    (
         "arena-1d",
         "Arena: 1-D constant velocity, 4 scalar linear sensors, every scheme of the registry (--budget, --budgets)",
         include_str!("../../scenarios/arena-1d.toml"),
