@@ -89,6 +89,8 @@ const GOLDEN: &[(&str, usize, u64, usize)] = &[
     ("classic-quantized-kf", 8, 0x443c1caa051be658, 200246),
     ("classic-one-bit-static", 8, 0x365883d266a1abd0, 157990),
     ("classic-one-bit-tracking", 8, 0x651320c915f5ddde, 305630),
+    ("mesh-line", 4, 0x4f719ca02fe19542, 426295),
+    ("mesh-grid", 2, 0x4d9d2735a6ab9e47, 99508),
     ("arena-1d", 4, 0xcbb4d0e4d04e2586, 810489),
     ("arena-nca", 4, 0x7d6f5d20dcb128cc, 722424),
     ("arena-rss", 4, 0xea42c43c4cae5dcd, 123570),

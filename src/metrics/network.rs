@@ -124,6 +124,19 @@ pub fn summarize(exp: &Experiment, sums: &Sums) -> Option<(NetworkSummary, Energ
     ))
 }
 
+/// A variant's energy and, over a multi-hop network, its network summary ([`summarize`]); on a
+/// star, the sensors' energy of [`crate::metrics::energy::of_variant`].
+pub fn energy_and_network(
+    exp: &Experiment,
+    v: &crate::scenario::build::Variant,
+    sums: &Sums,
+) -> (EnergySummary, Option<NetworkSummary>) {
+    match summarize(exp, sums) {
+        Some((network, energy)) => (energy, Some(network)),
+        None => (crate::metrics::energy::of_variant(exp, v, sums), None),
+    }
+}
+
 fn add(a: EnergyParts, b: EnergyParts) -> EnergyParts {
     EnergyParts {
         tx: a.tx + b.tx,

@@ -267,8 +267,7 @@ pub fn apply_floor(floor: &crate::metrics::floor::ScenarioFloor, s: &mut Summary
 pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
     let n = exp.system.state_dim() as f64;
     let n_sensors = exp.system.n_sensors() as f64;
-    let trials = exp.trials as f64;
-    let steps = exp.steps;
+    let (trials, steps) = (exp.trials as f64, exp.steps);
     let schemes = exp
         .variants
         .iter()
@@ -299,7 +298,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
             let per_sensor =
                 |v: Vec<f64>| -> Vec<f64> { v.into_iter().map(|x| x / n_sensors).collect() };
             let traffic_per_step = TrafficPerStep::of(&col, &col_se, &per_sensor);
-            let network = crate::metrics::network::summarize(exp, s);
+            let (energy, network) = crate::metrics::network::energy_and_network(exp, v, s);
             let p_div = s.diverged as f64 / trials;
             let anees_per_step: Vec<f64> = col(Layout::NEES).into_iter().map(|x| x / n).collect();
             let messages: f64 = col(Layout::MESSAGES).iter().sum();
@@ -358,11 +357,8 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 frame_bits_per_step_se: run_se(Layout::FRAME_BITS, 1.0),
                 downlink_bits_per_step: downlink_bits / steps as f64,
                 downlink_bits_per_step_se: run_se(Layout::DOWNLINK_BITS, 1.0),
-                energy: network.as_ref().map_or_else(
-                    || crate::metrics::energy::of_variant(exp, v, s),
-                    |n| n.1.clone(),
-                ),
-                network: network.map(|n| n.0),
+                energy,
+                network,
                 r_eff_per_step: crate::metrics::floor::r_eff_of(exp, s, bits, messages),
                 floor_mse: None,
                 traffic_per_step,

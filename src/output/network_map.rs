@@ -97,7 +97,10 @@ fn draw(net: &Topology, panels: &[(&str, &NetworkSummary)]) -> Result<String, St
     let (lo, hi) = energies.fold((f64::MAX, f64::MIN), |(a, b), e| (a.min(e), b.max(e)));
     let rows = panels.len().div_ceil(COLUMNS);
     let cols = panels.len().min(COLUMNS);
-    let size = ((PANEL.0 * cols as u32).max(1000), PANEL.1 * rows as u32 + 40);
+    let size = (
+        (PANEL.0 * cols as u32).max(1000),
+        PANEL.1 * rows as u32 + 40,
+    );
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, size).into_drawing_area();
@@ -112,12 +115,7 @@ fn draw(net: &Topology, panels: &[(&str, &NetworkSummary)]) -> Result<String, St
             area.draw(&Text::new(title, (10, 8), ("sans-serif", 14)))
                 .map_err(err)?;
             let (w, h) = (PANEL.0 as f64 - 90.0, PANEL.1 as f64 - 80.0);
-            let px = |i: usize| {
-                (
-                    30 + (at[i].0 * w) as i32,
-                    40 + (at[i].1 * h) as i32,
-                )
-            };
+            let px = |i: usize| (30 + (at[i].0 * w) as i32, 40 + (at[i].1 * h) as i32);
             for l in &net.links {
                 let tree = net.parent[l.a] == Some(l.b) || net.parent[l.b] == Some(l.a);
                 let style = if tree {
@@ -136,29 +134,46 @@ fn draw(net: &Topology, panels: &[(&str, &NetworkSummary)]) -> Result<String, St
                 };
                 let (x, y) = px(i);
                 if node.kind == "sink" {
-                    area.draw(&Rectangle::new([(x - 9, y - 9), (x + 9, y + 9)], heat(t).filled()))
-                        .map_err(err)?;
-                    area.draw(&Rectangle::new([(x - 9, y - 9), (x + 9, y + 9)], BLACK.stroke_width(2)))
-                        .map_err(err)?;
+                    area.draw(&Rectangle::new(
+                        [(x - 9, y - 9), (x + 9, y + 9)],
+                        heat(t).filled(),
+                    ))
+                    .map_err(err)?;
+                    area.draw(&Rectangle::new(
+                        [(x - 9, y - 9), (x + 9, y + 9)],
+                        BLACK.stroke_width(2),
+                    ))
+                    .map_err(err)?;
                 } else {
                     area.draw(&Circle::new((x, y), 8, heat(t).filled()))
                         .map_err(err)?;
                     area.draw(&Circle::new((x, y), 8, BLACK.stroke_width(1)))
                         .map_err(err)?;
                 }
-                if summary.first_to_die.as_ref().is_some_and(|f| f.node == node.name) {
+                if summary
+                    .first_to_die
+                    .as_ref()
+                    .is_some_and(|f| f.node == node.name)
+                {
                     area.draw(&Circle::new((x, y), 14, RED.stroke_width(3)))
                         .map_err(err)?;
                 }
-                area.draw(&Text::new(node.name.clone(), (x + 11, y - 16), ("sans-serif", 12)))
-                    .map_err(err)?;
+                area.draw(&Text::new(
+                    node.name.clone(),
+                    (x + 11, y - 16),
+                    ("sans-serif", 12),
+                ))
+                .map_err(err)?;
             }
         }
         // The colour scale.
         for s in 0..=100 {
             let x = 20 + s * 3;
             legend
-                .draw(&Rectangle::new([(x, 8), (x + 3, 22)], heat(s as f64 / 100.0).filled()))
+                .draw(&Rectangle::new(
+                    [(x, 8), (x + 3, 22)],
+                    heat(s as f64 / 100.0).filled(),
+                ))
                 .map_err(err)?;
         }
         let label = format!(

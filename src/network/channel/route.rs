@@ -27,10 +27,14 @@ use super::spec::{Arq, ChannelSpec};
 use super::{Fate, FateTable};
 use crate::engine::seeding;
 
+/// Node indices below this are keyed apart by [`forward_key`] (the topology's node limit is at
+/// most this).
+pub const KEY_STRIDE: usize = 4096;
+
 /// The key of the coins of the reports of source `source` that node `node` forwards: far from
-/// every node's own key (below 2^24 for nodes and sources below 4096).
+/// every node's own key (below 2^24 for nodes and sources below [`KEY_STRIDE`]).
 pub fn forward_key(node: usize, source: usize) -> usize {
-    usize::MAX - (node * crate::network::topology::MAX_NODES + source)
+    usize::MAX - (node * KEY_STRIDE + source)
 }
 
 /// The routes of a trial's reports: for every node but the sink, its parent and the channel of

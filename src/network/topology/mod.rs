@@ -20,6 +20,8 @@ use spec::{EdgeRule, Edges, NetworkSpec, Relays, RouteRule};
 /// Most nodes a network may have (sensors, relays and the sink): the routing and the per-node
 /// sums grow with it, and 802.15.4's 16-bit short addresses are not the limit here.
 pub const MAX_NODES: usize = 4096;
+// The link's fates key every (node, source) pair apart only below this stride.
+const _: () = assert!(MAX_NODES <= crate::network::channel::route::KEY_STRIDE);
 
 /// The name of the sink.
 pub const SINK: &str = "sink";
