@@ -264,3 +264,24 @@ fn bad_networks_exit_2_naming_field_and_nodes() {
         }
     }
 }
+
+#[test]
+fn a_mesh_run_is_the_same_on_one_thread_or_two() {
+    use hushfuse::engine::runner;
+    use hushfuse::metrics::results;
+    use hushfuse::scenario::{build, builtin};
+    for name in ["mesh-line", "mesh-grid"] {
+        let opts = build::LoadOptions {
+            trials: Some(3),
+            ..Default::default()
+        };
+        let exp = build::load_with(builtin::get(name).unwrap(), name, &opts).unwrap();
+        let json = |threads| {
+            let sums = runner::run(&exp, runner::RunOptions { threads }, &|_| {}).unwrap();
+            serde_json::to_string(&results::summarize(&exp, &sums).schemes).unwrap()
+        };
+        let one = json(1);
+        assert!(one.contains("first_to_die"), "{name}");
+        assert_eq!(one, json(2), "{name}");
+    }
+}

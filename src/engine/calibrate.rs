@@ -802,12 +802,15 @@ pub fn energy_floor_problem(exp: &Experiment, axis: Axis, budgets: &[f64]) -> Op
     if axis != Axis::Energy {
         return None;
     }
-    let asleep = exp.radio.asleep_step_uj(exp.system.n_sensors());
+    let asleep = exp.radio.asleep_step_uj(exp.battery_radios());
+    let radios = match exp.network {
+        None => format!("{} sensors' radios", exp.system.n_sensors()),
+        Some(_) => format!("network's {} battery-powered radios", exp.battery_radios()),
+    };
     budgets.iter().find(|&&b| b < asleep).map(|b| {
         format!(
-            "budget {} µJ/step is below what the {} sensors' radios spend asleep ({} µJ/step), which no scheme goes under",
+            "budget {} µJ/step is below what the {radios} spend asleep ({} µJ/step), which no scheme goes under",
             short(*b),
-            exp.system.n_sensors(),
             short(asleep)
         )
     })

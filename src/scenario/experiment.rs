@@ -68,3 +68,14 @@ pub struct Experiment {
     /// How real numbers cross the network (`reals`; singles by default).
     pub reals: crate::link::Reals,
 }
+
+impl Experiment {
+    /// The radios that run on a battery: the sensors on a star; over a multi-hop network also
+    /// the relays (and the sink unless it is on mains). What the energy axis counts.
+    pub fn battery_radios(&self) -> usize {
+        match &self.network {
+            None => self.system.n_sensors(),
+            Some(net) => net.nodes.len() - usize::from(net.sink_mains),
+        }
+    }
+}

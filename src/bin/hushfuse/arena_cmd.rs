@@ -252,7 +252,7 @@ pub(crate) fn quick_arena() -> Result<(), Failure> {
         ..Default::default()
     };
     let exp = build::load_with(text, &source, &load).map_err(|e| Failure::Run(e.to_string()))?;
-    let asleep = exp.radio.asleep_step_uj(exp.system.n_sensors());
+    let asleep = exp.radio.asleep_step_uj(exp.battery_radios());
     let start = Instant::now();
     let mut msg = arena::quick_description(trials);
     let mut evaluations = 0;
