@@ -285,3 +285,12 @@ fn a_mesh_run_is_the_same_on_one_thread_or_two() {
         assert_eq!(one, json(2), "{name}");
     }
 }
+
+#[test]
+fn live_runs_refuse_a_multi_hop_network() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = cli::hushfuse(&["live", "mesh-line", "--out", "live"], dir.path());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("multi-hop [network]"), "{err}");
+}

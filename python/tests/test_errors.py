@@ -143,3 +143,11 @@ def test_readings_that_overflow_the_filters_are_a_run_error_naming_the_scheme():
     with pytest.raises(hushfuse.RunError, match="not finite") as e:
         hushfuse.replay(kf, huge)
     assert "Centralized KF" in str(e.value) and "step 1:" in str(e.value), str(e.value)
+
+
+def test_a_multi_hop_network_runs_whole_and_is_refused_step_by_step():
+    r = hushfuse.run("mesh-line", trials=2)
+    s = r["schemes"][0]
+    assert s["network"]["first_to_die"]["node"] == "r0"
+    with pytest.raises(ValueError, match=r"multi-hop \[network\]"):
+        hushfuse.Scheme("mesh-line")

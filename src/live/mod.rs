@@ -60,6 +60,9 @@ pub fn check_live(exp: &Experiment) -> Result<(), String> {
             "reals = \"f64\" is not supported in a live run: its frames carry singles".into(),
         );
     }
+    if exp.network.is_some() {
+        return Err("a multi-hop [network] is not supported in a live run yet: the live processes talk over the one-hop star (run it with `hushfuse run`)".into());
+    }
     for v in &exp.variants {
         let label = &exp.curves[v.curve].label;
         if v.sequence_bits > 0 {
