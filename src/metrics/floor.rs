@@ -81,13 +81,21 @@ pub fn r_eff_per_step(
 /// messages summed over the steps (as `summarize_schemes` has them).
 pub fn r_eff_of(exp: &Experiment, sums: &Sums, bits: f64, messages: f64) -> f64 {
     let trials = exp.trials as f64;
+    // Frames beyond a message's first: the retransmissions (the link's counter 4,
+    // `LINK_COUNTERS`); over a multi-hop network also every forward, all of them carrying the
+    // message's payload again (every frame any node sent, less the messages).
+    let repeats = if sums.nodes.is_empty() {
+        sums.link.iter().map(|r| r[4] as f64).sum()
+    } else {
+        let frames: u64 = sums.nodes.iter().map(|c| c[0]).sum();
+        (frames as f64 - messages * trials).max(0.0)
+    };
     r_eff_per_step(
         sums,
         exp.system.n_sensors(),
         bits / exp.steps.max(1) as f64,
         messages * trials,
-        // Retransmissions: the link's counter 4 (`LINK_COUNTERS`).
-        sums.link.iter().map(|r| r[4] as f64).sum(),
+        repeats,
     )
 }
 
