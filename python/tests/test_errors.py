@@ -147,7 +147,10 @@ def test_readings_that_overflow_the_filters_are_a_run_error_naming_the_scheme():
 
 def test_a_multi_hop_network_runs_whole_and_is_refused_step_by_step():
     r = hushfuse.run("mesh-line", trials=2)
-    s = r["schemes"][0]
-    assert s["network"]["first_to_die"]["node"] == "r0"
+    net = r["schemes"][0]["network"]
+    battery = [n for n in net["nodes"] if not n["mains"]]
+    first = min(battery, key=lambda n: n["lifetime_days"])
+    assert net["first_to_die"]["node"] == first["name"]
+    assert [n["hops"] for n in net["nodes"]] == [5, 4, 3, 2, 1, 0]
     with pytest.raises(ValueError, match=r"multi-hop \[network\]"):
         hushfuse.Scheme("mesh-line")
