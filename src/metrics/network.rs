@@ -73,7 +73,7 @@ pub fn summarize(exp: &Experiment, sums: &Sums) -> Option<(NetworkSummary, Energ
         let parts = exp.radio.energy(&activity(&counts, node_steps)).per(per);
         let mains = node.kind == NodeKind::Sink && net.sink_mains;
         if !mains {
-            total = add(total, parts);
+            total = total + parts;
         }
         let (sent, received, forwarded) = frames(&counts);
         nodes.push(NodeSummary {
@@ -134,15 +134,5 @@ pub fn energy_and_network(
     match summarize(exp, sums) {
         Some((network, energy)) => (energy, Some(network)),
         None => (crate::metrics::energy::of_variant(exp, v, sums), None),
-    }
-}
-
-fn add(a: EnergyParts, b: EnergyParts) -> EnergyParts {
-    EnergyParts {
-        tx: a.tx + b.tx,
-        ack: a.ack + b.ack,
-        downlink: a.downlink + b.downlink,
-        sleep: a.sleep + b.sleep,
-        relay: a.relay + b.relay,
     }
 }

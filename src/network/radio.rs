@@ -217,6 +217,21 @@ pub struct EnergyParts {
     pub relay: f64,
 }
 
+impl std::ops::Add for EnergyParts {
+    type Output = EnergyParts;
+
+    /// Part by part: the energy of two radios, or of two spells of one.
+    fn add(self, o: EnergyParts) -> EnergyParts {
+        EnergyParts {
+            tx: self.tx + o.tx,
+            ack: self.ack + o.ack,
+            downlink: self.downlink + o.downlink,
+            sleep: self.sleep + o.sleep,
+            relay: self.relay + o.relay,
+        }
+    }
+}
+
 fn is_zero(x: &f64) -> bool {
     *x == 0.0
 }

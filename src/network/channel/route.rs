@@ -56,13 +56,9 @@ impl Routes {
             .fold(0u64, |a, h| a.saturating_add(u64::from(h)))
     }
 
-    /// The channel of node `n`'s uplink (ideal for the sink, which has none).
+    /// The channel of node `n`'s uplink; only nodes that send (never the sink) have one.
     fn uplink(&self, n: usize) -> &ChannelSpec {
-        static IDEAL: std::sync::OnceLock<ChannelSpec> = std::sync::OnceLock::new();
-        match &self.uplinks[n] {
-            Some((_, c)) => c,
-            None => IDEAL.get_or_init(ChannelSpec::default),
-        }
+        &self.uplinks[n].as_ref().expect("the sink sends nothing").1
     }
 
     /// Whether every link's downlink is lossless (feedback and ACKs always arrive).
@@ -149,6 +145,11 @@ impl RouteFates {
         } else {
             let mut per_node = Vec::with_capacity(nodes * steps);
             for n in 0..nodes {
+                if routes.uplinks[n].is_none() {
+                    // The sink: the feedback starts there (its fates are never read).
+                    per_node.extend((0..steps).map(|_| Fate::default()));
+                    continue;
+                }
                 let c = routes.uplink(n).downlink_spec();
                 let losses = loss_path(&c, steps, slots(n, true));
                 let down = slots(n, true);
