@@ -188,6 +188,84 @@ fn loss_aware_centers_take_the_path_loss() {
     assert!(unaware.anees > 1.0 + 4.0 * unaware.anees_se);
 }
 
+/// s0, s1 → s2; s2, s3 → r0 → sink.
+const TREE: &str = "relays = 1\nedges = [[\"s0\", \"s2\"], [\"s1\", \"s2\"], [\"s2\", \"r0\"], [\"s3\", \"r0\"], [\"r0\", \"sink\"]]\n";
+
+#[test]
+fn relays_sum_the_all_data_kf_into_one_frame_per_link() {
+    let aggregated = summary(&scenario(4, "", TREE, ALL_DATA, 20));
+    let forwarded = summary(&scenario(
+        4,
+        "",
+        &format!("{TREE}aggregate = false\n"),
+        ALL_DATA,
+        20,
+    ));
+    let star = summary(&scalar_system(0.95, 4, 60, "", ALL_DATA, 20));
+    let (a, f) = (&aggregated.schemes[0], &forwarded.schemes[0]);
+    assert!(a.network.as_ref().unwrap().aggregated);
+    assert!(!f.network.as_ref().unwrap().aggregated);
+    // One frame per link and step: s0, s1, s3 send their readings (32 bits), s2 and r0 sums of
+    // y and Y (2 singles, 64 bits) holding 3 and 4 reports.
+    for name in ["s0", "s1", "s2", "s3", "r0"] {
+        assert_eq!(node(a, name).frames_sent_per_step, 1.0, "{name}");
+    }
+    assert_eq!(node(a, "r0").frames_received_per_step, 2.0);
+    // per_step.csv's hops: 5 frames a step, 2 of them (s2's, r0's) carrying others' reports.
+    let (na, nf) = (a.network.as_ref().unwrap(), f.network.as_ref().unwrap());
+    assert!(na.frames_per_step.iter().all(|&x| x == 5.0));
+    assert!(na.forwards_per_step.iter().all(|&x| x == 2.0));
+    assert!(nf.frames_per_step.iter().all(|&x| x == 10.0));
+    assert!(nf.forwards_per_step.iter().all(|&x| x == 6.0));
+    assert_eq!(node(a, "sink").frames_received_per_step, 1.0);
+    assert_eq!(a.bits_per_step, 3.0 * 32.0 + 2.0 * 64.0);
+    // Per source: s2 forwards 2 reports, r0 forwards 4; 32 bits per report and per forward.
+    assert_eq!(node(f, "r0").frames_sent_per_step, 4.0);
+    assert_eq!(node(f, "sink").frames_received_per_step, 4.0);
+    assert_eq!(f.bits_per_step, 32.0 * (4.0 + 2.0 + 4.0));
+    assert!(a.energy.energy_per_step_uj < f.energy.energy_per_step_uj);
+    // The sink's estimate is the all-data KF's: the star's, but for the singles the sums are
+    // sent as (relative rounding 2^-24 per hop).
+    let rel = |x: f64, y: f64| (x - y).abs() / y.abs();
+    let key = star.schemes[0].mean_rmse.keys().next().unwrap().clone();
+    let (ra, rs) = (a.mean_rmse[&key], star.schemes[0].mean_rmse[&key]);
+    assert!(rel(ra, rs) < 1e-5, "{ra} vs {rs}");
+    assert!(rel(a.steady_state.anees, star.schemes[0].steady_state.anees) < 1e-5);
+    // Forwarded per source, the sink gets the very readings of the star: the same numbers.
+    assert_eq!(f.mean_rmse, star.schemes[0].mean_rmse);
+}
+
+#[test]
+fn summed_reports_under_loss_stay_consistent() {
+    // Per-hop loss 0.2: a frame lost loses its subtree's sum for the step; the all-data KF
+    // fuses what arrived, which stays exact (a missing report is no information).
+    let text = scenario(
+        4,
+        "[channel]\nkind = \"bernoulli\"\nloss = 0.2\n",
+        TREE,
+        ALL_DATA,
+        200,
+    );
+    let s = summary(&text);
+    let ss = &s.schemes[0].steady_state;
+    assert!(
+        (ss.anees - 1.0).abs() < 4.0 * ss.anees_se,
+        "ANEES {} ± {}",
+        ss.anees,
+        ss.anees_se
+    );
+    // s0's and s1's reports cross three links (delivered 0.8^3), s2's and s3's two (0.8^2):
+    // (2 · 0.512 + 2 · 0.64) / 4 = 0.576 on average; 200 × 60 × 4 reports, correlated within a
+    // step (one frame carries several), so the bound takes the 12000 steps as the samples.
+    let delivered = 1.0 - link_fraction(&s, 0, "loss_fraction");
+    let expected = (2.0 * 0.512 + 2.0 * 0.64) / 4.0;
+    let se = (0.25 / 12_000.0f64).sqrt();
+    assert!(
+        (delivered - expected).abs() < 4.0 * se,
+        "{delivered} vs {expected}"
+    );
+}
+
 #[test]
 fn a_star_network_is_todays_run() {
     let channel = "[channel]\nkind = \"bernoulli\"\nloss = 0.3\narq = { max_retries = 1 }\n";
@@ -223,7 +301,17 @@ fn run_cli(text: &str) -> (Option<i32>, String) {
 
 #[test]
 fn bad_networks_exit_2_naming_field_and_nodes() {
-    let cases: [(&str, &str, &[&str]); 6] = [
+    let cases: [(&str, &str, &[&str]); 8] = [
+        (
+            "relays = 1\nedges = \"line\"\n[[network.links]]\nbetween = [\"r0\", \"sink\"]\nchannel = { kind = \"bernoulli\", loss = 0.1, delay = 1 }\n",
+            "",
+            &["network.aggregate", "r0", "sink", "aggregate = false"],
+        ),
+        (
+            LINE3,
+            "[[schemes]]\nkind = \"centralized-kf\"\nsequence_bits = 4\n",
+            &["network.aggregate", "sequence_bits"],
+        ),
         (
             "relays = 2\nedges = [[\"s0\", \"sink\"], [\"r0\", \"r1\"]]\n",
             "",

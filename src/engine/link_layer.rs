@@ -43,6 +43,7 @@
 //! replay of the trial so far per step at which a gap is revealed, and the history of every
 //! inbox is kept whenever sequence numbers are on.
 use crate::link::{Received, Transmission};
+use crate::network::aggregate::{self, Aggregation};
 use crate::network::channel::route::{RouteFates, Routes};
 use crate::network::channel::{ChannelSpec, FateTable};
 use crate::network::topology::tally::{NodeCounts, Tally};
@@ -271,6 +272,8 @@ struct Hops {
     routes: Routes,
     fates: Arc<RouteFates>,
     tally: Tally,
+    /// For a variant whose relays sum its reports ([`crate::network::aggregate`]).
+    aggregation: Option<Aggregation>,
 }
 
 impl LinkLayer {
@@ -295,17 +298,32 @@ impl LinkLayer {
                 .max()
                 .unwrap_or(0)
                 .min(exp.steps as u64) as usize;
-            let mut link = Self::with_fates(
-                route_fates.up.clone(),
-                route_fates.down.clone(),
-                horizon,
-                exp.variants[variant].sequence_bits,
-            );
+            let v = &exp.variants[variant];
+            // Summed reports reach the sink when every node of their route delivered its frame.
+            let aggregation = v.aggregated(Some(net)).then(|| {
+                let sensors = exp.system.sensors.iter().map(|s| {
+                    let s = s
+                        .as_linear()
+                        .expect("an aggregable scheme's sensors are linear");
+                    (s.ht_rinv().clone(), s.information().clone())
+                });
+                Aggregation::new(&routes, sensors.collect())
+            });
+            let up = match &aggregation {
+                Some(_) => Arc::new(aggregate::composed(
+                    &routes,
+                    &route_fates.node_up,
+                    exp.steps,
+                )),
+                None => route_fates.up.clone(),
+            };
+            let mut link = Self::with_fates(up, route_fates.down.clone(), horizon, v.sequence_bits);
             link.held = vec![initial.clone(); link.held.len()];
             link.hops = Some(Hops {
                 tally: Tally::new(net),
                 routes,
                 fates: route_fates,
+                aggregation,
             });
             return Some(link);
         }
@@ -405,6 +423,19 @@ impl LinkLayer {
         };
         hops.tally.start_step();
         let (tally, fates, routes) = (&mut hops.tally, &hops.fates, &hops.routes);
+        if let Some(agg) = &mut hops.aggregation {
+            inbox.clear();
+            let mut traffic = Traffic::default();
+            for (i, t) in transmissions.into_iter().enumerate() {
+                if let Transmission::Send(_) = t {
+                    traffic.senders |= network::sensor_bit(i);
+                    traffic.messages += 1;
+                }
+                inbox.push(t.into());
+            }
+            agg.deliver(k, inbox, routes, &fates.node_up, tally, &mut traffic);
+            return traffic;
+        }
         let mut i = 0;
         let counted = transmissions.into_iter().inspect(|t| {
             if let Transmission::Send(m) = t {
@@ -480,6 +511,10 @@ impl LinkLayer {
         scheme: &dyn Scheme,
         (trial, center_seed): (usize, u64),
     ) -> Result<(), (usize, SchemeError)> {
+        if let Some(agg) = self.hops.as_ref().and_then(|h| h.aggregation.as_ref()) {
+            // No delays, no sequence numbers (checked at load): nothing to re-fuse.
+            return center.fuse_information(k, agg.held()).map_err(|e| (k, e));
+        }
         if self.receive(k).is_some() {
             let mut fresh = scheme
                 .build_for_trial(trial, center_seed)

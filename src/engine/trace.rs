@@ -98,7 +98,7 @@ impl Observer for SumsAndCalls<'_, '_, '_> {
             .record(s.k, &self.truth[s.k - 1], s.estimate, s.traffic)
             .map_err(ObserverError::Covariance)?;
         self.obs.record_ess(s.k, s.ess);
-        self.obs.record_nodes(s.nodes);
+        self.obs.record_nodes(s.k, s.nodes);
         (self.f)(s).map_err(ObserverError::Message)
     }
 }

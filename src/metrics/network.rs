@@ -52,7 +52,18 @@ pub struct FirstToDie {
 /// The network of a variant.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct NetworkSummary {
+    /// Whether the relays summed this scheme's reports into one frame per link
+    /// ([`crate::network::aggregate`]) rather than forward each report per source.
+    #[serde(default)]
+    pub aggregated: bool,
     pub nodes: Vec<NodeSummary>,
+    /// Per step, mean over trials: frames on air, every node's attempts (`per_step.csv`'s
+    /// `hop_frames`).
+    #[serde(default)]
+    pub frames_per_step: Vec<f64>,
+    /// Per step, mean over trials: frames that carried what other nodes sent (`hop_forwards`).
+    #[serde(default)]
+    pub forwards_per_step: Vec<f64>,
     /// The network's lifetime: the battery-powered node that dies first.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub first_to_die: Option<FirstToDie>,
@@ -61,8 +72,13 @@ pub struct NetworkSummary {
 /// The network summary of a variant's `sums` over `exp`'s multi-hop network, and its energy as
 /// the scheme's [`EnergySummary`]: every battery-powered node's energy per step added
 /// (`energy_per_sensor_step_uj` is that over the sensors), and the network's lifetime as
-/// `lifetime_days`. `None` on a star.
-pub fn summarize(exp: &Experiment, sums: &Sums) -> Option<(NetworkSummary, EnergySummary)> {
+/// `lifetime_days`. `None` on a star. `aggregated`: whether the relays summed the variant's
+/// reports.
+pub fn summarize(
+    exp: &Experiment,
+    sums: &Sums,
+    aggregated: bool,
+) -> Option<(NetworkSummary, EnergySummary)> {
     let net: &Topology = exp.network.as_deref()?;
     let node_steps = (sums.trials * sums.steps) as f64;
     let per = node_steps.max(1.0);
@@ -117,11 +133,24 @@ pub fn summarize(exp: &Experiment, sums: &Sums) -> Option<(NetworkSummary, Energ
     };
     Some((
         NetworkSummary {
+            aggregated,
             nodes,
+            frames_per_step: hops_column(sums, 0),
+            forwards_per_step: hops_column(sums, 1),
             first_to_die,
         },
         energy,
     ))
+}
+
+/// Column `c` of [`Sums::hops`] per step, as a mean over the trials (zeros where nothing was
+/// counted).
+fn hops_column(sums: &Sums, c: usize) -> Vec<f64> {
+    let trials = sums.trials.max(1) as f64;
+    match sums.hops.is_empty() {
+        true => vec![0.0; sums.steps],
+        false => sums.hops.iter().map(|h| h[c] as f64 / trials).collect(),
+    }
 }
 
 /// A variant's energy and, over a multi-hop network, its network summary ([`summarize`]); on a
@@ -131,7 +160,7 @@ pub fn energy_and_network(
     v: &crate::scenario::build::Variant,
     sums: &Sums,
 ) -> (EnergySummary, Option<NetworkSummary>) {
-    match summarize(exp, sums) {
+    match summarize(exp, sums, v.aggregated(exp.network.as_deref())) {
         Some((network, energy)) => (energy, Some(network)),
         None => (crate::metrics::energy::of_variant(exp, v, sums), None),
     }

@@ -55,6 +55,9 @@ fn write_csv_header(
     if summary.schemes.iter().any(|s| s.link.is_some()) {
         out.write_all(crate::metrics::link::CSV_HEADER.as_bytes())?;
     }
+    if summary.schemes.iter().any(|s| s.network.is_some()) {
+        out.write_all(b",hop_frames,hop_forwards")?;
+    }
     out.write_all(b"\n")
 }
 
@@ -94,6 +97,15 @@ fn write_csv_rows(
         }
         if let Some(l) = &s.link {
             out.write_all(crate::metrics::link::csv_fields(l, k).as_bytes())?;
+        }
+        if let Some(n) = &s.network {
+            let at = |v: &[f64]| v.get(k).copied().unwrap_or(0.0);
+            write!(
+                out,
+                ",{},{}",
+                at(&n.frames_per_step),
+                at(&n.forwards_per_step)
+            )?;
         }
         out.write_all(b"\n")?;
     }

@@ -3,6 +3,7 @@
 use crate::link::codec802154::ACK_PPDU_BITS;
 use crate::link::{Received, Transmission};
 
+pub mod aggregate;
 pub mod channel;
 pub mod radio;
 pub mod topology;

@@ -283,6 +283,7 @@ pub fn build_with(
     )?;
     if link.2.is_some() {
         check_network_variants(&ctx, &link.0, &curves, &variants, file_spec.reals)?;
+        check_aggregation(&ctx, link.2.as_deref(), &curves, &variants)?;
     }
     let estimate = limits::with_schemes(
         limits::baseline(
@@ -388,6 +389,39 @@ fn check_network_variants(
                 format!(
                     "scheme {} brings its own channel (a `channel` key, a swept channel key or --loss); with a multi-hop [network] every hop's channel is the network's: give it in [channel] or [[network.links]]",
                     curves[v.curve].label
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The schemes whose relays sum information ([`crate::network::aggregate`]) need links that
+/// deliver within the step (a relay cannot wait for a late child's frame) and no sequence
+/// numbers (a sum has no single source to number).
+fn check_aggregation(
+    ctx: &Ctx,
+    network: Option<&crate::network::topology::Topology>,
+    curves: &[crate::scenario::experiment::Curve],
+    variants: &[crate::scenario::experiment::Variant],
+) -> Result<(), ScenarioError> {
+    let Some(net) = network else { return Ok(()) };
+    for v in variants.iter().filter(|v| v.aggregated(Some(net))) {
+        let label = &curves[v.curve].label;
+        if let Some(l) = net.links.iter().find(|l| !l.channel.delay().is_zero()) {
+            return Err(ctx.err(
+                "network.aggregate",
+                format!(
+                    "scheme {label} is summed by the relays, and the link {} – {} delays frames (a relay cannot wait for a late child's frame); set network.aggregate = false to forward its reports per source",
+                    net.nodes[l.a].name, net.nodes[l.b].name
+                ),
+            ));
+        }
+        if v.sequence_bits > 0 {
+            return Err(ctx.err(
+                "network.aggregate",
+                format!(
+                    "scheme {label} has sequence_bits and is summed by the relays (a sum has no single source to number); set network.aggregate = false to forward its reports per source"
                 ),
             ));
         }

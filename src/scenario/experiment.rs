@@ -24,6 +24,15 @@ pub struct Variant {
     pub sequence_bits: u32,
 }
 
+impl Variant {
+    /// Whether the relays of `network` sum this variant's reports
+    /// ([`crate::network::aggregate`]): a multi-hop network that aggregates, and a scheme whose
+    /// reports may be summed.
+    pub fn aggregated(&self, network: Option<&crate::network::topology::Topology>) -> bool {
+        network.is_some_and(|n| n.aggregate) && self.scheme.aggregable()
+    }
+}
+
 /// One `[[schemes]]` entry: a curve of one or more variants.
 #[derive(Debug, Clone)]
 pub struct Curve {

@@ -185,6 +185,20 @@ pub trait FusionCenter: Send {
     fn ess(&self) -> Option<f64> {
         None
     }
+    /// Fuses step `k` from the information its sensors' reports add up to, summed inside the
+    /// network ([`crate::network::aggregate`]: Σ H_i^T R_i^{-1} H_i and Σ H_i^T R_i^{-1} z_i over
+    /// the reports that reached the sink; `None` when none did). Only the centers of schemes
+    /// that are [`Scheme::aggregable`] take it.
+    fn fuse_information(
+        &mut self,
+        k: usize,
+        sum: Option<&crate::filter::information::Information>,
+    ) -> Result<(), SchemeError> {
+        let _ = (k, sum);
+        Err(SchemeError::Unsupported(
+            "this fusion center cannot fuse an aggregated information sum".into(),
+        ))
+    }
 }
 
 /// Fresh per-trial state of a scheme.
@@ -208,6 +222,13 @@ pub trait Scheme: Send + Sync + Debug {
     fn build_for_trial(&self, trial: usize, seed: u64) -> Result<SchemeInstance, SchemeError> {
         let _ = trial;
         self.build_with_seed(seed)
+    }
+    /// Whether the reports of this scheme may be summed inside a multi-hop network
+    /// ([`crate::network::aggregate`]): raw measurements of linear sensors whose center needs
+    /// only their information sum ([`FusionCenter::fuse_information`]). Reports whose silences or
+    /// codes mean something are never merged.
+    fn aggregable(&self) -> bool {
+        false
     }
     /// Which sensors may talk at each step.
     fn schedule(&self) -> Schedule {

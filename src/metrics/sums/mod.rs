@@ -81,6 +81,11 @@ pub struct Sums {
     /// Integers; empty on a star.
     #[serde(default)]
     pub nodes: Vec<crate::network::topology::tally::NodeCounts>,
+    /// Over a multi-hop network: per step, summed over trials, `[frames on air (every node's
+    /// attempts), frames that carried what other nodes sent (forwards)]`: the hops of
+    /// `per_step.csv`. Empty on a star.
+    #[serde(default)]
+    pub hops: Vec<[u64; 2]>,
 }
 
 /// Where and why a variant's trial failed.
@@ -192,6 +197,19 @@ impl Sums {
             sensors: Vec::new(),
             reading_peaks: Vec::new(),
             nodes: Vec::new(),
+            hops: Vec::new(),
+        }
+    }
+
+    /// Adds step `k`'s (1-based) frames on air and forwards of one trial to [`Sums::hops`].
+    fn add_hops(&mut self, k: usize, nodes: &[crate::network::topology::tally::NodeCounts]) {
+        if self.hops.is_empty() {
+            self.hops = vec![[0; 2]; self.steps];
+        }
+        for c in nodes {
+            let (sent, _, forwarded) = crate::network::topology::tally::frames(c);
+            self.hops[k - 1][0] += sent;
+            self.hops[k - 1][1] += forwarded;
         }
     }
 
@@ -338,6 +356,7 @@ impl Sums {
         self.sensors.clear();
         self.reading_peaks.clear();
         self.nodes.clear();
+        self.hops.clear();
     }
 
     /// Adds another block's sums (same shape).
@@ -376,6 +395,15 @@ impl Sums {
         }
         self.merge_peaks(&o.reading_peaks);
         self.add_nodes(&o.nodes);
+        if !o.hops.is_empty() {
+            if self.hops.is_empty() {
+                self.hops = vec![[0; 2]; self.steps];
+            }
+            for (a, b) in self.hops.iter_mut().zip(&o.hops) {
+                a[0] += b[0];
+                a[1] += b[1];
+            }
+        }
         if !o.link.is_empty() {
             if self.link.is_empty() {
                 self.link = vec![[0; LINK_FIELDS]; self.steps];
@@ -707,11 +735,16 @@ impl TrialObserver<'_> {
         self.state.record_ess(self.sums, k, ess);
     }
 
-    /// [`Sums::add_nodes`]: a step's counters of a multi-hop network's nodes (nothing on a
-    /// star).
-    pub fn record_nodes(&mut self, nodes: &[crate::network::topology::tally::NodeCounts]) {
+    /// [`Sums::add_nodes`] and the hops of step `k`: a step's counters of a multi-hop
+    /// network's nodes (nothing on a star).
+    pub fn record_nodes(
+        &mut self,
+        k: usize,
+        nodes: &[crate::network::topology::tally::NodeCounts],
+    ) {
         if !nodes.is_empty() {
             self.sums.add_nodes(nodes);
+            self.sums.add_hops(k, nodes);
         }
     }
 

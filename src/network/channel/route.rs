@@ -81,6 +81,10 @@ pub struct RouteFates {
     pub down: Option<Arc<FateTable>>,
     /// Per (node, step): whether the feedback reached the node (`None` as `down`).
     pub node_down: Option<FateTable>,
+    /// Per (node, step): the fate of the node's own frame on its uplink, drawn from the node's
+    /// key (a sensor's is its report's first hop): what an aggregate frame meets
+    /// ([`crate::network::aggregate`]). The sink's are never read.
+    pub node_up: FateTable,
     /// Every hop's fate, sensor-major, then step, then hop.
     hops: Vec<Fate>,
     /// Per sensor: where its fates start in `hops`.
@@ -140,6 +144,28 @@ impl RouteFates {
             }
         }
         let sensors = routes.senders.len();
+        // Every node's own frame: a sensor's is its report's first hop (the same draw); a
+        // relay's comes from its own key, as a sensor's would.
+        let mut own = Vec::with_capacity(nodes * steps);
+        for n in 0..nodes {
+            let Some((_, c)) = &routes.uplinks[n] else {
+                own.extend((0..steps).map(|_| Fate::default()));
+                continue;
+            };
+            if n < sensors {
+                let len = routes.senders[n].len();
+                own.extend((0..steps).map(|k| hops[offsets[n] + k * len]));
+                continue;
+            }
+            let slot = slots(n, false);
+            own.extend((1..=steps).map(|k| {
+                let arq = c
+                    .arq
+                    .map(|a| (a.max_retries.min(Arq::MAX_RETRIES), ack_loss[n][k - 1]));
+                slot_fate(c, up_loss[n][k - 1], || slot(k), arq)
+            }));
+        }
+        let node_up = FateTable::from_fates(nodes, steps, own);
         let (down, node_down) = if routes.downlinks_lossless() {
             (None, None)
         } else {
@@ -179,6 +205,7 @@ impl RouteFates {
             up: Arc::new(FateTable::from_fates(sensors, steps, composed)),
             down,
             node_down,
+            node_up,
             hops,
             offsets,
             steps,

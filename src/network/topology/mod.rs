@@ -64,6 +64,9 @@ pub struct Topology {
     pub parent: Vec<Option<usize>>,
     /// Whether the sink runs on mains (no battery to run out).
     pub sink_mains: bool,
+    /// Whether the relays sum the information of aggregable schemes
+    /// ([`crate::network::aggregate`]) rather than forward their reports per source.
+    pub aggregate: bool,
     graph: UnGraph<(), usize>,
 }
 
@@ -164,6 +167,7 @@ impl Topology {
         let mut topology = Topology {
             parent: vec![None; nodes.len()],
             sink_mains: spec.sink_mains.unwrap_or(true),
+            aggregate: spec.aggregate.unwrap_or(true),
             nodes,
             links,
             graph,

@@ -36,6 +36,10 @@ pub struct NetworkSpec {
     /// Links whose channel differs from the scenario's `[channel]`.
     #[serde(default)]
     pub links: Vec<LinkSpec>,
+    /// Whether the relays sum the information of the schemes that allow it (default true;
+    /// [`crate::network::aggregate`]); `false` forwards every report per source.
+    #[serde(default)]
+    pub aggregate: Option<bool>,
 }
 
 /// `relays`: positions or a count.

@@ -84,34 +84,47 @@ impl Tally {
     /// The report of sensor `source` (a MAC frame of `mac_bits` bits) over its route, whose
     /// hops met `hops`.
     pub fn report(&mut self, routes: &Routes, hops: &[Fate], source: usize, mac_bits: u64) {
-        let ppdu = mac_bits + PHY_OVERHEAD_BITS;
         for (h, (&n, f)) in routes.senders[source].iter().zip(hops).enumerate() {
-            let Some((parent, channel)) = &routes.uplinks[n] else {
-                break;
-            };
-            let attempts = u64::from(1 + f.retries);
-            let arq = channel.arq.is_some();
-            let arrived = if arq {
-                u64::from(f.acks)
-            } else {
-                u64::from(!f.lost)
-            };
-            let c = &mut self.counts[n];
-            c[TX] += attempts;
-            c[TX_BITS] += attempts * ppdu;
-            c[FORWARDED] += u64::from(h > 0);
-            if arq {
-                c[ACK_WAITS] += attempts;
-                c[ACKS_HEARD] += u64::from(!f.lost);
-            }
-            let p = &mut self.counts[*parent];
-            p[RX] += arrived;
-            p[RX_BITS] += arrived * ppdu;
-            p[ACKS_SENT] += if arq { arrived } else { 0 };
-            if f.lost {
+            if routes.uplinks[n].is_none() || !self.hop(routes, n, f, mac_bits, h > 0) {
                 break;
             }
         }
+    }
+
+    /// One frame of `mac_bits` bits sent by node `n` to its parent, which met `f`; `forwarded`:
+    /// whether it carries what other nodes sent. Returns whether it arrived.
+    pub fn hop(
+        &mut self,
+        routes: &Routes,
+        n: usize,
+        f: &Fate,
+        mac_bits: u64,
+        forwarded: bool,
+    ) -> bool {
+        let Some((parent, channel)) = &routes.uplinks[n] else {
+            return false;
+        };
+        let ppdu = mac_bits + PHY_OVERHEAD_BITS;
+        let attempts = u64::from(1 + f.retries);
+        let arq = channel.arq.is_some();
+        let arrived = if arq {
+            u64::from(f.acks)
+        } else {
+            u64::from(!f.lost)
+        };
+        let c = &mut self.counts[n];
+        c[TX] += attempts;
+        c[TX_BITS] += attempts * ppdu;
+        c[FORWARDED] += u64::from(forwarded);
+        if arq {
+            c[ACK_WAITS] += attempts;
+            c[ACKS_HEARD] += u64::from(!f.lost);
+        }
+        let p = &mut self.counts[*parent];
+        p[RX] += arrived;
+        p[RX_BITS] += arrived * ppdu;
+        p[ACKS_SENT] += if arq { arrived } else { 0 };
+        !f.lost
     }
 
     /// The step's listening and its feedback of `payload_bits` (0: none) going down the tree;

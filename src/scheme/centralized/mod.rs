@@ -14,6 +14,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use std::sync::Arc;
 use std::sync::RwLock;
 
+mod aggregated;
 pub mod params;
 
 /// Sensor that forwards its raw measurement with probability `send_probability`.
@@ -396,6 +397,14 @@ impl FusionCenter for CentralizedKf {
 
     fn estimate(&self) -> &Gaussian {
         &self.est
+    }
+
+    fn fuse_information(
+        &mut self,
+        _k: usize,
+        sum: Option<&crate::filter::information::Information>,
+    ) -> Result<(), SchemeError> {
+        self.fuse_sum(sum)
     }
 }
 
@@ -866,6 +875,11 @@ impl Scheme for CentralizedScheme {
                 None => CentralizedKf::new(self.system.clone()),
             }),
         })
+    }
+
+    /// Raw measurements of linear sensors: a relay may add their information up.
+    fn aggregable(&self) -> bool {
+        self.system.sensors.iter().all(|s| s.as_linear().is_some())
     }
 
     /// The all-data KF's lockstep trials and the forwarding sensors' coins without the loop.
