@@ -49,8 +49,16 @@ fn benches(c: &mut Criterion) {
     let mut g = c.benchmark_group("mesh");
     g.sample_size(10);
     let cases = [
-        ("all-data KF aggregated, 100 trials x 100 steps, nodes", 100, true),
-        ("all-data KF per source, 10 trials x 100 steps, nodes", 10, false),
+        (
+            "all-data KF aggregated, 100 trials x 100 steps, nodes",
+            100,
+            true,
+        ),
+        (
+            "all-data KF per source, 10 trials x 100 steps, nodes",
+            10,
+            false,
+        ),
     ];
     for (name, trials, aggregate) in cases {
         for nodes in [250, 500, 1000] {

@@ -5,7 +5,7 @@
 mod common;
 
 use common::{hushfuse, TINY};
-use hushfuse::engine::durable::{self, Progress, State};
+use hushfuse::output::durable::{self, Progress, State};
 use proptest::prelude::*;
 use std::path::Path;
 

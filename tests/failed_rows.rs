@@ -1,7 +1,8 @@
 //! A variant whose trial fails becomes a row marked failed (its first failure by trial: trial,
 //! step, message), while the other variants finish; the same failure for any thread count and
 //! any order of merging blocks; its numbers null in summary.json.
-use hushfuse::engine::{durable, runner};
+use hushfuse::engine::runner;
+use hushfuse::output::durable;
 use hushfuse::filter::Gaussian;
 use hushfuse::link::Received;
 use hushfuse::metrics::{results, Sums};

@@ -1,6 +1,6 @@
 //! Runs, replays and simulated trials for Python: numpy arrays in and out, results as Python
 //! objects (never JSON or CSV text in between), and the engine's own run layer
-//! ([`hushfuse::engine::run`]) for output folders, resuming and shards.
+//! ([`hushfuse::output::run`]) for output folders, resuming and shards.
 use crate::external;
 use crate::helpers::to_py;
 use crate::{
@@ -8,10 +8,11 @@ use crate::{
 };
 use hushfuse::engine::calibrate;
 use hushfuse::engine::replay::{self, arrays};
-use hushfuse::engine::run as engine_run;
-use hushfuse::engine::{durable, runner};
+use hushfuse::engine::runner;
+use hushfuse::output::durable;
 use hushfuse::linalg::Vector;
 use hushfuse::metrics::results;
+use hushfuse::output::run as engine_run;
 use hushfuse::output::{arena_files, run_files, OutputDir};
 use hushfuse::scenario::build;
 use numpy::ndarray::Array2;

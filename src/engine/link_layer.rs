@@ -169,7 +169,15 @@ impl FateCache {
         self.renew(Some((trial, exp.seed, exp.steps)));
         self.routes
             .get_or_insert_with(|| {
-                Arc::new(RouteFates::draw(routes, exp.steps, exp.seed, trial as u64))
+                let net = exp.network.as_deref();
+                let per_source = exp.variants.iter().any(|v| !v.aggregated(net));
+                Arc::new(RouteFates::draw(
+                    routes,
+                    exp.steps,
+                    exp.seed,
+                    trial as u64,
+                    per_source,
+                ))
             })
             .clone()
     }

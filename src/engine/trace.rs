@@ -4,13 +4,13 @@
 //! runner; a variant's coins come from its own stream, or from variant 0's for every variant
 //! when each scheme ran alone, as calibrated arenas do.
 use crate::engine::runner::draw_trial;
-use crate::engine::seeding::coin_stream;
 use crate::engine::trial::{self, LoopBuffers, Observer, ObserverError, TrialSpec};
 pub use crate::engine::trial::{Link, StepOutput};
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
 use crate::metrics::Sums;
 use crate::scenario::build::Experiment;
+use crate::stats::seeding::coin_stream;
 /// One variant's trial: its fused estimates and what each sensor did.
 #[derive(Debug, Clone)]
 pub struct VariantTrace {

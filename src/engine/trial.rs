@@ -3,7 +3,7 @@
 //! mask, and which readings a recording has), deliver (the network counts the bits and fills
 //! the fusion center's inbox), fuse, feed back. The Monte Carlo runner, the trial-0 trace,
 //! replay of recorded data and the report's error bands all run their trials here, seeded by
-//! [`crate::engine::seeding`]; an [`Observer`] sees every fused step.
+//! [`crate::stats::seeding`]; an [`Observer`] sees every fused step.
 //!
 //! A scheme's lockstep fast path ([`LockstepFastPath::run_trial_fast`], offered by
 //! [`Scheme::fast_path`]) is a hook of this loop: taken when the observer can take its report
@@ -12,7 +12,6 @@
 //! (the bit-for-bit tests are in `tests/fast_paths.rs`).
 pub use crate::engine::link_layer::Link;
 use crate::engine::link_layer::{self, FateCache, LinkLayer};
-use crate::engine::seeding::coins;
 use crate::filter::Gaussian;
 use crate::linalg::{LinalgError, Vector};
 use crate::link::{Message, Received, Transmission};
@@ -25,6 +24,7 @@ use crate::scheme::fast_path::{FastTrialError, Losses, StepSink, TrialCache};
 #[cfg(doc)]
 use crate::scheme::Scheme;
 use crate::scheme::{Feedback, SchemeError};
+use crate::stats::seeding::coins;
 
 /// One fused step, as an [`Observer`] sees it.
 #[derive(Debug)]
@@ -99,7 +99,7 @@ pub struct TrialSpec<'a> {
     pub trial: usize,
     /// The variant of the experiment.
     pub variant: usize,
-    /// Its coin stream: [`crate::engine::seeding::coin_stream`] of the variant, or of 0 for a
+    /// Its coin stream: [`crate::stats::seeding::coin_stream`] of the variant, or of 0 for a
     /// variant run alone as the only one of its experiment would be (calibration).
     pub stream: u64,
     /// Recorded data: `available[k - 1][i]` says whether sensor i has a reading at step k (one

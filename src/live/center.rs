@@ -7,12 +7,12 @@
 //! (the center cannot tell a dead node from a quiet one, as it cannot tell a lost packet from
 //! a silence) and is logged. [`super::run_center`] drives it over UDP.
 use super::wire::{self, Datagram, Kind, MessageKind, DONE_READING, HELLO_FRESH, STEP_CATCH_UP};
-use crate::engine::seeding;
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
 use crate::link::Received;
 use crate::scenario::experiment::Experiment;
 use crate::scheme::{Feedback, FusionCenter, SchemeError};
+use crate::stats::seeding;
 
 /// Counts of datagrams that were not used, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -652,7 +652,7 @@ mod tests {
                 2 => Some(Message::Estimate(Vector::from_vec(vec![1.0, 2.0]))),
                 3 => {
                     let mut inst = exp.variants[qi].scheme.build().unwrap();
-                    let mut rng = crate::engine::seeding::sensor_coins(1, 0, 0, 1);
+                    let mut rng = crate::stats::seeding::sensor_coins(1, 0, 0, 1);
                     let fb = inst.center.feedback();
                     match inst.sensors[1].step(
                         1,

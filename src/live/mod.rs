@@ -4,7 +4,7 @@
 //!
 //! A live run is the engine's loop ([`crate::engine::trial`]) with the network replaced by
 //! sockets: each node runs its scheme's sensor side on its readings with its own coins (the
-//! coins of the same sensor in the simulation, [`crate::engine::seeding::sensor_coins`]),
+//! coins of the same sensor in the simulation, [`crate::stats::seeding::sensor_coins`]),
 //! and sends what the sensor sends as the frame a radio would send ([`wire`]); the center fuses
 //! what arrives with the scheme's center and sends the feedback down. Every real number
 //! crosses as the IEEE 754 single the simulation prices and delivers, so on an ideal link the

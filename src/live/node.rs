@@ -1,13 +1,13 @@
 //! The sensor side of a live run, without sockets: [`Node`] turns the center's datagrams into
 //! the sensor's replies, running the scheme's own [`crate::scheme::SensorNode`] on its readings
-//! with its own coins ([`crate::engine::seeding::sensor_coins`]). A program that embeds a
+//! with its own coins ([`crate::stats::seeding::sensor_coins`]). A program that embeds a
 //! sensor feeds it what arrives and sends what it returns; [`run_node`] does that over UDP.
 use super::wire::{self, Datagram, Kind, MessageKind, DONE_READING, HELLO_FRESH, STEP_CATCH_UP};
-use crate::engine::seeding;
 use crate::linalg::Vector;
 use crate::link::{Message, Transmission};
 use crate::scenario::experiment::Experiment;
 use crate::scheme::{Feedback, SensorNode};
+use crate::stats::seeding;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};

@@ -15,9 +15,9 @@
 //! all-data Kalman filter's covariance. For nonlinear sensors the expectation is taken over the
 //! run's own true trajectories (the same (seed, trial) draws as the runner), so it carries a
 //! Monte Carlo error of its own, small next to the schemes' for the same trials.
-use crate::engine::runner::draw_trial;
 use crate::linalg::{spd_inverse, symmetrize, Matrix};
 use crate::scenario::build::Experiment;
+use crate::scenario::draw::draw_trial;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 

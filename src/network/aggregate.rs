@@ -264,19 +264,26 @@ impl Aggregation {
 
 /// Per (sensor, step): whether the sensor's report reached the sink inside the sums, that is
 /// whether every node of its route delivered its frame of the step (`node_up`, no delay: a
-/// network that aggregates has none).
+/// network that aggregates has none). O(nodes) a step: parents first, each node reaches the
+/// sink when its parent does and its own frame arrived.
 pub fn composed(routes: &Routes, node_up: &FateTable, steps: usize) -> FateTable {
-    let fates = routes
-        .senders
-        .iter()
-        .flat_map(|senders| {
-            (1..=steps).map(move |k| Fate {
-                lost: senders.iter().any(|&n| node_up.get(n, k).lost),
-                ..Fate::default()
-            })
-        })
-        .collect();
-    FateTable::from_fates(routes.senders.len(), steps, fates)
+    let mut parents_first = fold_order(routes);
+    parents_first.reverse();
+    let sensors = routes.senders.len();
+    let mut reaches = vec![true; routes.uplinks.len()];
+    let mut fates = vec![Fate::default(); sensors * steps];
+    for k in 1..=steps {
+        for &n in &parents_first {
+            let (p, _) = routes.uplinks[n]
+                .as_ref()
+                .expect("only nodes with a parent");
+            reaches[n] = reaches[*p] && !node_up.get(n, k).lost;
+        }
+        for s in 0..sensors {
+            fates[s * steps + (k - 1)].lost = !reaches[s];
+        }
+    }
+    FateTable::from_fates(sensors, steps, fates)
 }
 
 /// `(&v[a], &mut v[b])` for `a != b`.

@@ -2,12 +2,14 @@
 //! reports, arena tables.
 pub mod arena;
 pub mod arena_files;
+pub mod durable;
 pub mod folder;
 pub mod html;
 pub mod network_map;
 pub mod notes;
 pub mod plot;
 pub mod report;
+pub mod run;
 pub mod run_files;
 pub mod tables;
 

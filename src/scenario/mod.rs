@@ -4,6 +4,7 @@ pub mod build;
 pub mod builtin;
 pub mod channel;
 pub mod classic;
+pub mod draw;
 pub mod error;
 pub mod every_scheme;
 pub mod experiment;

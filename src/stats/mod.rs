@@ -10,4 +10,5 @@ pub mod normal_block;
 pub mod quadform;
 pub mod quadform2d;
 pub mod rate_distortion;
+pub mod seeding;
 pub mod truncated_normal;

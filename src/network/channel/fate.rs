@@ -33,7 +33,7 @@ use rand_distr::Distribution;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
 use super::spec::{Arq, ChannelKind, ChannelSpec, Delay};
-use crate::engine::seeding;
+use crate::stats::seeding;
 
 /// The step index given to [`seeding::slot_rng`] for a sensor's Gilbert–Elliott state chain.
 /// No real step reaches it, so the chain's generator is distinct from every slot's, and the

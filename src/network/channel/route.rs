@@ -25,7 +25,7 @@ use std::sync::Arc;
 use super::fate::{loss_path, slot_fate};
 use super::spec::{Arq, ChannelSpec};
 use super::{Fate, FateTable};
-use crate::engine::seeding;
+use crate::stats::seeding;
 
 /// Node indices below this are keyed apart by [`forward_key`] (the topology's node limit is at
 /// most this).
@@ -94,8 +94,10 @@ pub struct RouteFates {
 
 impl RouteFates {
     /// Draws the fates of `routes` over steps `1..=steps` of trial `trial` (see the module
-    /// documentation for the keys).
-    pub fn draw(routes: &Routes, steps: usize, seed: u64, trial: u64) -> Self {
+    /// documentation for the keys). `per_source`: whether any variant forwards reports per
+    /// source (else only the nodes' own frames are drawn, [`RouteFates::node_up`], and `up`
+    /// holds no fate: O(nodes) a step rather than O(Σ route lengths)).
+    pub fn draw(routes: &Routes, steps: usize, seed: u64, trial: u64, per_source: bool) -> Self {
         let nodes = routes.uplinks.len();
         let slots = |key: usize, down: bool| seeding::sensor_slots(seed, trial, key, down);
         // Per node: its uplink's loss per step and its ACKs' loss per step (the downlink's).
@@ -112,7 +114,8 @@ impl RouteFates {
         let mut hops = Vec::new();
         let mut offsets = Vec::with_capacity(routes.senders.len());
         let mut composed = Vec::with_capacity(routes.senders.len() * steps);
-        for (s, senders) in routes.senders.iter().enumerate() {
+        let sources = if per_source { routes.senders.len() } else { 0 };
+        for (s, senders) in routes.senders.iter().enumerate().take(sources) {
             offsets.push(hops.len());
             let keyed: Vec<_> = senders
                 .iter()
@@ -144,19 +147,17 @@ impl RouteFates {
             }
         }
         let sensors = routes.senders.len();
-        // Every node's own frame: a sensor's is its report's first hop (the same draw); a
-        // relay's comes from its own key, as a sensor's would.
+        if !per_source {
+            composed.resize(sensors * steps, Fate::default());
+        }
+        // Every node's own frame from its own key: a sensor's is drawn as its report's first
+        // hop is (the same generator and slot), a relay's as a sensor's would be.
         let mut own = Vec::with_capacity(nodes * steps);
         for n in 0..nodes {
             let Some((_, c)) = &routes.uplinks[n] else {
                 own.extend((0..steps).map(|_| Fate::default()));
                 continue;
             };
-            if n < sensors {
-                let len = routes.senders[n].len();
-                own.extend((0..steps).map(|k| hops[offsets[n] + k * len]));
-                continue;
-            }
             let slot = slots(n, false);
             own.extend((1..=steps).map(|k| {
                 let arq = c

@@ -10,6 +10,7 @@
 //! What a report costs on its way ([`cost`]) and what it loses ([`Topology::path_loss`]) come
 //! from the links' channels: every hop pays a frame, its acknowledgement and its retries.
 pub mod cost;
+pub mod distance;
 pub mod spec;
 pub mod tally;
 
@@ -136,6 +137,9 @@ impl Topology {
         }
         for (k, l) in links.iter().enumerate() {
             graph.add_edge(NodeIndex::new(l.a), NodeIndex::new(l.b), k);
+        }
+        if let Some(model) = &spec.distance_loss {
+            model.apply(&mut links, &nodes)?;
         }
         let mut overridden = vec![false; links.len()];
         for (j, o) in spec.links.iter().enumerate() {
@@ -428,6 +432,7 @@ fn nodes(spec: &NetworkSpec, sensors: &[Option<[f64; 2]>]) -> Result<Vec<Node>, 
             .enumerate()
             .map(|(j, p)| point(&format!("relays[{j}]"), p).map(Some))
             .collect::<Result<_, _>>()?,
+        Some(Relays::Random(r)) => random_relays(r)?,
     };
     let total = sensors.len() + relays.len() + 1;
     if total > MAX_NODES {
@@ -457,6 +462,38 @@ fn nodes(spec: &NetworkSpec, sensors: &[Option<[f64; 2]>]) -> Result<Vec<Node>, 
         position: sink,
     });
     Ok(nodes)
+}
+
+/// `relays = { count, area, seed }`: uniform in the rectangle, x then y of each relay in turn
+/// from a generator of the placement's own seed.
+fn random_relays(r: &spec::RandomRelays) -> Result<Vec<Option<[f64; 2]>>, TopologyError> {
+    use rand::{Rng, SeedableRng};
+    let [lo, hi] = match r.area.as_slice() {
+        [a, b] => [point("relays.area[0]", a)?, point("relays.area[1]", b)?],
+        _ => {
+            return Err(err(
+                "relays.area",
+                format!(
+                    "expected two corners [[x0, y0], [x1, y1]], got {}",
+                    r.area.len()
+                ),
+            ))
+        }
+    };
+    if r.count > MAX_NODES {
+        return Err(err(
+            "relays.count",
+            format!("at most {MAX_NODES} nodes, got {}", r.count),
+        ));
+    }
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(r.seed);
+    let mut at = |a: f64, b: f64| a.min(b) + rng.random::<f64>() * (a - b).abs();
+    Ok((0..r.count)
+        .map(|_| {
+            let x = at(lo[0], hi[0]);
+            Some([x, at(lo[1], hi[1])])
+        })
+        .collect())
 }
 
 /// The node pairs linked, each once, by the rule or the list.

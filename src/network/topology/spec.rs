@@ -9,8 +9,9 @@ use std::collections::BTreeMap;
 #[derive(Debug, Clone, PartialEq, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct NetworkSpec {
-    /// Relays `r0, r1, …`: their positions `[[x, y], …]`, or how many there are (when every
-    /// edge is given by name, positions may be left out).
+    /// Relays `r0, r1, …`: their positions `[[x, y], …]`, how many there are (when every
+    /// edge is given by name, positions may be left out), or `{ count, area, seed }`: placed
+    /// uniformly at random in the rectangle `area = [[x0, y0], [x1, y1]]` by their own seed.
     #[serde(default)]
     pub relays: Option<Relays>,
     /// The sink's position `[x, y]` (optional when no edge rule needs positions).
@@ -40,6 +41,10 @@ pub struct NetworkSpec {
     /// [`crate::network::aggregate`]); `false` forwards every report per source.
     #[serde(default)]
     pub aggregate: Option<bool>,
+    /// Every link's loss from its length ([`super::distance`]), unless `[[network.links]]`
+    /// gives the link its own channel.
+    #[serde(default)]
+    pub distance_loss: Option<super::distance::DistanceLoss>,
 }
 
 /// `relays`: positions or a count.
@@ -48,6 +53,19 @@ pub struct NetworkSpec {
 pub enum Relays {
     Count(usize),
     At(Vec<Vec<f64>>),
+    Random(RandomRelays),
+}
+
+/// `relays = { count = …, area = [[x0, y0], [x1, y1]], seed = … }`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RandomRelays {
+    pub count: usize,
+    /// Opposite corners of the rectangle, metres.
+    pub area: Vec<Vec<f64>>,
+    /// Seed of the placement (independent of the scenario's seed, so the network stays fixed).
+    #[serde(default)]
+    pub seed: u64,
 }
 
 /// `edges`: a rule or the list of links by name.

@@ -70,9 +70,15 @@ impl Tally {
     pub fn new(net: &Topology) -> Self {
         Tally {
             counts: vec![[0; NODE_FIELDS]; net.nodes.len()],
-            children: (0..net.nodes.len())
-                .map(|n| net.children(n) as u64)
-                .collect(),
+            // One pass over the parents (a count per node would be O(nodes²) a trial).
+            children: net
+                .parent
+                .iter()
+                .flatten()
+                .fold(vec![0; net.nodes.len()], |mut c, &p| {
+                    c[p] += 1;
+                    c
+                }),
         }
     }
 

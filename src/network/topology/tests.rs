@@ -239,3 +239,90 @@ fn bad_topologies_are_named() {
         }
     }
 }
+
+#[test]
+fn distance_sets_each_links_loss_and_etx_routes_around_a_weak_link() {
+    // s0 at 0, r0 at 60 m, sink at 120 m: two 60 m hops (PRR ≈ 1) against one 120 m hop
+    // (PRR 0.188, loss 0.81): ETX goes through r0, hops straight to the sink.
+    let text = |routes: &str| {
+        format!(
+            "relays = [[60.0, 0.0]]\nsink = [120.0, 0.0]\nedges = \"complete\"\nroutes = \"{routes}\"\n[distance_loss]\n"
+        )
+    };
+    let sensors = [Some([0.0, 0.0])];
+    let etx = build(&text("etx"), &sensors).unwrap();
+    assert_eq!(etx.route(0), vec![0, 1, 2]);
+    let direct = etx.link(0, 2).unwrap();
+    let expected = 1.0 - etx_model().prr(120.0, 0.0);
+    assert_eq!(
+        direct.channel.kind,
+        crate::network::channel::ChannelKind::Bernoulli
+    );
+    assert!((direct.channel.loss.unwrap() - expected).abs() < 1e-15);
+    assert!((expected - (1.0 - 0.188_425_861_181)).abs() < 1e-9);
+    assert!(etx.link(0, 1).unwrap().channel.loss.unwrap() < 1e-6);
+    let hops = build(&text("hops"), &sensors).unwrap();
+    assert_eq!(hops.route(0), vec![0, 2]);
+    // A link given its own channel keeps it; shadowing moves losses, from its own seed.
+    let own = build(
+        &format!("{}[[links]]\nbetween = [\"s0\", \"sink\"]\nchannel = {{ kind = \"bernoulli\", loss = 0.5 }}\n", text("hops")),
+        &sensors,
+    )
+    .unwrap();
+    assert_eq!(own.link(0, 2).unwrap().channel.loss, Some(0.5));
+    let shadowed = |seed: u64| {
+        build(
+            &format!("{}shadowing_db = 4.0\nseed = {seed}\n", text("hops")),
+            &sensors,
+        )
+        .unwrap()
+        .link(0, 2)
+        .unwrap()
+        .channel
+        .loss
+        .unwrap()
+    };
+    assert_eq!(shadowed(1), shadowed(1));
+    assert_ne!(shadowed(1), shadowed(2));
+    // Positions are needed; a Gilbert–Elliott channel is refused; numbers are checked.
+    let e = build("edges = \"line\"\n[distance_loss]\n", &[None])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("network.distance_loss") && e.contains("s0"),
+        "{e}"
+    );
+    let ge = channel("kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.5\n");
+    let e = Topology::build(&spec(&text("hops")), &sensors, Some(&ge)).unwrap_err();
+    assert!(e.to_string().contains("gilbert-elliott"), "{e}");
+    let e = build(&format!("{}exponent = -1.0\n", text("hops")), &sensors).unwrap_err();
+    assert!(
+        e.to_string().contains("network.distance_loss.exponent"),
+        "{e}"
+    );
+}
+
+fn etx_model() -> super::distance::DistanceLoss {
+    toml::from_str("").unwrap()
+}
+
+#[test]
+fn random_relays_are_placed_by_their_own_seed_inside_the_area() {
+    let text = |seed: u64| {
+        format!("relays = {{ count = 20, area = [[100.0, 0.0], [0.0, 50.0]], seed = {seed} }}\nedges = \"complete\"\n")
+    };
+    let a = build(&text(3), &[None]).unwrap();
+    let relays: Vec<[f64; 2]> = a.nodes[1..21].iter().map(|n| n.position.unwrap()).collect();
+    assert!(relays
+        .iter()
+        .all(|p| (0.0..=100.0).contains(&p[0]) && (0.0..=50.0).contains(&p[1])));
+    let again = build(&text(3), &[None]).unwrap();
+    assert_eq!(a.nodes, again.nodes);
+    assert_ne!(a.nodes, build(&text(4), &[None]).unwrap().nodes);
+    assert_eq!(a.nodes[5].name, "r4");
+    let e = error(
+        "relays = { count = 2, area = [[0.0, 0.0]] }\nedges = \"complete\"\n",
+        1,
+    );
+    assert!(e.contains("network.relays.area"), "{e}");
+}

@@ -2,10 +2,10 @@
 //! (Ctrl-C), checkpoint, split into shards, resume, merge, and end in the run's files through
 //! [`crate::output::run_files`]. The command line and the Python package both call
 //! [`execute`] and [`merge`]; they only say how progress is shown and where messages go.
-use crate::engine::durable::{self, Progress, RunKey, State};
 use crate::engine::runner;
 use crate::metrics::results::{self, Summary};
 use crate::metrics::Sums;
+use crate::output::durable::{self, Progress, RunKey, State};
 use crate::output::run_files::{self, Results};
 use crate::output::{self, OutputDir};
 use crate::scenario::build::{self, Experiment};

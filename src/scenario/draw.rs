@@ -1,0 +1,213 @@
+//! The data of a scenario's trials: per trial, x_0 from the initial truth, then x_k and every
+//! sensor's z_k^i, all from the trial's data stream ([`crate::stats::seeding::trial_rng`]). The
+//! runner, the trace, the PCRB and the live driver draw here, so every one of them sees the same
+//! numbers for the same (seed, trial).
+use crate::linalg::Vector;
+use crate::scenario::experiment::Experiment;
+use crate::stats::seeding::trial_rng;
+use multiversion::multiversion;
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+/// Truth and measurements of one trial.
+pub struct TrialData {
+    /// x_1..x_T.
+    pub truth: Vec<Vector>,
+    /// z_k^i for k = 1..T, i = 1..N.
+    pub measurements: Vec<Vec<Vector>>,
+}
+
+/// Draws x_0 from the prior, then x_k and every z_k^i, all from one stream.
+pub fn draw_trial(exp: &Experiment, trial: usize) -> TrialData {
+    let mut drawer = Drawer::new(exp);
+    drawer.draw(exp, trial);
+    drawer.data
+}
+
+/// Draws trials into buffers reused from trial to trial: the same numbers as drawing each
+/// vector afresh (`F x + Q^{1/2} w`, `H x + R^{1/2} v`, the same gemv products and the same
+/// order of normal draws), without allocating per step.
+pub(crate) struct Drawer {
+    /// The trial last drawn.
+    pub(crate) data: TrialData,
+    /// Square root of the initial-truth covariance, once per run instead of once per trial.
+    x0_sqrt: crate::linalg::Matrix,
+    x: Vector,
+    normals: Vector,
+    a: Vector,
+    b: Vector,
+    /// Per sensor: its noise draw v and R^{1/2} v.
+    v: Vec<Vector>,
+    rv: Vec<Vector>,
+    /// Per sensor, when it is linear: H and R^{1/2} (column-major), read per step without a
+    /// virtual call.
+    linear: Vec<Option<LinearDraw>>,
+}
+
+/// A linear sensor's matrices as the drawer reads them.
+struct LinearDraw {
+    h: Vec<f64>,
+    r_sqrt: Vec<f64>,
+}
+
+impl Drawer {
+    pub(crate) fn new(exp: &Experiment) -> Self {
+        let sys = &exp.system;
+        let n = sys.state_dim();
+        let x0_sqrt = crate::model::transition::psd_sqrt(&exp.initial_truth.cov)
+            .expect("validated initial truth");
+        let zeros = |d: usize| Vector::zeros(d);
+        Self {
+            data: TrialData {
+                truth: (0..exp.steps).map(|_| zeros(n)).collect(),
+                measurements: (0..exp.steps)
+                    .map(|_| sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect())
+                    .collect(),
+            },
+            x0_sqrt,
+            x: zeros(n),
+            normals: zeros(n),
+            a: zeros(n),
+            b: zeros(n),
+            v: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
+            rv: sys.sensors.iter().map(|s| zeros(s.meas_dim())).collect(),
+            linear: sys
+                .sensors
+                .iter()
+                .map(|s| {
+                    s.as_linear().map(|l| LinearDraw {
+                        h: l.h().as_slice().to_vec(),
+                        r_sqrt: s.noise_sqrt().as_slice().to_vec(),
+                    })
+                })
+                .collect(),
+        }
+    }
+
+    pub(crate) fn draw(&mut self, exp: &Experiment, trial: usize) {
+        // State dimensions 1..=6: the same operations on stack arrays.
+        match exp.system.state_dim() {
+            1 => draw_fixed::<1>(self, exp, trial),
+            2 => draw_fixed::<2>(self, exp, trial),
+            3 => draw_fixed::<3>(self, exp, trial),
+            4 => draw_fixed::<4>(self, exp, trial),
+            5 => draw_fixed::<5>(self, exp, trial),
+            6 => draw_fixed::<6>(self, exp, trial),
+            _ => self.draw_dynamic(exp, trial),
+        }
+    }
+
+    fn draw_dynamic(&mut self, exp: &Experiment, trial: usize) {
+        let sys = &exp.system;
+        let mut rng = trial_rng(exp.seed, trial as u64, 0);
+        let normal = |rng: &mut Xoshiro256PlusPlus| -> f64 {
+            rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
+        };
+        // x_0 = mean + S n_0.
+        self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
+        crate::linalg::fixed::gemv(&mut self.a, &self.x0_sqrt, &self.normals);
+        self.x.copy_from(&exp.initial_truth.mean);
+        self.x += &self.a;
+        let t = &sys.transition;
+        for k in 0..exp.steps {
+            // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
+            self.normals.iter_mut().for_each(|v| *v = normal(&mut rng));
+            crate::linalg::fixed::gemv(&mut self.a, t.f(), &self.x);
+            crate::linalg::fixed::gemv(&mut self.b, t.q_sqrt(), &self.normals);
+            self.a += &self.b;
+            std::mem::swap(&mut self.x, &mut self.a);
+            for (i, (s, z)) in sys
+                .sensors
+                .iter()
+                .zip(self.data.measurements[k].iter_mut())
+                .enumerate()
+            {
+                match s.as_linear() {
+                    // z = H x + R^{1/2} v (MeasurementModel::sample).
+                    Some(lin) => {
+                        let (v, rv) = (&mut self.v[i], &mut self.rv[i]);
+                        v.iter_mut().for_each(|e| *e = normal(&mut rng));
+                        crate::linalg::fixed::gemv(z, lin.h(), &self.x);
+                        crate::linalg::fixed::gemv(rv, s.noise_sqrt(), v);
+                        *z += &*rv;
+                    }
+                    None => *z = s.sample(&self.x, &mut rng),
+                }
+            }
+            self.data.truth[k].copy_from(&self.x);
+        }
+    }
+}
+
+/// [`Drawer::draw_dynamic`] for state dimension N: the same normal draws in the same order
+/// and the same products (`fixed`'s kernels repeat nalgebra's gemv), with the state on the
+/// stack. Compiled also for AVX2 and picked at run time: the same IEEE operations (no FMA
+/// contraction), so the same draws on every x86-64 machine.
+#[multiversion(targets("x86_64+avx2"))]
+fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
+    use crate::linalg::fixed::{mat_vec, mat_vec_dyn, mat_vec_rows};
+    let sys = &exp.system;
+    let mut rng = trial_rng(exp.seed, trial as u64, 0);
+    let normal = standard_normal;
+    let normals = standard_normals::<N>;
+    let arr = |v: &Vector| -> [f64; N] { v.as_slice().try_into().expect("state dimension") };
+    // x_0 = mean + S n_0.
+    let a: [f64; N] = mat_vec(d.x0_sqrt.as_slice(), &normals(&mut rng));
+    let mean = arr(&exp.initial_truth.mean);
+    let mut x: [f64; N] = std::array::from_fn(|i| mean[i] + a[i]);
+    let t = &sys.transition;
+    let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
+    let any_nonlinear = d.linear.iter().any(Option::is_none);
+    for k in 0..exp.steps {
+        // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
+        let w = normals(&mut rng);
+        let a: [f64; N] = mat_vec(f, &x);
+        let b: [f64; N] = mat_vec(q_sqrt, &w);
+        x = std::array::from_fn(|i| a[i] + b[i]);
+        if any_nonlinear {
+            d.x.as_mut_slice().copy_from_slice(&x);
+        }
+        let zs = &mut d.data.measurements[k];
+        for (i, (plan, zv)) in d.linear.iter().zip(zs.iter_mut()).enumerate() {
+            let z = zv.as_mut_slice();
+            match plan {
+                // z = H x + R^{1/2} v (MeasurementModel::sample); a scalar measurement
+                // without the loops (the same products and sum).
+                Some(LinearDraw { h, r_sqrt }) if z.len() == 1 => {
+                    let v = normal(&mut rng);
+                    let hx: [f64; 1] = mat_vec(h, &x);
+                    z[0] = hx[0] + r_sqrt[0] * v;
+                }
+                Some(LinearDraw { h, r_sqrt }) => {
+                    let (v, rv) = (d.v[i].as_mut_slice(), d.rv[i].as_mut_slice());
+                    v.iter_mut().for_each(|e| *e = normal(&mut rng));
+                    mat_vec_rows::<N>(z, h, &x);
+                    mat_vec_dyn(rv, r_sqrt, v);
+                    for (z, r) in z.iter_mut().zip(rv.iter()) {
+                        *z += r;
+                    }
+                }
+                None => *zv = sys.sensors[i].sample(&d.x, &mut rng),
+            }
+        }
+        d.data.truth[k].as_mut_slice().copy_from_slice(&x);
+    }
+}
+
+/// N standard normal draws in order: a function, not a closure, so that it is inlined into
+/// the drawer's AVX2 version too (a closure there stayed out of line, a call per step), and a
+/// loop rather than `array::from_fn` (whose closure stayed out of line, a call per draw).
+#[inline(always)]
+fn standard_normals<const N: usize>(rng: &mut Xoshiro256PlusPlus) -> [f64; N] {
+    let mut a = [0.0; N];
+    for v in &mut a {
+        *v = standard_normal(rng);
+    }
+    a
+}
+
+/// One standard normal draw, inlined into the drawer's loops (as a closure it stayed out of
+/// line: a call per draw).
+#[inline(always)]
+fn standard_normal(rng: &mut Xoshiro256PlusPlus) -> f64 {
+    rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
+}
