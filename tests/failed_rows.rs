@@ -2,10 +2,10 @@
 //! step, message), while the other variants finish; the same failure for any thread count and
 //! any order of merging blocks; its numbers null in summary.json.
 use hushfuse::engine::runner;
-use hushfuse::output::durable;
 use hushfuse::filter::Gaussian;
 use hushfuse::link::Received;
 use hushfuse::metrics::{results, Sums};
+use hushfuse::output::durable;
 use hushfuse::scenario::build;
 use hushfuse::scheme::{FusionCenter, Scheme, SchemeError, SchemeInstance};
 

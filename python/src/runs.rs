@@ -9,9 +9,9 @@ use crate::{
 use hushfuse::engine::calibrate;
 use hushfuse::engine::replay::{self, arrays};
 use hushfuse::engine::runner;
-use hushfuse::output::durable;
 use hushfuse::linalg::Vector;
 use hushfuse::metrics::results;
+use hushfuse::output::durable;
 use hushfuse::output::run as engine_run;
 use hushfuse::output::{arena_files, run_files, OutputDir};
 use hushfuse::scenario::build;

@@ -157,7 +157,8 @@ impl LoopBuffers {
 }
 
 /// Runs one trial of one variant on `measurements` (`measurements[k - 1][i]` = z_k^i),
-/// reporting every fused step to `observer`.
+/// reporting every fused step to `observer`: the scheme's fast path when it applies, else
+/// [`Trial::step`] at every step.
 pub fn run_trial(
     exp: &Experiment,
     measurements: &[Vec<Vector>],
@@ -166,56 +167,129 @@ pub fn run_trial(
     observer: &mut dyn Observer,
 ) -> Result<(), LoopError> {
     let n_sensors = exp.system.n_sensors();
-    let variant = &exp.variants[spec.variant];
     let (mut coins, center_seed) = coins(exp.seed, spec.trial, spec.stream, n_sensors);
     if let Some(r) = fast_path(exp, measurements, spec, buffers, observer, &mut coins) {
         return r;
     }
-    let singles = exp.reals.is_f32();
-    let mut inst = variant
-        .scheme
-        .build_for_trial(spec.trial, center_seed)
-        .map_err(|source| LoopError::Scheme { k: 0, source })?;
-    let schedule = variant.scheme.schedule();
     let with_links = observer.needs_links();
-    let LoopBuffers {
-        inbox,
-        transmissions,
-        links,
-        bits,
-        fates,
-        ..
-    } = buffers;
-    // What the fusion center tells the sensors before the first measurement, as they receive
-    // it (every real number a single, as priced).
-    let sent = |f: Feedback| if singles { f.into_sent() } else { f };
-    let mut feedback = inst.center.feedback().map(sent);
-    // The link's fates of this trial, from its own stream: every scheme meets the same ones.
-    let mut link = LinkLayer::new(exp, spec.variant, spec.trial, &feedback, fates);
+    let mut trial = Trial::with_coins(exp, spec, buffers, (coins, center_seed), with_links)?;
     for k in 1..=exp.steps {
-        let downlink_lost = link.as_mut().map_or(0, |l| l.downlink(k, &feedback));
-        let scheduled = |i: usize| {
-            schedule.allows(k, i, n_sensors) && spec.available.is_none_or(|a| a[k - 1][i])
-        };
+        let out = trial.step(k, &measurements[k - 1])?;
+        observer.step(&out).map_err(|e| match e {
+            ObserverError::Covariance(source) => LoopError::Covariance { k, source },
+            ObserverError::Message(message) => LoopError::Observer { k, message },
+        })?;
+    }
+    Ok(())
+}
+
+/// One trial of one variant, one step at a time: the one place where a step's rules live
+/// (sense, schedule, deliver over the link, fuse, feed back). [`run_trial`] drives it for the
+/// Monte Carlo runner, the trace, replay and the report's bands; a caller with readings that
+/// arrive one step at a time (a Python loop, a live deployment) can drive it the same way.
+pub struct Trial<'a> {
+    exp: &'a Experiment,
+    spec: TrialSpec<'a>,
+    inst: crate::scheme::SchemeInstance,
+    schedule: Schedule,
+    coins: Vec<rand_xoshiro::Xoshiro256PlusPlus>,
+    center_seed: u64,
+    /// The center's feedback of the last step, as the sensors receive it.
+    feedback: Option<Feedback>,
+    link: Option<LinkLayer>,
+    with_links: bool,
+    buffers: &'a mut LoopBuffers,
+}
+
+impl<'a> Trial<'a> {
+    /// Trial `spec.trial` of variant `spec.variant` of `exp`, its scheme built and its link's
+    /// fates drawn, before its first step; `with_links`: whether [`StepOutput::links`] and
+    /// [`StepOutput::bits`] are filled.
+    pub fn new(
+        exp: &'a Experiment,
+        spec: TrialSpec<'a>,
+        buffers: &'a mut LoopBuffers,
+        with_links: bool,
+    ) -> Result<Self, LoopError> {
+        let coins = coins(exp.seed, spec.trial, spec.stream, exp.system.n_sensors());
+        Self::with_coins(exp, spec, buffers, coins, with_links)
+    }
+
+    fn with_coins(
+        exp: &'a Experiment,
+        spec: TrialSpec<'a>,
+        buffers: &'a mut LoopBuffers,
+        (coins, center_seed): (Vec<rand_xoshiro::Xoshiro256PlusPlus>, u64),
+        with_links: bool,
+    ) -> Result<Self, LoopError> {
+        let variant = &exp.variants[spec.variant];
+        let inst = variant
+            .scheme
+            .build_for_trial(spec.trial, center_seed)
+            .map_err(|source| LoopError::Scheme { k: 0, source })?;
+        // What the fusion center tells the sensors before the first measurement, as they
+        // receive it (every real number a single, as priced).
+        let feedback = inst.center.feedback().map(|f| as_received(exp, f));
+        // The link's fates of this trial, from its own stream: every scheme meets the same ones.
+        let link = LinkLayer::new(exp, spec.variant, spec.trial, &feedback, &mut buffers.fates);
+        Ok(Self {
+            exp,
+            spec,
+            schedule: variant.scheme.schedule(),
+            inst,
+            coins,
+            center_seed,
+            feedback,
+            link,
+            with_links,
+            buffers,
+        })
+    }
+
+    /// Step `k` (1, 2, … in order) on the readings `readings[i]` = z_k^i: every scheduled
+    /// sensor steps with its own coins and the feedback it holds, the link delivers (counting
+    /// every bit and hop), the center fuses, and its feedback goes out for the next step.
+    pub fn step(&mut self, k: usize, readings: &[Vector]) -> Result<StepOutput<'_>, LoopError> {
+        let exp = self.exp;
+        let n_sensors = exp.system.n_sensors();
+        let variant = &exp.variants[self.spec.variant];
+        let (schedule, available) = (self.schedule, self.spec.available);
+        let scheduled =
+            |i: usize| schedule.allows(k, i, n_sensors) && available.is_none_or(|a| a[k - 1][i]);
+        let link = &mut self.link;
+        let downlink_lost = link.as_mut().map_or(0, |l| l.downlink(k, &self.feedback));
+        let LoopBuffers {
+            inbox,
+            transmissions,
+            links,
+            bits,
+            ..
+        } = &mut *self.buffers;
         transmissions.clear();
         links.clear();
         bits.clear();
         let mut scheduled_mask = 0u128;
         let mut doubles = Doubles::new(exp.reals);
-        for (i, (node, rng)) in inst.sensors.iter_mut().zip(&mut coins).enumerate() {
+        for (i, (node, rng)) in self
+            .inst
+            .sensors
+            .iter_mut()
+            .zip(&mut self.coins)
+            .enumerate()
+        {
             let fb = match &link {
                 Some(l) => l.feedback(i),
-                None => feedback.as_ref(),
+                None => self.feedback.as_ref(),
             };
             let t = if scheduled(i) {
                 scheduled_mask |= network::sensor_bit(i);
-                node.step(k, &measurements[k - 1][i], fb, rng)
+                node.step(k, &readings[i], fb, rng)
                     .map_err(|source| LoopError::Scheme { k, source })?
             } else {
                 Transmission::Silent
             };
             doubles.record(&t);
-            if with_links {
+            if self.with_links {
                 let (link, b) = match &t {
                     _ if !scheduled(i) => (Link::NotScheduled, 0),
                     Transmission::Send(m) => {
@@ -229,7 +303,7 @@ pub fn run_trial(
             }
             transmissions.push(t);
         }
-        let mut traffic = match &mut link {
+        let mut traffic = match link {
             Some(l) => l.deliver(k, transmissions.drain(..), inbox),
             None if variant.sequence_bits == 0 => network::deliver(transmissions.drain(..), inbox),
             // Ideal links (nothing goes missing, so the numbers reveal nothing): only their cost.
@@ -240,54 +314,59 @@ pub fn run_trial(
                 variant.sequence_bits,
             ),
         };
+        let singles = exp.reals.is_f32();
         traffic.downlink_bits =
-            feedback.as_ref().map_or(0, |f| f.bits(n_sensors)) * if singles { 1 } else { 2 };
+            self.feedback.as_ref().map_or(0, |f| f.bits(n_sensors)) * if singles { 1 } else { 2 };
         traffic.scheduled = scheduled_mask;
-        if let Some(l) = &mut link {
+        if let Some(l) = link {
             l.uplink(k, inbox, &mut traffic);
             l.feedback_down(k, traffic.downlink_bits);
             traffic.downlink_lost = downlink_lost;
         }
         doubles.restore(inbox, &mut traffic);
-        if schedule != Schedule::All || spec.available.is_some() {
+        if schedule != Schedule::All || available.is_some() {
             for (i, r) in inbox.iter_mut().enumerate() {
                 if !scheduled(i) {
                     *r = Received::NotScheduled;
                 }
             }
         }
-        match &mut link {
+        let center = &mut self.inst.center;
+        match link {
             Some(l) => l
                 .fuse(
                     k,
                     inbox,
-                    &mut inst.center,
+                    center,
                     variant.scheme.as_ref(),
-                    (spec.trial, center_seed),
+                    (self.spec.trial, self.center_seed),
                 )
                 .map_err(|(k, source)| LoopError::Scheme { k, source })?,
-            None => inst
-                .center
+            None => center
                 .step(k, inbox)
                 .map_err(|source| LoopError::Scheme { k, source })?,
         }
-        feedback = inst.center.feedback().map(sent);
-        observer
-            .step(&StepOutput {
-                k,
-                estimate: inst.center.estimate(),
-                links,
-                bits,
-                traffic,
-                ess: inst.center.ess(),
-                nodes: link.as_ref().map_or(&[], |l| l.nodes()),
-            })
-            .map_err(|e| match e {
-                ObserverError::Covariance(source) => LoopError::Covariance { k, source },
-                ObserverError::Message(message) => LoopError::Observer { k, message },
-            })?;
+        self.feedback = center.feedback().map(|f| as_received(exp, f));
+        Ok(StepOutput {
+            k,
+            estimate: center.estimate(),
+            links,
+            bits,
+            traffic,
+            ess: center.ess(),
+            nodes: link.as_ref().map_or(&[], |l| l.nodes()),
+        })
     }
-    Ok(())
+}
+
+/// Feedback as the sensors receive it: every real number the single it is priced as, unless
+/// the scenario sends doubles.
+fn as_received(exp: &Experiment, f: Feedback) -> Feedback {
+    if exp.reals.is_f32() {
+        f.into_sent()
+    } else {
+        f
+    }
 }
 
 /// The scheme's fast path for this trial, when it has one that applies: an ideal link, or one

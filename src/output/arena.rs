@@ -81,7 +81,7 @@ pub fn spend_headers() -> Vec<String> {
 }
 
 /// What the columns of [`spend_headers`] count, printed once under the tables that have them.
-pub const SPEND_LEGEND: &str = "per step: payload, frame (whole 802.15.4 frames) and total (frames + downlink feedback) in bits;\nµJ: the sensors' radio energy ([radio], CC2420 by default); R_eff: the entropy-coded rate in bits\n(each sensor's send-or-silence entropy + its payload), at which the rate-distortion floor is taken.";
+pub const SPEND_LEGEND: &str = "per step: payload, frame (whole 802.15.4 frames) and total (frames + downlink feedback) in bits;\nµJ: the sensors' radio energy, over a [network] every battery-powered node's ([radio], CC2420 by\ndefault); R_eff: the entropy-coded rate in bits (each sensor's send-or-silence entropy + its\npayload), at which the rate-distortion floor is taken.";
 
 /// The cells of [`spend_headers`] for one result.
 pub fn spend_cells(s: &crate::metrics::results::SchemeSummary) -> Vec<String> {
