@@ -8,6 +8,7 @@ quantization, scheduling); a fusion center fuses what arrives and what the silen
   pandas DataFrame), exactly as ``hushfuse replay`` does;
 - :func:`simulate` draws one simulated trial (truth and measurements) as the simulator does;
 - :class:`Scheme` gives one scheme's sensor nodes and fusion center, to drive your own loop;
+- :class:`Trial` steps one trial on your readings by the simulator's own step (any network);
 - :class:`SchemeSpec`, :class:`SensorNode`, :class:`FusionCenter` and :func:`register` let you
   write a scheme of your own in Python that runs beside the built-in ones (``run``, ``replay``,
   the arena's ``budget=``), charged the same bits (see ``hushfuse._schemes``).
@@ -37,6 +38,7 @@ from ._hushfuse import (
     ScenarioError,
     System,
     Transmission,
+    Trial,
     builtins,
 )
 from ._schemes import (
@@ -66,6 +68,7 @@ __all__ = [
     "builtins",
     "measurements_frame",
     "Scheme",
+    "Trial",
     "SensorNode",
     "FusionCenter",
     "Transmission",

@@ -153,6 +153,23 @@ class FusionCenter:
     def feedback(self) -> Optional[Feedback]: ...
     def ess(self) -> Optional[float]: ...
 
+class Trial:
+    """One trial of one scheme variant stepped on your readings by the simulator's own step
+    (sensors, schedule, the link over any network, fusion, feedback)."""
+
+    def __init__(
+        self, scenario: str, variant: int = 0, trial: int = 0, seed: Optional[int] = None
+    ) -> None: ...
+    def step(self, k: int, readings: List[Any]) -> Dict[str, Any]:
+        """Step k (1, 2, ... in order) on one reading per sensor: mean, cov, links, bits,
+        traffic and, over a multi-hop network, nodes."""
+    @property
+    def label(self) -> str: ...
+    @property
+    def steps(self) -> int: ...
+    @property
+    def n_sensors(self) -> int: ...
+
 class Scheme:
     """One variant of a scenario built as the simulator builds it for one trial."""
 

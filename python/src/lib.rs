@@ -5,6 +5,7 @@
 mod external;
 mod helpers;
 mod runs;
+mod trial;
 
 use hushfuse::engine::replay;
 use hushfuse::engine::seeding;
@@ -523,7 +524,7 @@ impl Scheme {
         .map_err(scenario_err)?;
         if exp.network.is_some() {
             return Err(PyValueError::new_err(format!(
-                "{source}: a multi-hop [network] is not supported by the step-by-step Scheme yet (its loop is the one-hop star's); hushfuse.run runs it"
+                "{source}: a multi-hop [network] is not supported by the step-by-step Scheme (its sensors and center are the star's pieces, and the network between them is yours); hushfuse.Trial steps a trial over the network, hushfuse.run runs it"
             )));
         }
         let Some(v) = exp.variants.get(variant) else {
@@ -664,6 +665,7 @@ fn _hushfuse(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(variants, m)?)?;
     m.add_function(wrap_pyfunction!(builtins, m)?)?;
     m.add_class::<Scheme>()?;
+    m.add_class::<trial::Trial>()?;
     m.add_class::<SensorNode>()?;
     m.add_class::<FusionCenter>()?;
     m.add_class::<Transmission>()?;

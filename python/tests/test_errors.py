@@ -154,3 +154,29 @@ def test_a_multi_hop_network_runs_whole_and_is_refused_step_by_step():
     assert [n["hops"] for n in net["nodes"]] == [5, 4, 3, 2, 1, 0]
     with pytest.raises(ValueError, match=r"multi-hop \[network\]"):
         hushfuse.Scheme("mesh-line")
+
+
+def test_a_trial_steps_over_the_mesh_as_the_run_does():
+    # hushfuse.Trial is the simulator's own step: trial 0 stepped by hand spends every bit and
+    # frame that run(trials=1) reports, per scheme and per node (aggregated and per source).
+    data = hushfuse.simulate("mesh-line", trial=0)
+    r = hushfuse.run("mesh-line", trials=1)
+    for v in (0, 1):
+        t = hushfuse.Trial("mesh-line", variant=v, trial=0)
+        assert t.n_sensors == len(data["measurements"])
+        bits, sent = 0, {}
+        for k in range(1, t.steps + 1):
+            s = t.step(k, [m[k - 1] for m in data["measurements"]])
+            assert s["mean"].shape == (2,) and s["cov"].shape == (2, 2)
+            bits += s["traffic"]["bits"]
+            for name, c in s["nodes"].items():
+                sent[name] = sent.get(name, 0) + c["frames_sent"]
+        scheme = r["schemes"][v]
+        assert bits / t.steps == pytest.approx(scheme["bits_per_step"], rel=1e-12)
+        for n in scheme["network"]["nodes"]:
+            assert sent[n["name"]] / t.steps == pytest.approx(n["frames_sent_per_step"], rel=1e-12)
+    with pytest.raises(hushfuse.InputError, match="in order"):
+        t.step(1, [m[0] for m in data["measurements"]])
+    fresh = hushfuse.Trial("mesh-line")
+    with pytest.raises(hushfuse.InputError, match="readings"):
+        fresh.step(1, [data["measurements"][0][0]])

@@ -407,7 +407,8 @@ fn run_variant(
             let step = match &e {
                 LoopError::Scheme { k, .. }
                 | LoopError::Covariance { k, .. }
-                | LoopError::Observer { k, .. } => *k,
+                | LoopError::Observer { k, .. }
+                | LoopError::Input { k, .. } => *k,
             };
             sums.record_failure(TrialFailure {
                 trial,

@@ -25,6 +25,7 @@ use crate::scheme::fast_path::{FastTrialError, Losses, StepSink, TrialCache};
 use crate::scheme::Scheme;
 use crate::scheme::{Feedback, SchemeError};
 use crate::stats::seeding::coins;
+use std::ops::{Deref, DerefMut};
 
 /// One fused step, as an [`Observer`] sees it.
 #[derive(Debug)]
@@ -56,9 +57,24 @@ pub enum ObserverError {
 /// Why a trial's loop stopped, at which step (0: building the scheme).
 #[derive(Debug, Clone, PartialEq)]
 pub enum LoopError {
-    Scheme { k: usize, source: SchemeError },
-    Covariance { k: usize, source: LinalgError },
-    Observer { k: usize, message: String },
+    Scheme {
+        k: usize,
+        source: SchemeError,
+    },
+    Covariance {
+        k: usize,
+        source: LinalgError,
+    },
+    Observer {
+        k: usize,
+        message: String,
+    },
+    /// What the caller of [`Trial::step`] passed does not fit the trial (a step out of order,
+    /// a reading missing or of the wrong size).
+    Input {
+        k: usize,
+        message: String,
+    },
 }
 
 impl LoopError {
@@ -71,6 +87,7 @@ impl LoopError {
                 "scheme {label}, step {k}: fused covariance is not positive definite ({source})"
             ),
             LoopError::Observer { message, .. } => message.clone(),
+            LoopError::Input { k, message } => format!("scheme {label}, step {k}: {message}"),
         }
     }
 }
@@ -187,8 +204,15 @@ pub fn run_trial(
 /// (sense, schedule, deliver over the link, fuse, feed back). [`run_trial`] drives it for the
 /// Monte Carlo runner, the trace, replay and the report's bands; a caller with readings that
 /// arrive one step at a time (a Python loop, a live deployment) can drive it the same way.
-pub struct Trial<'a> {
-    exp: &'a Experiment,
+///
+/// It borrows the experiment and the work space (`E`, `B`), or holds them (an `Arc` and a
+/// `Box`, for a caller that keeps the trial between calls, as Python's `hushfuse.Trial` does).
+pub struct Trial<'a, E = &'a Experiment, B = &'a mut LoopBuffers>
+where
+    E: Deref<Target = Experiment>,
+    B: DerefMut<Target = LoopBuffers>,
+{
+    exp: E,
     spec: TrialSpec<'a>,
     inst: crate::scheme::SchemeInstance,
     schedule: Schedule,
@@ -198,17 +222,23 @@ pub struct Trial<'a> {
     feedback: Option<Feedback>,
     link: Option<LinkLayer>,
     with_links: bool,
-    buffers: &'a mut LoopBuffers,
+    buffers: B,
+    /// Steps taken.
+    done: usize,
 }
 
-impl<'a> Trial<'a> {
+impl<'a, E, B> Trial<'a, E, B>
+where
+    E: Deref<Target = Experiment>,
+    B: DerefMut<Target = LoopBuffers>,
+{
     /// Trial `spec.trial` of variant `spec.variant` of `exp`, its scheme built and its link's
     /// fates drawn, before its first step; `with_links`: whether [`StepOutput::links`] and
     /// [`StepOutput::bits`] are filled.
     pub fn new(
-        exp: &'a Experiment,
+        exp: E,
         spec: TrialSpec<'a>,
-        buffers: &'a mut LoopBuffers,
+        buffers: B,
         with_links: bool,
     ) -> Result<Self, LoopError> {
         let coins = coins(exp.seed, spec.trial, spec.stream, exp.system.n_sensors());
@@ -216,9 +246,9 @@ impl<'a> Trial<'a> {
     }
 
     fn with_coins(
-        exp: &'a Experiment,
+        exp: E,
         spec: TrialSpec<'a>,
-        buffers: &'a mut LoopBuffers,
+        mut buffers: B,
         (coins, center_seed): (Vec<rand_xoshiro::Xoshiro256PlusPlus>, u64),
         with_links: bool,
     ) -> Result<Self, LoopError> {
@@ -229,13 +259,20 @@ impl<'a> Trial<'a> {
             .map_err(|source| LoopError::Scheme { k: 0, source })?;
         // What the fusion center tells the sensors before the first measurement, as they
         // receive it (every real number a single, as priced).
-        let feedback = inst.center.feedback().map(|f| as_received(exp, f));
+        let feedback = inst.center.feedback().map(|f| as_received(&exp, f));
         // The link's fates of this trial, from its own stream: every scheme meets the same ones.
-        let link = LinkLayer::new(exp, spec.variant, spec.trial, &feedback, &mut buffers.fates);
+        let link = LinkLayer::new(
+            &exp,
+            spec.variant,
+            spec.trial,
+            &feedback,
+            &mut buffers.fates,
+        );
+        let schedule = variant.scheme.schedule();
         Ok(Self {
             exp,
             spec,
-            schedule: variant.scheme.schedule(),
+            schedule,
             inst,
             coins,
             center_seed,
@@ -243,15 +280,24 @@ impl<'a> Trial<'a> {
             link,
             with_links,
             buffers,
+            done: 0,
         })
     }
 
-    /// Step `k` (1, 2, … in order) on the readings `readings[i]` = z_k^i: every scheduled
+    /// Step `k` (1, 2, … in order; anything else is [`LoopError::Input`]) on the readings `readings[i]` = z_k^i: every scheduled
     /// sensor steps with its own coins and the feedback it holds, the link delivers (counting
     /// every bit and hop), the center fuses, and its feedback goes out for the next step.
     pub fn step(&mut self, k: usize, readings: &[Vector]) -> Result<StepOutput<'_>, LoopError> {
-        let exp = self.exp;
+        let exp: &Experiment = &self.exp;
         let n_sensors = exp.system.n_sensors();
+        if k != self.done + 1 {
+            return Err(LoopError::Input {
+                k,
+                message: format!("steps come in order: step {} is next", self.done + 1),
+            });
+        }
+        check_readings(exp, k, self.spec.available, readings)?;
+        self.done = k;
         let variant = &exp.variants[self.spec.variant];
         let (schedule, available) = (self.schedule, self.spec.available);
         let scheduled =
@@ -357,6 +403,38 @@ impl<'a> Trial<'a> {
             nodes: link.as_ref().map_or(&[], |l| l.nodes()),
         })
     }
+}
+
+/// Step `k`'s readings fit the trial: one per sensor of its dimension, where the sensor has
+/// one; `k` within the run (the schedule and the link's fates are drawn for its steps).
+fn check_readings(
+    exp: &Experiment,
+    k: usize,
+    available: Option<&[Vec<bool>]>,
+    readings: &[Vector],
+) -> Result<(), LoopError> {
+    let input = |message: String| Err(LoopError::Input { k, message });
+    if k == 0 || k > exp.steps {
+        return input(format!("steps run from 1 to {}", exp.steps));
+    }
+    if readings.len() != exp.system.n_sensors() {
+        return input(format!(
+            "{} readings for {} sensors",
+            readings.len(),
+            exp.system.n_sensors()
+        ));
+    }
+    for (i, (z, s)) in readings.iter().zip(&exp.system.sensors).enumerate() {
+        let present = available.is_none_or(|a| a[k - 1][i]);
+        if present && z.len() != s.meas_dim() {
+            return input(format!(
+                "sensor {i}'s reading has {} components, the sensor measures {}",
+                z.len(),
+                s.meas_dim()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Feedback as the sensors receive it: every real number the single it is priced as, unless
