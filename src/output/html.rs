@@ -555,7 +555,7 @@ pub fn render(input: &Input) -> Result<String, String> {
     }
     results_section(&mut h, input);
     if let Some(svg) = crate::output::network_map::map_svg(exp, s) {
-        let _ = writeln!(h, "<h2>The network</h2>\n<p>Every node at its place, filled by its radio's energy per step; dark links carry the routes to the sink (the square); the node circled in red dies first. Per node figures are in <code>summary.json</code> (<code>network.nodes</code>).</p>\n<figure>{}</figure>", svg?);
+        let _ = writeln!(h, "<h2>The network</h2>\n<p>Every node at its place, filled by its radio's energy per step; dark links carry the routes to the sink (the square); the node circled in red dies first; &ldquo;relays sum&rdquo;: the relays added that scheme's reports into one frame per link. Per node and per step figures are in <code>summary.json</code> (<code>network.nodes</code>).</p>\n<figure>{}</figure>", svg?);
     }
     let within = |i: usize| {
         input.arena.is_none_or(|o| {

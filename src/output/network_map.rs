@@ -108,10 +108,13 @@ fn draw(net: &Topology, panels: &[(&str, &NetworkSummary)]) -> Result<String, St
         let (grid, legend) = root.split_vertically(PANEL.1 * rows as u32);
         let areas = grid.split_evenly((rows, cols));
         for ((name, summary), area) in panels.iter().zip(areas) {
-            let title = match &summary.first_to_die {
+            let mut title = match &summary.first_to_die {
                 Some(f) => format!("{name}: {} dies first, {:.0} days", f.node, f.lifetime_days),
                 None => name.to_string(),
             };
+            if summary.aggregated {
+                title.push_str(" (relays sum)");
+            }
             area.draw(&Text::new(title, (10, 8), ("sans-serif", 14)))
                 .map_err(err)?;
             let (w, h) = (PANEL.0 as f64 - 90.0, PANEL.1 as f64 - 80.0);
