@@ -175,6 +175,12 @@ enum Command {
         #[arg(long)]
         markdown: bool,
     },
+    /// List every link model (`[channel]` kind) with its keys.
+    ListLinks {
+        /// Print the table as Markdown (the `[channel]` table of docs/scenarios.md).
+        #[arg(long)]
+        markdown: bool,
+    },
     /// The fusion center of a live run: listens for the sensor nodes (UDP), announces each
     /// step, fuses the 802.15.4 frames that arrive, sends the feedback; appends every fused step
     /// to OUT/estimates.csv (flushed).
@@ -321,6 +327,14 @@ fn main() -> ExitCode {
                 hushfuse::scheme::registry::markdown()
             } else {
                 hushfuse::scheme::registry::describe()
+            });
+            Ok(())
+        }
+        Some(Command::ListLinks { markdown }) => {
+            print_out(&if markdown {
+                hushfuse::network::channel::models::markdown()
+            } else {
+                hushfuse::network::channel::models::describe()
             });
             Ok(())
         }

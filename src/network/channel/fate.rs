@@ -222,15 +222,18 @@ pub(super) fn loss_path(
     steps: usize,
     slot: impl Fn(usize) -> Xoshiro256PlusPlus,
 ) -> Vec<f64> {
-    match spec.kind {
-        ChannelKind::Ideal => vec![0.0; steps],
-        ChannelKind::Bernoulli => vec![clamp_probability(spec.loss.unwrap_or(0.0)); steps],
-        ChannelKind::GilbertElliott => {
-            let chain = GilbertElliott::from_spec(spec);
-            let mut states = chain.states(slot(CHAIN_STEP));
-            (0..steps).map(|_| chain.loss(states.next_bad())).collect()
-        }
-    }
+    (super::models::of(spec.kind).loss_path)(spec, steps, &slot)
+}
+
+/// The Gilbert–Elliott link's loss per step: its chain, drawn from `slot(CHAIN_STEP)`.
+pub(super) fn gilbert_elliott_loss_path(
+    spec: &ChannelSpec,
+    steps: usize,
+    slot: &dyn Fn(usize) -> Xoshiro256PlusPlus,
+) -> Vec<f64> {
+    let chain = GilbertElliott::from_spec(spec);
+    let mut states = chain.states(slot(CHAIN_STEP));
+    (0..steps).map(|_| chain.loss(states.next_bad())).collect()
 }
 
 /// A slot's fate. `lost` is the first attempt's coin, already drawn from `rng`; the delay is
@@ -413,7 +416,7 @@ impl States {
     }
 }
 
-fn clamp_probability(p: f64) -> f64 {
+pub(super) fn clamp_probability(p: f64) -> f64 {
     if p.is_nan() {
         0.0
     } else {

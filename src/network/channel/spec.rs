@@ -183,16 +183,7 @@ impl ChannelSpec {
     /// moves, as the fates take it). A delay is not a loss and counts nothing here. Assumes a
     /// validated spec.
     pub fn delivery_loss(&self) -> f64 {
-        let attempts = 1 + self.arq.map_or(0, |a| a.max_retries.min(Arq::MAX_RETRIES)) as i32;
-        match self.kind {
-            ChannelKind::Ideal => 0.0,
-            ChannelKind::Bernoulli => self.loss.unwrap_or(0.0).powi(attempts),
-            ChannelKind::GilbertElliott => {
-                let (gb, bg) = (self.p_gb.unwrap_or(0.0), self.p_bg.unwrap_or(0.0));
-                let bad = if gb + bg > 0.0 { gb / (gb + bg) } else { 0.0 };
-                (1.0 - bad) * self.loss_good().powi(attempts) + bad * self.loss_bad().powi(attempts)
-            }
-        }
+        (super::models::of(self.kind).delivery_loss)(self)
     }
 
     /// The downlink model (`None` in the file means ideal).
@@ -238,18 +229,7 @@ impl ChannelSpec {
     /// table in messages (`"channel"`, `"sensors[2].channel"`, …) so the user can find the key.
     pub fn validate_at(&self, path: &str) -> Result<(), String> {
         self.check_keys_fit_kind(path)?;
-        match self.kind {
-            ChannelKind::Ideal => {}
-            ChannelKind::Bernoulli => {
-                probability(path, "loss", required(path, self.kind, "loss", self.loss)?)?;
-            }
-            ChannelKind::GilbertElliott => {
-                probability(path, "p_gb", required(path, self.kind, "p_gb", self.p_gb)?)?;
-                probability(path, "p_bg", required(path, self.kind, "p_bg", self.p_bg)?)?;
-                probability(path, "loss_good", self.loss_good())?;
-                probability(path, "loss_bad", self.loss_bad())?;
-            }
-        }
+        (super::models::of(self.kind).validate)(self, path)?;
         if let Some(Delay::Geometric(g)) = &self.delay {
             if !(g.mean.is_finite() && g.mean >= 0.0) {
                 return Err(format!(
@@ -324,12 +304,17 @@ impl ChannelSpec {
 }
 
 /// The value of a key the kind needs, or an error naming it.
-fn required(path: &str, kind: ChannelKind, key: &str, value: Option<f64>) -> Result<f64, String> {
+pub(super) fn required(
+    path: &str,
+    kind: ChannelKind,
+    key: &str,
+    value: Option<f64>,
+) -> Result<f64, String> {
     value.ok_or_else(|| format!("{path}.kind = \"{}\" needs `{key}`", kind.name()))
 }
 
 /// Checks that `value` is a probability; NaN fails the range test and is rejected too.
-fn probability(path: &str, key: &str, value: f64) -> Result<(), String> {
+pub(super) fn probability(path: &str, key: &str, value: f64) -> Result<(), String> {
     if (0.0..=1.0).contains(&value) {
         Ok(())
     } else {
