@@ -11,6 +11,7 @@
 //! - [`stability`]: the classical stability checks of Kalman filtering with intermittent
 //!   observations (Sinopoli et al. 2004), used to sanity-check a scenario's link.
 pub mod fate;
+mod gilbert_elliott;
 pub mod models;
 pub mod route;
 pub mod spec;

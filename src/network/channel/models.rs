@@ -7,7 +7,7 @@
 //!
 //! Adding a model: its `ChannelKind` variant and keys in [`super::spec`], its entry here (and
 //! its per-step loss beside the others in [`super::fate`]).
-use super::spec::{Arq, ChannelKind, ChannelSpec};
+use super::spec::{Arq, ChannelKind, ChannelSpec, Delay};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
 /// One documented key of a link model.
@@ -17,6 +17,9 @@ pub struct KeyDoc {
     pub default: &'static str,
     pub meaning: &'static str,
 }
+
+/// A link's generator of slot j (a model with a hidden state draws its chain from one).
+pub type Slot<'a> = &'a dyn Fn(usize) -> Xoshiro256PlusPlus;
 
 /// A registered link model.
 pub struct LinkModel {
@@ -29,7 +32,7 @@ pub struct LinkModel {
     pub validate: fn(&ChannelSpec, path: &str) -> Result<(), String>,
     /// The loss probability of a packet sent at each step `1..=steps`; `slot(j)` is the
     /// link's generator of slot j (a model with a hidden state draws its chain from one).
-    pub loss_path: fn(&ChannelSpec, usize, &dyn Fn(usize) -> Xoshiro256PlusPlus) -> Vec<f64>,
+    pub loss_path: fn(&ChannelSpec, usize, Slot) -> Vec<f64>,
     /// The long-run probability that a report is lost for good (after `arq`'s retries): what a
     /// loss-aware center assumes.
     pub delivery_loss: fn(&ChannelSpec) -> f64,
@@ -59,10 +62,10 @@ pub const LINK_MODELS: &[LinkModel] = &[
             meaning: "probability that a packet is lost",
         }],
         validate: |s, path| {
-            let loss = super::spec::required(path, s.kind, "loss", s.loss)?;
-            super::spec::probability(path, "loss", loss)
+            let loss = required(path, s.kind, "loss", s.loss)?;
+            probability(path, "loss", loss)
         },
-        loss_path: |s, steps, _| vec![super::fate::clamp_probability(s.loss.unwrap_or(0.0)); steps],
+        loss_path: |s, steps, _| vec![super::gilbert_elliott::clamp_probability(s.loss.unwrap_or(0.0)); steps],
         delivery_loss: |s| s.loss.unwrap_or(0.0).powi(attempts(s)),
     },
     LinkModel {
@@ -81,13 +84,12 @@ pub const LINK_MODELS: &[LinkModel] = &[
             },
         ],
         validate: |s, path| {
-            use super::spec::{probability, required};
             probability(path, "p_gb", required(path, s.kind, "p_gb", s.p_gb)?)?;
             probability(path, "p_bg", required(path, s.kind, "p_bg", s.p_bg)?)?;
             probability(path, "loss_good", s.loss_good())?;
             probability(path, "loss_bad", s.loss_bad())
         },
-        loss_path: super::fate::gilbert_elliott_loss_path,
+        loss_path: super::gilbert_elliott::loss_path,
         delivery_loss: |s| {
             let (gb, bg) = (s.p_gb.unwrap_or(0.0), s.p_bg.unwrap_or(0.0));
             let bad = if gb + bg > 0.0 { gb / (gb + bg) } else { 0.0 };
@@ -122,6 +124,118 @@ pub fn of(kind: ChannelKind) -> &'static LinkModel {
         .iter()
         .find(|m| m.kind == kind)
         .expect("every kind is registered")
+}
+
+/// What a link's model says of it: its checks and the loss a loss-aware center assumes.
+impl ChannelSpec {
+    /// The probability that an uplink packet is never delivered, in the long run: what a
+    /// loss-aware center assumes for this link (`link_loss = "channel"`). Bernoulli `p`, and
+    /// with `arq` of `n` retries `p^(1+n)` (each attempt draws its own loss); Gilbert–Elliott
+    /// at its stationary state, `π_good loss_good^(1+n) + π_bad loss_bad^(1+n)` (the retries of
+    /// a step see that step's state; π_bad = p_gb / (p_gb + p_bg), 0 when the chain never
+    /// moves, as the fates take it). A delay is not a loss and counts nothing here. Assumes a
+    /// validated spec.
+    pub fn delivery_loss(&self) -> f64 {
+        (of(self.kind).delivery_loss)(self)
+    }
+
+    /// Checks the table found at `channel`; see [`ChannelSpec::validate_at`].
+    pub fn validate(&self) -> Result<(), String> {
+        self.validate_at("channel")
+    }
+
+    /// Checks the keys against the kind and the values against their ranges. `path` names the
+    /// table in messages (`"channel"`, `"sensors[2].channel"`, …) so the user can find the key.
+    pub fn validate_at(&self, path: &str) -> Result<(), String> {
+        self.check_keys_fit_kind(path)?;
+        (of(self.kind).validate)(self, path)?;
+        if let Some(Delay::Geometric(g)) = &self.delay {
+            if !(g.mean.is_finite() && g.mean >= 0.0) {
+                return Err(format!(
+                    "{path}.delay.mean = {} must be a finite number of steps >= 0",
+                    g.mean
+                ));
+            }
+        }
+        if let Some(arq) = &self.arq {
+            if arq.max_retries > Arq::MAX_RETRIES {
+                return Err(format!(
+                    "{path}.arq.max_retries = {} is out of range: 0 to {} (macMaxFrameRetries of IEEE 802.15.4)",
+                    arq.max_retries,
+                    Arq::MAX_RETRIES
+                ));
+            }
+        }
+        if let Some(down) = &self.downlink {
+            // A feedback link has no feedback link of its own.
+            if down.downlink.is_some() {
+                return Err(format!(
+                    "{path}.downlink.downlink is not allowed: a downlink has no downlink"
+                ));
+            }
+            // Feedback is not retransmitted: the downlink carries the uplink's acknowledgements.
+            if down.arq.is_some() {
+                return Err(format!(
+                    "{path}.downlink.arq is not allowed: retransmission applies to the uplink (its acknowledgements travel on the downlink)"
+                ));
+            }
+            // Feedback is read at the step it is sent or not at all (a lost one leaves the
+            // sensor with what it last heard): a delay on it was accepted and ignored before.
+            if !down.delay().is_zero() {
+                return Err(format!(
+                    "{path}.downlink.delay is not supported: feedback reaches a sensor at its step or is lost (the sensor keeps what it last heard); remove the delay, or model a slow downlink by its loss"
+                ));
+            }
+            down.validate_at(&format!("{path}.downlink"))?;
+        }
+        Ok(())
+    }
+
+    /// Rejects keys of another kind: a `loss` under `kind = "gilbert-elliott"` would otherwise be
+    /// silently ignored, and the user would believe it was used.
+    fn check_keys_fit_kind(&self, path: &str) -> Result<(), String> {
+        let keys: [(&str, bool, ChannelKind); 5] = [
+            ("loss", self.loss.is_some(), ChannelKind::Bernoulli),
+            ("p_gb", self.p_gb.is_some(), ChannelKind::GilbertElliott),
+            ("p_bg", self.p_bg.is_some(), ChannelKind::GilbertElliott),
+            (
+                "loss_good",
+                self.loss_good.is_some(),
+                ChannelKind::GilbertElliott,
+            ),
+            (
+                "loss_bad",
+                self.loss_bad.is_some(),
+                ChannelKind::GilbertElliott,
+            ),
+        ];
+        for (key, present, owner) in keys {
+            if present && owner != self.kind {
+                return Err(format!(
+                    "{path}.{key} belongs to kind = \"{}\", not \"{}\"",
+                    owner.name(),
+                    self.kind.name()
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The value of a key the kind needs, or an error naming it.
+fn required(path: &str, kind: ChannelKind, key: &str, value: Option<f64>) -> Result<f64, String> {
+    value.ok_or_else(|| format!("{path}.kind = \"{}\" needs `{key}`", kind.name()))
+}
+
+/// Checks that `value` is a probability; NaN fails the range test and is rejected too.
+fn probability(path: &str, key: &str, value: f64) -> Result<(), String> {
+    if (0.0..=1.0).contains(&value) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{path}.{key} = {value} is not a probability in [0, 1]"
+        ))
+    }
 }
 
 /// The `[channel]` key table of `docs/scenarios.md`.

@@ -175,17 +175,6 @@ impl ChannelSpec {
         self.delay.unwrap_or_default()
     }
 
-    /// The probability that an uplink packet is never delivered, in the long run: what a
-    /// loss-aware center assumes for this link (`link_loss = "channel"`). Bernoulli `p`, and
-    /// with `arq` of `n` retries `p^(1+n)` (each attempt draws its own loss); Gilbert–Elliott
-    /// at its stationary state, `π_good loss_good^(1+n) + π_bad loss_bad^(1+n)` (the retries of
-    /// a step see that step's state; π_bad = p_gb / (p_gb + p_bg), 0 when the chain never
-    /// moves, as the fates take it). A delay is not a loss and counts nothing here. Assumes a
-    /// validated spec.
-    pub fn delivery_loss(&self) -> f64 {
-        (super::models::of(self.kind).delivery_loss)(self)
-    }
-
     /// The downlink model (`None` in the file means ideal).
     pub fn downlink_spec(&self) -> ChannelSpec {
         self.downlink.as_deref().cloned().unwrap_or_default()
@@ -218,109 +207,6 @@ impl ChannelSpec {
                 .downlink
                 .as_deref()
                 .is_none_or(ChannelSpec::is_lossless)
-    }
-
-    /// Checks the table found at `channel`; see [`ChannelSpec::validate_at`].
-    pub fn validate(&self) -> Result<(), String> {
-        self.validate_at("channel")
-    }
-
-    /// Checks the keys against the kind and the values against their ranges. `path` names the
-    /// table in messages (`"channel"`, `"sensors[2].channel"`, …) so the user can find the key.
-    pub fn validate_at(&self, path: &str) -> Result<(), String> {
-        self.check_keys_fit_kind(path)?;
-        (super::models::of(self.kind).validate)(self, path)?;
-        if let Some(Delay::Geometric(g)) = &self.delay {
-            if !(g.mean.is_finite() && g.mean >= 0.0) {
-                return Err(format!(
-                    "{path}.delay.mean = {} must be a finite number of steps >= 0",
-                    g.mean
-                ));
-            }
-        }
-        if let Some(arq) = &self.arq {
-            if arq.max_retries > Arq::MAX_RETRIES {
-                return Err(format!(
-                    "{path}.arq.max_retries = {} is out of range: 0 to {} (macMaxFrameRetries of IEEE 802.15.4)",
-                    arq.max_retries,
-                    Arq::MAX_RETRIES
-                ));
-            }
-        }
-        if let Some(down) = &self.downlink {
-            // A feedback link has no feedback link of its own.
-            if down.downlink.is_some() {
-                return Err(format!(
-                    "{path}.downlink.downlink is not allowed: a downlink has no downlink"
-                ));
-            }
-            // Feedback is not retransmitted: the downlink carries the uplink's acknowledgements.
-            if down.arq.is_some() {
-                return Err(format!(
-                    "{path}.downlink.arq is not allowed: retransmission applies to the uplink (its acknowledgements travel on the downlink)"
-                ));
-            }
-            // Feedback is read at the step it is sent or not at all (a lost one leaves the
-            // sensor with what it last heard): a delay on it was accepted and ignored before.
-            if !down.delay().is_zero() {
-                return Err(format!(
-                    "{path}.downlink.delay is not supported: feedback reaches a sensor at its step or is lost (the sensor keeps what it last heard); remove the delay, or model a slow downlink by its loss"
-                ));
-            }
-            down.validate_at(&format!("{path}.downlink"))?;
-        }
-        Ok(())
-    }
-
-    /// Rejects keys of another kind: a `loss` under `kind = "gilbert-elliott"` would otherwise be
-    /// silently ignored, and the user would believe it was used.
-    fn check_keys_fit_kind(&self, path: &str) -> Result<(), String> {
-        let keys: [(&str, bool, ChannelKind); 5] = [
-            ("loss", self.loss.is_some(), ChannelKind::Bernoulli),
-            ("p_gb", self.p_gb.is_some(), ChannelKind::GilbertElliott),
-            ("p_bg", self.p_bg.is_some(), ChannelKind::GilbertElliott),
-            (
-                "loss_good",
-                self.loss_good.is_some(),
-                ChannelKind::GilbertElliott,
-            ),
-            (
-                "loss_bad",
-                self.loss_bad.is_some(),
-                ChannelKind::GilbertElliott,
-            ),
-        ];
-        for (key, present, owner) in keys {
-            if present && owner != self.kind {
-                return Err(format!(
-                    "{path}.{key} belongs to kind = \"{}\", not \"{}\"",
-                    owner.name(),
-                    self.kind.name()
-                ));
-            }
-        }
-        Ok(())
-    }
-}
-
-/// The value of a key the kind needs, or an error naming it.
-pub(super) fn required(
-    path: &str,
-    kind: ChannelKind,
-    key: &str,
-    value: Option<f64>,
-) -> Result<f64, String> {
-    value.ok_or_else(|| format!("{path}.kind = \"{}\" needs `{key}`", kind.name()))
-}
-
-/// Checks that `value` is a probability; NaN fails the range test and is rejected too.
-pub(super) fn probability(path: &str, key: &str, value: f64) -> Result<(), String> {
-    if (0.0..=1.0).contains(&value) {
-        Ok(())
-    } else {
-        Err(format!(
-            "{path}.{key} = {value} is not a probability in [0, 1]"
-        ))
     }
 }
 
