@@ -77,22 +77,29 @@ pub struct Folder {
     order: Vec<usize>,
     parent: Vec<Option<usize>>,
     sink: usize,
-    /// Per node: the sum it holds this step.
-    acc: Vec<Information>,
+    dim: usize,
+    /// Per node, one after the other: the sum it holds this step, y (dim) then Y (dim × dim,
+    /// column-major). One flat buffer: a thousand nodes' sums stay in a few pages.
+    sums: Vec<f64>,
+    /// The sink's sum after the last fold.
+    held: Information,
     /// Per node: how many contributions its sum holds (its own, and one per child's frame).
     parts: Vec<u32>,
     /// Per node: the sensor whose report it holds when it holds one only (then it sends that).
     single: Vec<Option<usize>>,
 }
 
+/// `to[i] += from[i]` for every i.
+fn add(to: &mut [f64], from: &[f64]) {
+    for (t, f) in to.iter_mut().zip(from) {
+        *t += f;
+    }
+}
+
 impl Folder {
     /// A folder over `routes` for state dimension `dim`.
     pub fn new(routes: &Routes, dim: usize) -> Self {
         let nodes = routes.uplinks.len();
-        let zero = Information {
-            matrix: Matrix::zeros(dim, dim),
-            vector: Vector::zeros(dim),
-        };
         Folder {
             order: fold_order(routes),
             parent: routes
@@ -105,18 +112,27 @@ impl Folder {
                 .iter()
                 .position(Option::is_none)
                 .expect("a routing tree has a sink"),
-            acc: vec![zero; nodes],
+            dim,
+            sums: vec![0.0; nodes * (dim + dim * dim)],
+            held: Information {
+                matrix: Matrix::zeros(dim, dim),
+                vector: Vector::zeros(dim),
+            },
             parts: vec![0; nodes],
             single: vec![None; nodes],
         }
     }
 
+    fn stride(&self) -> usize {
+        self.dim + self.dim * self.dim
+    }
+
     /// A new step: every node holds nothing.
     pub fn start(&mut self) {
+        let w = self.stride();
         for (n, p) in self.parts.iter_mut().enumerate() {
             if *p > 0 {
-                self.acc[n].matrix.fill(0.0);
-                self.acc[n].vector.fill(0.0);
+                self.sums[n * w..(n + 1) * w].fill(0.0);
             }
             *p = 0;
         }
@@ -125,22 +141,24 @@ impl Folder {
 
     /// Node `node`'s own contribution (y_i = H^T R^{-1} z, Y_i = H^T R^{-1} H) this step.
     pub fn add_own(&mut self, node: usize, vector: &Vector, matrix: &Matrix) {
-        let a = &mut self.acc[node];
-        a.vector += vector;
-        a.matrix += matrix;
+        let (w, d) = (self.stride(), self.dim);
+        let sum = &mut self.sums[node * w..(node + 1) * w];
+        add(&mut sum[..d], vector.as_slice());
+        add(&mut sum[d..], matrix.as_slice());
         self.parts[node] += 1;
         self.single[node] = (self.parts[node] == 1).then_some(node);
     }
 
     /// Folds the step's contributions up the tree: every node, children first, sends one frame
     /// to its parent when it holds anything; `send(node, frame)` puts it on the link and says
-    /// whether it arrived; `on_air` makes a sum what its frame carries (the singles it is
-    /// priced as). Returns the sum the sink holds, `None` when nothing reached it.
+    /// whether it arrived; `on_air` makes a sum's reals (y, then Y) what its frame carries (the
+    /// singles it is priced as). Returns the sum the sink holds, `None` when nothing reached it.
     pub fn fold(
         &mut self,
         mut send: impl FnMut(usize, Frame) -> bool,
-        on_air: impl Fn(&mut Information),
+        on_air: impl Fn(&mut [f64]),
     ) -> Option<&Information> {
+        let w = self.stride();
         for idx in 0..self.order.len() {
             let n = self.order[idx];
             if self.parts[n] == 0 {
@@ -150,7 +168,7 @@ impl Folder {
             let frame = match self.single[n] {
                 Some(s) => Frame::Measurement(s),
                 None => {
-                    on_air(&mut self.acc[n]);
+                    on_air(&mut self.sums[n * w..(n + 1) * w]);
                     Frame::Sum
                 }
             };
@@ -158,23 +176,24 @@ impl Folder {
                 continue;
             }
             let p = self.parent[n].expect("only nodes with a parent fold");
-            let (from, to) = pair_mut(&mut self.acc, n, p);
-            to.vector += &from.vector;
-            to.matrix += &from.matrix;
+            let (from, to) = pair_mut(&mut self.sums, w, n, p);
+            add(to, from);
             self.parts[p] += 1;
             self.single[p] = match (self.parts[p], frame) {
                 (1, Frame::Measurement(s)) => Some(s),
                 _ => None,
             };
         }
-        (self.parts[self.sink] > 0).then(|| &self.acc[self.sink])
+        let d = self.dim;
+        let sink = &self.sums[self.sink * w..(self.sink + 1) * w];
+        self.held.vector.as_mut_slice().copy_from_slice(&sink[..d]);
+        self.held.matrix.as_mut_slice().copy_from_slice(&sink[d..]);
+        self.held()
     }
-}
 
-impl Folder {
     /// The sum the sink holds after the last [`Folder::fold`] (`None`: nothing reached it).
     pub fn held(&self) -> Option<&Information> {
-        (self.parts[self.sink] > 0).then(|| &self.acc[self.sink])
+        (self.parts[self.sink] > 0).then_some(&self.held)
     }
 }
 
@@ -249,10 +268,7 @@ impl Aggregation {
                 traffic.ack_bits += u64::from(f.acks) * ACK_PPDU_BITS;
                 tally.hop(routes, n, &f, mac, frame != Frame::Measurement(n))
             },
-            |info| {
-                round_as_sent(info.vector.as_mut_slice());
-                round_as_sent(info.matrix.as_mut_slice());
-            },
+            round_as_sent,
         );
     }
 
@@ -286,15 +302,16 @@ pub fn composed(routes: &Routes, node_up: &FateTable, steps: usize) -> FateTable
     FateTable::from_fates(sensors, steps, fates)
 }
 
-/// `(&v[a], &mut v[b])` for `a != b`.
-fn pair_mut<T>(v: &mut [T], a: usize, b: usize) -> (&T, &mut T) {
+/// Blocks `a` and `b` (of `w` entries each) of `v`, the first to read, the second to write
+/// (`a != b`).
+fn pair_mut(v: &mut [f64], w: usize, a: usize, b: usize) -> (&[f64], &mut [f64]) {
     assert_ne!(a, b, "a node is never its own parent");
     if a < b {
-        let (lo, hi) = v.split_at_mut(b);
-        (&lo[a], &mut hi[0])
+        let (lo, hi) = v.split_at_mut(b * w);
+        (&lo[a * w..(a + 1) * w], &mut hi[..w])
     } else {
-        let (lo, hi) = v.split_at_mut(a);
-        (&hi[0], &mut lo[b])
+        let (lo, hi) = v.split_at_mut(a * w);
+        (&hi[..w], &mut lo[b * w..(b + 1) * w])
     }
 }
 
