@@ -62,7 +62,7 @@
 //! hash unchanged: a star draws and counts as before). Their `r_eff_per_step` was then fixed to
 //! charge a message's payload once, not once per hop (re-recorded). In-network aggregation
 //! (the relays sum the all-data KF's reports, `network.aggregate`, default on) moved
-//! `mesh-line`'s all-data KF (one frame per link: 1482 µJ a step against 2375, its losses now
+//! `mesh-line`'s all-data KF (one frame per link: 1479 µJ a step against 2375, its losses now
 //! correlated across sources); both mesh records gained `network.aggregated` and the per-step
 //! hop counts (`frames_per_step`, `forwards_per_step`); no other number of `mesh-grid` moved
 //! (compared key by key against 6d95354).

@@ -191,7 +191,7 @@ pub fn run_trial(
     let with_links = observer.needs_links();
     let mut trial = Trial::with_coins(exp, spec, buffers, (coins, center_seed), with_links)?;
     for k in 1..=exp.steps {
-        let out = trial.step(k, &measurements[k - 1])?;
+        let out = trial.advance(k, &measurements[k - 1])?;
         observer.step(&out).map_err(|e| match e {
             ObserverError::Covariance(source) => LoopError::Covariance { k, source },
             ObserverError::Message(message) => LoopError::Observer { k, message },
@@ -288,16 +288,21 @@ where
     /// sensor steps with its own coins and the feedback it holds, the link delivers (counting
     /// every bit and hop), the center fuses, and its feedback goes out for the next step.
     pub fn step(&mut self, k: usize, readings: &[Vector]) -> Result<StepOutput<'_>, LoopError> {
-        let exp: &Experiment = &self.exp;
-        let n_sensors = exp.system.n_sensors();
         if k != self.done + 1 {
             return Err(LoopError::Input {
                 k,
                 message: format!("steps come in order: step {} is next", self.done + 1),
             });
         }
-        check_readings(exp, k, self.spec.available, readings)?;
+        check_readings(&self.exp, k, self.spec.available, readings)?;
         self.done = k;
+        self.advance(k, readings)
+    }
+
+    /// [`Trial::step`] on input known to fit (the runner's own data, in order): the step itself.
+    fn advance(&mut self, k: usize, readings: &[Vector]) -> Result<StepOutput<'_>, LoopError> {
+        let exp: &Experiment = &self.exp;
+        let n_sensors = exp.system.n_sensors();
         let variant = &exp.variants[self.spec.variant];
         let (schedule, available) = (self.schedule, self.spec.available);
         let scheduled =

@@ -27,7 +27,7 @@
 //! ([`crate::scheme::Scheme::aggregable`]) aggregate.
 use crate::filter::information::Information;
 use crate::linalg::{Matrix, Vector};
-use crate::link::codec802154::{mpdu_bits_for_payload, ACK_PPDU_BITS};
+use crate::link::codec802154::mpdu_bits_for_payload;
 use crate::link::{round_as_sent, Received, BITS_PER_COMPONENT};
 use crate::network::channel::route::Routes;
 use crate::network::channel::{Fate, FateTable};
@@ -258,14 +258,8 @@ impl Aggregation {
                     },
                     Frame::Sum => sum_bits,
                 };
-                let f: Fate = node_up.get(n, k);
-                let attempts = u64::from(f.attempts());
-                traffic.bits += attempts * payload;
-                traffic.frame_bits += attempts * mac;
-                traffic.retransmissions += u64::from(f.retries);
-                traffic.duplicates += u64::from(f.duplicates());
-                traffic.ack_frames += u64::from(f.acks);
-                traffic.ack_bits += u64::from(f.acks) * ACK_PPDU_BITS;
+                let f = node_up.get(n, k);
+                traffic.add_frames(&f, payload, mac);
                 tally.hop(routes, n, &f, mac, frame != Frame::Measurement(n))
             },
             round_as_sent,

@@ -58,6 +58,20 @@ pub struct Traffic {
 /// Sensors whose send decisions [`Traffic::senders`] records (the bits of a `u128`).
 pub const MASKED_SENSORS: usize = 128;
 
+impl Traffic {
+    /// A frame of `payload_bits` in a MAC frame of `mac_bits` that met fate `f`: every attempt
+    /// on air costs its bits, and its retries, duplicates and acknowledgements are counted.
+    pub fn add_frames(&mut self, f: &Fate, payload_bits: u64, mac_bits: u64) {
+        let attempts = u64::from(f.attempts());
+        self.bits += attempts * payload_bits;
+        self.frame_bits += attempts * mac_bits;
+        self.retransmissions += u64::from(f.retries);
+        self.duplicates += u64::from(f.duplicates());
+        self.ack_frames += u64::from(f.acks);
+        self.ack_bits += u64::from(f.acks) * ACK_PPDU_BITS;
+    }
+}
+
 /// Sensor `i`'s bit in [`Traffic::senders`] and [`Traffic::scheduled`]; 0 (not recorded) from
 /// [`MASKED_SENSORS`] on.
 pub fn sensor_bit(i: usize) -> u128 {
@@ -173,16 +187,13 @@ pub fn deliver_sequenced(
     let mut traffic = Traffic::default();
     for (i, t) in transmissions.into_iter().enumerate() {
         if let Transmission::Send(m) = &t {
-            let f = fate(i);
-            let attempts = u64::from(f.attempts());
             traffic.senders |= sensor_bit(i);
             traffic.messages += 1;
-            traffic.bits += attempts * m.bits_with_sequence(sequence_bits);
-            traffic.frame_bits += attempts * m.frame_bits_with_sequence(sequence_bits);
-            traffic.retransmissions += u64::from(f.retries);
-            traffic.duplicates += u64::from(f.duplicates());
-            traffic.ack_frames += u64::from(f.acks);
-            traffic.ack_bits += u64::from(f.acks) * ACK_PPDU_BITS;
+            traffic.add_frames(
+                &fate(i),
+                m.bits_with_sequence(sequence_bits),
+                m.frame_bits_with_sequence(sequence_bits),
+            );
         }
         inbox.push(t.into());
     }

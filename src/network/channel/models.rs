@@ -194,31 +194,31 @@ impl ChannelSpec {
     /// Rejects keys of another kind: a `loss` under `kind = "gilbert-elliott"` would otherwise be
     /// silently ignored, and the user would believe it was used.
     fn check_keys_fit_kind(&self, path: &str) -> Result<(), String> {
-        let keys: [(&str, bool, ChannelKind); 5] = [
-            ("loss", self.loss.is_some(), ChannelKind::Bernoulli),
-            ("p_gb", self.p_gb.is_some(), ChannelKind::GilbertElliott),
-            ("p_bg", self.p_bg.is_some(), ChannelKind::GilbertElliott),
-            (
-                "loss_good",
-                self.loss_good.is_some(),
-                ChannelKind::GilbertElliott,
-            ),
-            (
-                "loss_bad",
-                self.loss_bad.is_some(),
-                ChannelKind::GilbertElliott,
-            ),
-        ];
-        for (key, present, owner) in keys {
-            if present && owner != self.kind {
-                return Err(format!(
-                    "{path}.{key} belongs to kind = \"{}\", not \"{}\"",
-                    owner.name(),
-                    self.kind.name()
-                ));
+        // The owner of each key is the model that documents it.
+        for owner in LINK_MODELS.iter().filter(|m| m.kind != self.kind) {
+            for key in owner.keys.iter().flat_map(|k| k.name.split(", ")) {
+                if self.has_key(key) {
+                    return Err(format!(
+                        "{path}.{key} belongs to kind = \"{}\", not \"{}\"",
+                        owner.kind.name(),
+                        self.kind.name()
+                    ));
+                }
             }
         }
         Ok(())
+    }
+
+    /// Whether the model key `key` is written in the table.
+    fn has_key(&self, key: &str) -> bool {
+        match key {
+            "loss" => self.loss.is_some(),
+            "p_gb" => self.p_gb.is_some(),
+            "p_bg" => self.p_bg.is_some(),
+            "loss_good" => self.loss_good.is_some(),
+            "loss_bad" => self.loss_bad.is_some(),
+            _ => unreachable!("every registered key is a field of ChannelSpec: {key}"),
+        }
     }
 }
 
@@ -320,5 +320,13 @@ mod tests {
         );
         assert!((ge.delivery_loss() - 0.22).abs() < 1e-15);
         assert_eq!(spec("").delivery_loss(), 0.0);
+        // Every documented key is a field the checks can see (none set in a default table).
+        for key in LINK_MODELS
+            .iter()
+            .flat_map(|m| m.keys)
+            .flat_map(|k| k.name.split(", "))
+        {
+            assert!(!ChannelSpec::default().has_key(key), "{key}");
+        }
     }
 }
