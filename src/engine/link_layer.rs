@@ -42,6 +42,7 @@
 //! packet inside it arrives afterwards (that packet itself is fused at its step). Cost: one
 //! replay of the trial so far per step at which a gap is revealed, and the history of every
 //! inbox is kept whenever sequence numbers are on.
+use crate::engine::fusion_side::FusionSide;
 use crate::link::{Received, Transmission};
 use crate::network::aggregate::{self, Aggregation};
 use crate::network::channel::route::{RouteFates, Routes};
@@ -49,7 +50,7 @@ use crate::network::channel::{ChannelSpec, FateTable};
 use crate::network::topology::tally::{NodeCounts, Tally};
 use crate::network::{self, Traffic};
 use crate::scenario::experiment::{Experiment, Variant};
-use crate::scheme::{Feedback, FusionCenter, Scheme, SchemeError};
+use crate::scheme::{Feedback, Scheme, SchemeError};
 use std::sync::Arc;
 
 /// Whether a variant's trials may take the fast paths as on an ideal link: its links are
@@ -295,7 +296,7 @@ impl LinkLayer {
         exp: &Experiment,
         variant: usize,
         trial: usize,
-        initial: &Option<Feedback>,
+        initial: Option<&Feedback>,
         fates: &mut FateCache,
     ) -> Option<Self> {
         if let Some(net) = &exp.network {
@@ -326,7 +327,7 @@ impl LinkLayer {
                 None => route_fates.up.clone(),
             };
             let mut link = Self::with_fates(up, route_fates.down.clone(), horizon, v.sequence_bits);
-            link.held = vec![initial.clone(); link.held.len()];
+            link.held = vec![initial.cloned(); link.held.len()];
             link.hops = Some(Hops {
                 tally: Tally::new(net),
                 routes,
@@ -350,7 +351,7 @@ impl LinkLayer {
             .then(|| fates.get(exp, specs, trial, true));
         let up = fates.get(exp, specs, trial, false);
         let mut link = Self::with_fates(up, down, horizon, exp.variants[variant].sequence_bits);
-        link.held = vec![initial.clone(); link.held.len()];
+        link.held = vec![initial.cloned(); link.held.len()];
         Some(link)
     }
 
@@ -378,7 +379,7 @@ impl LinkLayer {
 
     /// The feedback of step `k` goes out: each sensor whose downlink slot keeps it holds it.
     /// Returns the packets lost (only feedback that was sent can be lost).
-    pub(crate) fn downlink(&mut self, k: usize, feedback: &Option<Feedback>) -> u64 {
+    pub(crate) fn downlink(&mut self, k: usize, feedback: Option<&Feedback>) -> u64 {
         if k == 1 {
             return 0;
         }
@@ -387,7 +388,10 @@ impl LinkLayer {
             if self.down.as_ref().is_some_and(|d| d.get(i, k).lost) {
                 lost += u64::from(feedback.is_some());
             } else {
-                h.clone_from(feedback);
+                match (h, feedback) {
+                    (Some(h), Some(f)) => h.clone_from(f),
+                    (h, f) => *h = f.cloned(),
+                }
             }
         }
         lost
@@ -508,32 +512,24 @@ impl LinkLayer {
     }
 
     /// Fuses step `k`'s `inbox` into `center`: directly, or, when late packets arrive at this
-    /// step or sequence numbers reveal a gap ([`LinkLayer::receive`]), by a center rebuilt
-    /// from `scheme` (for `trial`, seeded with `center_seed`) that re-fuses every step with the arrivals in
-    /// their own steps and the unknown silences made [`Received::NotScheduled`].
+    /// step or sequence numbers reveal a gap ([`LinkLayer::receive`]), by the center rebuilt
+    /// from `scheme` ([`FusionSide::rebuild`]) through every step with the arrivals in their
+    /// own steps and the unknown silences made [`Received::NotScheduled`].
     pub(crate) fn fuse(
         &mut self,
         k: usize,
         inbox: &[Received],
-        center: &mut Box<dyn FusionCenter>,
+        fusion: &mut FusionSide,
         scheme: &dyn Scheme,
-        (trial, center_seed): (usize, u64),
     ) -> Result<(), (usize, SchemeError)> {
         if let Some(agg) = self.hops.as_ref().and_then(|h| h.aggregation.as_ref()) {
             // No delays, no sequence numbers (checked at load): nothing to re-fuse.
-            return center.fuse_information(k, agg.held()).map_err(|e| (k, e));
+            return fusion.fuse_information(k, agg.held()).map_err(|e| (k, e));
         }
         if self.receive(k).is_some() {
-            let mut fresh = scheme
-                .build_for_trial(trial, center_seed)
-                .map_err(|e| (0, e))?
-                .center;
-            for (j, past) in self.history.iter().enumerate() {
-                fresh.step(j + 1, past).map_err(|e| (j + 1, e))?;
-            }
-            *center = fresh;
+            fusion.rebuild(scheme, &self.history)?;
         }
-        center.step(k, inbox).map_err(|e| (k, e))?;
+        fusion.step(k, inbox).map_err(|e| (k, e))?;
         self.record(inbox);
         Ok(())
     }

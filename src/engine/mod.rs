@@ -1,6 +1,7 @@
 //! The Monte Carlo engine: the trial loop ([`trial`], with the seeding rule of [`crate::stats::seeding`]), runs in blocks with checkpoints and shards,
 //! the trial-0 trace, replay of recorded data and calibration to bit budgets.
 pub mod calibrate;
+pub mod fusion_side;
 pub mod link_layer;
 pub mod replay;
 pub mod runner;

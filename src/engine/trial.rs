@@ -10,6 +10,7 @@
 //! ([`Observer::fast_sink`]) and every reading exists, on an ideal link or one that only loses
 //! packets (the fast path applies the losses, [`Losses`]), with the same numbers as the loop
 //! (the bit-for-bit tests are in `tests/fast_paths.rs`).
+use crate::engine::fusion_side::{self, FusionSide};
 pub use crate::engine::link_layer::Link;
 use crate::engine::link_layer::{self, FateCache, LinkLayer};
 use crate::filter::Gaussian;
@@ -23,7 +24,7 @@ use crate::scheme::fast_path::LockstepFastPath;
 use crate::scheme::fast_path::{FastTrialError, Losses, StepSink, TrialCache};
 #[cfg(doc)]
 use crate::scheme::Scheme;
-use crate::scheme::{Feedback, SchemeError};
+use crate::scheme::{SchemeError, SensorNode};
 use crate::stats::seeding::coins;
 use std::ops::{Deref, DerefMut};
 
@@ -214,12 +215,10 @@ where
 {
     exp: E,
     spec: TrialSpec<'a>,
-    inst: crate::scheme::SchemeInstance,
+    sensors: Vec<Box<dyn SensorNode>>,
+    fusion: FusionSide,
     schedule: Schedule,
     coins: Vec<rand_xoshiro::Xoshiro256PlusPlus>,
-    center_seed: u64,
-    /// The center's feedback of the last step, as the sensors receive it.
-    feedback: Option<Feedback>,
     link: Option<LinkLayer>,
     with_links: bool,
     buffers: B,
@@ -252,31 +251,25 @@ where
         (coins, center_seed): (Vec<rand_xoshiro::Xoshiro256PlusPlus>, u64),
         with_links: bool,
     ) -> Result<Self, LoopError> {
-        let variant = &exp.variants[spec.variant];
-        let inst = variant
-            .scheme
-            .build_for_trial(spec.trial, center_seed)
+        let (fusion, sensors) = FusionSide::with_seed(&exp, spec.variant, spec.trial, center_seed)
             .map_err(|source| LoopError::Scheme { k: 0, source })?;
-        // What the fusion center tells the sensors before the first measurement, as they
-        // receive it (every real number a single, as priced).
-        let feedback = inst.center.feedback().map(|f| as_received(&exp, f));
-        // The link's fates of this trial, from its own stream: every scheme meets the same ones.
+        // The link's fates of this trial, from its own stream: every scheme meets the same ones;
+        // the downlink carries what the center tells the sensors before the first measurement.
         let link = LinkLayer::new(
             &exp,
             spec.variant,
             spec.trial,
-            &feedback,
+            fusion.feedback(),
             &mut buffers.fates,
         );
-        let schedule = variant.scheme.schedule();
+        let schedule = exp.variants[spec.variant].scheme.schedule();
         Ok(Self {
             exp,
             spec,
             schedule,
-            inst,
+            sensors,
+            fusion,
             coins,
-            center_seed,
-            feedback,
             link,
             with_links,
             buffers,
@@ -305,10 +298,19 @@ where
         let n_sensors = exp.system.n_sensors();
         let variant = &exp.variants[self.spec.variant];
         let (schedule, available) = (self.schedule, self.spec.available);
-        let scheduled =
-            |i: usize| schedule.allows(k, i, n_sensors) && available.is_none_or(|a| a[k - 1][i]);
+        let scheduled = |i: usize| {
+            fusion_side::scheduled(
+                schedule,
+                k,
+                i,
+                n_sensors,
+                available.is_none_or(|a| a[k - 1][i]),
+            )
+        };
         let link = &mut self.link;
-        let downlink_lost = link.as_mut().map_or(0, |l| l.downlink(k, &self.feedback));
+        let downlink_lost = link
+            .as_mut()
+            .map_or(0, |l| l.downlink(k, self.fusion.feedback()));
         let LoopBuffers {
             inbox,
             transmissions,
@@ -321,16 +323,10 @@ where
         bits.clear();
         let mut scheduled_mask = 0u128;
         let mut doubles = Doubles::new(exp.reals);
-        for (i, (node, rng)) in self
-            .inst
-            .sensors
-            .iter_mut()
-            .zip(&mut self.coins)
-            .enumerate()
-        {
+        for (i, (node, rng)) in self.sensors.iter_mut().zip(&mut self.coins).enumerate() {
             let fb = match &link {
                 Some(l) => l.feedback(i),
-                None => self.feedback.as_ref(),
+                None => self.fusion.feedback(),
             };
             let t = if scheduled(i) {
                 scheduled_mask |= network::sensor_bit(i);
@@ -367,7 +363,7 @@ where
         };
         let singles = exp.reals.is_f32();
         traffic.downlink_bits =
-            self.feedback.as_ref().map_or(0, |f| f.bits(n_sensors)) * if singles { 1 } else { 2 };
+            self.fusion.feedback().map_or(0, |f| f.bits(n_sensors)) * if singles { 1 } else { 2 };
         traffic.scheduled = scheduled_mask;
         if let Some(l) = link {
             l.uplink(k, inbox, &mut traffic);
@@ -382,29 +378,22 @@ where
                 }
             }
         }
-        let center = &mut self.inst.center;
+        let fusion = &mut self.fusion;
         match link {
             Some(l) => l
-                .fuse(
-                    k,
-                    inbox,
-                    center,
-                    variant.scheme.as_ref(),
-                    (self.spec.trial, self.center_seed),
-                )
+                .fuse(k, inbox, fusion, variant.scheme.as_ref())
                 .map_err(|(k, source)| LoopError::Scheme { k, source })?,
-            None => center
+            None => fusion
                 .step(k, inbox)
                 .map_err(|source| LoopError::Scheme { k, source })?,
         }
-        self.feedback = center.feedback().map(|f| as_received(exp, f));
         Ok(StepOutput {
             k,
-            estimate: center.estimate(),
+            estimate: fusion.estimate(),
             links,
             bits,
             traffic,
-            ess: center.ess(),
+            ess: fusion.ess(),
             nodes: link.as_ref().map_or(&[], |l| l.nodes()),
         })
     }
@@ -440,16 +429,6 @@ fn check_readings(
         }
     }
     Ok(())
-}
-
-/// Feedback as the sensors receive it: every real number the single it is priced as, unless
-/// the scenario sends doubles.
-fn as_received(exp: &Experiment, f: Feedback) -> Feedback {
-    if exp.reals.is_f32() {
-        f.into_sent()
-    } else {
-        f
-    }
 }
 
 /// The scheme's fast path for this trial, when it has one that applies: an ideal link, or one

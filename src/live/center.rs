@@ -1,17 +1,18 @@
 //! The fusion side of a live run, without sockets: [`Center`] announces each step, takes the
 //! datagrams that arrive, and at the step's end fuses the inbox they make with the scheme's
-//! own [`crate::scheme::FusionCenter`], exactly as the engine's loop fuses a simulated one
-//! ([`crate::engine::trial`]): a frame that arrived is its message, a sensor that reported no
+//! own [`crate::scheme::FusionCenter`] through the engine's [`FusionSide`], the half of a step
+//! the engine's loop ([`crate::engine::trial`]) runs for a simulated one: a frame that arrived is its message, a sensor that reported no
 //! frame is a silence, one that had no reading or was not scheduled is
 //! [`Received::NotScheduled`]. A sensor that did not report by the step's end is a silence too
 //! (the center cannot tell a dead node from a quiet one, as it cannot tell a lost packet from
 //! a silence) and is logged. [`super::run_center`] drives it over UDP.
 use super::wire::{self, Datagram, Kind, MessageKind, DONE_READING, HELLO_FRESH, STEP_CATCH_UP};
+use crate::engine::fusion_side::FusionSide;
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
 use crate::link::Received;
 use crate::scenario::experiment::Experiment;
-use crate::scheme::{Feedback, FusionCenter, SchemeError};
+use crate::scheme::SchemeError;
 use crate::stats::seeding;
 
 /// Counts of datagrams that were not used, by reason.
@@ -102,8 +103,9 @@ pub struct Center<'a> {
     at: usize,
     /// Step being collected (1-based); `exp.steps + 1` when the variant is done.
     k: usize,
-    center: Option<Box<dyn FusionCenter>>,
-    feedback: Option<Feedback>,
+    /// The current variant's center (the engine's [`FusionSide`]: built, stepped and rebuilt
+    /// as in a simulated run).
+    fusion: Option<FusionSide>,
     /// Per step of the current variant, per sensor, the step announcement sent (for nodes that
     /// catch up).
     announced: Vec<Vec<Vec<u8>>>,
@@ -133,8 +135,7 @@ impl<'a> Center<'a> {
             variants,
             at: 0,
             k: 1,
-            center: None,
-            feedback: None,
+            fusion: None,
             announced: Vec::new(),
             pending: Pending {
                 frames: vec![None; n],
@@ -150,14 +151,9 @@ impl<'a> Center<'a> {
 
     fn start_variant(&mut self) -> Result<(), String> {
         let v = self.variants[self.at];
-        let center_seed =
-            seeding::center_seed(self.exp.seed, self.trial as u64, seeding::coin_stream(v));
-        let inst = self.exp.variants[v]
-            .scheme
-            .build_for_trial(self.trial, center_seed)
+        let (fusion, _sensors) = FusionSide::new(self.exp, v, self.trial, seeding::coin_stream(v))
             .map_err(|e| format!("scheme {}: cannot build it: {e}", self.label(v)))?;
-        self.feedback = inst.center.feedback().map(|f| f.as_sent());
-        self.center = Some(inst.center);
+        self.fusion = Some(fusion);
         self.k = 1;
         self.announced.clear();
         self.history.clear();
@@ -168,21 +164,13 @@ impl<'a> Center<'a> {
     /// (the same estimates: a particle filter draws again from its own seed).
     fn rebuild(&mut self) -> Result<(), String> {
         let v = self.variants[self.at];
-        let center_seed =
-            seeding::center_seed(self.exp.seed, self.trial as u64, seeding::coin_stream(v));
-        let label = self.label(v).to_string();
-        let mut center = self.exp.variants[v]
-            .scheme
-            .build_for_trial(self.trial, center_seed)
-            .map_err(|e| format!("scheme {label}: cannot build it: {e}"))?
-            .center;
-        for (j, inbox) in self.history.iter().enumerate() {
-            center
-                .step(j + 1, inbox)
-                .map_err(|e| format!("scheme {label}, step {}: {e}", j + 1))?;
-        }
-        self.center = Some(center);
-        Ok(())
+        let fusion = self.fusion.as_mut().expect("a variant is running");
+        fusion
+            .rebuild(self.exp.variants[v].scheme.as_ref(), &self.history)
+            .map_err(|(j, e)| match j {
+                0 => format!("scheme {}: cannot build it: {e}", self.label(v)),
+                j => format!("scheme {}, step {j}: {e}", self.label(v)),
+            })
     }
 
     /// The label of variant `v`.
@@ -202,7 +190,7 @@ impl<'a> Center<'a> {
 
     /// The current estimate (the prior before the first step).
     pub fn estimate(&self) -> Option<&Gaussian> {
-        self.center.as_deref().map(|c| c.estimate())
+        self.fusion.as_ref().map(FusionSide::estimate)
     }
 
     /// The announcements of the current step, one per sensor: the step and the feedback each
@@ -214,7 +202,7 @@ impl<'a> Center<'a> {
             let mut all = Vec::with_capacity(n);
             for i in 0..n {
                 let mut d = Datagram::new(Kind::Step, i, v, k);
-                if let Some(fb) = &self.feedback {
+                if let Some(fb) = self.fusion.as_ref().and_then(FusionSide::feedback) {
                     match wire::feedback_frame(fb, i, k).map_err(|e| {
                         format!("scheme {}: feedback cannot be sent: {e}", self.label(v))
                     })? {
@@ -470,8 +458,8 @@ impl<'a> Center<'a> {
         self.announce()?;
         let label = self.label(v).to_string();
         loop {
-            let center = self.center.as_mut().expect("a variant is running");
-            match center.step(k, &inbox) {
+            let fusion = self.fusion.as_mut().expect("a variant is running");
+            match fusion.step(k, &inbox) {
                 Ok(()) => break,
                 Err(SchemeError::Protocol { sensor, .. })
                     if from_network && inbox.get(sensor).is_some_and(carries_message) =>
@@ -489,9 +477,7 @@ impl<'a> Center<'a> {
             }
         }
         self.history.push(inbox.clone());
-        let center = self.center.as_mut().expect("a variant is running");
-        let estimate = center.estimate().clone();
-        self.feedback = center.feedback().map(|f| f.as_sent());
+        let estimate = self.estimate().expect("a variant is running").clone();
         let bits = sensors.iter().map(|s| s.bits).sum();
         let record = StepRecord {
             variant: v,

@@ -3,6 +3,7 @@
 //! with its own coins ([`crate::stats::seeding::sensor_coins`]). A program that embeds a
 //! sensor feeds it what arrives and sends what it returns; [`run_node`] does that over UDP.
 use super::wire::{self, Datagram, Kind, MessageKind, DONE_READING, HELLO_FRESH, STEP_CATCH_UP};
+use crate::engine::fusion_side;
 use crate::linalg::Vector;
 use crate::link::{Message, Transmission};
 use crate::scenario::experiment::Experiment;
@@ -423,7 +424,8 @@ impl<'a> Node<'a> {
         }
         let schedule = self.exp.variants[v].scheme.schedule();
         let mut out = Vec::new();
-        if let (true, Some(z)) = (schedule.allows(k, i, n), &reading) {
+        let steps = fusion_side::scheduled(schedule, k, i, n, reading.is_some());
+        if let (true, Some(z)) = (steps, &reading) {
             let t = cur
                 .sensor
                 .step(k, z, cur.held.as_ref(), &mut cur.coins)
