@@ -15,7 +15,7 @@ use hushfuse::linalg::LinalgError;
 use hushfuse::network::{self, Traffic};
 use hushfuse::scenario::build;
 use hushfuse::scenario::builtin;
-use hushfuse::scheme::fast_path::{StepSink, TrialCache};
+use hushfuse::scheme::fast_path::{BatchSink, TrialCache};
 
 type Steps = Vec<(Vec<u64>, Vec<u64>, Traffic)>;
 
@@ -28,9 +28,16 @@ fn bits(est: &Gaussian) -> (Vec<u64>, Vec<u64>) {
 
 struct Collect(Steps);
 
-impl StepSink for Collect {
-    fn step(&mut self, k: usize, est: &Gaussian, traffic: Traffic) -> Result<(), LinalgError> {
-        assert_eq!(k, self.0.len() + 1);
+impl BatchSink for Collect {
+    fn step(
+        &mut self,
+        j: usize,
+        k: usize,
+        est: &Gaussian,
+        _factor: Option<&[f64]>,
+        traffic: Traffic,
+    ) -> Result<(), LinalgError> {
+        assert_eq!((j, k), (0, self.0.len() + 1));
         let (m, c) = bits(est);
         self.0.push((m, c, traffic));
         Ok(())
@@ -137,7 +144,7 @@ impl Observer for Record {
         Ok(())
     }
 
-    fn fast_sink(&mut self) -> Option<&mut dyn StepSink> {
+    fn fast_sink(&mut self) -> Option<&mut dyn BatchSink> {
         if self.fast {
             Some(self)
         } else {
@@ -146,9 +153,16 @@ impl Observer for Record {
     }
 }
 
-impl StepSink for Record {
-    fn step(&mut self, k: usize, est: &Gaussian, traffic: Traffic) -> Result<(), LinalgError> {
-        assert_eq!(k, self.steps.len() + 1);
+impl BatchSink for Record {
+    fn step(
+        &mut self,
+        j: usize,
+        k: usize,
+        est: &Gaussian,
+        _factor: Option<&[f64]>,
+        traffic: Traffic,
+    ) -> Result<(), LinalgError> {
+        assert_eq!((j, k), (0, self.steps.len() + 1));
         self.via_fast += 1;
         let (m, c) = bits(est);
         self.steps.push((m, c, traffic));

@@ -346,32 +346,26 @@ impl Observer for SumsObserver<'_, '_> {
         Ok(())
     }
 
-    fn fast_sink(&mut self) -> Option<&mut dyn crate::scheme::fast_path::StepSink> {
+    fn fast_sink(&mut self) -> Option<&mut dyn crate::scheme::fast_path::BatchSink> {
         Some(self)
     }
 }
 
-impl crate::scheme::fast_path::StepSink for SumsObserver<'_, '_> {
+impl crate::scheme::fast_path::BatchSink for SumsObserver<'_, '_> {
+    /// A fast trial reports as trial 0 of a batch of one.
     fn step(
         &mut self,
+        _j: usize,
         k: usize,
         estimate: &crate::filter::Gaussian,
+        factor: Option<&[f64]>,
         traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        self.obs.record(k, &self.truth[k - 1], estimate, traffic)?;
-        self.obs.record_ess(k, None);
-        Ok(())
-    }
-
-    fn step_factored(
-        &mut self,
-        k: usize,
-        estimate: &crate::filter::Gaussian,
-        factor: &[f64],
-        traffic: network::Traffic,
-    ) -> Result<(), crate::linalg::LinalgError> {
-        self.obs
-            .record_factored(k, &self.truth[k - 1], estimate, factor, traffic)?;
+        let truth = &self.truth[k - 1];
+        match factor {
+            Some(f) => self.obs.record_factored(k, truth, estimate, f, traffic)?,
+            None => self.obs.record(k, truth, estimate, traffic)?,
+        }
         self.obs.record_ess(k, None);
         Ok(())
     }

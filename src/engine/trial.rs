@@ -21,7 +21,7 @@ use crate::network::{self, Schedule, Traffic};
 use crate::scenario::experiment::Experiment;
 #[cfg(doc)]
 use crate::scheme::fast_path::LockstepFastPath;
-use crate::scheme::fast_path::{FastTrialError, Losses, StepSink, TrialCache};
+use crate::scheme::fast_path::{BatchSink, FastTrialError, Losses, TrialCache};
 #[cfg(doc)]
 use crate::scheme::Scheme;
 use crate::scheme::{SchemeError, SensorNode};
@@ -106,7 +106,7 @@ pub trait Observer {
 
     /// The observer as the sink of a scheme's fast path (which reports estimates and traffic,
     /// no links), or `None` when it needs what only the loop gives.
-    fn fast_sink(&mut self) -> Option<&mut dyn StepSink> {
+    fn fast_sink(&mut self) -> Option<&mut dyn BatchSink> {
         None
     }
 }

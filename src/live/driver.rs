@@ -1,5 +1,5 @@
 //! The center over UDP ([`run_center`]): greets the nodes, paces the steps (lock step or the
-//! wall clock), shows a status line once a second, hands every fused step to a [`StepSink`]
+//! wall clock), shows a status line once a second, hands every fused step to a [`CenterSink`]
 //! before it announces the next; and the [`Journal`] a restarted center resumes from.
 use super::center::{Center, SensorRecord, StepRecord};
 use crate::linalg::Vector;
@@ -32,8 +32,10 @@ pub struct CenterOptions {
 }
 
 /// Takes every fused step (written and flushed before the next step is announced) and the
-/// events worth a line in the log.
-pub trait StepSink {
+/// events worth a line in the log. Not an engine [`crate::engine::trial::Observer`]: it
+/// journals what only a live run has (per sensor `missing` or `no_report`, the raw inbox a
+/// restarted center replays) and the run's events.
+pub trait CenterSink {
     fn record(&mut self, center: &Center, record: &StepRecord) -> Result<(), String>;
     fn event(&mut self, text: &str);
 }
@@ -43,7 +45,7 @@ pub fn run_center(
     socket: &UdpSocket,
     center: &mut Center,
     opts: &CenterOptions,
-    sink: &mut dyn StepSink,
+    sink: &mut dyn CenterSink,
 ) -> Result<(), String> {
     let n = center.sensors();
     let mut nodes: HashMap<usize, SocketAddr> = HashMap::new();
@@ -151,7 +153,7 @@ fn take(
     octets: &[u8],
     from: SocketAddr,
     nodes: &mut HashMap<usize, SocketAddr>,
-    sink: &mut dyn StepSink,
+    sink: &mut dyn CenterSink,
     send: &dyn Fn(&[u8], SocketAddr),
 ) {
     let a = center.accept(octets);

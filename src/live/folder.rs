@@ -4,7 +4,7 @@
 //! joined, who was silent, what was dropped). The folder is claimed like every run's output
 //! ([`crate::output::OutputDir`]: its manifest lists these files) and then written in place.
 use super::center::{Center, StepRecord};
-use super::driver::{Journal, StepSink};
+use super::driver::{CenterSink, Journal};
 use crate::engine::replay;
 use crate::output::{self, OutputDir};
 use crate::scenario::experiment::Experiment;
@@ -278,7 +278,7 @@ fn row(exp: &Experiment, r: &StepRecord) -> String {
     )
 }
 
-impl StepSink for LiveFolder<'_> {
+impl CenterSink for LiveFolder<'_> {
     fn record(&mut self, _center: &Center, r: &StepRecord) -> Result<(), String> {
         // The journal first: a step in estimates.csv is always one a resumed center has.
         self.journal.write(r)?;

@@ -41,7 +41,7 @@ pub mod proxy;
 pub mod wire;
 
 pub use center::{Accepted, Center, Dropped, SensorRecord, StepRecord};
-pub use driver::{run_center, CenterOptions, Journal, Pace, StepSink};
+pub use driver::{run_center, CenterOptions, CenterSink, Journal, Pace};
 pub use folder::{LiveFolder, RunId, ESTIMATES, JOURNAL, LOG};
 pub use local::run_local;
 pub use node::{

@@ -15,7 +15,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 pub trait LockstepFastPath: Send + Sync {
     /// Runs one whole trial on `measurements` (`measurements[k - 1][i]` = z_k^i, k = 1..=steps)
     /// without the generic per-step loop, reporting each step's fused estimate and traffic to
-    /// `sink`, with the same coin draws (sensor i's from `coins[i]`) and the same numbers as
+    /// `sink` as trial 0 of a batch of one (one sink trait for a trial and a batch), with the same coin draws (sensor i's from `coins[i]`) and the same numbers as
     /// that loop gives: what reaches the center rounded as [`crate::link::as_sent`] rounds it.
     /// `cache` lives for one trial and is shared by its variants (work that depends on the
     /// data but not on the variant is done once). `None`: no fast path for this scheme or this
@@ -31,7 +31,7 @@ pub trait LockstepFastPath: Send + Sync {
         losses: Option<&Losses>,
         coins: &mut [Xoshiro256PlusPlus],
         cache: &mut TrialCache,
-        sink: &mut dyn StepSink,
+        sink: &mut dyn BatchSink,
     ) -> Option<Result<(), FastTrialError>> {
         let _ = (measurements, steps, losses, coins, cache, sink);
         None
@@ -91,10 +91,14 @@ impl<'a> Losses<'a> {
     }
 }
 
-/// Receives the steps of a [`LockstepFastPath::run_batch_fast`] batch.
+/// Receives the steps of a fast path: a [`LockstepFastPath::run_batch_fast`] batch, or a
+/// [`LockstepFastPath::run_trial_fast`] trial as trial 0 of a batch of one.
 pub trait BatchSink {
-    /// The fused estimate of batch trial `j` after step `k` (1-based), with the Cholesky
-    /// factor of its covariance when the scheme has it (see [`StepSink::step_factored`]).
+    /// The fused estimate of batch trial `j` after step `k` (1-based) and the traffic of the
+    /// step, with the Cholesky factor of its covariance when the scheme has it at hand (a
+    /// covariance shared by every trial): the dirty column-major lower factor that
+    /// `fixed::nees_factor` computes from exactly these covariance bits, so a sink that needs
+    /// NEES need not factor the covariance again.
     fn step(
         &mut self,
         j: usize,
@@ -122,32 +126,6 @@ pub trait BatchSink {
             self.step(j, k, shared, factor, traffic)?;
         }
         Ok(())
-    }
-}
-
-/// Receives the steps of a [`LockstepFastPath::run_trial_fast`] trial.
-pub trait StepSink {
-    /// The fused estimate after step `k` (1-based) and the traffic of the step.
-    fn step(
-        &mut self,
-        k: usize,
-        estimate: &Gaussian,
-        traffic: crate::network::Traffic,
-    ) -> Result<(), LinalgError>;
-
-    /// [`StepSink::step`] with the Cholesky factor of the estimate's covariance, when the
-    /// scheme has it at hand (a covariance shared by every trial): `factor` is the dirty
-    /// column-major lower factor that `fixed::nees_factor` computes from exactly these
-    /// covariance bits, so a sink that needs NEES need not factor the covariance again.
-    fn step_factored(
-        &mut self,
-        k: usize,
-        estimate: &Gaussian,
-        factor: &[f64],
-        traffic: crate::network::Traffic,
-    ) -> Result<(), LinalgError> {
-        let _ = factor;
-        self.step(k, estimate, traffic)
     }
 }
 

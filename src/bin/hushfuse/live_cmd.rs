@@ -165,7 +165,7 @@ struct Tally<'a> {
     rows: Vec<(usize, usize, u64, Vec<f64>)>,
 }
 
-impl live::StepSink for Tally<'_> {
+impl live::CenterSink for Tally<'_> {
     fn record(&mut self, center: &Center, r: &live::StepRecord) -> Result<(), String> {
         self.inner.record(center, r)?;
         if self.rows.last().is_none_or(|row| row.0 != r.variant) {

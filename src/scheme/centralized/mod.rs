@@ -1,7 +1,7 @@
 //! Baselines: the centralized Kalman filter that receives raw measurements — all of them (the
 //! bound every scheme is measured against), or each with probability `rate` (Dormann et al.
 //! Section V: a measurement not sent is lost for good).
-use super::fast_path::{BatchSink, FastTrialError, LockstepFastPath, Losses, StepSink, TrialCache};
+use super::fast_path::{BatchSink, FastTrialError, LockstepFastPath, Losses, TrialCache};
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::fixed;
@@ -577,25 +577,6 @@ impl AllData<'_> {
     }
 }
 
-/// A [`StepSink`] as the sink of a batch of one trial.
-struct OneTrial<'a>(&'a mut dyn StepSink);
-
-impl BatchSink for OneTrial<'_> {
-    fn step(
-        &mut self,
-        _j: usize,
-        k: usize,
-        estimate: &Gaussian,
-        factor: Option<&[f64]>,
-        traffic: crate::network::Traffic,
-    ) -> Result<(), crate::linalg::LinalgError> {
-        match factor {
-            Some(f) => self.0.step_factored(k, estimate, f, traffic),
-            None => self.0.step(k, estimate, traffic),
-        }
-    }
-}
-
 /// What network::deliver counts when every sensor sends its measurement.
 fn all_sent_traffic(sys: &System) -> crate::network::Traffic {
     let mut traffic = crate::network::Traffic::default();
@@ -775,7 +756,7 @@ impl LockstepFastPath for CentralizedScheme {
         losses: Option<&Losses>,
         coins: &mut [Xoshiro256PlusPlus],
         cache: &mut TrialCache,
-        sink: &mut dyn StepSink,
+        sink: &mut dyn BatchSink,
     ) -> Option<Result<(), FastTrialError>> {
         let losses = losses.filter(|l| l.any(steps));
         let sys = &self.system;
@@ -796,7 +777,7 @@ impl LockstepFastPath for CentralizedScheme {
             // State dimensions 1..=6 while the shared covariance schedule holds: the mean
             // recursion on the stack.
             // One trial is a batch of one.
-            let (trials, sink) = (&[measurements][..], &mut OneTrial(sink));
+            let trials = &[measurements][..];
             let fixed = all.batch_any(trials, steps, sink);
             if fixed.is_some() {
                 return fixed;
@@ -855,7 +836,7 @@ impl LockstepFastPath for CentralizedScheme {
                 center
                     .step_linear(&arrived)
                     .map_err(|source| FastTrialError::Scheme { k, source })?;
-                sink.step(k, center.estimate(), traffic)
+                sink.step(0, k, center.estimate(), None, traffic)
                     .map_err(|source| FastTrialError::Sink { k, source })?;
             }
             Ok(())

@@ -32,7 +32,7 @@ use crate::linalg::fixed;
 use crate::linalg::{Matrix, Vector};
 use crate::link::Message;
 use crate::network::Traffic;
-use crate::scheme::fast_path::{FastTrialError, Losses, StepSink, TrialCache};
+use crate::scheme::fast_path::{BatchSink, FastTrialError, Losses, TrialCache};
 use crate::scheme::SchemeError;
 use rand::Rng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -98,7 +98,7 @@ pub(super) fn run(
     losses: Option<&Losses>,
     coins: &mut [Xoshiro256PlusPlus],
     cache: &mut TrialCache,
-    sink: &mut dyn StepSink,
+    sink: &mut dyn BatchSink,
 ) -> Option<Result<(), FastTrialError>> {
     let plan = &scheme.plan;
     let losses = losses.filter(|l| l.any(steps));
@@ -200,7 +200,7 @@ fn run_variant<const LOSSY: bool>(
     steps: usize,
     losses: Option<&Losses>,
     coins: &mut [Xoshiro256PlusPlus],
-    sink: &mut dyn StepSink,
+    sink: &mut dyn BatchSink,
 ) -> Result<(), FastTrialError> {
     let Track {
         signals,
@@ -333,11 +333,8 @@ fn run_variant<const LOSSY: bool>(
             scheduled: crate::network::all_sensors(ns),
             ..Traffic::default()
         };
-        match factor {
-            Some(f) => sink.step_factored(k, &est, f, traffic),
-            None => sink.step(k, &est, traffic),
-        }
-        .map_err(|source| FastTrialError::Sink { k, source })?;
+        sink.step(0, k, &est, factor, traffic)
+            .map_err(|source| FastTrialError::Sink { k, source })?;
     }
     Ok(())
 }

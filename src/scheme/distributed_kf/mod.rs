@@ -20,7 +20,7 @@ pub use plan::GlobalizedPlan;
 pub use sensor::{DkfSensor, Trigger};
 
 use crate::linalg::Matrix;
-use crate::scheme::fast_path::{FastTrialError, LockstepFastPath, Losses, StepSink, TrialCache};
+use crate::scheme::fast_path::{BatchSink, FastTrialError, LockstepFastPath, Losses, TrialCache};
 use crate::scheme::{Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use std::sync::Arc;
 
@@ -208,7 +208,7 @@ impl LockstepFastPath for DistributedKfScheme {
         losses: Option<&Losses>,
         coins: &mut [rand_xoshiro::Xoshiro256PlusPlus],
         cache: &mut TrialCache,
-        sink: &mut dyn StepSink,
+        sink: &mut dyn BatchSink,
     ) -> Option<Result<(), FastTrialError>> {
         // The fast trial fuses as published (Algorithm 2's B alone).
         if self.loss_aware {
