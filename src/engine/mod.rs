@@ -5,6 +5,7 @@ pub mod fusion_side;
 pub mod link_layer;
 pub mod replay;
 pub mod runner;
+pub mod star_nodes;
 /// The seeding rule lives below every layer that draws ([`crate::stats::seeding`]); kept here
 /// under its old path for code written against it.
 pub use crate::stats::seeding;

@@ -5,6 +5,7 @@ use crate::link::{Received, Transmission};
 
 pub mod aggregate;
 pub mod channel;
+pub mod graph;
 pub mod radio;
 pub mod topology;
 

@@ -87,6 +87,18 @@ pub fn sensor_slots(
     }
 }
 
+/// The key of the `m`-th message (m ≥ 1) a node sends on one directed link in one step, from
+/// the key `key` of its first ([`sensor_slots`]' `sensor`): a splitmix step of both, so every
+/// message has coins of its own and the first keeps the key's (the star's and the mesh's
+/// draws stay what they were). `m = 0` gives `key`.
+pub fn message_key(key: usize, m: u64) -> usize {
+    if m == 0 {
+        key
+    } else {
+        splitmix64(splitmix64(key as u64) ^ m) as usize
+    }
+}
+
 fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
     splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream)
 }

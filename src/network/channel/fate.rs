@@ -186,7 +186,7 @@ fn draw_sensor(
 /// ([`fate`]). An ideal link draws no loss coin (its first attempt always arrives); one of fixed
 /// delay without `arq` draws nothing, and its generator is not even made. `arq`: (retry limit,
 /// probability an ACK is lost).
-pub(super) fn slot_fate(
+pub(crate) fn slot_fate(
     spec: &ChannelSpec,
     loss: f64,
     slot: impl FnOnce() -> Xoshiro256PlusPlus,
@@ -214,7 +214,7 @@ pub(super) fn slot_fate(
 /// for ideal and Bernoulli links, the state's for Gilbert–Elliott, whose chain is drawn from
 /// `slot(CHAIN_STEP)` exactly as [`draw_sensor`] draws it (so the ACKs of an uplink see the
 /// states that decide its downlink's feedback).
-pub(super) fn loss_path(
+pub(crate) fn loss_path(
     spec: &ChannelSpec,
     steps: usize,
     slot: impl Fn(usize) -> Xoshiro256PlusPlus,

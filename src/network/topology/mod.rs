@@ -184,6 +184,51 @@ impl Topology {
         Ok(topology)
     }
 
+    /// The one-hop star of a scenario without `[network]`: sensor i linked to the sink over
+    /// `channels[i]` (its link as the star's per-sensor `[channel]` gives it), no relay, the sink
+    /// on mains.
+    pub fn star(channels: &[ChannelSpec]) -> Self {
+        let n = channels.len();
+        let mut nodes: Vec<Node> = (0..n)
+            .map(|i| Node {
+                kind: NodeKind::Sensor(i),
+                name: format!("s{i}"),
+                position: None,
+            })
+            .collect();
+        nodes.push(Node {
+            kind: NodeKind::Sink,
+            name: SINK.to_string(),
+            position: None,
+        });
+        let links: Vec<Link> = channels
+            .iter()
+            .enumerate()
+            .map(|(i, c)| Link {
+                a: i,
+                b: n,
+                channel: c.clone(),
+            })
+            .collect();
+        let mut graph = UnGraph::<(), usize>::with_capacity(n + 1, n);
+        for _ in &nodes {
+            graph.add_node(());
+        }
+        for (k, l) in links.iter().enumerate() {
+            graph.add_edge(NodeIndex::new(l.a), NodeIndex::new(l.b), k);
+        }
+        let mut parent = vec![Some(n); n];
+        parent.push(None);
+        Topology {
+            nodes,
+            links,
+            parent,
+            sink_mains: true,
+            aggregate: false,
+            graph,
+        }
+    }
+
     /// The sink's index (the last node).
     pub fn sink(&self) -> usize {
         self.nodes.len() - 1

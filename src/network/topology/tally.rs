@@ -110,15 +110,29 @@ impl Tally {
         let Some((parent, channel)) = &routes.uplinks[n] else {
             return false;
         };
+        self.frame(n, *parent, f, mac_bits, channel.arq.is_some(), forwarded)
+    }
+
+    /// One unicast frame of `mac_bits` bits (MAC header, payload, FCS) from `sender` to
+    /// `receiver`, whose attempts met `f`; `arq`: whether the link acknowledges and retries;
+    /// `forwarded`: whether it carries what another node sent. Returns whether it arrived.
+    pub fn frame(
+        &mut self,
+        sender: usize,
+        receiver: usize,
+        f: &Fate,
+        mac_bits: u64,
+        arq: bool,
+        forwarded: bool,
+    ) -> bool {
         let ppdu = mac_bits + PHY_OVERHEAD_BITS;
         let attempts = u64::from(1 + f.retries);
-        let arq = channel.arq.is_some();
         let arrived = if arq {
             u64::from(f.acks)
         } else {
             u64::from(!f.lost)
         };
-        let c = &mut self.counts[n];
+        let c = &mut self.counts[sender];
         c[TX] += attempts;
         c[TX_BITS] += attempts * ppdu;
         c[FORWARDED] += u64::from(forwarded);
@@ -126,11 +140,41 @@ impl Tally {
             c[ACK_WAITS] += attempts;
             c[ACKS_HEARD] += u64::from(!f.lost);
         }
-        let p = &mut self.counts[*parent];
+        let p = &mut self.counts[receiver];
         p[RX] += arrived;
         p[RX_BITS] += arrived * ppdu;
         p[ACKS_SENT] += if arq { arrived } else { 0 };
         !f.lost
+    }
+
+    /// One broadcast frame of `mac_bits` bits from `sender` (no acknowledgement, no retry):
+    /// one frame on air, received by each of `heard` (the neighbours whose fate kept it).
+    pub fn broadcast(&mut self, sender: usize, heard: &[usize], mac_bits: u64) {
+        let ppdu = mac_bits + PHY_OVERHEAD_BITS;
+        self.counts[sender][TX] += 1;
+        self.counts[sender][TX_BITS] += ppdu;
+        for &r in heard {
+            self.counts[r][RX] += 1;
+            self.counts[r][RX_BITS] += ppdu;
+        }
+    }
+
+    /// Node `n` sends one frame down the tree to its children (the feedback's frame, one for
+    /// all of them), `ppdu_bits` on air.
+    pub fn down_sent(&mut self, n: usize, ppdu_bits: u64) {
+        self.counts[n][FB_TX] += 1;
+        self.counts[n][FB_TX_BITS] += ppdu_bits;
+    }
+
+    /// Node `n` receives a frame its parent sent down (`ppdu_bits` on air; its receiver is on
+    /// whether or not the frame survives).
+    pub fn down_heard(&mut self, n: usize, ppdu_bits: u64) {
+        self.counts[n][FB_RX_BITS] += ppdu_bits;
+    }
+
+    /// Node `n` keeps its receiver on for `windows` slots this step.
+    pub fn listen(&mut self, n: usize, windows: u64) {
+        self.counts[n][LISTENS] += windows;
     }
 
     /// The step's listening and its feedback of `payload_bits` (0: none) going down the tree;
@@ -138,18 +182,17 @@ impl Tally {
     pub fn feedback(&mut self, routes: &Routes, payload_bits: u64, holds: impl Fn(usize) -> bool) {
         let frame = DOWNLINK_OVERHEAD_BITS + payload_bits;
         for n in 0..self.counts.len() {
-            self.counts[n][LISTENS] += self.children[n];
+            self.listen(n, self.children[n]);
             if payload_bits == 0 {
                 continue;
             }
             if self.children[n] > 0 && holds(n) {
-                self.counts[n][FB_TX] += 1;
-                self.counts[n][FB_TX_BITS] += frame;
+                self.down_sent(n, frame);
             }
             if let Some((parent, _)) = &routes.uplinks[n] {
-                self.counts[n][LISTENS] += 1;
+                self.listen(n, 1);
                 if holds(*parent) {
-                    self.counts[n][FB_RX_BITS] += frame;
+                    self.down_heard(n, frame);
                 }
             }
         }
