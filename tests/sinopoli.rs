@@ -36,7 +36,7 @@ fn sinopoli_critical_claims_hold() {
             Some(hushfuse::scenario::ParamValue::Number(x)) => *x,
             other => panic!("channel.loss not in params: {other:?}"),
         };
-        assert_eq!(specs[0].loss, Some(loss));
+        assert_eq!(specs[0].key("loss"), Some(loss));
         // The link delivered at its rate (3 SE over 2000 x 120 slots is below 0.004).
         let l = s.link.as_ref().expect("a link summary");
         assert!(
@@ -109,7 +109,7 @@ fn an_entry_link_replaces_the_scenario_link_for_its_variants_only() {
     let exp = build::load(&text, "t").unwrap();
     assert_eq!(exp.variants.len(), 3);
     for (v, loss) in exp.variants[..2].iter().zip([0.1, 0.3]) {
-        assert_eq!(v.channel.as_deref().unwrap()[0].loss, Some(loss));
+        assert_eq!(v.channel.as_deref().unwrap()[0].key("loss"), Some(loss));
         assert_eq!(v.sequence_bits, 8);
         assert!(v.params.contains_key("channel.loss"));
         assert!(v.params.contains_key("sequence_bits"));

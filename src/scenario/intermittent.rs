@@ -5,7 +5,7 @@
 //! "Stability of Kalman filtering with Markovian packet losses", Automatica 43(4), 2007
 //! (Gilbert–Elliott bursts). Read from the scenario and checked before anything runs; the
 //! claim's independent computation lives with its verdict (`output::report`).
-use crate::network::channel::{ChannelKind, ChannelSpec};
+use crate::network::channel::ChannelSpec;
 use crate::scheme::System;
 
 /// The scheme kind the claim is about: the Kalman filter on every measurement that arrives,
@@ -51,16 +51,8 @@ impl ScalarModel {
     }
 }
 
-/// How measurements arrive: the law of the link's losses.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Arrivals {
-    /// Each arrives independently with probability `gamma` (1 − loss).
-    Bernoulli { gamma: f64 },
-    /// A two-state chain started in its stationary law (as the link draws it): good → bad with
-    /// probability `p_gb`, bad → good with `p_bg`; the good state delivers every packet and
-    /// the bad state loses every packet.
-    GilbertElliott { p_gb: f64, p_bg: f64 },
-}
+/// How measurements arrive: the law of the link's losses (each link model says its own).
+pub use crate::network::channel::models::Arrivals;
 
 impl Arrivals {
     /// The arrival law of a variant's link (`None`: ideal), or why the claim cannot use it: no
@@ -73,25 +65,7 @@ impl Arrivals {
         if !spec.delay().is_zero() || spec.arq.is_some() {
             return Err("needs a link without delay and without arq".into());
         }
-        match spec.kind {
-            ChannelKind::Ideal => Ok(Arrivals::Bernoulli { gamma: 1.0 }),
-            ChannelKind::Bernoulli => Ok(Arrivals::Bernoulli {
-                gamma: 1.0 - spec.loss.unwrap_or(0.0),
-            }),
-            ChannelKind::GilbertElliott => {
-                if spec.loss_good() != 0.0 || spec.loss_bad() != 1.0 {
-                    return Err(format!(
-                        "a Gilbert–Elliott link needs loss_good = 0 and loss_bad = 1 (got {} and {})",
-                        spec.loss_good(),
-                        spec.loss_bad()
-                    ));
-                }
-                Ok(Arrivals::GilbertElliott {
-                    p_gb: spec.p_gb.unwrap_or(0.0),
-                    p_bg: spec.p_bg.unwrap_or(0.0),
-                })
-            }
-        }
+        (spec.kind.model().arrivals)(spec)
     }
 
     /// The probability that a loss run goes on one more step: 1 − γ (Bernoulli), 1 − p_bg

@@ -236,17 +236,15 @@ pub fn with_refusion(
 /// The chance, from above, that one sensor's packet of a step makes the center re-fuse: it is
 /// late (any delay), or (with sequence numbers) it is lost, which the next arrival reveals.
 fn refusion_chance(s: &crate::network::channel::ChannelSpec, sequence_bits: u32) -> f64 {
-    use crate::network::channel::{ChannelKind, Delay};
+    use crate::network::channel::Delay;
     let late = match s.delay() {
         Delay::Fixed(0) => 0.0,
         Delay::Fixed(_) => 1.0,
         Delay::Geometric(g) => g.mean / (1.0 + g.mean),
     };
-    let lost = match s.kind {
-        _ if sequence_bits == 0 => 0.0,
-        ChannelKind::Ideal => 0.0,
-        ChannelKind::Bernoulli => s.loss.unwrap_or(0.0),
-        ChannelKind::GilbertElliott => s.loss_good().max(s.loss_bad()),
+    let lost = match sequence_bits {
+        0 => 0.0,
+        _ => (s.kind.model().worst_loss)(s),
     };
     (late + lost).clamp(0.0, 1.0)
 }

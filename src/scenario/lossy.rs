@@ -197,7 +197,7 @@ mod tests {
         );
         // Every sensor's link is Bernoulli 0.3, and the copies carry link_loss = 0.3.
         let specs = exp.channel.as_ref().expect("a channel");
-        assert!(specs.iter().all(|s| s.loss == Some(0.3)));
+        assert!(specs.iter().all(|s| s.key("loss") == Some(0.3)));
         for v in &exp.variants {
             let label = &exp.curves[v.curve].label;
             let has = v.params.contains_key(LOSS_AWARE_PARAM);

@@ -32,10 +32,10 @@ use rand::Rng;
 use rand_distr::Distribution;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use super::spec::{Arq, ChannelKind, ChannelSpec, Delay};
+use super::spec::{Arq, ChannelSpec, Delay};
 use crate::stats::seeding;
 
-pub use super::gilbert_elliott::CHAIN_STEP;
+pub use super::models::gilbert_elliott::CHAIN_STEP;
 
 /// What happens to a packet sent in one slot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -193,21 +193,19 @@ pub(crate) fn slot_fate(
     arq: Option<(u32, f64)>,
 ) -> Fate {
     let delay = spec.delay();
-    match spec.kind {
-        ChannelKind::Ideal => match (&delay, arq) {
+    if !spec.kind.model().draws_loss {
+        return match (&delay, arq) {
             (Delay::Fixed(d), None) => Fate {
                 delay: *d,
                 ..Fate::default()
             },
             _ => fate(false, 0.0, &delay, &mut slot(), arq),
-        },
-        ChannelKind::Bernoulli | ChannelKind::GilbertElliott => {
-            let mut rng = slot();
-            let lost = rng.random::<f64>() < loss;
-            // Retries within the step see the same state, hence the same loss.
-            fate(lost, loss, &delay, &mut rng, arq)
-        }
+        };
     }
+    let mut rng = slot();
+    let lost = rng.random::<f64>() < loss;
+    // Retries within the step see the same state, hence the same loss.
+    fate(lost, loss, &delay, &mut rng, arq)
 }
 
 /// The loss probability of a packet sent at each step `1..=steps` on the link `spec`: constant
@@ -219,7 +217,7 @@ pub(crate) fn loss_path(
     steps: usize,
     slot: impl Fn(usize) -> Xoshiro256PlusPlus,
 ) -> Vec<f64> {
-    (super::models::of(spec.kind).loss_path)(spec, steps, &slot)
+    (spec.kind.model().loss_path)(spec, steps, &slot)
 }
 
 /// A slot's fate. `lost` is the first attempt's coin, already drawn from `rng`; the delay is
@@ -329,22 +327,17 @@ mod tests {
     const SEED: u64 = 0x5EED_CAFE;
 
     fn bernoulli(loss: f64) -> ChannelSpec {
-        ChannelSpec {
-            kind: ChannelKind::Bernoulli,
-            loss: Some(loss),
-            ..ChannelSpec::default()
-        }
+        ChannelSpec::of_kind("bernoulli", &[("loss", loss)])
     }
 
     fn gilbert_elliott(p_gb: f64, p_bg: f64, loss_good: f64, loss_bad: f64) -> ChannelSpec {
-        ChannelSpec {
-            kind: ChannelKind::GilbertElliott,
-            p_gb: Some(p_gb),
-            p_bg: Some(p_bg),
-            loss_good: Some(loss_good),
-            loss_bad: Some(loss_bad),
-            ..ChannelSpec::default()
-        }
+        let keys = [
+            ("p_gb", p_gb),
+            ("p_bg", p_bg),
+            ("loss_good", loss_good),
+            ("loss_bad", loss_bad),
+        ];
+        ChannelSpec::of_kind("gilbert-elliott", &keys)
     }
 
     fn geometric(mean: f64) -> Delay {

@@ -11,8 +11,8 @@
 //! - [`stability`]: the classical stability checks of Kalman filtering with intermittent
 //!   observations (Sinopoli et al. 2004), used to sanity-check a scenario's link.
 pub mod fate;
-mod gilbert_elliott;
 pub mod models;
+mod parse;
 pub mod route;
 pub mod spec;
 pub mod stability;

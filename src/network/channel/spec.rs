@@ -1,31 +1,36 @@
-//! The scenario keys of a link model: the `[channel]` table of a scenario (and of a sensor that
-//! overrides it). Parsing accepts every key as optional so that `[channel]` with only
-//! `kind = "ideal"` parses; [`ChannelSpec::validate`] then checks that the keys present fit the
-//! kind and that every probability is one.
-use serde::{Deserialize, Serialize};
+//! The scenario keys of a link: the `[channel]` table of a scenario (and of a sensor or link
+//! that overrides it). The keys every link has (`kind`, `delay`, `downlink`, `arq`) are fields
+//! here; a model's own keys (`loss`, `p_gb`, …) are kept by name as written, and belong to the
+//! model that documents them ([`super::models`]): adding a link model is writing its file there,
+//! nothing here. Parsing accepts any registered key so that a key of another kind can be named by
+//! [`ChannelSpec::validate`], which then checks that the keys fit the kind and their values.
+use serde::{Deserialize, Serialize, Serializer};
+use std::collections::BTreeMap;
 
-/// The loss model of a link.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ChannelKind {
-    /// Every packet arrives.
-    #[default]
-    Ideal,
-    /// Each packet is lost independently with probability `loss`.
-    Bernoulli,
-    /// A two-state Markov chain (good, bad) with a loss probability per state: bursty losses
-    /// (Gilbert 1960, Elliott 1963).
-    GilbertElliott,
-}
+/// The loss model of a link: a registered model ([`super::models::LINK_MODELS`]), by its name
+/// ([`ChannelKind::named`] finds one, [`ChannelKind::model`] gives its behaviour).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChannelKind(pub(super) &'static str);
 
 impl ChannelKind {
+    /// Every packet arrives: the link of a scenario without `[channel]`.
+    pub const IDEAL: ChannelKind = ChannelKind("ideal");
+
     /// The name used in the scenario file.
     pub fn name(self) -> &'static str {
-        match self {
-            ChannelKind::Ideal => "ideal",
-            ChannelKind::Bernoulli => "bernoulli",
-            ChannelKind::GilbertElliott => "gilbert-elliott",
-        }
+        self.0
+    }
+}
+
+impl Default for ChannelKind {
+    fn default() -> Self {
+        ChannelKind::IDEAL
+    }
+}
+
+impl Serialize for ChannelKind {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.0)
     }
 }
 
@@ -120,54 +125,30 @@ impl Arq {
     pub const MAX_RETRIES: u32 = 7;
 }
 
-/// A link model: the `[channel]` table of a scenario or of one sensor.
+/// A link model: the `[channel]` table of a scenario, of one sensor or of one link.
 ///
 /// Every key is optional at parse time; [`ChannelSpec::validate`] enforces which keys each
-/// `kind` needs and allows. `loss_good` and `loss_bad` default to 0 and 1
-/// ([`ChannelSpec::loss_good`], [`ChannelSpec::loss_bad`]); they stay `Option` here so that a key
-/// given for the wrong kind can be reported.
-#[derive(Debug, Clone, PartialEq, Default, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
+/// `kind` needs and allows (its model's checks). Read and written as documented in `channel/parse.rs`.
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct ChannelSpec {
     /// The loss model (default `"ideal"`).
-    #[serde(default)]
     pub kind: ChannelKind,
-    /// Bernoulli: probability that a packet is lost.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub loss: Option<f64>,
-    /// Gilbert–Elliott: per-step transition probability good → bad.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub p_gb: Option<f64>,
-    /// Gilbert–Elliott: per-step transition probability bad → good.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub p_bg: Option<f64>,
-    /// Gilbert–Elliott: loss probability in the good state (default 0).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub loss_good: Option<f64>,
-    /// Gilbert–Elliott: loss probability in the bad state (default 1).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub loss_bad: Option<f64>,
+    /// The model keys as written, by name (any registered model's: a key of another kind is
+    /// kept so that the checks can name it). Read them with [`ChannelSpec::key`].
+    pub keys: BTreeMap<&'static str, f64>,
     /// Delay of a delivered packet, in steps (default 0).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub delay: Option<Delay>,
     /// The feedback link (fusion center → sensors); `None` = ideal downlink.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub downlink: Option<Box<ChannelSpec>>,
     /// Acknowledged retransmission of the uplink's packets; the acknowledgements travel on
     /// `downlink`. Not allowed on a downlink itself.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub arq: Option<Arq>,
 }
 
 impl ChannelSpec {
-    /// Gilbert–Elliott loss probability in the good state (default 0).
-    pub fn loss_good(&self) -> f64 {
-        self.loss_good.unwrap_or(0.0)
-    }
-
-    /// Gilbert–Elliott loss probability in the bad state (default 1).
-    pub fn loss_bad(&self) -> f64 {
-        self.loss_bad.unwrap_or(1.0)
+    /// The model key `name` as written, if it is.
+    pub fn key(&self, name: &str) -> Option<f64> {
+        self.keys.get(name).copied()
     }
 
     /// The delay (default 0).
@@ -183,30 +164,10 @@ impl ChannelSpec {
     /// Whether the link changes nothing: ideal kind, zero delay (a geometric delay of mean 0 is
     /// zero too), an ideal or absent downlink and no `arq` table.
     pub fn is_ideal(&self) -> bool {
-        self.kind == ChannelKind::Ideal
+        self.kind == ChannelKind::IDEAL
             && self.delay().is_zero()
             && self.downlink.as_deref().is_none_or(ChannelSpec::is_ideal)
             && self.arq.is_none()
-    }
-
-    /// Whether every packet of this link arrives at once and nothing is counted but what an
-    /// ideal link counts: an ideal kind, a Bernoulli link of loss 0 or a Gilbert–Elliott link
-    /// that loses nothing in either state; zero delay; no `arq` (whose acknowledgements are
-    /// counted); and a downlink that is lossless too. Such a link draws no fate that changes a
-    /// number, so the engine may run it as an ideal one (its fast paths included).
-    pub fn is_lossless(&self) -> bool {
-        let loses = match self.kind {
-            ChannelKind::Ideal => false,
-            ChannelKind::Bernoulli => self.loss.unwrap_or(0.0) != 0.0,
-            ChannelKind::GilbertElliott => self.loss_good() != 0.0 || self.loss_bad() != 0.0,
-        };
-        !loses
-            && self.delay().is_zero()
-            && self.arq.is_none()
-            && self
-                .downlink
-                .as_deref()
-                .is_none_or(ChannelSpec::is_lossless)
     }
 }
 
@@ -269,8 +230,8 @@ mod tests {
     #[test]
     fn parses_bernoulli() {
         let s = parse_ok("kind = \"bernoulli\"\nloss = 0.25");
-        assert_eq!(s.kind, ChannelKind::Bernoulli);
-        assert_eq!(s.loss, Some(0.25));
+        assert_eq!(s.kind, ChannelKind::named("bernoulli").unwrap());
+        assert_eq!(s.key("loss"), Some(0.25));
         assert_eq!(s.validate(), Ok(()));
         assert!(!s.is_ideal());
     }
@@ -278,14 +239,17 @@ mod tests {
     #[test]
     fn parses_gilbert_elliott_with_defaults() {
         let s = parse_ok("kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.4");
-        assert_eq!(s.kind, ChannelKind::GilbertElliott);
-        assert_eq!((s.p_gb, s.p_bg), (Some(0.1), Some(0.4)));
-        assert_eq!((s.loss_good(), s.loss_bad()), (0.0, 1.0));
+        assert_eq!(s.kind, ChannelKind::named("gilbert-elliott").unwrap());
+        assert_eq!((s.key("p_gb"), s.key("p_bg")), (Some(0.1), Some(0.4)));
+        assert_eq!((s.key("loss_good"), s.key("loss_bad")), (None, None));
         assert_eq!(s.validate(), Ok(()));
         let s = parse_ok(
             "kind = \"gilbert-elliott\"\np_gb = 0.1\np_bg = 0.4\nloss_good = 0.02\nloss_bad = 0.8",
         );
-        assert_eq!((s.loss_good(), s.loss_bad()), (0.02, 0.8));
+        assert_eq!(
+            (s.key("loss_good"), s.key("loss_bad")),
+            (Some(0.02), Some(0.8))
+        );
         assert_eq!(s.validate(), Ok(()));
     }
 
@@ -331,8 +295,8 @@ mod tests {
             "kind = \"bernoulli\"\nloss = 0.1\ndownlink = { kind = \"bernoulli\", loss = 0.3 }\narq = { max_retries = 2 }",
         );
         let down = s.downlink.as_deref().expect("downlink parsed");
-        assert_eq!(down.kind, ChannelKind::Bernoulli);
-        assert_eq!(down.loss, Some(0.3));
+        assert_eq!(down.kind, ChannelKind::named("bernoulli").unwrap());
+        assert_eq!(down.key("loss"), Some(0.3));
         assert_eq!(s.arq, Some(Arq { max_retries: 2 }));
         assert_eq!(s.validate(), Ok(()));
         // Sub-table syntax works too.
@@ -344,7 +308,7 @@ mod tests {
         let doc: Doc = toml::from_str(toml).expect("sub-table parses");
         assert_eq!(
             doc.channel.downlink_spec().kind,
-            ChannelKind::GilbertElliott
+            ChannelKind::named("gilbert-elliott").unwrap()
         );
         assert!(!doc.channel.is_ideal());
     }

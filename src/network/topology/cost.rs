@@ -15,7 +15,7 @@
 //! costs weighted by the probability the frame got that far.
 use super::Topology;
 use crate::link::codec802154::ACK_PPDU_BITS;
-use crate::network::channel::{Arq, ChannelKind, ChannelSpec};
+use crate::network::channel::{Arq, ChannelSpec};
 use crate::network::radio::RadioSpec;
 
 /// One frame over one hop: expected energy at both ends, µJ, and the hop's odds.
@@ -31,32 +31,14 @@ pub struct HopCost {
     pub delivered: f64,
 }
 
-/// The loss of one attempt on `channel` in the long run (a Gilbert–Elliott link at its
-/// stationary state, without retries).
-fn attempt_loss(channel: &ChannelSpec) -> f64 {
-    ChannelSpec {
-        arq: None,
-        ..channel.clone()
-    }
-    .delivery_loss()
-}
-
 /// One frame of `ppdu_bits` bits on air (PHY header included) over a hop of `channel`.
 pub fn hop(radio: &RadioSpec, ppdu_bits: f64, channel: &ChannelSpec) -> HopCost {
-    let p = attempt_loss(channel);
     let retries = channel.arq.map(|a| a.max_retries.min(Arq::MAX_RETRIES));
     let delivered = 1.0 - channel.delivery_loss();
-    // A Gilbert–Elliott hop retries in one state: attempts from the two states' losses.
-    let attempts = match (retries, channel.kind) {
-        (None, _) => 1.0,
-        (Some(r), ChannelKind::GilbertElliott) => {
-            let (gb, bg) = (channel.p_gb.unwrap_or(0.0), channel.p_bg.unwrap_or(0.0));
-            let bad = if gb + bg > 0.0 { gb / (gb + bg) } else { 0.0 };
-            (1.0 - bad) * expected_attempts(channel.loss_good(), r)
-                + bad * expected_attempts(channel.loss_bad(), r)
-        }
-        (Some(r), _) => expected_attempts(p, r),
-    };
+    // The model's expectation (a Gilbert–Elliott hop retries in one state).
+    let attempts = retries.map_or(1.0, |r| {
+        (channel.kind.model().expected_attempts)(channel, r)
+    });
     let frame_rx = radio.rx_uj(ppdu_bits);
     let ack_us = radio.turnaround_us + radio.airtime_us(ACK_PPDU_BITS as f64);
     let (sender_ack, receiver_ack) = match retries {
@@ -75,11 +57,7 @@ pub fn hop(radio: &RadioSpec, ppdu_bits: f64, channel: &ChannelSpec) -> HopCost 
     }
 }
 
-/// Expected attempts of a frame at loss `p` per attempt with `r` retries:
-/// `Σ_{j=0}^{r} p^j = (1 − p^{r+1}) / (1 − p)`.
-pub fn expected_attempts(p: f64, r: u32) -> f64 {
-    (0..=r as i32).map(|j| p.powi(j)).sum()
-}
+pub use crate::network::channel::models::expected_attempts;
 
 /// Expected energy of every node, µJ, when every sensor sends one frame of `ppdu_bits` bits
 /// to the sink along its route and relays forward each one as it is (no aggregation).

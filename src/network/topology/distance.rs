@@ -17,7 +17,7 @@
 //! each link is drawn once, from the model's own `seed`, in link order, so the network stays
 //! the same whatever the run's seed.
 use super::{err, Link, Node, TopologyError};
-use crate::network::channel::{ChannelKind, ChannelSpec};
+use crate::network::channel::ChannelSpec;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
@@ -133,10 +133,11 @@ impl DistanceLoss {
                     ),
                 ));
             };
-            if l.channel.kind == ChannelKind::GilbertElliott {
+            let kind = l.channel.kind.name();
+            if kind != "ideal" && kind != "bernoulli" {
                 return Err(err(
                     "distance_loss",
-                    "sets a Bernoulli loss per link; the [channel] is gilbert-elliott",
+                    format!("sets a Bernoulli loss per link; the [channel] is {kind}"),
                 ));
             }
             // Drawn for every link, shadowed or not, so a link's draw does not move.
@@ -154,11 +155,7 @@ impl DistanceLoss {
 
 /// `c` with a Bernoulli loss of `p` in place of its own.
 fn with_loss(c: &ChannelSpec, p: f64) -> ChannelSpec {
-    ChannelSpec {
-        kind: ChannelKind::Bernoulli,
-        loss: Some(p.clamp(0.0, 1.0)),
-        ..c.clone()
-    }
+    c.as_kind("bernoulli", &[("loss", p.clamp(0.0, 1.0))])
 }
 
 #[cfg(test)]

@@ -254,13 +254,10 @@ fn distance_sets_each_links_loss_and_etx_routes_around_a_weak_link() {
     assert_eq!(etx.route(0), vec![0, 1, 2]);
     let direct = etx.link(0, 2).unwrap();
     let expected = 1.0 - etx_model().prr(120.0, 0.0);
-    assert_eq!(
-        direct.channel.kind,
-        crate::network::channel::ChannelKind::Bernoulli
-    );
-    assert!((direct.channel.loss.unwrap() - expected).abs() < 1e-15);
+    assert_eq!(direct.channel.kind.name(), "bernoulli");
+    assert!((direct.channel.key("loss").unwrap() - expected).abs() < 1e-15);
     assert!((expected - (1.0 - 0.188_425_861_181)).abs() < 1e-9);
-    assert!(etx.link(0, 1).unwrap().channel.loss.unwrap() < 1e-6);
+    assert!(etx.link(0, 1).unwrap().channel.key("loss").unwrap() < 1e-6);
     let hops = build(&text("hops"), &sensors).unwrap();
     assert_eq!(hops.route(0), vec![0, 2]);
     // A link given its own channel keeps it; shadowing moves losses, from its own seed.
@@ -269,7 +266,7 @@ fn distance_sets_each_links_loss_and_etx_routes_around_a_weak_link() {
         &sensors,
     )
     .unwrap();
-    assert_eq!(own.link(0, 2).unwrap().channel.loss, Some(0.5));
+    assert_eq!(own.link(0, 2).unwrap().channel.key("loss"), Some(0.5));
     let shadowed = |seed: u64| {
         build(
             &format!("{}shadowing_db = 4.0\nseed = {seed}\n", text("hops")),
@@ -279,7 +276,7 @@ fn distance_sets_each_links_loss_and_etx_routes_around_a_weak_link() {
         .link(0, 2)
         .unwrap()
         .channel
-        .loss
+        .key("loss")
         .unwrap()
     };
     assert_eq!(shadowed(1), shadowed(1));

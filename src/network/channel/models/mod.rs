@@ -1,16 +1,21 @@
-//! The link models, registered as the schemes are (`crate::scheme::SCHEMES`): each with its
-//! `kind`, its keys and their documentation, its checks, the loss it puts on each step, and the
-//! long-run loss a loss-aware center believes (`link_loss = "channel"`, derived here from the
-//! link's own keys, never typed twice). The `[channel]` table of `docs/scenarios.md` is
-//! generated from this list ([`markdown`], `hushfuse list-links --markdown`; a test keeps the
-//! two equal).
+//! The link models, registered as the schemes are (`crate::scheme::SCHEMES`): each in a file
+//! of its own here, with its `kind`, its keys and their documentation, its checks, the loss it
+//! puts on each step, and what the rest of hushfuse asks of a link (the long-run loss a
+//! loss-aware center believes, `link_loss = "channel"`, derived from the link's own keys and
+//! never typed twice; the attempts a hop's energy budget expects; the arrival law a stability
+//! claim needs). The `[channel]` table of `docs/scenarios.md` is generated from this list
+//! ([`markdown`], `hushfuse list-links --markdown`; a test keeps the two equal).
 //!
-//! Adding a model: its `ChannelKind` variant and keys in [`super::spec`], its entry here (and
-//! its per-step loss beside the others in [`super::fate`]).
+//! Adding a model: a file here with its [`LinkModel`] (its keys are read by name from
+//! [`ChannelSpec::key`]), and its line in [`LINK_MODELS`]. Nothing else names a model.
+pub mod bernoulli;
+pub mod gilbert_elliott;
+pub mod ideal;
+
 use super::spec::{Arq, ChannelKind, ChannelSpec, Delay};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-/// One documented key of a link model.
+/// One documented key of a link model (`name` may list several, comma-separated).
 #[derive(Debug, Clone, Copy)]
 pub struct KeyDoc {
     pub name: &'static str,
@@ -21,83 +26,103 @@ pub struct KeyDoc {
 /// A link's generator of slot j (a model with a hidden state draws its chain from one).
 pub type Slot<'a> = &'a dyn Fn(usize) -> Xoshiro256PlusPlus;
 
+/// How packets arrive over a link without delay or retransmission: the law a stability claim
+/// (`crate::scenario::intermittent`) is stated for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Arrivals {
+    /// Each arrives independently with probability `gamma` (1 − loss).
+    Bernoulli { gamma: f64 },
+    /// A two-state chain started in its stationary law (as the link draws it): good → bad with
+    /// probability `p_gb`, bad → good with `p_bg`; the good state delivers every packet and
+    /// the bad state loses every packet.
+    GilbertElliott { p_gb: f64, p_bg: f64 },
+}
+
 /// A registered link model.
 pub struct LinkModel {
-    pub kind: ChannelKind,
+    /// Its `kind` in the scenario file.
+    pub name: &'static str,
     /// One line for `hushfuse list-links` and the docs.
     pub summary: &'static str,
     /// Its own keys (a key of another model is refused under this one).
     pub keys: &'static [KeyDoc],
     /// The checks of its keys' values; `path` names the table.
     pub validate: fn(&ChannelSpec, path: &str) -> Result<(), String>,
+    /// Whether a packet's slot draws a loss coin (first from the slot's generator): every model
+    /// that may lose one. An ideal link draws none, so its slots' other draws come first.
+    pub draws_loss: bool,
     /// The loss probability of a packet sent at each step `1..=steps`; `slot(j)` is the
     /// link's generator of slot j (a model with a hidden state draws its chain from one).
     pub loss_path: fn(&ChannelSpec, usize, Slot) -> Vec<f64>,
     /// The long-run probability that a report is lost for good (after `arq`'s retries): what a
     /// loss-aware center assumes.
     pub delivery_loss: fn(&ChannelSpec) -> f64,
-}
-
-/// Attempts of a packet on `spec`: the first and `arq`'s retries.
-fn attempts(spec: &ChannelSpec) -> i32 {
-    1 + spec.arq.map_or(0, |a| a.max_retries.min(Arq::MAX_RETRIES)) as i32
+    /// Whether the link may lose a packet with these keys (else it is lossless).
+    pub loses: fn(&ChannelSpec) -> bool,
+    /// The largest loss of a packet at any step (a bound the run-time estimate uses).
+    pub worst_loss: fn(&ChannelSpec) -> f64,
+    /// Expected attempts of a frame with up to `r` retries (each stopped by the first
+    /// acknowledgement, ACKs taken as heard), in the long run.
+    pub expected_attempts: fn(&ChannelSpec, u32) -> f64,
+    /// The arrival law of the link, or why a stability claim cannot use it.
+    pub arrivals: fn(&ChannelSpec) -> Result<Arrivals, String>,
 }
 
 /// Every link model, in the order the docs list them.
-pub const LINK_MODELS: &[LinkModel] = &[
-    LinkModel {
-        kind: ChannelKind::Ideal,
-        summary: "every packet arrives",
-        keys: &[],
-        validate: |_, _| Ok(()),
-        loss_path: |_, steps, _| vec![0.0; steps],
-        delivery_loss: |_| 0.0,
-    },
-    LinkModel {
-        kind: ChannelKind::Bernoulli,
-        summary: "each packet lost independently with probability `loss`",
-        keys: &[KeyDoc {
-            name: "loss",
-            default: "required",
-            meaning: "probability that a packet is lost",
-        }],
-        validate: |s, path| {
-            let loss = required(path, s.kind, "loss", s.loss)?;
-            probability(path, "loss", loss)
-        },
-        loss_path: |s, steps, _| vec![super::gilbert_elliott::clamp_probability(s.loss.unwrap_or(0.0)); steps],
-        delivery_loss: |s| s.loss.unwrap_or(0.0).powi(attempts(s)),
-    },
-    LinkModel {
-        kind: ChannelKind::GilbertElliott,
-        summary: "bursts: a two-state Markov chain (good, bad) with a loss probability per state (Gilbert 1960, Elliott 1963)",
-        keys: &[
-            KeyDoc {
-                name: "p_gb, p_bg",
-                default: "required",
-                meaning: "per-step probabilities of going from good to bad and from bad to good (mean burst 1 / p_bg steps); the chain starts in its stationary distribution",
-            },
-            KeyDoc {
-                name: "loss_good, loss_bad",
-                default: "0, 1",
-                meaning: "loss probability in each state",
-            },
-        ],
-        validate: |s, path| {
-            probability(path, "p_gb", required(path, s.kind, "p_gb", s.p_gb)?)?;
-            probability(path, "p_bg", required(path, s.kind, "p_bg", s.p_bg)?)?;
-            probability(path, "loss_good", s.loss_good())?;
-            probability(path, "loss_bad", s.loss_bad())
-        },
-        loss_path: super::gilbert_elliott::loss_path,
-        delivery_loss: |s| {
-            let (gb, bg) = (s.p_gb.unwrap_or(0.0), s.p_bg.unwrap_or(0.0));
-            let bad = if gb + bg > 0.0 { gb / (gb + bg) } else { 0.0 };
-            let n = attempts(s);
-            (1.0 - bad) * s.loss_good().powi(n) + bad * s.loss_bad().powi(n)
-        },
-    },
-];
+pub const LINK_MODELS: &[&LinkModel] = &[&ideal::MODEL, &bernoulli::MODEL, &gilbert_elliott::MODEL];
+
+/// Every model key of every model, in the registry's order.
+pub fn model_keys() -> impl Iterator<Item = &'static str> {
+    LINK_MODELS
+        .iter()
+        .flat_map(|m| m.keys)
+        .flat_map(|k| k.name.split(", "))
+}
+
+/// Attempts of a packet on `spec`: the first and `arq`'s retries.
+pub(crate) fn attempts(spec: &ChannelSpec) -> i32 {
+    1 + spec.arq.map_or(0, |a| a.max_retries.min(Arq::MAX_RETRIES)) as i32
+}
+
+/// Expected attempts of a frame with up to `r` retries when each attempt is lost with
+/// probability `p`: Σ_{j=0}^{r} p^j = (1 − p^{r+1}) / (1 − p).
+pub fn expected_attempts(p: f64, r: u32) -> f64 {
+    (0..=r as i32).map(|j| p.powi(j)).sum()
+}
+
+/// The loss of one attempt on `spec` in the long run (its `arq` set aside).
+pub(crate) fn attempt_loss(spec: &ChannelSpec) -> f64 {
+    (spec.kind.model().delivery_loss)(&ChannelSpec {
+        arq: None,
+        ..spec.clone()
+    })
+}
+
+/// The value of a key the kind needs, or an error naming it.
+pub(crate) fn required(path: &str, spec: &ChannelSpec, key: &str) -> Result<f64, String> {
+    spec.key(key)
+        .ok_or_else(|| format!("{path}.kind = \"{}\" needs `{key}`", spec.kind.name()))
+}
+
+/// Checks that `value` is a probability; NaN fails the range test and is rejected too.
+pub(crate) fn probability(path: &str, key: &str, value: f64) -> Result<(), String> {
+    if (0.0..=1.0).contains(&value) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{path}.{key} = {value} is not a probability in [0, 1]"
+        ))
+    }
+}
+
+/// A probability as a chain or a coin uses it: NaN as 0, the rest clamped to [0, 1].
+pub(crate) fn clamp_probability(p: f64) -> f64 {
+    if p.is_nan() {
+        0.0
+    } else {
+        p.clamp(0.0, 1.0)
+    }
+}
 
 /// The keys every model has.
 pub const COMMON_KEYS: &[KeyDoc] = &[
@@ -122,12 +147,43 @@ pub const COMMON_KEYS: &[KeyDoc] = &[
 pub fn of(kind: ChannelKind) -> &'static LinkModel {
     LINK_MODELS
         .iter()
-        .find(|m| m.kind == kind)
+        .find(|m| m.name == kind.name())
         .expect("every kind is registered")
+}
+
+impl ChannelKind {
+    /// The registered model called `name`.
+    pub fn named(name: &str) -> Option<Self> {
+        LINK_MODELS
+            .iter()
+            .find(|m| m.name == name)
+            .map(|m| ChannelKind(m.name))
+    }
+
+    /// Its registered model.
+    pub fn model(self) -> &'static LinkModel {
+        of(self)
+    }
 }
 
 /// What a link's model says of it: its checks and the loss a loss-aware center assumes.
 impl ChannelSpec {
+    /// Whether every packet of this link arrives at once and nothing is counted but what an
+    /// ideal link counts: a model that loses nothing with these keys (an ideal kind, a Bernoulli
+    /// link of loss 0, a Gilbert–Elliott link that loses nothing in either state); zero delay;
+    /// no `arq` (whose acknowledgements are counted); and a downlink that is lossless too. Such
+    /// a link draws no fate that changes a number, so the engine may run it as an ideal one (its
+    /// fast paths included).
+    pub fn is_lossless(&self) -> bool {
+        !(self.kind.model().loses)(self)
+            && self.delay().is_zero()
+            && self.arq.is_none()
+            && self
+                .downlink
+                .as_deref()
+                .is_none_or(ChannelSpec::is_lossless)
+    }
+
     /// The probability that an uplink packet is never delivered, in the long run: what a
     /// loss-aware center assumes for this link (`link_loss = "channel"`). Bernoulli `p`, and
     /// with `arq` of `n` retries `p^(1+n)` (each attempt draws its own loss); Gilbert–Elliott
@@ -136,7 +192,7 @@ impl ChannelSpec {
     /// moves, as the fates take it). A delay is not a loss and counts nothing here. Assumes a
     /// validated spec.
     pub fn delivery_loss(&self) -> f64 {
-        (of(self.kind).delivery_loss)(self)
+        (self.kind.model().delivery_loss)(self)
     }
 
     /// Checks the table found at `channel`; see [`ChannelSpec::validate_at`].
@@ -148,7 +204,7 @@ impl ChannelSpec {
     /// table in messages (`"channel"`, `"sensors[2].channel"`, …) so the user can find the key.
     pub fn validate_at(&self, path: &str) -> Result<(), String> {
         self.check_keys_fit_kind(path)?;
-        (of(self.kind).validate)(self, path)?;
+        (self.kind.model().validate)(self, path)?;
         if let Some(Delay::Geometric(g)) = &self.delay {
             if !(g.mean.is_finite() && g.mean >= 0.0) {
                 return Err(format!(
@@ -195,12 +251,12 @@ impl ChannelSpec {
     /// silently ignored, and the user would believe it was used.
     fn check_keys_fit_kind(&self, path: &str) -> Result<(), String> {
         // The owner of each key is the model that documents it.
-        for owner in LINK_MODELS.iter().filter(|m| m.kind != self.kind) {
+        for owner in LINK_MODELS.iter().filter(|m| m.name != self.kind.name()) {
             for key in owner.keys.iter().flat_map(|k| k.name.split(", ")) {
-                if self.has_key(key) {
+                if self.keys.contains_key(key) {
                     return Err(format!(
                         "{path}.{key} belongs to kind = \"{}\", not \"{}\"",
-                        owner.kind.name(),
+                        owner.name,
                         self.kind.name()
                     ));
                 }
@@ -208,41 +264,13 @@ impl ChannelSpec {
         }
         Ok(())
     }
-
-    /// Whether the model key `key` is written in the table.
-    fn has_key(&self, key: &str) -> bool {
-        match key {
-            "loss" => self.loss.is_some(),
-            "p_gb" => self.p_gb.is_some(),
-            "p_bg" => self.p_bg.is_some(),
-            "loss_good" => self.loss_good.is_some(),
-            "loss_bad" => self.loss_bad.is_some(),
-            _ => unreachable!("every registered key is a field of ChannelSpec: {key}"),
-        }
-    }
-}
-
-/// The value of a key the kind needs, or an error naming it.
-fn required(path: &str, kind: ChannelKind, key: &str, value: Option<f64>) -> Result<f64, String> {
-    value.ok_or_else(|| format!("{path}.kind = \"{}\" needs `{key}`", kind.name()))
-}
-
-/// Checks that `value` is a probability; NaN fails the range test and is rejected too.
-fn probability(path: &str, key: &str, value: f64) -> Result<(), String> {
-    if (0.0..=1.0).contains(&value) {
-        Ok(())
-    } else {
-        Err(format!(
-            "{path}.{key} = {value} is not a probability in [0, 1]"
-        ))
-    }
 }
 
 /// The `[channel]` key table of `docs/scenarios.md`.
 pub fn markdown() -> String {
     let kinds: Vec<String> = LINK_MODELS
         .iter()
-        .map(|m| format!("`{}` ({})", m.kind.name(), m.summary))
+        .map(|m| format!("`{}` ({})", m.name, m.summary))
         .collect();
     let mut out = String::from("| field | default | meaning |\n|---|---|---|\n");
     out.push_str(&format!("| `kind` | `ideal` | {} |\n", kinds.join("; ")));
@@ -250,7 +278,7 @@ pub fn markdown() -> String {
         for k in m.keys {
             let names: Vec<String> = k.name.split(", ").map(|n| format!("`{n}`")).collect();
             let default = match k.default {
-                "required" => format!("required for `{}`", m.kind.name()),
+                "required" => format!("required for `{}`", m.name),
                 d => d.to_string(),
             };
             out.push_str(&format!(
@@ -273,7 +301,7 @@ pub fn markdown() -> String {
 pub fn describe() -> String {
     let mut out = String::new();
     for m in LINK_MODELS {
-        out.push_str(&format!("{}: {}\n", m.kind.name(), m.summary));
+        out.push_str(&format!("{}: {}\n", m.name, m.summary));
         for k in m.keys {
             out.push_str(&format!("    {} ({}): {}\n", k.name, k.default, k.meaning));
         }
@@ -292,7 +320,7 @@ mod tests {
     /// The `[channel]` table of docs/scenarios.md is the registry's, as generated.
     #[test]
     fn the_docs_table_is_generated_from_the_registry() {
-        let docs = include_str!("../../../docs/scenarios.md");
+        let docs = include_str!("../../../../docs/scenarios.md");
         assert!(
             docs.contains(&markdown()),
             "docs/scenarios.md's [channel] table differs from `hushfuse list-links --markdown`:\n{}",
@@ -303,13 +331,16 @@ mod tests {
     /// Every kind is registered once, and its long-run loss is what its keys say by hand.
     #[test]
     fn every_kind_once_and_its_belief_by_hand() {
-        for kind in [
-            ChannelKind::Ideal,
-            ChannelKind::Bernoulli,
-            ChannelKind::GilbertElliott,
-        ] {
-            assert_eq!(LINK_MODELS.iter().filter(|m| m.kind == kind).count(), 1);
+        for m in LINK_MODELS {
+            assert_eq!(LINK_MODELS.iter().filter(|n| n.name == m.name).count(), 1);
+            assert_eq!(ChannelKind::named(m.name).map(|k| k.name()), Some(m.name));
         }
+        // No key belongs to two models (the checks name a key's one owner).
+        let keys: Vec<&str> = model_keys().collect();
+        let mut unique = keys.clone();
+        unique.sort_unstable();
+        unique.dedup();
+        assert_eq!(unique.len(), keys.len(), "{keys:?}");
         let spec = |t: &str| -> ChannelSpec { toml::from_str(t).unwrap() };
         // Bernoulli 0.3 with two retries: 0.3^3.
         let b = spec("kind = \"bernoulli\"\nloss = 0.3\narq = { max_retries = 2 }");
@@ -320,13 +351,12 @@ mod tests {
         );
         assert!((ge.delivery_loss() - 0.22).abs() < 1e-15);
         assert_eq!(spec("").delivery_loss(), 0.0);
-        // Every documented key is a field the checks can see (none set in a default table).
-        for key in LINK_MODELS
-            .iter()
-            .flat_map(|m| m.keys)
-            .flat_map(|k| k.name.split(", "))
-        {
-            assert!(!ChannelSpec::default().has_key(key), "{key}");
+        // Every documented key parses under its own kind and is read back by name.
+        for m in LINK_MODELS {
+            for key in m.keys.iter().flat_map(|k| k.name.split(", ")) {
+                let s = spec(&format!("kind = \"{}\"\n{key} = 0.5", m.name));
+                assert_eq!(s.key(key), Some(0.5), "{key}");
+            }
         }
     }
 }
