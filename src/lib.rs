@@ -60,6 +60,7 @@
 //! let est = center.estimate();
 //! assert!((est.mean[0] - 10.0).abs() < 1.5, "position {}", est.mean[0]);
 //! ```
+pub mod decentralized;
 pub mod engine;
 pub mod filter;
 pub mod linalg;

@@ -6,7 +6,8 @@
 //! - a frame node n sends up to its parent: key n for its own frame, `forward_key(n, s)` for
 //!   one it forwards for source s, on the uplink's Gilbert–Elliott chain (key n), the ACKs on the
 //!   downlink's chain (key n, downlink);
-//! - a frame a parent sends down to child c: key c on the downlink side;
+//! - a frame a parent sends down to child c: key c on the downlink side, on the link's
+//!   `downlink` model (the direction the star's feedback takes; ideal unless the link gives one);
 //! - a frame over a link outside the routing tree: [`lateral_key`]`(a, b)` per direction, its
 //!   chain from the same key;
 //! - the m-th frame (m ≥ 1) of the same (link, direction, source) in one step (a consensus

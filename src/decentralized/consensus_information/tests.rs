@@ -1,0 +1,205 @@
+//! Consensus on information on a 4-node graph (three sensors and a naive node): its limits by
+//! hand (L → ∞: the Kalman filter with every R multiplied by N; L = 0 or every broadcast lost:
+//! each node's local Kalman filter) and its price per edge.
+use super::*;
+use crate::decentralized::weights::{WeightRule, Weights};
+use crate::network::channel::ChannelSpec;
+use crate::network::graph::driver::GraphDriver;
+use crate::network::radio::PHY_OVERHEAD_BITS;
+use crate::network::topology::spec::NetworkSpec;
+use crate::network::topology::Topology;
+
+/// s0 – s1 – s2 – sink – s0: a ring of four.
+fn ring(channel: &str) -> Topology {
+    let spec: NetworkSpec = toml::from_str(
+        "edges = [[\"s0\", \"s1\"], [\"s1\", \"s2\"], [\"s2\", \"sink\"], [\"sink\", \"s0\"]]",
+    )
+    .unwrap();
+    let c: ChannelSpec = toml::from_str(channel).unwrap();
+    Topology::build(&spec, &[None, None, None], Some(&c)).unwrap()
+}
+
+fn model() -> Model {
+    Model {
+        a: Matrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]),
+        q: Matrix::from_diagonal_element(2, 2, 0.1),
+    }
+}
+
+fn prior() -> Gaussian {
+    Gaussian::new(
+        Vector::from_vec(vec![0.0, 1.0]),
+        Matrix::from_diagonal_element(2, 2, 4.0),
+    )
+}
+
+/// The three sensors' (H, R).
+fn sensors() -> Vec<(Matrix, Matrix)> {
+    vec![
+        (
+            Matrix::from_row_slice(1, 2, &[1.0, 0.0]),
+            Matrix::from_element(1, 1, 1.0),
+        ),
+        (
+            Matrix::from_row_slice(1, 2, &[0.0, 1.0]),
+            Matrix::from_element(1, 1, 2.0),
+        ),
+        (
+            Matrix::from_row_slice(1, 2, &[1.0, 0.0]),
+            Matrix::from_element(1, 1, 0.5),
+        ),
+    ]
+}
+
+/// Readings z_k^i, deterministic.
+fn reading(k: usize, i: usize) -> Vector {
+    Vector::from_element(1, (k as f64 * 0.7 + i as f64).sin() * 3.0 + k as f64)
+}
+
+type Nodes = Vec<Box<dyn NetworkNode<InformationPair>>>;
+
+fn nodes(t: &Topology, iterations: usize) -> Nodes {
+    let edges: Vec<(usize, usize)> = t.links.iter().map(|l| (l.a, l.b)).collect();
+    let n = t.nodes.len();
+    let w = Weights::new(&WeightRule::MetropolisHastings, n, &edges).unwrap();
+    let s = sensors();
+    (0..n)
+        .map(|i| {
+            let neighbours = (0..n)
+                .filter(|&j| j != i && t.link(i, j).is_some())
+                .map(|j| (j, w.get(i, j)))
+                .collect();
+            let sensor = s.get(i).map(|(h, r)| (h, r));
+            Box::new(
+                ConsensusOnInformation::new(
+                    model(),
+                    &prior(),
+                    sensor,
+                    w.get(i, i),
+                    neighbours,
+                    iterations,
+                )
+                .unwrap(),
+            ) as Box<dyn NetworkNode<InformationPair>>
+        })
+        .collect()
+}
+
+/// Runs `steps` steps; after each, every node's estimate and the driver's counters.
+fn run(
+    t: &Topology,
+    iterations: usize,
+    steps: usize,
+) -> Vec<(
+    Vec<Gaussian>,
+    Vec<crate::network::topology::tally::NodeCounts>,
+)> {
+    let mut nodes = nodes(t, iterations);
+    let mut d = GraphDriver::new(t, ConsensusOnInformation::rounds(iterations), steps, 5, 0);
+    (1..=steps)
+        .map(|k| {
+            let z: Vec<Vector> = (0..3).map(|i| reading(k, i)).collect();
+            let readings: Vec<Option<&Vector>> = z.iter().map(Some).collect();
+            d.step(k, &mut nodes, &readings).unwrap();
+            let est = nodes
+                .iter()
+                .map(|x| x.estimate().unwrap().clone())
+                .collect();
+            (est, d.counts().to_vec())
+        })
+        .collect()
+}
+
+/// The information filter fusing sensors `which` with each (HᵀR⁻¹H, HᵀR⁻¹z) scaled by `scale`.
+fn reference(which: &[usize], scale: f64, steps: usize) -> Vec<Gaussian> {
+    let m = model();
+    let mut p = prior();
+    let s = sensors();
+    let mut out = Vec::new();
+    for k in 1..=steps {
+        let mut omega = inverse(&p.cov).unwrap();
+        let mut q = &omega * &p.mean;
+        for &i in which {
+            let (h, r) = &s[i];
+            let ht_rinv = h.transpose() * inverse(r).unwrap();
+            omega += &ht_rinv * h * scale;
+            q += &ht_rinv * reading(k, i) * scale;
+        }
+        let cov = inverse(&omega).unwrap();
+        let mean = &cov * q;
+        out.push(Gaussian::new(mean.clone(), cov.clone()));
+        p = Gaussian::new(&m.a * mean, &m.a * cov * m.a.transpose() + &m.q);
+    }
+    out
+}
+
+fn close(a: &Gaussian, b: &Gaussian, tol: f64) -> bool {
+    (&a.mean - &b.mean).amax() < tol && (&a.cov - &b.cov).amax() < tol
+}
+
+#[test]
+fn many_iterations_give_the_kalman_filter_with_every_r_times_n() {
+    // ρ of the 4-ring is 1/3: 200 iterations leave 1e-95 of the disagreement.
+    let steps = 10;
+    let got = run(&ring("kind = \"ideal\""), 200, steps);
+    let want = reference(&[0, 1, 2], 1.0 / 4.0, steps);
+    for (k, (est, _)) in got.iter().enumerate() {
+        for (i, e) in est.iter().enumerate() {
+            assert!(
+                close(e, &want[k], 1e-9),
+                "node {i}, step {}: {e:?} vs {:?}",
+                k + 1,
+                want[k]
+            );
+        }
+    }
+    // Not the all-data filter (N-fold inflated R): the limit is conservative.
+    let all = reference(&[0, 1, 2], 1.0, steps);
+    assert!(got[steps - 1].0[0].cov[(0, 0)] > all[steps - 1].cov[(0, 0)] * 1.5);
+}
+
+#[test]
+fn no_iteration_or_every_broadcast_lost_is_each_nodes_local_filter() {
+    let steps = 6;
+    // A parent's frames to its children cross the link's downlink (the tree's direction of the
+    // feedback): both directions lose everything.
+    let deaf = "kind = \"bernoulli\"\nloss = 1.0\ndownlink = { kind = \"bernoulli\", loss = 1.0 }";
+    let lost = run(&ring(deaf), 3, steps);
+    let silent = run(&ring("kind = \"ideal\""), 0, steps);
+    for got in [&silent, &lost] {
+        for (k, (est, _)) in got.iter().enumerate() {
+            for (i, e) in est.iter().enumerate() {
+                let local: Vec<usize> = if i < 3 { vec![i] } else { vec![] };
+                let want = reference(&local, 1.0, steps);
+                assert!(
+                    close(e, &want[k], 1e-12),
+                    "node {i}, step {}: {e:?} vs {:?}",
+                    k + 1,
+                    want[k]
+                );
+            }
+        }
+    }
+    // Without iterations nothing goes on air.
+    assert!(silent[0].1.iter().all(|c| c[0] == 0));
+    // Every broadcast lost is still on air: L frames per node and step, none received.
+    let (_, counts) = &lost[0];
+    for c in counts {
+        assert_eq!((c[0], c[2]), (3, 0));
+    }
+}
+
+#[test]
+fn every_iteration_is_one_broadcast_heard_by_each_neighbour() {
+    // L = 2 on the ring: each node sends 2 frames a step and receives 2 from each of its 2
+    // neighbours; a pair of a 2-state is 2 + 3 = 5 singles, 20 octets, in one MAC frame.
+    let got = run(&ring("kind = \"ideal\""), 2, 3);
+    let ppdu = mpdu_bits_for_payload(160) + PHY_OVERHEAD_BITS;
+    for (_, counts) in &got {
+        for c in counts {
+            // sent, bits sent, received, bits received; listens (windows) last.
+            assert_eq!(c[..4], [2, 2 * ppdu, 4, 4 * ppdu]);
+            assert_eq!(c[11], 4);
+        }
+    }
+}
