@@ -1,6 +1,7 @@
-//! Consensus on information on a 4-node graph (three sensors and a naive node): its limits by
-//! hand (L → ∞: the Kalman filter with every R multiplied by N; L = 0 or every broadcast lost:
-//! each node's local Kalman filter) and its price per edge.
+//! The consensus family on a 4-node ring (three sensors and a naive node): its limits by hand
+//! (CI, L → ∞: the Kalman filter with every R multiplied by N; CM, the hybrid and the ICF with
+//! ω = N, L → ∞: the all-data Kalman filter; CI with L = 0 or every broadcast lost: each node's
+//! local Kalman filter; the hybrid with ω = 1 is CI) and its price per edge.
 use super::*;
 use crate::decentralized::weights::{WeightRule, Weights};
 use crate::network::channel::ChannelSpec;
@@ -56,12 +57,12 @@ fn reading(k: usize, i: usize) -> Vector {
     Vector::from_element(1, (k as f64 * 0.7 + i as f64).sin() * 3.0 + k as f64)
 }
 
-type Nodes = Vec<Box<dyn NetworkNode<InformationPair>>>;
+type Nodes = Vec<Box<dyn NetworkNode<InformationPairs>>>;
 
-fn nodes(t: &Topology, iterations: usize) -> Nodes {
+fn nodes(t: &Topology, fusion: Fusion, rule: &WeightRule, iterations: usize) -> Nodes {
     let edges: Vec<(usize, usize)> = t.links.iter().map(|l| (l.a, l.b)).collect();
     let n = t.nodes.len();
-    let w = Weights::new(&WeightRule::MetropolisHastings, n, &edges).unwrap();
+    let w = Weights::new(rule, n, &edges).unwrap();
     let s = sensors();
     (0..n)
         .map(|i| {
@@ -71,7 +72,8 @@ fn nodes(t: &Topology, iterations: usize) -> Nodes {
                 .collect();
             let sensor = s.get(i).map(|(h, r)| (h, r));
             Box::new(
-                ConsensusOnInformation::new(
+                ConsensusNode::new(
+                    fusion,
                     model(),
                     &prior(),
                     sensor,
@@ -80,22 +82,27 @@ fn nodes(t: &Topology, iterations: usize) -> Nodes {
                     iterations,
                 )
                 .unwrap(),
-            ) as Box<dyn NetworkNode<InformationPair>>
+            ) as Box<dyn NetworkNode<InformationPairs>>
         })
         .collect()
 }
 
-/// Runs `steps` steps; after each, every node's estimate and the driver's counters.
-fn run(
-    t: &Topology,
-    iterations: usize,
-    steps: usize,
-) -> Vec<(
+type Steps = Vec<(
     Vec<Gaussian>,
     Vec<crate::network::topology::tally::NodeCounts>,
-)> {
-    let mut nodes = nodes(t, iterations);
-    let mut d = GraphDriver::new(t, ConsensusOnInformation::rounds(iterations), steps, 5, 0);
+)>;
+
+/// Runs `steps` steps of `fusion` with weights `rule`; after each, every node's estimate and
+/// the driver's counters.
+fn run_with(
+    t: &Topology,
+    fusion: Fusion,
+    rule: &WeightRule,
+    iterations: usize,
+    steps: usize,
+) -> Steps {
+    let mut nodes = nodes(t, fusion, rule, iterations);
+    let mut d = GraphDriver::new(t, ConsensusNode::rounds(iterations), steps, 5, 0);
     (1..=steps)
         .map(|k| {
             let z: Vec<Vector> = (0..3).map(|i| reading(k, i)).collect();
@@ -108,6 +115,12 @@ fn run(
             (est, d.counts().to_vec())
         })
         .collect()
+}
+
+/// CI with Metropolis weights.
+fn run(t: &Topology, iterations: usize, steps: usize) -> Steps {
+    let rule = WeightRule::MetropolisHastings;
+    run_with(t, Fusion::Information, &rule, iterations, steps)
 }
 
 /// The information filter fusing sensors `which` with each (HᵀR⁻¹H, HᵀR⁻¹z) scaled by `scale`.
@@ -202,4 +215,46 @@ fn every_iteration_is_one_broadcast_heard_by_each_neighbour() {
             assert_eq!(c[11], 4);
         }
     }
+}
+
+#[test]
+fn measurements_hybrid_and_icf_with_omega_n_give_the_all_data_filter() {
+    let steps = 8;
+    let all = reference(&[0, 1, 2], 1.0, steps);
+    let ideal = ring("kind = \"ideal\"");
+    let metropolis = WeightRule::MetropolisHastings;
+    for (fusion, rule, what) in [
+        (Fusion::Measurements { omega: 4.0 }, &metropolis, "CM"),
+        (Fusion::Hybrid { omega: 4.0 }, &metropolis, "HCMCI"),
+        (
+            Fusion::information_weighted(4),
+            &WeightRule::MaxDegree,
+            "ICF",
+        ),
+    ] {
+        let got = run_with(&ideal, fusion, rule, 300, steps);
+        for (k, (est, _)) in got.iter().enumerate() {
+            for (i, e) in est.iter().enumerate() {
+                assert!(close(e, &all[k], 1e-9), "{what}, node {i}, step {}", k + 1);
+            }
+        }
+    }
+}
+
+#[test]
+fn the_hybrid_with_omega_one_is_consensus_on_information() {
+    // Linearity: avg(Ω⁻) + avg(U) = avg(Ω⁻ + U), at any L and over lossy links alike.
+    let lossy =
+        ring("kind = \"bernoulli\"\nloss = 0.3\ndownlink = { kind = \"bernoulli\", loss = 0.3 }");
+    let rule = WeightRule::MetropolisHastings;
+    let ci = run_with(&lossy, Fusion::Information, &rule, 3, 10);
+    let hybrid = run_with(&lossy, Fusion::Hybrid { omega: 1.0 }, &rule, 3, 10);
+    for (k, ((a, _), (b, _))) in ci.iter().zip(&hybrid).enumerate() {
+        for (i, (x, y)) in a.iter().zip(b).enumerate() {
+            assert!(close(x, y, 1e-10), "node {i}, step {}", k + 1);
+        }
+    }
+    // The hybrid's frame carries two pairs: 10 singles, 40 octets of payload.
+    let ppdu = mpdu_bits_for_payload(320) + PHY_OVERHEAD_BITS;
+    assert_eq!(hybrid[0].1[0][1], 3 * ppdu);
 }
