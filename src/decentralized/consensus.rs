@@ -30,6 +30,7 @@
 //! arrive (a lost broadcast) is replaced by the node's own: its weight goes to the node (the row
 //! stays stochastic, so CI's result is still a Kullback–Leibler average and stays consistent; the
 //! network average drifts, as one-way drops do, Kar & Moura 2009).
+use super::spd_inverse as inverse;
 use crate::filter::Gaussian;
 use crate::linalg::{Matrix, Vector};
 use crate::link::codec802154::mpdu_bits_for_payload;
@@ -242,11 +243,6 @@ impl NetworkNode<InformationPairs> for ConsensusNode {
     fn estimate(&self) -> Option<&Gaussian> {
         Some(&self.estimate)
     }
-}
-
-/// The inverse of a symmetric positive definite matrix, or `None`.
-fn inverse(m: &Matrix) -> Option<Matrix> {
-    m.clone().cholesky().map(|c| c.inverse())
 }
 
 #[cfg(test)]

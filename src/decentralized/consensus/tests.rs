@@ -3,59 +3,11 @@
 //! ω = N, L → ∞: the all-data Kalman filter; CI with L = 0 or every broadcast lost: each node's
 //! local Kalman filter; the hybrid with ω = 1 is CI) and its price per edge.
 use super::*;
+use crate::decentralized::fixture::{close, model, prior, reading, reference, ring, sensors};
 use crate::decentralized::weights::{WeightRule, Weights};
-use crate::network::channel::ChannelSpec;
 use crate::network::graph::driver::GraphDriver;
 use crate::network::radio::PHY_OVERHEAD_BITS;
-use crate::network::topology::spec::NetworkSpec;
 use crate::network::topology::Topology;
-
-/// s0 – s1 – s2 – sink – s0: a ring of four.
-fn ring(channel: &str) -> Topology {
-    let spec: NetworkSpec = toml::from_str(
-        "edges = [[\"s0\", \"s1\"], [\"s1\", \"s2\"], [\"s2\", \"sink\"], [\"sink\", \"s0\"]]",
-    )
-    .unwrap();
-    let c: ChannelSpec = toml::from_str(channel).unwrap();
-    Topology::build(&spec, &[None, None, None], Some(&c)).unwrap()
-}
-
-fn model() -> Model {
-    Model {
-        a: Matrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]),
-        q: Matrix::from_diagonal_element(2, 2, 0.1),
-    }
-}
-
-fn prior() -> Gaussian {
-    Gaussian::new(
-        Vector::from_vec(vec![0.0, 1.0]),
-        Matrix::from_diagonal_element(2, 2, 4.0),
-    )
-}
-
-/// The three sensors' (H, R).
-fn sensors() -> Vec<(Matrix, Matrix)> {
-    vec![
-        (
-            Matrix::from_row_slice(1, 2, &[1.0, 0.0]),
-            Matrix::from_element(1, 1, 1.0),
-        ),
-        (
-            Matrix::from_row_slice(1, 2, &[0.0, 1.0]),
-            Matrix::from_element(1, 1, 2.0),
-        ),
-        (
-            Matrix::from_row_slice(1, 2, &[1.0, 0.0]),
-            Matrix::from_element(1, 1, 0.5),
-        ),
-    ]
-}
-
-/// Readings z_k^i, deterministic.
-fn reading(k: usize, i: usize) -> Vector {
-    Vector::from_element(1, (k as f64 * 0.7 + i as f64).sin() * 3.0 + k as f64)
-}
 
 type Nodes = Vec<Box<dyn NetworkNode<InformationPairs>>>;
 
@@ -121,33 +73,6 @@ fn run_with(
 fn run(t: &Topology, iterations: usize, steps: usize) -> Steps {
     let rule = WeightRule::MetropolisHastings;
     run_with(t, Fusion::Information, &rule, iterations, steps)
-}
-
-/// The information filter fusing sensors `which` with each (HᵀR⁻¹H, HᵀR⁻¹z) scaled by `scale`.
-fn reference(which: &[usize], scale: f64, steps: usize) -> Vec<Gaussian> {
-    let m = model();
-    let mut p = prior();
-    let s = sensors();
-    let mut out = Vec::new();
-    for k in 1..=steps {
-        let mut omega = inverse(&p.cov).unwrap();
-        let mut q = &omega * &p.mean;
-        for &i in which {
-            let (h, r) = &s[i];
-            let ht_rinv = h.transpose() * inverse(r).unwrap();
-            omega += &ht_rinv * h * scale;
-            q += &ht_rinv * reading(k, i) * scale;
-        }
-        let cov = inverse(&omega).unwrap();
-        let mean = &cov * q;
-        out.push(Gaussian::new(mean.clone(), cov.clone()));
-        p = Gaussian::new(&m.a * mean, &m.a * cov * m.a.transpose() + &m.q);
-    }
-    out
-}
-
-fn close(a: &Gaussian, b: &Gaussian, tol: f64) -> bool {
-    (&a.mean - &b.mean).amax() < tol && (&a.cov - &b.cov).amax() < tol
 }
 
 #[test]
