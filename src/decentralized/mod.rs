@@ -5,6 +5,7 @@ pub mod consensus;
 pub mod diffusion;
 #[cfg(test)]
 mod fixture;
+pub mod peer_fusion;
 pub mod weights;
 
 use crate::linalg::Matrix;
