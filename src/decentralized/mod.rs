@@ -5,6 +5,7 @@ pub mod consensus;
 pub mod diffusion;
 #[cfg(test)]
 mod fixture;
+pub mod kalman_consensus;
 pub mod peer_fusion;
 pub mod weights;
 
