@@ -18,6 +18,12 @@
 //! the Kalman filter of its neighbourhood's measurements. Every node knows its neighbours'
 //! (Hₗ, Rₗ), as the paper assumes, so a measurement crosses the air as its m singles.
 //!
+//! **Event-triggered** (Alanwar, Said, Mehta, Althoff, "Event-triggered diffusion Kalman
+//! filters", ICCPS 2020, §IV): a node takes part in a step's exchanges only when its local
+//! signal, the trace of its predicted covariance, exceeds a threshold τ; otherwise it neither
+//! sends nor listens and adapts with its own measurement alone. τ = 0 is the untriggered filter
+//! (tested); an unreachable τ leaves every node its local Kalman filter.
+//!
 //! On the graph: adapt-then-combine is three rounds (broadcast the measurement; adapt and
 //! broadcast ψ, n singles; combine and predict), combine-then-adapt two (broadcast the
 //! prediction and the measurement in one frame; combine, adapt and predict). A neighbour's
@@ -80,6 +86,10 @@ pub struct DiffusionNode {
     /// The node's own reading of the step.
     reading: Option<Vector>,
     estimate: Gaussian,
+    /// τ of the event trigger (`None`: always take part).
+    threshold: Option<f64>,
+    /// Whether the node takes part in the current step's exchanges.
+    fired: bool,
 }
 
 impl DiffusionNode {
@@ -118,7 +128,18 @@ impl DiffusionNode {
             adapted: prior.clone(),
             reading: None,
             estimate: prior.clone(),
+            threshold: None,
+            fired: true,
         })
+    }
+
+    /// The event-triggered form: exchange only at steps where tr(P⁻) > `threshold` (≥ 0).
+    pub fn triggered(mut self, threshold: f64) -> Result<Self, String> {
+        if threshold.is_nan() || threshold < 0.0 {
+            return Err(format!("threshold = {threshold} must be ≥ 0"));
+        }
+        self.threshold = Some(threshold);
+        Ok(self)
     }
 
     /// Rounds a step takes.
@@ -188,6 +209,21 @@ impl NetworkNode<DiffusionMessage> for DiffusionNode {
     ) -> Result<(), String> {
         let k = at.k;
         let own = self.sensors[self.me].as_ref().and(at.reading);
+        if at.round == 0 {
+            self.fired = self.threshold.is_none_or(|t| self.prior.cov.trace() > t);
+        }
+        if !self.fired {
+            // Not triggered: no exchange, the node's own measurement only.
+            if at.round == 0 {
+                self.reading = own.cloned();
+            }
+            if at.round + 1 == Self::rounds(self.order) {
+                let mine = self.reading.as_ref().map(|z| (self.me, z));
+                let estimate = self.adapt(&self.prior, mine.into_iter())?;
+                self.predict(estimate);
+            }
+            return Ok(());
+        }
         match (self.order, at.round) {
             (Order::AdaptThenCombine, 0) => {
                 self.reading = own.cloned();
@@ -247,13 +283,13 @@ impl NetworkNode<DiffusionMessage> for DiffusionNode {
         Ok(())
     }
 
-    /// One window per neighbour per exchange.
+    /// One window per neighbour per exchange it takes part in.
     fn windows(&self, _k: usize) -> u64 {
         let exchanges = match self.order {
             Order::AdaptThenCombine => 2,
             Order::CombineThenAdapt => 1,
         };
-        (self.neighbours.len() * exchanges) as u64
+        (self.neighbours.len() * exchanges * usize::from(self.fired)) as u64
     }
 
     fn estimate(&self) -> Option<&Gaussian> {

@@ -14,6 +14,17 @@ type Steps = Vec<(
 
 /// Every node of `t` (three sensors and the sink), combination weights `c(i, j)`.
 fn run(t: &Topology, order: Order, c: impl Fn(usize, usize) -> f64, steps: usize) -> Steps {
+    run_triggered(t, order, c, None, steps)
+}
+
+/// [`run`] with the event trigger at `threshold` (`None`: untriggered).
+fn run_triggered(
+    t: &Topology,
+    order: Order,
+    c: impl Fn(usize, usize) -> f64,
+    threshold: Option<f64>,
+    steps: usize,
+) -> Steps {
     let n = t.nodes.len();
     let mut all: Vec<Option<(Matrix, Matrix)>> = sensors().into_iter().map(Some).collect();
     all.push(None);
@@ -23,9 +34,13 @@ fn run(t: &Topology, order: Order, c: impl Fn(usize, usize) -> f64, steps: usize
                 .filter(|&j| j != i && t.link(i, j).is_some())
                 .map(|j| (j, c(j, i)))
                 .collect();
-            Box::new(
-                DiffusionNode::new(order, model(), &prior(), &all, i, c(i, i), neighbours).unwrap(),
-            ) as Box<dyn NetworkNode<DiffusionMessage>>
+            let node =
+                DiffusionNode::new(order, model(), &prior(), &all, i, c(i, i), neighbours).unwrap();
+            let node = match threshold {
+                Some(t) => node.triggered(t).unwrap(),
+                None => node,
+            };
+            Box::new(node) as Box<dyn NetworkNode<DiffusionMessage>>
         })
         .collect();
     let mut d = GraphDriver::new(t, DiffusionNode::rounds(order), steps, 3, 0);
@@ -114,4 +129,55 @@ fn combine_then_adapt_sends_one_frame_a_step() {
             assert_eq!((c[0], c[1], c[2], c[11]), (1, ppdu, 3, 3), "node {i}");
         }
     }
+}
+
+#[test]
+fn the_trigger_at_zero_is_the_untriggered_filter_and_never_is_the_local_one() {
+    let steps = 8;
+    let t = network(LINE, "kind = \"ideal\"");
+    let c = |a: usize, b: usize| if a == b { 0.5 } else { 0.25 };
+    for order in [Order::AdaptThenCombine, Order::CombineThenAdapt] {
+        let plain = run(&t, order, c, steps);
+        let zero = run_triggered(&t, order, c, Some(0.0), steps);
+        for (k, ((a, ca), (b, cb))) in plain.iter().zip(&zero).enumerate() {
+            assert_eq!(a, b, "{order:?}, step {}", k + 1);
+            assert_eq!(ca, cb);
+        }
+        // A threshold no covariance reaches: nothing on air, nobody listening, local filters.
+        let never = run_triggered(&t, order, c, Some(1e12), steps);
+        for (k, (est, counts)) in never.iter().enumerate() {
+            assert!(counts.iter().all(|x| x[0] == 0 && x[11] == 0));
+            for (i, e) in est.iter().enumerate() {
+                let local: Vec<usize> = if i < 3 { vec![i] } else { vec![] };
+                assert!(
+                    close(e, &reference(&local, 1.0, steps)[k], 1e-10),
+                    "node {i}, step {}",
+                    k + 1
+                );
+            }
+        }
+        // In between: the nodes whose prediction is uncertain talk, the others save frames.
+        let some = run_triggered(&t, order, c, Some(1.0), steps);
+        let frames = |r: &Steps| {
+            r.iter()
+                .flat_map(|(_, c)| c.iter().map(|x| x[0]))
+                .sum::<u64>()
+        };
+        assert!(
+            0 < frames(&some) && frames(&some) < frames(&plain),
+            "{order:?}"
+        );
+    }
+    assert!(DiffusionNode::new(
+        Order::AdaptThenCombine,
+        model(),
+        &prior(),
+        &[],
+        0,
+        1.0,
+        vec![]
+    )
+    .unwrap()
+    .triggered(-1.0)
+    .is_err());
 }
