@@ -7,6 +7,11 @@
 //!   whatever the cross-covariance of the two, so the peers' shared history (their common prior,
 //!   each other's fused estimates) is never counted twice; several neighbours are folded in one
 //!   after another, each fold consistent.
+//! - **Inverse covariance intersection** (Noack, Sijs, Reinhardt, Hanebeck, "Decentralized data
+//!   fusion with inverse covariance intersection", Automatica 79, 2017, Theorem 2):
+//!   P⁻¹ = A⁻¹ + B⁻¹ − (ωA + (1 − ω)B)⁻¹, x̂ = Ka + Lb with K = P(A⁻¹ − ω(ωA + (1 − ω)B)⁻¹),
+//!   L = P(B⁻¹ − (1 − ω)(ωA + (1 − ω)B)⁻¹), ω minimizing det P: consistent when the two share
+//!   unknown common information (not for arbitrary correlation), and tighter than CI there.
 //! - **Naive fusion**, kept as the counterexample: the estimates fused as if independent,
 //!   P⁻¹ = Σ Pᵢ⁻¹, x̂ = P Σ Pᵢ⁻¹x̂ᵢ. On any graph with a loop (or any exchange repeated over
 //!   steps) the common information is counted again at every fusion: the covariance shrinks far
@@ -27,6 +32,7 @@ use crate::network::graph::{Address, Envelope, NetworkNode, Outbox, Payload, Rou
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Rule {
     CovarianceIntersection,
+    InverseCovarianceIntersection,
     /// Independent fusion: inconsistent on loops (the counterexample).
     Naive,
 }
@@ -102,6 +108,9 @@ impl PeerFusionNode {
             Rule::CovarianceIntersection => others
                 .iter()
                 .try_fold(self.local.clone(), |a, b| intersect(&a, b)),
+            Rule::InverseCovarianceIntersection => others
+                .iter()
+                .try_fold(self.local.clone(), |a, b| inverse_intersect(&a, b)),
             Rule::Naive => {
                 let mut omega = Matrix::zeros(self.local.cov.nrows(), self.local.cov.ncols());
                 let mut q = Vector::zeros(self.local.mean.len());
@@ -117,14 +126,9 @@ impl PeerFusionNode {
     }
 }
 
-/// Covariance intersection of `a` and `b` with ω minimizing det P (golden section on [0, 1];
-/// det P⁻¹ is log-concave in ω, so the minimum of det P is unique).
-pub fn intersect(a: &Gaussian, b: &Gaussian) -> Result<Gaussian, String> {
-    let ia = inverse(&a.cov).ok_or("an estimate is not positive definite")?;
-    let ib = inverse(&b.cov).ok_or("an estimate is not positive definite")?;
-    // Maximize det(ω A⁻¹ + (1 − ω) B⁻¹), i.e. minimize det P.
-    let info = |w: f64| &ia * w + &ib * (1.0 - w);
-    let score = |w: f64| info(w).determinant();
+/// The ω in [0, 1] maximizing `score` (golden section, then the ends: one estimate alone may
+/// be best). The scores here (det P⁻¹ of CI and ICI) are unimodal in ω.
+fn best_omega(score: impl Fn(f64) -> f64) -> f64 {
     let g = (5f64.sqrt() - 1.0) / 2.0;
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
     let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
@@ -143,15 +147,53 @@ pub fn intersect(a: &Gaussian, b: &Gaussian) -> Result<Gaussian, String> {
         }
     }
     let mut w = (lo + hi) / 2.0;
-    // The ends: one estimate alone may be best.
     for end in [0.0, 1.0] {
         if score(end) >= score(w) {
             w = end;
         }
     }
-    let cov = inverse(&info(w)).ok_or("the intersection is singular")?;
+    w
+}
+
+/// Covariance intersection of `a` and `b` with ω minimizing det P.
+pub fn intersect(a: &Gaussian, b: &Gaussian) -> Result<Gaussian, String> {
+    let ia = inverse(&a.cov).ok_or("an estimate is not positive definite")?;
+    let ib = inverse(&b.cov).ok_or("an estimate is not positive definite")?;
+    let info = |w: f64| &ia * w + &ib * (1.0 - w);
+    let w = best_omega(|w| info(w).determinant());
+    intersect_at(a, b, w)
+}
+
+/// Covariance intersection of `a` and `b` at a given ω.
+pub fn intersect_at(a: &Gaussian, b: &Gaussian, w: f64) -> Result<Gaussian, String> {
+    let ia = inverse(&a.cov).ok_or("an estimate is not positive definite")?;
+    let ib = inverse(&b.cov).ok_or("an estimate is not positive definite")?;
+    let cov = inverse(&(&ia * w + &ib * (1.0 - w))).ok_or("the intersection is singular")?;
     let mean = &cov * (&ia * &a.mean * w + &ib * &b.mean * (1.0 - w));
     Ok(Gaussian::new(mean, cov))
+}
+
+/// Inverse covariance intersection of `a` and `b` with ω minimizing det P.
+pub fn inverse_intersect(a: &Gaussian, b: &Gaussian) -> Result<Gaussian, String> {
+    let ia = inverse(&a.cov).ok_or("an estimate is not positive definite")?;
+    let ib = inverse(&b.cov).ok_or("an estimate is not positive definite")?;
+    let info = |w: f64| {
+        let mix = &a.cov * w + &b.cov * (1.0 - w);
+        inverse(&mix).map(|m| &ia + &ib - m)
+    };
+    let w = best_omega(|w| info(w).map_or(f64::NEG_INFINITY, |m| m.determinant()));
+    inverse_intersect_at(a, b, w)
+}
+
+/// Inverse covariance intersection of `a` and `b` at a given ω.
+pub fn inverse_intersect_at(a: &Gaussian, b: &Gaussian, w: f64) -> Result<Gaussian, String> {
+    let ia = inverse(&a.cov).ok_or("an estimate is not positive definite")?;
+    let ib = inverse(&b.cov).ok_or("an estimate is not positive definite")?;
+    let mix = inverse(&(&a.cov * w + &b.cov * (1.0 - w))).ok_or("ωA + (1 − ω)B is singular")?;
+    let cov = inverse(&(&ia + &ib - &mix)).ok_or("the inverse intersection is singular")?;
+    let k = &cov * (&ia - &mix * w);
+    let l = &cov * (&ib - &mix * (1.0 - w));
+    Ok(Gaussian::new(k * &a.mean + l * &b.mean, cov))
 }
 
 impl NetworkNode<Estimate> for PeerFusionNode {

@@ -40,6 +40,27 @@ fn scalar_intersection_keeps_the_better_estimate() {
     );
 }
 
+#[test]
+fn inverse_intersection_by_hand() {
+    // Scalars a = 1, b = 4 (the digest's §1.6): at ω = 0.9, 1/P = 1 + 1/4 − 1/(0.9 + 0.4) =
+    // 0.48077, P = 2.08 > P_CI = 1/(0.9 + 0.025) = 1.081; at the best ω both keep min(a, b) = 1.
+    let (a, b) = (scalar(3.0, 1.0), scalar(-2.0, 4.0));
+    let ici = inverse_intersect_at(&a, &b, 0.9).unwrap();
+    let ci = intersect_at(&a, &b, 0.9).unwrap();
+    let want = 1.0 / (1.25 - 1.0 / 1.3);
+    assert!((ici.cov[(0, 0)] - want).abs() < 1e-12, "{ici:?}");
+    assert!((ci.cov[(0, 0)] - 1.0 / 0.925).abs() < 1e-12);
+    assert!(ici.cov[(0, 0)] > ci.cov[(0, 0)]);
+    let best = inverse_intersect(&a, &b).unwrap();
+    assert!(
+        (best.cov[(0, 0)] - 1.0).abs() < 1e-9 && (best.mean[0] - 3.0).abs() < 1e-6,
+        "{best:?}"
+    );
+    // K + L = I: the fusion of two equal means is that mean.
+    let same = inverse_intersect_at(&scalar(2.0, 1.0), &scalar(2.0, 3.0), 0.4).unwrap();
+    assert!((same.mean[0] - 2.0).abs() < 1e-12);
+}
+
 /// `s` sensors and the sink linked by `edges` (node indices; the sink is `s`).
 fn graph(s: usize, edges: &[(usize, usize)]) -> Topology {
     let name = |i: usize| {
@@ -138,13 +159,23 @@ fn anees(t: &Topology, rule: Rule, trials: usize, steps: usize, seed: u64) -> (f
 }
 
 #[test]
-fn covariance_intersection_is_consistent_on_random_graphs() {
+fn covariance_intersections_are_consistent_on_random_graphs() {
     // ANEES of a consistent 2-state estimator is at most 2; allow 3 Monte Carlo standard errors.
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(40);
     for g in 0..3 {
         let t = graph(5, &random_edges(6, 3, &mut rng));
-        let (mean, se) = anees(&t, Rule::CovarianceIntersection, 200, 20, 7 + g);
-        assert!(mean <= 2.0 + 3.0 * se, "graph {g}: ANEES {mean} ± {se}");
+        // Inverse CI too: the peers' correlation is their common information (prior, shared
+        // past), the case it is made for.
+        for rule in [
+            Rule::CovarianceIntersection,
+            Rule::InverseCovarianceIntersection,
+        ] {
+            let (mean, se) = anees(&t, rule, 200, 20, 7 + g);
+            assert!(
+                mean <= 2.0 + 3.0 * se,
+                "{rule:?}, graph {g}: ANEES {mean} ± {se}"
+            );
+        }
     }
 }
 
