@@ -15,8 +15,9 @@
 //! graph with a loop the same information arrives twice and is counted twice, so
 //! [`check_network`] refuses loops; it also refuses lossy links (a lost broadcast leaves the two
 //! copies of a channel different, and the estimate with them).
-use super::consensus::{Model, Pair};
+use super::consensus::Pair;
 use super::spd_inverse as inverse;
+use super::{heard, sensor_information, Model, SensorInformation};
 use crate::filter::Gaussian;
 use crate::linalg::Matrix;
 use crate::link::codec802154::mpdu_bits_for_payload;
@@ -60,8 +61,7 @@ pub fn check_network(net: &Topology) -> Result<(), String> {
 /// One node of the channel filter.
 pub struct ChannelFilterNode {
     model: Model,
-    /// (HᵀR⁻¹, HᵀR⁻¹H) of its sensor, if it has one.
-    sensor: Option<(Matrix, Matrix)>,
+    sensor: Option<SensorInformation>,
     neighbours: Vec<usize>,
     /// (Y⁻, y⁻) before the step, (Y, y) during it.
     info: Pair,
@@ -81,15 +81,7 @@ impl ChannelFilterNode {
     ) -> Result<Self, String> {
         let y = inverse(&prior.cov).ok_or("the prior covariance is not positive definite")?;
         let info = (y.clone(), &y * &prior.mean);
-        let sensor = match sensor {
-            Some((h, r)) => {
-                let r_inv = inverse(r).ok_or("a sensor's R is not positive definite")?;
-                let ht_rinv = h.transpose() * r_inv;
-                let u = &ht_rinv * h;
-                Some((ht_rinv, u))
-            }
-            None => None,
-        };
+        let sensor = sensor_information(sensor)?;
         Ok(Self {
             model,
             sensor,
@@ -103,11 +95,9 @@ impl ChannelFilterNode {
     /// The prediction of an information pair with the model.
     fn predict(&self, (y, v): &Pair) -> Result<Pair, String> {
         let p = inverse(y).ok_or("an information matrix is not positive definite")?;
-        let a = &self.model.a;
-        let mean = a * (&p * v);
-        let cov = a * p * a.transpose() + &self.model.q;
-        let y = inverse(&cov).ok_or("a predicted covariance is singular")?;
-        let v = &y * mean;
+        let predicted = self.model.predict(&Gaussian::new(&p * v, p));
+        let y = inverse(&predicted.cov).ok_or("a predicted covariance is singular")?;
+        let v = &y * predicted.mean;
         Ok((y, v))
     }
 }
@@ -129,10 +119,9 @@ impl NetworkNode<InformationEstimate> for ChannelFilterNode {
         }
         let sent = self.info.clone();
         for (c, &j) in self.channels.iter_mut().zip(&self.neighbours) {
-            let Some(e) = inbox.iter().find(|e| e.source == j && e.sent == at.k) else {
+            let Some(InformationEstimate((yj, vj))) = heard(inbox, j, at.k) else {
                 continue;
             };
-            let (yj, vj) = &e.payload.0;
             self.info.0 += yj - &c.0;
             self.info.1 += vj - &c.1;
             *c = (&sent.0 + yj - &c.0, &sent.1 + vj - &c.1);

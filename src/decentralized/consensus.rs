@@ -31,6 +31,7 @@
 //! stays stochastic, so CI's result is still a Kullback–Leibler average and stays consistent; the
 //! network average drifts, as one-way drops do, Kar & Moura 2009).
 use super::spd_inverse as inverse;
+use super::{sensor_information, Model, SensorInformation};
 use crate::filter::Gaussian;
 use crate::linalg::{Matrix, Vector};
 use crate::link::codec802154::mpdu_bits_for_payload;
@@ -76,18 +77,11 @@ impl Fusion {
     }
 }
 
-/// The linear model every node knows: x' = A x + w, w ~ N(0, Q).
-#[derive(Debug, Clone)]
-pub struct Model {
-    pub a: Matrix,
-    pub q: Matrix,
-}
-
 /// One node's filter.
 pub struct ConsensusNode {
     model: Model,
     /// (Hᵀ R⁻¹, Hᵀ R⁻¹ H) of the node's sensor, if it has one.
-    sensor: Option<(Matrix, Matrix)>,
+    sensor: Option<SensorInformation>,
     /// πᵢᵢ and (j, πᵢⱼ) for every neighbour j.
     own_weight: f64,
     neighbours: Vec<(usize, f64)>,
@@ -116,15 +110,7 @@ impl ConsensusNode {
     ) -> Result<Self, String> {
         let omega = inverse(&prior.cov).ok_or("the prior covariance is not positive definite")?;
         let q = &omega * &prior.mean;
-        let sensor = match sensor {
-            Some((h, r)) => {
-                let r_inv = inverse(r).ok_or("a sensor's R is not positive definite")?;
-                let ht_rinv = h.transpose() * r_inv;
-                let u = &ht_rinv * h;
-                Some((ht_rinv, u))
-            }
-            None => None,
-        };
+        let sensor = sensor_information(sensor)?;
         Ok(Self {
             model,
             sensor,
@@ -198,12 +184,10 @@ impl ConsensusNode {
     fn predict(&mut self) -> Result<(), String> {
         let (omega, q) = self.corrected();
         let p = inverse(&omega).ok_or("the fused information is not positive definite")?;
-        let mean = &p * q;
-        let a = &self.model.a;
-        let p_pred = a * &p * a.transpose() + &self.model.q;
-        let omega_pred = inverse(&p_pred).ok_or("the predicted covariance is singular")?;
-        let q_pred = &omega_pred * (a * &mean);
-        self.estimate = Gaussian::new(mean, p);
+        self.estimate = Gaussian::new(&p * q, p);
+        let predicted = self.model.predict(&self.estimate);
+        let omega_pred = inverse(&predicted.cov).ok_or("the predicted covariance is singular")?;
+        let q_pred = &omega_pred * &predicted.mean;
         self.prior = (omega_pred, q_pred);
         Ok(())
     }

@@ -35,8 +35,8 @@ use crate::link::codec802154::mpdu_bits_for_payload;
 use crate::link::message::BITS_PER_COMPONENT;
 use crate::network::graph::{Address, Envelope, NetworkNode, Outbox, Payload, Round};
 
-use super::consensus::Model;
 use super::spd_inverse as inverse;
+use super::{sensor_information, Model, SensorInformation};
 
 /// Adapt-then-combine (Algorithm 1) or combine-then-adapt.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,9 +65,6 @@ impl Payload for DiffusionMessage {
         mpdu_bits_for_payload(BITS_PER_COMPONENT * singles as u64)
     }
 }
-
-/// A sensor's (HᵀR⁻¹, HᵀR⁻¹H).
-type SensorInformation = (Matrix, Matrix);
 
 /// One node of the diffusion Kalman filter.
 pub struct DiffusionNode {
@@ -106,16 +103,7 @@ impl DiffusionNode {
     ) -> Result<Self, String> {
         let sensors = sensors
             .iter()
-            .map(|s| {
-                s.as_ref()
-                    .map(|(h, r)| {
-                        let r_inv = inverse(r).ok_or("a sensor's R is not positive definite")?;
-                        let ht_rinv = h.transpose() * r_inv;
-                        let u = &ht_rinv * h;
-                        Ok::<_, String>((ht_rinv, u))
-                    })
-                    .transpose()
-            })
+            .map(|s| sensor_information(s.as_ref().map(|(h, r)| (h, r))))
             .collect::<Result<_, _>>()?;
         Ok(Self {
             order,
@@ -178,11 +166,7 @@ impl DiffusionNode {
     }
 
     fn predict(&mut self, estimate: Gaussian) {
-        let a = &self.model.a;
-        self.prior = Gaussian::new(
-            a * &estimate.mean,
-            a * &estimate.cov * a.transpose() + &self.model.q,
-        );
+        self.prior = self.model.predict(&estimate);
         self.estimate = estimate;
     }
 }

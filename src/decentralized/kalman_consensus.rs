@@ -13,8 +13,8 @@
 //!
 //! On the graph a step is two rounds: (0) broadcast x̄ᵢ (n singles); (1) update with the
 //! neighbours' predictions that arrived (a lost one is left out of the sum), then predict.
-use super::consensus::Model;
 use super::spd_inverse as inverse;
+use super::{heard, Model};
 use crate::filter::Gaussian;
 use crate::linalg::{Matrix, Vector};
 use crate::link::codec802154::mpdu_bits_for_payload;
@@ -108,19 +108,10 @@ impl NetworkNode<Prediction> for KalmanConsensusNode {
         let others: Vec<&Vector> = self
             .neighbours
             .iter()
-            .filter_map(|&j| {
-                inbox
-                    .iter()
-                    .find(|e| e.source == j && e.sent == at.k)
-                    .map(|e| &e.payload.0)
-            })
+            .filter_map(|&j| heard(inbox, j, at.k).map(|p| &p.0))
             .collect();
         self.estimate = self.update(at.reading, &others)?;
-        let a = &self.model.a;
-        self.prior = Gaussian::new(
-            a * &self.estimate.mean,
-            a * &self.estimate.cov * a.transpose() + &self.model.q,
-        );
+        self.prior = self.model.predict(&self.estimate);
         Ok(())
     }
 

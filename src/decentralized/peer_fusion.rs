@@ -20,8 +20,8 @@
 //! On the graph a step is two rounds: (0) predict-corrected local estimate, broadcast (x̂, P) in
 //! one frame (n + n(n+1)/2 singles); (1) fuse with what arrived (a lost estimate is left out),
 //! then predict.
-use super::consensus::Model;
 use super::spd_inverse as inverse;
+use super::{heard, sensor_information, Model, SensorInformation};
 use crate::filter::Gaussian;
 use crate::linalg::{Matrix, Vector};
 use crate::link::codec802154::mpdu_bits_for_payload;
@@ -53,8 +53,7 @@ impl Payload for Estimate {
 pub struct PeerFusionNode {
     rule: Rule,
     model: Model,
-    /// (HᵀR⁻¹, HᵀR⁻¹H) of its sensor, if it has one.
-    sensor: Option<(Matrix, Matrix)>,
+    sensor: Option<SensorInformation>,
     neighbours: Vec<usize>,
     prior: Gaussian,
     local: Gaussian,
@@ -72,15 +71,7 @@ impl PeerFusionNode {
         sensor: Option<(&Matrix, &Matrix)>,
         neighbours: Vec<usize>,
     ) -> Result<Self, String> {
-        let sensor = match sensor {
-            Some((h, r)) => {
-                let r_inv = inverse(r).ok_or("a sensor's R is not positive definite")?;
-                let ht_rinv = h.transpose() * r_inv;
-                let u = &ht_rinv * h;
-                Some((ht_rinv, u))
-            }
-            None => None,
-        };
+        let sensor = sensor_information(sensor)?;
         Ok(Self {
             rule,
             model,
@@ -211,19 +202,10 @@ impl NetworkNode<Estimate> for PeerFusionNode {
         let others: Vec<&Gaussian> = self
             .neighbours
             .iter()
-            .filter_map(|&j| {
-                inbox
-                    .iter()
-                    .find(|e| e.source == j && e.sent == at.k)
-                    .map(|e| &e.payload.0)
-            })
+            .filter_map(|&j| heard(inbox, j, at.k).map(|e| &e.0))
             .collect();
         self.estimate = self.fuse(&others)?;
-        let a = &self.model.a;
-        self.prior = Gaussian::new(
-            a * &self.estimate.mean,
-            a * &self.estimate.cov * a.transpose() + &self.model.q,
-        );
+        self.prior = self.model.predict(&self.estimate);
         Ok(())
     }
 
