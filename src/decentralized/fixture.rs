@@ -1,8 +1,8 @@
 //! What the decentralized schemes' tests share: a 2-state constant-velocity target watched by
 //! three sensors (position, velocity, position) on small graphs, deterministic readings, and the
 //! information filter that fuses a chosen set of them (the limits the schemes must reach).
-use super::Model;
 use super::spd_inverse as inverse;
+use super::Model;
 use crate::filter::Gaussian;
 use crate::linalg::{Matrix, Vector};
 use crate::network::channel::ChannelSpec;
