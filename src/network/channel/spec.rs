@@ -4,33 +4,23 @@
 //! model that documents them ([`super::models`]): adding a link model is writing its file there,
 //! nothing here. Parsing accepts any registered key so that a key of another kind can be named by
 //! [`ChannelSpec::validate`], which then checks that the keys fit the kind and their values.
-use serde::{Deserialize, Serialize, Serializer};
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-/// The loss model of a link: a registered model ([`super::models::LINK_MODELS`]), by its name
-/// ([`ChannelKind::named`] finds one, [`ChannelKind::model`] gives its behaviour).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ChannelKind(pub(super) &'static str);
+/// The loss model of a link: a registered model ([`super::models::LINK_MODELS`]), by its place
+/// in the registry ([`ChannelKind::named`] finds one by name, [`ChannelKind::model`] gives its
+/// behaviour at no cost: fates ask it once per slot).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct ChannelKind(pub(super) usize);
 
 impl ChannelKind {
-    /// Every packet arrives: the link of a scenario without `[channel]`.
-    pub const IDEAL: ChannelKind = ChannelKind("ideal");
-
-    /// The name used in the scenario file.
-    pub fn name(self) -> &'static str {
-        self.0
-    }
+    /// Every packet arrives: the link of a scenario without `[channel]` (the registry's first).
+    pub const IDEAL: ChannelKind = ChannelKind(0);
 }
 
 impl Default for ChannelKind {
     fn default() -> Self {
         ChannelKind::IDEAL
-    }
-}
-
-impl Serialize for ChannelKind {
-    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(self.0)
     }
 }
 

@@ -145,10 +145,13 @@ pub const COMMON_KEYS: &[KeyDoc] = &[
 
 /// The registered model of `kind`.
 pub fn of(kind: ChannelKind) -> &'static LinkModel {
-    LINK_MODELS
-        .iter()
-        .find(|m| m.name == kind.name())
-        .expect("every kind is registered")
+    LINK_MODELS[kind.0]
+}
+
+impl std::fmt::Debug for ChannelKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "ChannelKind({:?})", self.name())
+    }
 }
 
 impl ChannelKind {
@@ -156,8 +159,13 @@ impl ChannelKind {
     pub fn named(name: &str) -> Option<Self> {
         LINK_MODELS
             .iter()
-            .find(|m| m.name == name)
-            .map(|m| ChannelKind(m.name))
+            .position(|m| m.name == name)
+            .map(ChannelKind)
+    }
+
+    /// The name used in the scenario file.
+    pub fn name(self) -> &'static str {
+        self.model().name
     }
 
     /// Its registered model.
@@ -331,6 +339,7 @@ mod tests {
     /// Every kind is registered once, and its long-run loss is what its keys say by hand.
     #[test]
     fn every_kind_once_and_its_belief_by_hand() {
+        assert_eq!(ChannelKind::IDEAL.name(), "ideal");
         for m in LINK_MODELS {
             assert_eq!(LINK_MODELS.iter().filter(|n| n.name == m.name).count(), 1);
             assert_eq!(ChannelKind::named(m.name).map(|k| k.name()), Some(m.name));
