@@ -58,7 +58,8 @@ pub(crate) fn heard<P>(inbox: &[Envelope<P>], j: usize, k: usize) -> Option<&P> 
         .map(|e| &e.payload)
 }
 
-/// The inverse of a symmetric positive definite matrix (by its Cholesky factor), or `None`.
+/// The inverse of a symmetric positive definite matrix ([`crate::linalg::spd_inverse`]), or
+/// `None` (each caller says which matrix it was).
 pub(crate) fn spd_inverse(m: &Matrix) -> Option<Matrix> {
-    m.clone().cholesky().map(|c| c.inverse())
+    crate::linalg::spd_inverse(m).ok()
 }
