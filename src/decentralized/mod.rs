@@ -8,6 +8,7 @@ pub mod diffusion;
 mod fixture;
 pub mod kalman_consensus;
 pub mod peer_fusion;
+pub mod trial;
 pub mod weights;
 
 use crate::filter::Gaussian;

@@ -3,6 +3,7 @@
 pub mod calibrate;
 pub mod fusion_side;
 pub mod link_layer;
+pub mod peers;
 pub mod replay;
 pub mod runner;
 pub mod star_nodes;

@@ -380,6 +380,10 @@ fn run_variant(
     sums: &mut Sums,
     scratch: &mut LoopBuffers,
 ) -> Result<(), RunError> {
+    if let Some(peers) = exp.variants[v].scheme.peers() {
+        crate::engine::peers::run_variant(exp, trial, v, peers, data, sums);
+        return Ok(());
+    }
     let label = &exp.curves[exp.variants[v].curve].label;
     let mut obs = sums.trial(&exp.groups, exp.steady_from);
     let spec = TrialSpec {

@@ -215,7 +215,7 @@ pub fn star_nodes(
     let (fusion, sensors) =
         FusionSide::with_seed(exp, variant, trial, center_seed).map_err(|e| e.to_string())?;
     let schedule = v.scheme.schedule();
-    let sink = net.sink();
+    let sink = net.sink_for("a center scheme")?;
     // Every sensor holds the feedback made from the prior before the first step (it knows it).
     let initial = fusion.feedback().cloned();
     let listens_feedback = initial.is_some();
@@ -266,7 +266,7 @@ pub fn run_star_trial(
 ) -> Result<Vec<(Gaussian, Vec<NodeCounts>)>, String> {
     let (net, mut nodes) = star_nodes(exp, variant, trial, stream)?;
     let mut driver = GraphDriver::new(&net, STAR_ROUNDS, exp.steps, exp.seed, trial as u64);
-    let sink = net.sink();
+    let sink = net.sink_for("a center scheme")?;
     let mut steps = Vec::with_capacity(measurements.len());
     for (j, readings) in measurements.iter().enumerate() {
         let readings: Vec<Option<&Vector>> = readings.iter().map(Some).collect();

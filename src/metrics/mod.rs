@@ -1,6 +1,7 @@
 //! Metrics as mergeable sums, the summaries computed from them, and the bounds no scheme
 //! can beat.
 pub mod energy;
+pub mod estimators;
 mod failed;
 pub mod finite;
 pub mod floor;

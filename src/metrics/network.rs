@@ -76,10 +76,10 @@ pub struct NetworkSummary {
 /// reports.
 pub fn summarize(
     exp: &Experiment,
+    net: &Topology,
     sums: &Sums,
     aggregated: bool,
-) -> Option<(NetworkSummary, EnergySummary)> {
-    let net: &Topology = exp.network.as_deref()?;
+) -> (NetworkSummary, EnergySummary) {
     let node_steps = (sums.trials * sums.steps) as f64;
     let per = node_steps.max(1.0);
     let mut total = EnergyParts::default();
@@ -131,7 +131,7 @@ pub fn summarize(
         energy_parts_per_step_uj: total,
         lifetime_days: first_to_die.as_ref().map(|f| f.lifetime_days),
     };
-    Some((
+    (
         NetworkSummary {
             aggregated,
             nodes,
@@ -140,7 +140,7 @@ pub fn summarize(
             first_to_die,
         },
         energy,
-    ))
+    )
 }
 
 /// Column `c` of [`Sums::hops`] per step, as a mean over the trials (zeros where nothing was
@@ -153,15 +153,20 @@ fn hops_column(sums: &Sums, c: usize) -> Vec<f64> {
     }
 }
 
-/// A variant's energy and, over a multi-hop network, its network summary ([`summarize`]); on a
-/// star, the sensors' energy of [`crate::metrics::energy::of_variant`].
+/// A variant's energy and, over a multi-hop network (or the graph a decentralized scheme runs
+/// on, [`Experiment::graph_of`]), its network summary ([`summarize`]); on a star, the sensors'
+/// energy of [`crate::metrics::energy::of_variant`].
 pub fn energy_and_network(
     exp: &Experiment,
     v: &crate::scenario::build::Variant,
     sums: &Sums,
 ) -> (EnergySummary, Option<NetworkSummary>) {
-    match summarize(exp, sums, v.aggregated(exp.network.as_deref())) {
-        Some((network, energy)) => (energy, Some(network)),
+    match exp.graph_of(v) {
+        Some(net) => {
+            let (network, energy) =
+                summarize(exp, &net, sums, v.aggregated(exp.network.as_deref()));
+            (energy, Some(network))
+        }
         None => (crate::metrics::energy::of_variant(exp, v, sums), None),
     }
 }

@@ -120,6 +120,11 @@ pub struct SchemeSummary {
     /// node to die ([`crate::metrics::network`]); absent on a star.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub network: Option<crate::metrics::network::NetworkSummary>,
+    /// A decentralized scheme (every node estimates; the row is the mean over its nodes): each
+    /// node's steady-state MSE, ANEES and energy, the worst node and the nodes' disagreement
+    /// ([`crate::metrics::estimators`]); absent for a scheme with one estimate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimators: Option<crate::metrics::estimators::EstimatorsSummary>,
     /// The entropy-coded rate `R_eff`, bits per step: each sensor's send-or-silence decision
     /// (its binary entropy) plus its payload once per message ([`crate::metrics::floor`]).
     pub r_eff_per_step: f64,
@@ -299,6 +304,14 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 |v: Vec<f64>| -> Vec<f64> { v.into_iter().map(|x| x / n_sensors).collect() };
             let traffic_per_step = TrafficPerStep::of(&col, &col_se, &per_sensor);
             let (energy, network) = crate::metrics::network::energy_and_network(exp, v, s);
+            let estimators = exp.graph_of(v).and_then(|net| {
+                crate::metrics::estimators::summarize(
+                    &net,
+                    s,
+                    exp.system.state_dim(),
+                    network.as_ref(),
+                )
+            });
             let p_div = s.diverged as f64 / trials;
             let anees_per_step: Vec<f64> = col(Layout::NEES).into_iter().map(|x| x / n).collect();
             let messages: f64 = col(Layout::MESSAGES).iter().sum();
@@ -359,6 +372,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 downlink_bits_per_step_se: run_se(Layout::DOWNLINK_BITS, 1.0),
                 energy,
                 network,
+                estimators,
                 r_eff_per_step: crate::metrics::floor::r_eff_of(exp, s, bits, messages),
                 floor_mse: None,
                 traffic_per_step,

@@ -281,6 +281,13 @@ pub fn build_with(
             path_loss.as_deref(),
         ),
     )?;
+    check_decentralized(
+        &ctx,
+        link.2.as_deref(),
+        &curves,
+        &variants,
+        system.n_sensors(),
+    )?;
     if link.2.is_some() {
         check_network_variants(&ctx, &link.0, &curves, &variants, file_spec.reals)?;
         check_aggregation(&ctx, link.2.as_deref(), &curves, &variants)?;
@@ -359,11 +366,57 @@ fn build_network(
             format!("sensors[{i}].channel"),
             format!(
                 "with a [network], a link's channel is given in [[network.links]] (between = [\"s{i}\", \"{}\"]), not by the sensor",
-                topology.nodes[topology.parent[i].unwrap_or(topology.sink())].name
+                topology
+                    .parent[i]
+                    .or(topology.sink())
+                    .or(topology.neighbours(i).first().copied())
+                    .map_or("…", |n| topology.nodes[n].name.as_str())
             ),
         ));
     }
     Ok(Some(Arc::new(topology)))
+}
+
+/// A network of peers (`sink = false`) runs only decentralized schemes (a center scheme needs
+/// its sink); a decentralized scheme must fit the graph it runs on (weights given by hand, the
+/// channel filter's tree), which is the network or, without one, the star.
+fn check_decentralized(
+    ctx: &Ctx,
+    network: Option<&crate::network::topology::Topology>,
+    curves: &[crate::scenario::experiment::Curve],
+    variants: &[crate::scenario::experiment::Variant],
+    sensors: usize,
+) -> Result<(), ScenarioError> {
+    for v in variants {
+        let label = &curves[v.curve].label;
+        let field = format!("schemes[{}]", v.curve);
+        match (v.scheme.peers(), network) {
+            (None, Some(net)) if net.sink().is_none() => {
+                return Err(ctx.err(
+                    "network.sink",
+                    format!(
+                        "scheme {label} fuses at a sink, and this network has none (sink = false): a network of peers runs the decentralized schemes (`hushfuse list-schemes`)"
+                    ),
+                ))
+            }
+            (Some(peers), Some(net)) => peers
+                .check(net)
+                .map_err(|m| ctx.err(&field, format!("{label}: {m}")))?,
+            (Some(peers), None) => {
+                let channels = v
+                    .channel
+                    .as_deref()
+                    .cloned()
+                    .unwrap_or_else(|| vec![Default::default(); sensors]);
+                let star = crate::network::topology::Topology::star(&channels);
+                peers
+                    .check(&star)
+                    .map_err(|m| ctx.err(&field, format!("{label}: {m}")))?
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// With a multi-hop `[network]` every hop's channel comes from the network, so a scheme entry

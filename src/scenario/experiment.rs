@@ -1,6 +1,7 @@
 //! A validated experiment: the system, the schemes' variants and the run's size, ready to run.
 use crate::filter::Gaussian;
 use crate::network::channel::ChannelSpec;
+use crate::network::topology::Topology;
 use crate::scenario::file::{FrontierSpec, PaperSpec, Params};
 use crate::scheme::{Scheme, System};
 use std::sync::Arc;
@@ -79,6 +80,25 @@ pub struct Experiment {
 }
 
 impl Experiment {
+    /// The graph variant `v` runs on: the scenario's `[network]`; without one, for a
+    /// decentralized scheme the star of its sensors' links (the sink a node without a sensor),
+    /// for a center scheme `None` (the engine's one-hop star).
+    pub fn graph_of(&self, v: &Variant) -> Option<std::borrow::Cow<'_, Topology>> {
+        match (&self.network, v.scheme.peers()) {
+            (Some(net), _) => Some(std::borrow::Cow::Borrowed(net.as_ref())),
+            (None, Some(_)) => {
+                let n = self.system.n_sensors();
+                let channels = v
+                    .channel
+                    .as_deref()
+                    .cloned()
+                    .unwrap_or_else(|| vec![ChannelSpec::default(); n]);
+                Some(std::borrow::Cow::Owned(Topology::star(&channels)))
+            }
+            (None, None) => None,
+        }
+    }
+
     /// The radios that run on a battery: the sensors on a star; over a multi-hop network also
     /// the relays (and the sink unless it is on mains). What the energy axis counts.
     pub fn battery_radios(&self) -> usize {

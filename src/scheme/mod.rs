@@ -2,6 +2,7 @@
 //! paper; the simulator drives every scheme through the same loop on the same data.
 pub mod censored_pf;
 pub mod centralized;
+pub mod decentralized;
 pub mod distributed_kf;
 pub mod estimate_fusion;
 pub mod event_triggered;
@@ -32,6 +33,22 @@ pub const SCHEMES: &[registry::SchemeEntry] = &[
     event_triggered::params::SEND_ON_DELTA,
     estimate_fusion::params::CI,
     estimate_fusion::params::NAIVE,
+];
+
+/// The decentralized schemes ([`crate::decentralized`]): every node of a `[network]`
+/// estimates. Found by kind as [`SCHEMES`] are, but not run by `every_scheme` (they need a
+/// network of their own).
+pub const DECENTRALIZED: &[registry::SchemeEntry] = &[
+    decentralized::params::CONSENSUS_INFORMATION,
+    decentralized::params::CONSENSUS_MEASUREMENTS,
+    decentralized::params::CONSENSUS_HYBRID,
+    decentralized::params::INFORMATION_WEIGHTED,
+    decentralized::params::KALMAN_CONSENSUS,
+    decentralized::params::DIFFUSION,
+    decentralized::params::PEER_CI,
+    decentralized::params::PEER_ICI,
+    decentralized::params::PEER_NAIVE,
+    decentralized::params::CHANNEL_FILTER,
 ];
 
 use crate::filter::{FilterError, Gaussian};
@@ -249,6 +266,11 @@ pub trait Scheme: Send + Sync + Debug {
     /// The engine's hook for a lockstep fast path ([`LockstepFastPath`]); `None`: the engine
     /// runs the generic per-step loop. A scheme author never needs it.
     fn fast_path(&self) -> Option<&dyn LockstepFastPath> {
+        None
+    }
+    /// A decentralized scheme: no sensor side and center to build; the engine runs its nodes
+    /// on the network's graph ([`crate::decentralized::trial`]). `None` for a center scheme.
+    fn peers(&self) -> Option<&crate::decentralized::trial::Peers> {
         None
     }
 }

@@ -297,7 +297,12 @@ fn backticked(message: &str, prefix: &str) -> Option<String> {
     Some(rest[..rest.find('`')?].to_string())
 }
 
-pub use super::SCHEMES;
+pub use super::{DECENTRALIZED, SCHEMES};
+
+/// The built-in kinds: the center schemes, then the decentralized ones.
+pub fn built_in() -> impl Iterator<Item = &'static SchemeEntry> {
+    SCHEMES.iter().chain(DECENTRALIZED)
+}
 
 /// Builds a scheme of a kind registered at run time from its table (a closure: a function
 /// pointer cannot hold, e.g., the Python objects of a user's scheme).
@@ -344,8 +349,7 @@ pub fn runtime_kinds() -> Vec<&'static str> {
 
 /// The entry of a kind.
 pub fn find(kind: &str) -> Option<&'static SchemeEntry> {
-    SCHEMES
-        .iter()
+    built_in()
         .find(|e| e.kind == kind)
         .or_else(|| find_runtime(kind))
 }
@@ -357,7 +361,7 @@ pub fn build_entry(
     table: toml::Table,
     cx: &BuildContext,
 ) -> Result<Box<dyn Scheme>, ParamError> {
-    if !SCHEMES.iter().any(|e| e.kind == entry.kind) {
+    if !built_in().any(|e| e.kind == entry.kind) {
         let builder = runtime()
             .iter()
             .find(|(e, _)| e.kind == entry.kind)
@@ -371,7 +375,7 @@ pub fn build_entry(
 
 /// The known kinds, for error messages: the built-in ones, then those registered at run time.
 pub fn kinds() -> Vec<&'static str> {
-    let mut k: Vec<&'static str> = SCHEMES.iter().map(|e| e.kind).collect();
+    let mut k: Vec<&'static str> = built_in().map(|e| e.kind).collect();
     k.extend(runtime_kinds());
     k
 }
@@ -379,7 +383,10 @@ pub fn kinds() -> Vec<&'static str> {
 /// The registry as text: every kind with its parameters and defaults (`hushfuse list-schemes`).
 pub fn describe() -> String {
     let mut out = String::new();
-    for e in SCHEMES {
+    for e in built_in() {
+        if DECENTRALIZED.first().is_some_and(|d| d.kind == e.kind) {
+            out.push_str("Decentralized (no center: every node of the [network] estimates)\n\n");
+        }
         out.push_str(&format!("{}  ({})\n  {}\n", e.kind, e.label, e.summary));
         let example = e.example.trim().replace('\n', ", ");
         out.push_str(&format!(
@@ -444,7 +451,7 @@ pub const DOCS_END: &str = "<!-- registry:end -->";
 pub fn markdown() -> String {
     let esc = |t: &str| t.replace('|', "\\|");
     let mut out = String::from("| kind | parameters | scheme |\n|---|---|---|\n");
-    for e in SCHEMES {
+    for e in built_in() {
         let params = if e.params.is_empty() {
             "—".to_string()
         } else {

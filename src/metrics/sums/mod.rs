@@ -86,6 +86,23 @@ pub struct Sums {
     /// `per_step.csv`. Empty on a star.
     #[serde(default)]
     pub hops: Vec<[u64; 2]>,
+    /// A decentralized scheme (every node estimates): per node, the spread across trials of its
+    /// steady-state mean squared error and NEES ([`EstimatorStat`]). Empty for a scheme with one
+    /// estimate (its center's).
+    #[serde(default)]
+    pub estimators: Vec<EstimatorStat>,
+    /// A decentralized scheme: per trial, the steady-state mean over steps of the nodes'
+    /// disagreement (1/M) Σᵢ ‖x̂ᵢ − x̄‖², x̄ the mean of the M nodes' estimates.
+    #[serde(default)]
+    pub disagreement: TrialStat,
+}
+
+/// One estimator of a network (a node of a decentralized scheme): its per-trial steady-state
+/// mean squared error and NEES, summed over trials with their squares.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EstimatorStat {
+    pub mse: TrialStat,
+    pub nees: TrialStat,
 }
 
 /// Where and why a variant's trial failed.
@@ -166,6 +183,35 @@ pub struct TrialState<'a> {
     /// the order they are added in changes nothing).
     pending_nees: [f64; PENDING_NEES],
     pending: usize,
+    /// A decentralized scheme's per-node running sums ([`TrialState::record_estimators`]).
+    estimators: Option<Box<EstimatorState>>,
+}
+
+/// What a trial of a decentralized scheme carries besides the mean over its nodes.
+#[derive(Debug, Default)]
+struct EstimatorState {
+    /// Per node, the steady-state sums of its squared error and NEES.
+    acc: Vec<[f64; 2]>,
+    /// The steady-state sum of the disagreement.
+    disagreement: f64,
+    /// Work space: one node's error, the mean over nodes of each component's squared error,
+    /// the mean estimate.
+    err: Vec<f64>,
+    sq: Vec<f64>,
+    mean: Vec<f64>,
+}
+
+/// One step's values of a trial (of one estimator, or the mean over a network's estimators).
+#[derive(Debug, Clone, Copy)]
+struct StepValues {
+    /// Squared error, all components.
+    total: f64,
+    nees: f64,
+    /// 1 when the covariance was degenerate (the fraction of estimators whose was).
+    degenerate: f64,
+    /// 1 when the NEES was within its 99% and 95% bounds (the fraction of estimators).
+    covered: [f64; 2],
+    trace: f64,
 }
 
 /// Capacity of [`TrialState`]'s buffer of NEES values awaiting the histogram.
@@ -198,6 +244,8 @@ impl Sums {
             reading_peaks: Vec::new(),
             nodes: Vec::new(),
             hops: Vec::new(),
+            estimators: Vec::new(),
+            disagreement: TrialStat::default(),
         }
     }
 
@@ -327,6 +375,7 @@ impl Sums {
             traffic: (Traffic::default(), [0.0; 4]),
             pending_nees: [0.0; PENDING_NEES],
             pending: 0,
+            estimators: None,
         }
     }
 
@@ -357,6 +406,8 @@ impl Sums {
         self.reading_peaks.clear();
         self.nodes.clear();
         self.hops.clear();
+        self.estimators.clear();
+        self.disagreement = TrialStat::default();
     }
 
     /// Adds another block's sums (same shape).
@@ -395,6 +446,15 @@ impl Sums {
         }
         self.merge_peaks(&o.reading_peaks);
         self.add_nodes(&o.nodes);
+        if self.estimators.len() < o.estimators.len() {
+            self.estimators
+                .resize(o.estimators.len(), EstimatorStat::default());
+        }
+        for (a, b) in self.estimators.iter_mut().zip(&o.estimators) {
+            a.mse.merge(&b.mse);
+            a.nees.merge(&b.nees);
+        }
+        self.disagreement.merge(&o.disagreement);
         if !o.hops.is_empty() {
             if self.hops.is_empty() {
                 self.hops = vec![[0; 2]; self.steps];
@@ -462,6 +522,108 @@ impl TrialState<'_> {
     ) -> Result<(), crate::linalg::LinalgError> {
         sums.add_senders(&traffic, 1);
         self.record_inner(sums, k, truth, est, Some(factor), traffic)
+    }
+
+    /// Records step `k` of a decentralized scheme, whose every node estimates: `estimates[i]`
+    /// is node i's. The step's values are the means over the nodes (squared error per
+    /// component, NEES, trace; the degenerate and covered fields as fractions of the nodes);
+    /// each node's squared error and NEES, and the nodes' disagreement, go to its running sums
+    /// ([`Sums::estimators`], [`Sums::disagreement`]).
+    pub fn record_estimators(
+        &mut self,
+        sums: &mut Sums,
+        k: usize,
+        truth: &Vector,
+        estimates: &[&Gaussian],
+        traffic: Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        let (n, m) = (truth.len(), estimates.len());
+        assert!(m > 0, "record_estimators: no estimate");
+        let mut st = self.estimators.take().unwrap_or_default();
+        st.acc.resize(m, [0.0; 2]);
+        st.err.resize(n, 0.0);
+        st.sq.clear();
+        st.sq.resize(n, 0.0);
+        st.mean.clear();
+        st.mean.resize(n, 0.0);
+        let steady = k >= self.steady_from;
+        let (mut nees_sum, mut trace_sum, mut degenerate) = (0.0, 0.0, 0usize);
+        let mut covered = [0usize; 2];
+        for (i, est) in estimates.iter().enumerate() {
+            assert_eq!(est.mean.len(), n, "record: truth and estimate dimensions");
+            for ((e, x), t) in st.err.iter_mut().zip(est.mean.iter()).zip(truth.iter()) {
+                *e = x - t;
+            }
+            let (nees, degen) = match self.nees(&st.err, est, None) {
+                Ok(v) => v,
+                Err(e) => {
+                    self.estimators = Some(st);
+                    return Err(e);
+                }
+            };
+            let se: f64 = st.err.iter().map(|e| e * e).sum();
+            for ((q, e), (x, v)) in st
+                .sq
+                .iter_mut()
+                .zip(&st.err)
+                .zip(st.mean.iter_mut().zip(est.mean.iter()))
+            {
+                *q += e * e;
+                *x += v;
+            }
+            nees_sum += nees;
+            trace_sum += trace(&est.cov);
+            degenerate += usize::from(degen);
+            covered[0] += usize::from(nees <= self.nees_bound);
+            covered[1] += usize::from(nees <= self.nees_bound_95);
+            if steady {
+                st.acc[i][0] += se;
+                st.acc[i][1] += nees;
+            }
+        }
+        let mf = m as f64;
+        st.sq.iter_mut().for_each(|q| *q /= mf);
+        st.mean.iter_mut().for_each(|x| *x /= mf);
+        let disagreement = estimates
+            .iter()
+            .map(|est| {
+                est.mean
+                    .iter()
+                    .zip(&st.mean)
+                    .map(|(x, c)| (x - c) * (x - c))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / mf;
+        if steady {
+            st.disagreement += disagreement;
+        }
+        let link = link_counts(&traffic);
+        if link.iter().any(|&c| c > 0) {
+            sums.add_link(k, link);
+        }
+        if self.traffic.0 != traffic {
+            self.traffic = (traffic, traffic_counts(traffic));
+        }
+        let step = StepValues {
+            total: st.sq.iter().sum(),
+            nees: nees_sum / mf,
+            degenerate: degenerate as f64 / mf,
+            covered: [covered[0] as f64 / mf, covered[1] as f64 / mf],
+            trace: trace_sum / mf,
+        };
+        let counts = self.traffic.1;
+        let sq = std::mem::take(&mut st.sq);
+        self.accumulate_step(
+            sums,
+            k,
+            &step,
+            |idx| idx.iter().map(|&j| sq[j]).sum(),
+            counts,
+        );
+        st.sq = sq;
+        self.estimators = Some(st);
+        Ok(())
     }
 
     fn record_inner(
@@ -561,10 +723,47 @@ impl TrialState<'_> {
         trace: f64,
         counts: [f64; 4],
     ) {
-        let layout = sums.layout();
-        let w = layout.width();
         let total: f64 = err.iter().map(|e| e * e).sum();
         let flag = |b: bool| f64::from(u8::from(b));
+        let step = StepValues {
+            total,
+            nees,
+            degenerate: flag(degenerate),
+            covered: [
+                flag(nees <= self.nees_bound),
+                flag(nees <= self.nees_bound_95),
+            ],
+            trace,
+        };
+        self.accumulate_step(
+            sums,
+            k,
+            &step,
+            |idx| idx.iter().map(|&j| err[j] * err[j]).sum::<f64>(),
+            counts,
+        );
+    }
+
+    /// Adds step `k`'s values (`step`; `group_se(idx)`: the squared error of the components
+    /// `idx`) into the sums and this trial's running sums.
+    #[inline(always)]
+    fn accumulate_step(
+        &mut self,
+        sums: &mut Sums,
+        k: usize,
+        step: &StepValues,
+        group_se: impl Fn(&[usize]) -> f64,
+        counts: [f64; 4],
+    ) {
+        let layout = sums.layout();
+        let w = layout.width();
+        let StepValues {
+            total,
+            nees,
+            degenerate,
+            covered,
+            trace,
+        } = *step;
         // This step's value of every field, at its layout index. ESS is left at +0, which adds
         // nothing to any of its sums (they start at +0 and only ever add ESS values >= 0); it
         // is recorded by `record_ess`.
@@ -584,12 +783,12 @@ impl TrialState<'_> {
         vals[Layout::BITS] = bits;
         vals[Layout::FRAME_BITS] = frame_bits;
         vals[Layout::DOWNLINK_BITS] = downlink_bits;
-        vals[Layout::DEGENERATE] = flag(degenerate);
-        vals[Layout::NEES_COVERED] = flag(nees <= self.nees_bound);
-        vals[Layout::NEES_COVERED_95] = flag(nees <= self.nees_bound_95);
+        vals[Layout::DEGENERATE] = degenerate;
+        vals[Layout::NEES_COVERED] = covered[0];
+        vals[Layout::NEES_COVERED_95] = covered[1];
         let steady = k >= self.steady_from;
         for (g, (_, idx)) in self.groups.iter().enumerate() {
-            let se = idx.iter().map(|&j| err[j] * err[j]).sum::<f64>();
+            let se = group_se(idx);
             vals[layout.group(g)] = se;
             if steady {
                 self.group_acc[g] += se;
@@ -681,6 +880,10 @@ impl TrialState<'_> {
         }
         self.count = 0;
         self.pending = 0;
+        if let Some(e) = &mut self.estimators {
+            e.acc.clear();
+            e.disagreement = 0.0;
+        }
     }
 
     /// [`TrialState::finish`] in place (the state is then spent until
@@ -700,6 +903,17 @@ impl TrialState<'_> {
         let steps = sums.steps.max(1) as f64;
         for (stat, v) in sums.whole_run.iter_mut().zip(self.run_acc.iter()) {
             stat.add(v / steps);
+        }
+        if let Some(e) = &self.estimators {
+            if sums.estimators.len() < e.acc.len() {
+                sums.estimators
+                    .resize(e.acc.len(), EstimatorStat::default());
+            }
+            for (stat, [se, nees]) in sums.estimators.iter_mut().zip(&e.acc) {
+                stat.mse.add(se / c);
+                stat.nees.add(nees / c);
+            }
+            sums.disagreement.add(e.disagreement / c);
         }
     }
 }
@@ -728,6 +942,18 @@ impl TrialObserver<'_> {
     ) -> Result<(), crate::linalg::LinalgError> {
         self.state
             .record_factored(self.sums, k, truth, est, factor, traffic)
+    }
+
+    /// [`TrialState::record_estimators`].
+    pub fn record_estimators(
+        &mut self,
+        k: usize,
+        truth: &Vector,
+        estimates: &[&Gaussian],
+        traffic: Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        self.state
+            .record_estimators(self.sums, k, truth, estimates, traffic)
     }
 
     /// [`TrialState::record_ess`].

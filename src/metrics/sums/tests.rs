@@ -220,3 +220,80 @@ fn link_counters_are_summed_per_step_and_merge() {
     m2.merge(&Sums::new(1, 2, 1));
     assert_eq!(m2.link, s.link);
 }
+
+/// Two estimators of a 2-state target, one step, every value by hand: node 0 at (1, 0) with
+/// P = I, node 1 at (0, 2) with P = 2I, the truth at 0.
+#[test]
+fn many_estimators_record_their_mean_and_each_node_by_hand() {
+    let groups = vec![("position".to_string(), vec![0])];
+    let mut sums = Sums::new(1, 1, 2);
+    let truth = Vector::zeros(2);
+    let a = Gaussian::new(Vector::from_vec(vec![1.0, 0.0]), Matrix::identity(2, 2));
+    let b = Gaussian::new(
+        Vector::from_vec(vec![0.0, 2.0]),
+        Matrix::identity(2, 2) * 2.0,
+    );
+    let mut state = sums.trial_state(&groups, 1);
+    state
+        .record_estimators(&mut sums, 1, &truth, &[&a, &b], Traffic::default())
+        .unwrap();
+    state.finish(&mut sums);
+    // Squared errors (1, 0) and (0, 4): their mean per component (0.5, 2), total 2.5; NEES 1
+    // and 4 / 2 = 2, mean 1.5; traces 2 and 4, mean 3; both NEES under the chi-square(2)
+    // quantiles (5.99, 9.21).
+    assert_eq!(sums.at(0, Layout::TOTAL_SE), 2.5);
+    // (The NEES goes through a Cholesky factor: √2 rounds.)
+    let near = |a: f64, b: f64| (a - b).abs() < 1e-12;
+    assert!(near(sums.at(0, Layout::NEES), 1.5));
+    assert_eq!(sums.at(0, Layout::TRACE), 3.0);
+    assert_eq!(sums.at(0, Layout::NEES_COVERED), 1.0);
+    assert_eq!(sums.at(0, Layout::NEES_COVERED_95), 1.0);
+    assert_eq!(sums.at(0, Layout { groups: 1 }.group(0)), 0.5);
+    assert_eq!(sums.steady_mse.sum, 2.5);
+    assert!(near(sums.steady_nees.sum, 1.5));
+    // Each node on its own; the mean estimate (0.5, 1), each node 1.25 away squared.
+    assert_eq!(sums.estimators.len(), 2);
+    assert_eq!(
+        (sums.estimators[0].mse.sum, sums.estimators[0].nees.sum),
+        (1.0, 1.0)
+    );
+    assert_eq!(sums.estimators[1].mse.sum, 4.0);
+    assert!(near(sums.estimators[1].nees.sum, 2.0));
+    assert_eq!(sums.disagreement.sum, 1.25);
+    // A node far out of its bound counts as a fraction of the nodes.
+    let mut far = Sums::new(1, 1, 2);
+    let c = Gaussian::new(Vector::from_vec(vec![10.0, 0.0]), Matrix::identity(2, 2));
+    let mut state = far.trial_state(&groups, 1);
+    state
+        .record_estimators(&mut far, 1, &truth, &[&a, &c], Traffic::default())
+        .unwrap();
+    state.finish(&mut far);
+    assert_eq!(far.at(0, Layout::NEES_COVERED), 0.5);
+}
+
+/// Per-node sums merge as the other sums do: two trials added into one, or each into its own
+/// and merged, give the same numbers.
+#[test]
+fn many_estimator_sums_merge_like_one_run() {
+    let groups = vec![("position".to_string(), vec![0])];
+    let truth = Vector::zeros(2);
+    let g = |x: f64, y: f64| Gaussian::new(Vector::from_vec(vec![x, y]), Matrix::identity(2, 2));
+    let trials = [[g(1.0, 0.5), g(-0.5, 2.0)], [g(0.2, 0.1), g(3.0, -1.0)]];
+    let run = |sums: &mut Sums, t: &[Gaussian; 2]| {
+        let mut state = sums.trial_state(&groups, 1);
+        state
+            .record_estimators(sums, 1, &truth, &[&t[0], &t[1]], Traffic::default())
+            .unwrap();
+        state.finish(sums);
+    };
+    let mut one = Sums::new(1, 1, 2);
+    trials.iter().for_each(|t| run(&mut one, t));
+    let mut merged = Sums::new(1, 1, 2);
+    for t in &trials {
+        let mut part = Sums::new(1, 1, 2);
+        run(&mut part, t);
+        merged.merge(&part);
+    }
+    assert_eq!(one, merged);
+    assert_eq!(one.estimators[1].mse.sum, 0.25 + 4.0 + 9.0 + 1.0);
+}

@@ -16,7 +16,7 @@ pub mod tally;
 
 use crate::network::channel::ChannelSpec;
 use petgraph::graph::{NodeIndex, UnGraph};
-use spec::{EdgeRule, Edges, NetworkSpec, Relays, RouteRule};
+use spec::{EdgeRule, Edges, NetworkSpec, Relays, RouteRule, Sink};
 
 /// Most nodes a network may have (sensors, relays and the sink): the routing and the per-node
 /// sums grow with it, and 802.15.4's 16-bit short addresses are not the limit here.
@@ -120,7 +120,6 @@ impl Topology {
         channel: Option<&ChannelSpec>,
     ) -> Result<Self, TopologyError> {
         let nodes = nodes(spec, sensors)?;
-        let sink = nodes.len() - 1;
         let pairs = edges(spec, &nodes)?;
         let default = channel.cloned().unwrap_or_default();
         let mut links: Vec<Link> = pairs
@@ -176,11 +175,21 @@ impl Topology {
             links,
             graph,
         };
-        topology.parent = match &spec.parent {
-            Some(given) => topology.given_parents(given)?,
-            None => topology.routed(spec.routes.unwrap_or_default())?,
+        topology.parent = match (&spec.parent, topology.sink()) {
+            (Some(_), None) => {
+                return Err(err(
+                    "parent",
+                    "a network of peers (sink = false) has no routing tree to give",
+                ))
+            }
+            (None, None) => {
+                topology.check_connected()?;
+                vec![None; topology.nodes.len()]
+            }
+            (Some(given), Some(_)) => topology.given_parents(given)?,
+            (None, Some(_)) => topology.routed(spec.routes.unwrap_or_default())?,
         };
-        debug_assert!(topology.parent[sink].is_none());
+        debug_assert!(topology.sink().is_none_or(|s| topology.parent[s].is_none()));
         Ok(topology)
     }
 
@@ -229,9 +238,56 @@ impl Topology {
         }
     }
 
-    /// The sink's index (the last node).
-    pub fn sink(&self) -> usize {
-        self.nodes.len() - 1
+    /// The sink's index (the last node), if the network has one (`sink = false`: a network of
+    /// peers, no routing tree).
+    pub fn sink(&self) -> Option<usize> {
+        let last = self.nodes.len().checked_sub(1)?;
+        (self.nodes[last].kind == NodeKind::Sink).then_some(last)
+    }
+
+    /// The sink's index, or an error saying that `what` needs one.
+    pub fn sink_for(&self, what: &str) -> Result<usize, String> {
+        self.sink().ok_or_else(|| {
+            format!("{what} needs a sink, and this network has none (network.sink = false)")
+        })
+    }
+
+    /// The undirected links as node pairs, in link order.
+    pub fn edges(&self) -> Vec<(usize, usize)> {
+        self.links.iter().map(|l| (l.a, l.b)).collect()
+    }
+
+    /// Each node's neighbours, in increasing order.
+    pub fn neighbours(&self, node: usize) -> Vec<usize> {
+        let mut out: Vec<usize> = self
+            .graph
+            .neighbors(NodeIndex::new(node))
+            .map(|n| n.index())
+            .collect();
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+
+    /// A network of peers must be connected (every node reaches every other).
+    fn check_connected(&self) -> Result<(), TopologyError> {
+        let mut seen = vec![false; self.nodes.len()];
+        let mut dfs = petgraph::visit::Dfs::new(&self.graph, NodeIndex::new(0));
+        while let Some(n) = dfs.next(&self.graph) {
+            seen[n.index()] = true;
+        }
+        let cut: Vec<usize> = (0..self.nodes.len()).filter(|&i| !seen[i]).collect();
+        if cut.is_empty() {
+            return Ok(());
+        }
+        Err(err(
+            "edges",
+            format!(
+                "the graph is disconnected: {} cannot reach {}",
+                names(&self.nodes, cut),
+                self.nodes[0].name
+            ),
+        ))
     }
 
     /// Number of sensors.
@@ -313,10 +369,13 @@ impl Topology {
 
     /// Whether this is the one-hop star: no relay, and every sensor linked straight to the sink.
     pub fn is_star(&self) -> bool {
+        let Some(sink) = self.sink() else {
+            return false;
+        };
         self.nodes
             .iter()
             .all(|n| !matches!(n.kind, NodeKind::Relay(_)))
-            && (0..self.sink()).all(|i| self.parent[i] == Some(self.sink()))
+            && (0..sink).all(|i| self.parent[i] == Some(sink))
     }
 
     /// Parents as written: every node but the sink has one, linked to it, and following them
@@ -325,7 +384,7 @@ impl Topology {
         &self,
         given: &std::collections::BTreeMap<String, String>,
     ) -> Result<Vec<Option<usize>>, TopologyError> {
-        let sink = self.sink();
+        let sink = self.sink().expect("given parents need a sink");
         let mut parent = vec![None; self.nodes.len()];
         for (child, p) in given {
             let field = format!("parent.{child}");
@@ -390,7 +449,8 @@ impl Topology {
             RouteRule::Etx => 1.0 / (1.0 - self.links[k].channel.delivery_loss()),
         };
         let usable = |k: usize| weight(k).is_finite();
-        let sink = NodeIndex::new(self.sink());
+        let sink_at = self.sink().expect("routes need a sink");
+        let sink = NodeIndex::new(sink_at);
         let dist = petgraph::algo::dijkstra(&self.graph, sink, None, |e| {
             let w = weight(*e.weight());
             if w.is_finite() {
@@ -413,7 +473,7 @@ impl Topology {
         }
         let d = |i: usize| dist[&NodeIndex::new(i)];
         let mut parent = vec![None; self.nodes.len()];
-        for (v, slot) in parent.iter_mut().enumerate().take(self.sink()) {
+        for (v, slot) in parent.iter_mut().enumerate().take(sink_at) {
             let mut best: Option<(usize, f64)> = None;
             for e in self.graph.edges(NodeIndex::new(v)) {
                 let k = *e.weight();
@@ -446,7 +506,10 @@ fn index_of(nodes: &[Node], field: &str, name: &str) -> Result<usize, TopologyEr
             format!(
                 "unknown node {name:?} (the nodes are {}{})",
                 names(nodes, 0..last.min(6)),
-                if last > 6 { ", …, sink" } else { ", sink" }
+                match (last > 6, &nodes[last].name) {
+                    (true, l) => format!(", …, {l}"),
+                    (false, l) => format!(", {l}"),
+                }
             ),
         )
     })
@@ -479,14 +542,18 @@ fn nodes(spec: &NetworkSpec, sensors: &[Option<[f64; 2]>]) -> Result<Vec<Node>, 
             .collect::<Result<_, _>>()?,
         Some(Relays::Random(r)) => random_relays(r)?,
     };
-    let total = sensors.len() + relays.len() + 1;
+    let (has_sink, sink) = match &spec.sink {
+        None => (true, None),
+        Some(Sink::Present(b)) => (*b, None),
+        Some(Sink::At(p)) => (true, Some(point("sink", p)?)),
+    };
+    let total = sensors.len() + relays.len() + usize::from(has_sink);
     if total > MAX_NODES {
         return Err(err(
             "relays",
             format!("at most {MAX_NODES} nodes (sensors, relays and the sink), got {total}"),
         ));
     }
-    let sink = spec.sink.as_deref().map(|p| point("sink", p)).transpose()?;
     let mut nodes: Vec<Node> = sensors
         .iter()
         .enumerate()
@@ -501,11 +568,19 @@ fn nodes(spec: &NetworkSpec, sensors: &[Option<[f64; 2]>]) -> Result<Vec<Node>, 
         name: format!("r{j}"),
         position: p,
     }));
-    nodes.push(Node {
-        kind: NodeKind::Sink,
-        name: SINK.into(),
-        position: sink,
-    });
+    if has_sink {
+        nodes.push(Node {
+            kind: NodeKind::Sink,
+            name: SINK.into(),
+            position: sink,
+        });
+    }
+    if !has_sink && nodes.len() < 2 {
+        return Err(err(
+            "sink",
+            "a network of peers needs at least two nodes (sensors and relays)",
+        ));
+    }
     Ok(nodes)
 }
 
@@ -544,7 +619,8 @@ fn random_relays(r: &spec::RandomRelays) -> Result<Vec<Option<[f64; 2]>>, Topolo
 /// The node pairs linked, each once, by the rule or the list.
 fn edges(spec: &NetworkSpec, nodes: &[Node]) -> Result<Vec<(usize, usize)>, TopologyError> {
     let n = nodes.len();
-    let sink = n - 1;
+    // The last node: the sink, or in a network of peers the last sensor or relay.
+    let last = n - 1;
     let rule = match &spec.edges {
         None => EdgeRule::Star,
         Some(Edges::Rule(r)) => *r,
@@ -603,12 +679,18 @@ fn edges(spec: &NetworkSpec, nodes: &[Node]) -> Result<Vec<(usize, usize)>, Topo
     let dist = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
     let pairs = (0..n).flat_map(|a| (a + 1..n).map(move |b| (a, b)));
     Ok(match rule {
-        EdgeRule::Star => (0..sink).map(|i| (i, sink)).collect(),
-        EdgeRule::Line => (0..sink).map(|i| (i, i + 1)).collect(),
+        EdgeRule::Star if nodes[last].kind != NodeKind::Sink => {
+            return Err(err(
+                "edges",
+                "edges = \"star\" links every node to the sink, and this network has none (sink = false): give the edges",
+            ))
+        }
+        EdgeRule::Star => (0..last).map(|i| (i, last)).collect(),
+        EdgeRule::Line => (0..last).map(|i| (i, i + 1)).collect(),
         EdgeRule::Ring => {
-            let mut e: Vec<(usize, usize)> = (0..sink).map(|i| (i, i + 1)).collect();
+            let mut e: Vec<(usize, usize)> = (0..last).map(|i| (i, i + 1)).collect();
             if n >= 3 {
-                e.push((0, sink));
+                e.push((0, last));
             }
             e
         }

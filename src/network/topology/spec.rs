@@ -14,9 +14,11 @@ pub struct NetworkSpec {
     /// uniformly at random in the rectangle `area = [[x0, y0], [x1, y1]]` by their own seed.
     #[serde(default)]
     pub relays: Option<Relays>,
-    /// The sink's position `[x, y]` (optional when no edge rule needs positions).
+    /// The sink's position `[x, y]` (optional when no edge rule needs positions), or `false`:
+    /// no sink, a network of peers where every node estimates (the decentralized schemes,
+    /// [`crate::decentralized`]).
     #[serde(default)]
-    pub sink: Option<Vec<f64>>,
+    pub sink: Option<Sink>,
     /// Whether the sink runs on mains (default true, as the fusion center of a star does): its
     /// energy is reported but it has no battery to run out.
     #[serde(default)]
@@ -45,6 +47,15 @@ pub struct NetworkSpec {
     /// gives the link its own channel.
     #[serde(default)]
     pub distance_loss: Option<super::distance::DistanceLoss>,
+}
+
+/// `sink`: its position, or whether there is one (`false`: a network of peers; `true`: a sink
+/// without a position).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum Sink {
+    At(Vec<f64>),
+    Present(bool),
 }
 
 /// `relays`: positions or a count.

@@ -1,0 +1,269 @@
+//! One trial of a decentralized scheme on a network's graph: the scheme as configured from a
+//! scenario ([`Peers`]: which scheme, its knobs, the model every node knows), its nodes built on
+//! the graph (weights, neighbours, the sensors of the sensor nodes), and the graph driver
+//! ([`GraphDriver`]) running them step by step on a trial's readings. Every node of the graph
+//! runs the filter (a relay or the sink as a node without a sensor); after each step the
+//! recorder gets every node's estimate and every node's counters.
+use super::channel_filter::{self, ChannelFilterNode};
+use super::consensus::{ConsensusNode, Fusion};
+use super::diffusion::{DiffusionNode, Order};
+use super::kalman_consensus::KalmanConsensusNode;
+use super::peer_fusion::{self, PeerFusionNode, Rule};
+use super::weights::{WeightRule, Weights};
+use super::Model;
+use crate::filter::Gaussian;
+use crate::linalg::{Matrix, Vector};
+use crate::network::graph::driver::GraphDriver;
+use crate::network::graph::{NetworkNode, Payload};
+use crate::network::topology::tally::NodeCounts;
+use crate::network::topology::{NodeKind, Topology};
+
+/// Which decentralized scheme, with its knobs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PeerKind {
+    /// The consensus family ([`super::consensus`]): `omega` `None` is ω = N, the number of
+    /// nodes of the graph it runs on.
+    Consensus {
+        fusion: FusionKind,
+        weights: WeightRule,
+        iterations: usize,
+        omega: Option<f64>,
+    },
+    /// Olfati-Saber's Kalman consensus filter ([`super::kalman_consensus`]); `gamma` `None` is
+    /// 1 / (1 + Δ), Δ the graph's largest degree: the pull's matrix Pᵢ / (1 + ‖Pᵢ‖_F) has norm
+    /// below 1, so the consensus part I − γ(·)L has its eigenvalues in (1 − 2γΔ, 1] and γ < 1/Δ
+    /// keeps it from overshooting on any graph (our default; the paper leaves γ to the user).
+    KalmanConsensus { gamma: Option<f64> },
+    /// The diffusion Kalman filter ([`super::diffusion`]), event-triggered with a threshold.
+    Diffusion {
+        order: Order,
+        weights: WeightRule,
+        threshold: Option<f64>,
+    },
+    /// Peer-to-peer fusion of estimates ([`super::peer_fusion`]).
+    PeerFusion(Rule),
+    /// The channel filter on a tree ([`super::channel_filter`]).
+    ChannelFilter,
+}
+
+/// A member of the consensus family, before ω is known.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FusionKind {
+    Information,
+    Measurements,
+    Hybrid,
+}
+
+/// A decentralized scheme as a scenario configures it: the model every node knows, the prior
+/// every node starts from, and the (H, R) of each sensor (sensor i at node i).
+#[derive(Debug, Clone)]
+pub struct Peers {
+    pub kind: PeerKind,
+    pub model: Model,
+    pub prior: Gaussian,
+    pub sensors: Vec<(Matrix, Matrix)>,
+}
+
+/// What a trial runs on.
+#[derive(Debug, Clone, Copy)]
+pub struct PeerTrial<'a> {
+    pub net: &'a Topology,
+    /// `measurements[k - 1][i]`: sensor i's reading at step k.
+    pub measurements: &'a [Vec<Vector>],
+    /// The run's seed and the trial: the links' fates ([`crate::network::graph::fates`]).
+    pub seed: u64,
+    pub trial: u64,
+}
+
+/// Gets step k's estimates of every node and every node's counters of the step.
+pub type Recorder<'r> = dyn FnMut(usize, &[&Gaussian], &[NodeCounts]) -> Result<(), String> + 'r;
+
+/// A node's own weight and its neighbours' (node, weight).
+type NodeWeights = (f64, Vec<(usize, f64)>);
+
+/// Most consensus iterations a step (each one a broadcast of every node).
+pub const MAX_ITERATIONS: usize = 10_000;
+
+impl Peers {
+    /// Whether the scheme can run on `net`: the channel filter needs a tree of lossless links;
+    /// weights given by hand must fit the graph. An error names the field.
+    pub fn check(&self, net: &Topology) -> Result<(), String> {
+        match &self.kind {
+            PeerKind::ChannelFilter => channel_filter::check_network(net),
+            PeerKind::Consensus { weights, .. } | PeerKind::Diffusion { weights, .. } => {
+                Weights::new(weights, net.nodes.len(), &net.edges()).map(|_| ())
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Rounds a step takes.
+    pub fn rounds(&self) -> usize {
+        match &self.kind {
+            PeerKind::Consensus { iterations, .. } => ConsensusNode::rounds(*iterations),
+            PeerKind::KalmanConsensus { .. } => super::kalman_consensus::ROUNDS,
+            PeerKind::Diffusion { order, .. } => DiffusionNode::rounds(*order),
+            PeerKind::PeerFusion(_) => peer_fusion::ROUNDS,
+            PeerKind::ChannelFilter => channel_filter::ROUNDS,
+        }
+    }
+
+    /// The sensor of node `node` of `net`, if it is a sensor node.
+    fn sensor_of(&self, net: &Topology, node: usize) -> Option<(&Matrix, &Matrix)> {
+        match net.nodes[node].kind {
+            NodeKind::Sensor(i) => self.sensors.get(i).map(|(h, r)| (h, r)),
+            _ => None,
+        }
+    }
+
+    /// One trial: the nodes on `t.net`, run over every step of `t.measurements`, each step's
+    /// estimates and counters to `record`.
+    pub fn run_trial(&self, t: &PeerTrial, record: &mut Recorder) -> Result<(), String> {
+        let net = t.net;
+        let n = net.nodes.len();
+        let neighbours: Vec<Vec<usize>> = (0..n).map(|i| net.neighbours(i)).collect();
+        let weighted = |rule: &WeightRule| -> Result<Vec<NodeWeights>, String> {
+            let w = Weights::new(rule, n, &net.edges())?;
+            Ok((0..n)
+                .map(|i| {
+                    let others = neighbours[i].iter().map(|&j| (j, w.get(i, j))).collect();
+                    (w.get(i, i), others)
+                })
+                .collect())
+        };
+        let (model, prior) = (&self.model, &self.prior);
+        match &self.kind {
+            PeerKind::Consensus {
+                fusion,
+                weights,
+                iterations,
+                omega,
+            } => {
+                let omega = omega.unwrap_or(n as f64);
+                let fusion = match fusion {
+                    FusionKind::Information => Fusion::Information,
+                    FusionKind::Measurements => Fusion::Measurements { omega },
+                    FusionKind::Hybrid => Fusion::Hybrid { omega },
+                };
+                let nodes = weighted(weights)?
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, (own, others))| {
+                        let s = self.sensor_of(net, i);
+                        ConsensusNode::new(
+                            fusion,
+                            model.clone(),
+                            prior,
+                            s,
+                            own,
+                            others,
+                            *iterations,
+                        )
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                drive(t, self.rounds(), boxed(nodes), record)
+            }
+            PeerKind::KalmanConsensus { gamma } => {
+                let degree = neighbours.iter().map(Vec::len).max().unwrap_or(0);
+                let gamma = gamma.unwrap_or(1.0 / (1.0 + degree as f64));
+                let nodes = (0..n)
+                    .map(|i| {
+                        let s = self.sensor_of(net, i);
+                        KalmanConsensusNode::new(
+                            model.clone(),
+                            prior,
+                            s,
+                            gamma,
+                            neighbours[i].clone(),
+                        )
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                drive(t, self.rounds(), boxed(nodes), record)
+            }
+            PeerKind::Diffusion {
+                order,
+                weights,
+                threshold,
+            } => {
+                let sensors: Vec<Option<(Matrix, Matrix)>> = (0..n)
+                    .map(|i| self.sensor_of(net, i).map(|(h, r)| (h.clone(), r.clone())))
+                    .collect();
+                let nodes = weighted(weights)?
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, (own, others))| {
+                        let node = DiffusionNode::new(
+                            *order,
+                            model.clone(),
+                            prior,
+                            &sensors,
+                            i,
+                            own,
+                            others,
+                        )?;
+                        match threshold {
+                            Some(tau) => node.triggered(*tau),
+                            None => Ok(node),
+                        }
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                drive(t, self.rounds(), boxed(nodes), record)
+            }
+            PeerKind::PeerFusion(rule) => {
+                let nodes = (0..n)
+                    .map(|i| {
+                        let s = self.sensor_of(net, i);
+                        PeerFusionNode::new(*rule, model.clone(), prior, s, neighbours[i].clone())
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                drive(t, self.rounds(), boxed(nodes), record)
+            }
+            PeerKind::ChannelFilter => {
+                channel_filter::check_network(net)?;
+                let nodes = (0..n)
+                    .map(|i| {
+                        let s = self.sensor_of(net, i);
+                        ChannelFilterNode::new(model.clone(), prior, s, neighbours[i].clone())
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                drive(t, self.rounds(), boxed(nodes), record)
+            }
+        }
+    }
+}
+
+/// The nodes as the driver takes them.
+fn boxed<P, N: NetworkNode<P> + 'static>(nodes: Vec<N>) -> Vec<Box<dyn NetworkNode<P>>> {
+    nodes
+        .into_iter()
+        .map(|n| Box::new(n) as Box<dyn NetworkNode<P>>)
+        .collect()
+}
+
+/// Runs `nodes` (`rounds` rounds a step) on the trial's readings, recording each step.
+fn drive<P: Payload + Clone>(
+    t: &PeerTrial,
+    rounds: usize,
+    mut nodes: Vec<Box<dyn NetworkNode<P>>>,
+    record: &mut Recorder,
+) -> Result<(), String> {
+    let steps = t.measurements.len();
+    let mut driver = GraphDriver::new(t.net, rounds, steps, t.seed, t.trial);
+    let sensors = t.net.sensors();
+    let mut readings: Vec<Option<&Vector>> = Vec::with_capacity(sensors);
+    for (j, z) in t.measurements.iter().enumerate() {
+        readings.clear();
+        readings.extend((0..sensors).map(|i| z.get(i)));
+        driver.step(j + 1, &mut nodes, &readings)?;
+        let estimates = nodes
+            .iter()
+            .enumerate()
+            .map(|(x, node)| {
+                node.estimate()
+                    .ok_or_else(|| format!("node {} keeps no estimate", t.net.nodes[x].name))
+            })
+            .collect::<Result<Vec<&Gaussian>, String>>()?;
+        record(j + 1, &estimates, driver.counts())?;
+    }
+    Ok(())
+}
