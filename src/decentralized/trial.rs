@@ -55,7 +55,7 @@ pub enum FusionKind {
 }
 
 /// A decentralized scheme as a scenario configures it: the model every node knows, the prior
-/// every node starts from, and the (H, R) of each sensor (sensor i at node i).
+/// of x₀ every node starts from, and the (H, R) of each sensor (sensor i at node i).
 #[derive(Debug, Clone)]
 pub struct Peers {
     pub kind: PeerKind,
@@ -131,7 +131,9 @@ impl Peers {
                 })
                 .collect())
         };
-        let (model, prior) = (&self.model, &self.prior);
+        // The scenario's prior is of x₀; a node's filter starts each step from its prediction
+        // (the nodes correct first, then predict), so the first is x₁⁻ = A x₀ + w.
+        let (model, prior) = (&self.model, &self.model.predict(&self.prior));
         match &self.kind {
             PeerKind::Consensus {
                 fusion,
