@@ -467,7 +467,10 @@ pub fn markdown() -> String {
             esc(e.summary)
         ));
     }
-    for e in SCHEMES {
+    for e in built_in() {
+        if DECENTRALIZED.first().is_some_and(|d| d.kind == e.kind) {
+            out.push_str("\n### Decentralized schemes\n\nEvery node of the `[network]` runs the filter and talks only with its neighbours (no center); the row of a decentralized scheme is the mean over its nodes, each node's numbers beside it (`estimators` in `summary.json`). They run on the network's graph, including its relays and sink (nodes without a sensor); `sink = false` makes a network of peers. Not part of `every_scheme`.\n");
+        }
         out.push_str(&format!(
             "\n### `{}` — {}\n\n{}\n",
             e.kind, e.label, e.summary
@@ -532,7 +535,7 @@ mod tests {
     #[test]
     fn kinds_are_unique_and_labelled() {
         let mut seen = std::collections::BTreeSet::new();
-        for e in SCHEMES {
+        for e in built_in() {
             assert!(seen.insert(e.kind), "{} is registered twice", e.kind);
             assert!(!e.label.is_empty() && !e.summary.is_empty(), "{}", e.kind);
             if let Some(k) = e.knob {
@@ -557,7 +560,7 @@ mod tests {
             steps: 10,
             link_loss: None,
         };
-        for e in SCHEMES {
+        for e in built_in() {
             let table = example(e);
             for key in table.keys() {
                 assert!(
@@ -568,6 +571,12 @@ mod tests {
             }
             let scheme = (e.build)(table, &cx)
                 .unwrap_or_else(|err| panic!("{}: example does not build: {err}", e.kind));
+            if scheme.peers().is_some() {
+                // A decentralized scheme has no center to build: its nodes run on a graph.
+                assert!(DECENTRALIZED.iter().any(|d| d.kind == e.kind), "{}", e.kind);
+                assert!(scheme.build_with_seed(1).is_err(), "{}", e.kind);
+                continue;
+            }
             let inst = scheme.build_with_seed(1).unwrap();
             assert_eq!(inst.sensors.len(), 2, "{}", e.kind);
         }
@@ -583,7 +592,7 @@ mod tests {
             steps: 10,
             link_loss: None,
         };
-        for e in SCHEMES {
+        for e in built_in() {
             let mut table = example(e);
             table.insert("zz_not_a_parameter".into(), toml::Value::Integer(1));
             let err = match (e.build)(table, &cx) {
@@ -613,7 +622,7 @@ mod tests {
             steps: 10,
             link_loss: None,
         };
-        for e in SCHEMES {
+        for e in built_in() {
             for p in e.params {
                 let mut table = example(e);
                 table.insert(

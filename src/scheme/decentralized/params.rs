@@ -4,7 +4,6 @@
 //! the channel filter's tree) is checked when the network is known
 //! ([`crate::decentralized::trial::Peers::check`]).
 use super::Decentralized;
-use crate::decentralized::consensus::Fusion;
 use crate::decentralized::diffusion::Order;
 use crate::decentralized::peer_fusion::Rule;
 use crate::decentralized::trial::{FusionKind, PeerKind, Peers, MAX_ITERATIONS};
@@ -52,6 +51,17 @@ struct ConsensusParams {
     weights: Option<WeightsParam>,
     #[serde(default)]
     omega: Option<f64>,
+}
+
+/// Consensus on information and the ICF: no ω (CI runs on the corrected pair; the ICF has
+/// ω = N by construction).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct IterationParams {
+    #[serde(rename = "L")]
+    iterations: usize,
+    #[serde(default)]
+    weights: Option<WeightsParam>,
 }
 
 /// `kalman-consensus`.
@@ -139,55 +149,49 @@ fn check_omega(omega: Option<f64>) -> Result<(), ParamError> {
 }
 
 fn consensus(
-    table: toml::Table,
     cx: &BuildContext,
     fusion: FusionKind,
+    (iterations, weights, omega): (usize, Option<WeightsParam>, Option<f64>),
     default: RuleName,
 ) -> Result<Box<dyn Scheme>, ParamError> {
-    let p: ConsensusParams = registry::parse(table)?;
-    check_iterations(p.iterations)?;
-    check_omega(p.omega)?;
-    if p.omega.is_some() && fusion == FusionKind::Information {
-        return Err(ParamError::at(
-            "omega",
-            "consensus on information has no omega (it runs on the corrected pair)",
-        ));
-    }
-    let weights = p.weights.unwrap_or(WeightsParam::Rule(default)).rule();
+    check_iterations(iterations)?;
+    check_omega(omega)?;
+    let weights = weights.unwrap_or(WeightsParam::Rule(default)).rule();
     peers(
         cx,
         PeerKind::Consensus {
             fusion,
             weights,
-            iterations: p.iterations,
-            omega: p.omega,
+            iterations,
+            omega,
         },
     )
 }
 
 fn build_ci(t: toml::Table, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
-    consensus(t, cx, FusionKind::Information, RuleName::Metropolis)
+    let p: IterationParams = registry::parse(t)?;
+    let knobs = (p.iterations, p.weights, None);
+    consensus(cx, FusionKind::Information, knobs, RuleName::Metropolis)
 }
 
 fn build_cm(t: toml::Table, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
-    consensus(t, cx, FusionKind::Measurements, RuleName::Metropolis)
+    let p: ConsensusParams = registry::parse(t)?;
+    let knobs = (p.iterations, p.weights, p.omega);
+    consensus(cx, FusionKind::Measurements, knobs, RuleName::Metropolis)
 }
 
 fn build_hybrid(t: toml::Table, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
-    consensus(t, cx, FusionKind::Hybrid, RuleName::Metropolis)
+    let p: ConsensusParams = registry::parse(t)?;
+    let knobs = (p.iterations, p.weights, p.omega);
+    consensus(cx, FusionKind::Hybrid, knobs, RuleName::Metropolis)
 }
 
-/// Kamal et al.'s ICF: the hybrid with ω = N on max-degree weights
-/// ([`Fusion::information_weighted`]); ω is not a parameter.
+/// Kamal et al.'s ICF: the hybrid with ω = N ([`crate::decentralized::consensus::Fusion::information_weighted`]) on max-degree
+/// weights by default.
 fn build_icf(t: toml::Table, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
-    if t.contains_key("omega") {
-        return Err(ParamError::at(
-            "omega",
-            "the information-weighted consensus filter has omega = N by construction",
-        ));
-    }
-    let _ = Fusion::information_weighted;
-    consensus(t, cx, FusionKind::Hybrid, RuleName::MaxDegree)
+    let p: IterationParams = registry::parse(t)?;
+    let knobs = (p.iterations, p.weights, None);
+    consensus(cx, FusionKind::Hybrid, knobs, RuleName::MaxDegree)
 }
 
 fn build_kcf(t: toml::Table, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
