@@ -27,9 +27,6 @@ pub struct Trace {
     pub variants: Vec<VariantTrace>,
 }
 
-/// Called after every step with (k, truth, fused estimate, what each sensor did).
-type StepFn<'a> = &'a mut dyn FnMut(usize, &Vector, &Gaussian, &[Link]);
-
 /// Per variant: per-step RMSE and its standard error.
 pub type RmseSe = Vec<(Vec<f64>, Vec<f64>)>;
 
@@ -127,22 +124,49 @@ pub fn run_variant_into(
     Ok(())
 }
 
-/// Variant `v` of `trial` on drawn data, calling `f` with (step, truth, estimate, links).
+/// Called after every step with (k, truth, the estimates, what each sensor did): one estimate
+/// for a center scheme, one per node for a decentralized scheme.
+type EstimatesFn<'a> = &'a mut dyn FnMut(usize, &Vector, &[&Gaussian], &[Link]);
+
+/// Variant `v` of `trial` on drawn data, calling `f` after every step. A decentralized
+/// scheme's nodes run on its graph ([`crate::engine::peers`]); a sensor node that sent no frame
+/// in a step shows as silent.
 fn run_variant(
     exp: &Experiment,
     data: &crate::engine::runner::TrialData,
     v: usize,
     trial: usize,
     alone: bool,
-    f: StepFn,
+    f: EstimatesFn,
 ) -> Result<(), String> {
+    if let Some(peers) = exp.variants[v].scheme.peers() {
+        let net = exp.graph_of(&exp.variants[v]).expect("a decentralized scheme has a graph");
+        let t = crate::decentralized::trial::PeerTrial {
+            net: &net,
+            measurements: &data.measurements,
+            seed: exp.seed,
+            trial: trial as u64,
+        };
+        let sensors = exp.system.n_sensors();
+        return peers.run_trial(&t, &mut |k, estimates, counts| {
+            let links: Vec<Link> = counts[..sensors]
+                .iter()
+                .map(|c| match crate::network::topology::tally::frames(c).0 {
+                    0 => Link::Silent,
+                    _ => Link::Sent,
+                })
+                .collect();
+            f(k, &data.truth[k - 1], estimates, &links);
+            Ok(())
+        });
+    }
     let opts = LoopOptions {
         trial,
         alone,
         available: None,
     };
     run_variant_with(exp, &data.measurements, v, opts, &mut |s| {
-        f(s.k, &data.truth[s.k - 1], s.estimate, s.links);
+        f(s.k, &data.truth[s.k - 1], &[s.estimate], s.links);
         Ok(())
     })
 }
@@ -156,8 +180,9 @@ pub fn trace(exp: &Experiment, trial: usize, alone: bool) -> Result<Trace, Strin
             estimates: Vec::with_capacity(exp.steps),
             links: Vec::with_capacity(exp.steps),
         };
+        // A decentralized scheme's trial in detail is its first node's.
         run_variant(exp, &data, v, trial, alone, &mut |_, _, est, links| {
-            vt.estimates.push(est.clone());
+            vt.estimates.push(est[0].clone());
             vt.links.push(links.to_vec());
         })?;
         variants.push(vt);
@@ -183,8 +208,13 @@ pub fn rmse_with_se(
         let data = draw_trial(exp, trial);
         for v in 0..exp.variants.len() {
             let (a, b) = (&mut s1[v], &mut s2[v]);
-            run_variant(exp, &data, v, trial, alone, &mut |k, x, est, _| {
-                let e: f64 = indices.iter().map(|&i| (x[i] - est.mean[i]).powi(2)).sum();
+            // A decentralized scheme's error is the mean over its nodes, as its row's.
+            run_variant(exp, &data, v, trial, alone, &mut |k, x, ests, _| {
+                let e: f64 = ests
+                    .iter()
+                    .map(|est| indices.iter().map(|&i| (x[i] - est.mean[i]).powi(2)).sum::<f64>())
+                    .sum::<f64>()
+                    / ests.len() as f64;
                 a[k - 1] += e;
                 b[k - 1] += e * e;
             })?;

@@ -1,6 +1,6 @@
 //! The network map of a multi-hop run (`network_map.svg`, also in `report.html`): one panel per
 //! scheme, the nodes at their positions (or, where the file gives none, by hops from the sink:
-//! the sink right, each layer a column), every link in light grey, the routing tree's links
+//! the sink right, each layer a column; a network of peers on a circle), every link in light grey, the routing tree's links
 //! dark, each node filled by its radio's energy per step on one scale for all panels (yellow
 //! low, dark red high), the sink a square, and the first node to die circled in red. Panels
 //! are titled with the scheme and the network's lifetime.
@@ -50,6 +50,15 @@ fn layout(net: &Topology) -> Vec<(f64, f64)> {
             .map(|n| {
                 let p = n.position.unwrap_or_default();
                 (p[0], p[1])
+            })
+            .collect()
+    } else if net.sink().is_none() {
+        // A network of peers has no layers: its nodes on a circle, in order.
+        let m = net.nodes.len() as f64;
+        (0..net.nodes.len())
+            .map(|i| {
+                let a = std::f64::consts::TAU * i as f64 / m;
+                (a.sin(), a.cos())
             })
             .collect()
     } else {
