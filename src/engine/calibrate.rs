@@ -561,62 +561,6 @@ fn uncalibrated(
 /// out of range, at which end.
 type Choice = (f64, SchemeSummary, Status, Option<End>);
 
-/// An integer knob: every integer of the range (a value that does not build ends it), and the
-/// nearest per budget. A budget beyond what the first and last integers reach is out of range
-/// at the nearer end; only one the integers straddle is a "nearest integer".
-fn choose_integer(
-    ev: &mut Evaluator,
-    s: &Setup,
-    p: &mut Pilot,
-    label: &str,
-) -> Result<Vec<Choice>, String> {
-    let (axis, tol, knob, range) = (s.axis, s.tol, p.knob, p.range);
-    let mut chosen = Vec::new();
-    let mut points = Vec::new();
-    let mut first_err: Option<(f64, String)> = None;
-    let mut x = range.lo;
-    while x <= range.hi.unwrap_or(range.lo) + 0.5 {
-        match p.eval(ev, x) {
-            Ok(s) => points.push((x, s)),
-            Err(e) if points.is_empty() => {
-                first_err.get_or_insert((x, e));
-            }
-            Err(_) => break,
-        }
-        x += 1.0;
-    }
-    if points.is_empty() {
-        let cause = first_err
-            .map(|(x, e)| format!(" (`{knob}` = {x}: {e})"))
-            .unwrap_or_default();
-        return Err(format!("{label}: no value of `{knob}` builds{cause}"));
-    }
-    let reach = points.iter().map(|p| axis.of(&p.1));
-    let (min, max) = reach.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), v| {
-        (a.min(v), c.max(v))
-    });
-    let (first, last) = (points[0].0, points[points.len() - 1].0);
-    for &b in s.budgets {
-        let (x, s) = points
-            .iter()
-            .min_by(|p, q| {
-                (axis.of(&p.1) - b)
-                    .abs()
-                    .total_cmp(&(axis.of(&q.1) - b).abs())
-            })
-            .expect("non-empty");
-        let (st, end) = if (axis.of(s) - b).abs() <= tol * b {
-            (Status::Calibrated, None)
-        } else if b < min || b > max {
-            (Status::OutOfRange, Some(End::of(*x, first, last)))
-        } else {
-            (Status::NearestInteger, None)
-        };
-        chosen.push((*x, s.clone(), st, end));
-    }
-    Ok(chosen)
-}
-
 /// A continuous knob's two ends and their pilot runs; an open upper end is found by
 /// quadrupling from 1 until below the smallest target, or until the rate stops falling.
 #[allow(clippy::type_complexity)]
@@ -859,5 +803,7 @@ pub fn render(rows: &[Vec<String>]) -> String {
     crate::metrics::results::text_table(rows, 1)
 }
 
+mod integer;
+use integer::choose_integer;
 #[cfg(test)]
 mod tests;
