@@ -128,6 +128,11 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/mesh-grid.toml"),
     ),
     (
+        "arena-graph",
+        "Arena on a graph: a ring of 20 nodes, sink schemes relayed hop by hop beside consensus, diffusion and peer-to-peer fusion at every node (each node's numbers in summary.json)",
+        include_str!("../../scenarios/arena-graph.toml"),
+    ),
+    (
         "arena-1d",
         "Arena: 1-D constant velocity, 4 scalar linear sensors, every scheme of the registry (--budget, --budgets)",
         include_str!("../../scenarios/arena-1d.toml"),
