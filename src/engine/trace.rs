@@ -140,7 +140,9 @@ fn run_variant(
     f: EstimatesFn,
 ) -> Result<(), String> {
     if let Some(peers) = exp.variants[v].scheme.peers() {
-        let net = exp.graph_of(&exp.variants[v]).expect("a decentralized scheme has a graph");
+        let net = exp
+            .graph_of(&exp.variants[v])
+            .expect("a decentralized scheme has a graph");
         let t = crate::decentralized::trial::PeerTrial {
             net: &net,
             measurements: &data.measurements,
@@ -212,7 +214,12 @@ pub fn rmse_with_se(
             run_variant(exp, &data, v, trial, alone, &mut |k, x, ests, _| {
                 let e: f64 = ests
                     .iter()
-                    .map(|est| indices.iter().map(|&i| (x[i] - est.mean[i]).powi(2)).sum::<f64>())
+                    .map(|est| {
+                        indices
+                            .iter()
+                            .map(|&i| (x[i] - est.mean[i]).powi(2))
+                            .sum::<f64>()
+                    })
                     .sum::<f64>()
                     / ests.len() as f64;
                 a[k - 1] += e;

@@ -4,6 +4,7 @@
 //! estimates are apart (the disagreement). From [`Sums::estimators`] and
 //! [`Sums::disagreement`], per-trial values summed over trials (so they merge across threads,
 //! checkpoints and shards like every other sum).
+use crate::metrics::energy::EnergySummary;
 use crate::metrics::network::NetworkSummary;
 use crate::metrics::Sums;
 use crate::network::topology::Topology;
@@ -33,6 +34,25 @@ pub struct EstimatorsSummary {
     /// every node holds the same estimate. With its standard error.
     pub disagreement: f64,
     pub disagreement_se: f64,
+}
+
+/// A variant's energy, its network (over a `[network]`, or the graph a decentralized scheme
+/// runs on) and its estimators ([`summarize`]).
+pub fn of_variant(
+    exp: &crate::scenario::build::Experiment,
+    v: &crate::scenario::build::Variant,
+    sums: &Sums,
+) -> (
+    EnergySummary,
+    Option<NetworkSummary>,
+    Option<EstimatorsSummary>,
+) {
+    let (energy, network) = crate::metrics::network::energy_and_network(exp, v, sums);
+    let dim = exp.system.state_dim();
+    let estimators = exp
+        .graph_of(v)
+        .and_then(|net| summarize(&net, sums, dim, network.as_ref()));
+    (energy, network, estimators)
 }
 
 /// The estimators of a variant's `sums` on `net` (its nodes in order), `None` for a scheme with

@@ -23,6 +23,28 @@ pub struct SteadyState {
     pub rate_se: f64,
 }
 
+impl SteadyState {
+    /// The steady-state averages of a variant's `sums`, with their standard errors.
+    fn of(exp: &Experiment, s: &Sums) -> Self {
+        let (n, n_sensors) = (exp.system.state_dim() as f64, exp.system.n_sensors() as f64);
+        let (mse, mse_se) = s.steady_mse.mean_se(exp.trials);
+        let (trace, trace_se) = s.steady_trace.mean_se(exp.trials);
+        let (nees, nees_se) = s.steady_nees.mean_se(exp.trials);
+        let (msg, msg_se) = s.steady_messages.mean_se(exp.trials);
+        SteadyState {
+            from_step: exp.steady_from,
+            mse,
+            mse_se,
+            trace,
+            trace_se,
+            anees: nees / n,
+            anees_se: nees_se / n,
+            rate: msg / n_sensors,
+            rate_se: msg_se / n_sensors,
+        }
+    }
+}
+
 /// Per-step traffic: mean over trials and its standard error at each step.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct TrafficPerStep {
@@ -303,27 +325,19 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
             let per_sensor =
                 |v: Vec<f64>| -> Vec<f64> { v.into_iter().map(|x| x / n_sensors).collect() };
             let traffic_per_step = TrafficPerStep::of(&col, &col_se, &per_sensor);
-            let (energy, network) = crate::metrics::network::energy_and_network(exp, v, s);
-            let estimators = exp.graph_of(v).and_then(|net| {
-                crate::metrics::estimators::summarize(
-                    &net,
-                    s,
-                    exp.system.state_dim(),
-                    network.as_ref(),
-                )
-            });
+            let (energy, network, estimators) = crate::metrics::estimators::of_variant(exp, v, s);
             let p_div = s.diverged as f64 / trials;
             let anees_per_step: Vec<f64> = col(Layout::NEES).into_iter().map(|x| x / n).collect();
-            let messages: f64 = col(Layout::MESSAGES).iter().sum();
-            let bits: f64 = col(Layout::BITS).iter().sum();
-            let frame_bits: f64 = col(Layout::FRAME_BITS).iter().sum();
-            let downlink_bits: f64 = col(Layout::DOWNLINK_BITS).iter().sum();
-            let degenerate: f64 = col(Layout::DEGENERATE).iter().sum();
-            let covered: f64 = col(Layout::NEES_COVERED).iter().sum();
-            let (mse_ss, mse_se) = s.steady_mse.mean_se(exp.trials);
-            let (trace_ss, trace_se) = s.steady_trace.mean_se(exp.trials);
-            let (nees_ss, nees_se) = s.steady_nees.mean_se(exp.trials);
-            let (msg_ss, msg_se) = s.steady_messages.mean_se(exp.trials);
+            let sum = |f: usize| -> f64 { col(f).iter().sum() };
+            let [messages, bits, frame_bits, downlink_bits, degenerate, covered] = [
+                Layout::MESSAGES,
+                Layout::BITS,
+                Layout::FRAME_BITS,
+                Layout::DOWNLINK_BITS,
+                Layout::DEGENERATE,
+                Layout::NEES_COVERED,
+            ]
+            .map(sum);
             let covered_95: f64 = col(Layout::NEES_COVERED_95).iter().sum();
             let ess = s.has_ess.then(|| {
                 let mean_per_step = col(Layout::ESS);
@@ -392,17 +406,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
                 failed: s.failure.clone(),
                 consistency,
                 per_trial: s.per_trial_rows().map(<[f64]>::to_vec).collect(),
-                steady_state: SteadyState {
-                    from_step: exp.steady_from,
-                    mse: mse_ss,
-                    mse_se,
-                    trace: trace_ss,
-                    trace_se,
-                    anees: nees_ss / n,
-                    anees_se: nees_se / n,
-                    rate: msg_ss / n_sensors,
-                    rate_se: msg_se / n_sensors,
-                },
+                steady_state: SteadyState::of(exp, s),
             }
         })
         .collect();

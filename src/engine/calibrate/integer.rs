@@ -124,4 +124,3 @@ fn every_integer(
     }
     Ok(chosen)
 }
-

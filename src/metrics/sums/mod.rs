@@ -3,17 +3,21 @@
 //!
 //! The row layout is in `row.rs`, the NEES histogram and bounds in `nees.rs`; this file holds
 //! the sums of a variant, their recording during a trial and their merging.
+mod estimators;
 mod nees;
 mod row;
+mod shared;
 #[cfg(test)]
 mod tests;
 
 use crate::filter::Gaussian;
 use crate::linalg::{mahalanobis_sq, Vector};
 use crate::network::Traffic;
-use multiversion::multiversion;
+pub use estimators::EstimatorStat;
+use estimators::EstimatorState;
 pub use nees::*;
 pub use row::*;
+pub use shared::record_shared;
 
 /// Sums for one scheme variant.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -97,14 +101,6 @@ pub struct Sums {
     pub disagreement: TrialStat,
 }
 
-/// One estimator of a network (a node of a decentralized scheme): its per-trial steady-state
-/// mean squared error and NEES, summed over trials with their squares.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct EstimatorStat {
-    pub mse: TrialStat,
-    pub nees: TrialStat,
-}
-
 /// Where and why a variant's trial failed.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct TrialFailure {
@@ -185,20 +181,6 @@ pub struct TrialState<'a> {
     pending: usize,
     /// A decentralized scheme's per-node running sums ([`TrialState::record_estimators`]).
     estimators: Option<Box<EstimatorState>>,
-}
-
-/// What a trial of a decentralized scheme carries besides the mean over its nodes.
-#[derive(Debug, Default)]
-struct EstimatorState {
-    /// Per node, the steady-state sums of its squared error and NEES.
-    acc: Vec<[f64; 2]>,
-    /// The steady-state sum of the disagreement.
-    disagreement: f64,
-    /// Work space: one node's error, the mean over nodes of each component's squared error,
-    /// the mean estimate.
-    err: Vec<f64>,
-    sq: Vec<f64>,
-    mean: Vec<f64>,
 }
 
 /// One step's values of a trial (of one estimator, or the mean over a network's estimators).
@@ -522,108 +504,6 @@ impl TrialState<'_> {
     ) -> Result<(), crate::linalg::LinalgError> {
         sums.add_senders(&traffic, 1);
         self.record_inner(sums, k, truth, est, Some(factor), traffic)
-    }
-
-    /// Records step `k` of a decentralized scheme, whose every node estimates: `estimates[i]`
-    /// is node i's. The step's values are the means over the nodes (squared error per
-    /// component, NEES, trace; the degenerate and covered fields as fractions of the nodes);
-    /// each node's squared error and NEES, and the nodes' disagreement, go to its running sums
-    /// ([`Sums::estimators`], [`Sums::disagreement`]).
-    pub fn record_estimators(
-        &mut self,
-        sums: &mut Sums,
-        k: usize,
-        truth: &Vector,
-        estimates: &[&Gaussian],
-        traffic: Traffic,
-    ) -> Result<(), crate::linalg::LinalgError> {
-        let (n, m) = (truth.len(), estimates.len());
-        assert!(m > 0, "record_estimators: no estimate");
-        let mut st = self.estimators.take().unwrap_or_default();
-        st.acc.resize(m, [0.0; 2]);
-        st.err.resize(n, 0.0);
-        st.sq.clear();
-        st.sq.resize(n, 0.0);
-        st.mean.clear();
-        st.mean.resize(n, 0.0);
-        let steady = k >= self.steady_from;
-        let (mut nees_sum, mut trace_sum, mut degenerate) = (0.0, 0.0, 0usize);
-        let mut covered = [0usize; 2];
-        for (i, est) in estimates.iter().enumerate() {
-            assert_eq!(est.mean.len(), n, "record: truth and estimate dimensions");
-            for ((e, x), t) in st.err.iter_mut().zip(est.mean.iter()).zip(truth.iter()) {
-                *e = x - t;
-            }
-            let (nees, degen) = match self.nees(&st.err, est, None) {
-                Ok(v) => v,
-                Err(e) => {
-                    self.estimators = Some(st);
-                    return Err(e);
-                }
-            };
-            let se: f64 = st.err.iter().map(|e| e * e).sum();
-            for ((q, e), (x, v)) in st
-                .sq
-                .iter_mut()
-                .zip(&st.err)
-                .zip(st.mean.iter_mut().zip(est.mean.iter()))
-            {
-                *q += e * e;
-                *x += v;
-            }
-            nees_sum += nees;
-            trace_sum += trace(&est.cov);
-            degenerate += usize::from(degen);
-            covered[0] += usize::from(nees <= self.nees_bound);
-            covered[1] += usize::from(nees <= self.nees_bound_95);
-            if steady {
-                st.acc[i][0] += se;
-                st.acc[i][1] += nees;
-            }
-        }
-        let mf = m as f64;
-        st.sq.iter_mut().for_each(|q| *q /= mf);
-        st.mean.iter_mut().for_each(|x| *x /= mf);
-        let disagreement = estimates
-            .iter()
-            .map(|est| {
-                est.mean
-                    .iter()
-                    .zip(&st.mean)
-                    .map(|(x, c)| (x - c) * (x - c))
-                    .sum::<f64>()
-            })
-            .sum::<f64>()
-            / mf;
-        if steady {
-            st.disagreement += disagreement;
-        }
-        let link = link_counts(&traffic);
-        if link.iter().any(|&c| c > 0) {
-            sums.add_link(k, link);
-        }
-        if self.traffic.0 != traffic {
-            self.traffic = (traffic, traffic_counts(traffic));
-        }
-        let step = StepValues {
-            total: st.sq.iter().sum(),
-            nees: nees_sum / mf,
-            degenerate: degenerate as f64 / mf,
-            covered: [covered[0] as f64 / mf, covered[1] as f64 / mf],
-            trace: trace_sum / mf,
-        };
-        let counts = self.traffic.1;
-        let sq = std::mem::take(&mut st.sq);
-        self.accumulate_step(
-            sums,
-            k,
-            &step,
-            |idx| idx.iter().map(|&j| sq[j]).sum(),
-            counts,
-        );
-        st.sq = sq;
-        self.estimators = Some(st);
-        Ok(())
     }
 
     fn record_inner(
@@ -980,70 +860,6 @@ impl TrialObserver<'_> {
     }
 }
 
-/// Records step `k` of the trials of a batch run in lockstep whose estimates share one
-/// covariance: trial j (state `states[j]`, truth `truths[j][k - 1]`) has the mean
-/// `means[j * n..(j + 1) * n]`; `shared` holds the covariance (its mean is work space),
-/// `factor` its Cholesky factor. The same numbers as [`TrialState::record_factored`] of
-/// each trial in order; what no trial changes (the trace, the traffic's counts) is read
-/// once per step.
-/// Compiled also for AVX2 and picked at run time: the same IEEE operations (no FMA
-/// contraction), so the same sums on every x86-64 machine.
-#[allow(clippy::too_many_arguments)]
-#[multiversion(targets("x86_64+avx2"))]
-pub fn record_shared(
-    states: &mut [TrialState],
-    sums: &mut Sums,
-    k: usize,
-    truths: &[&[Vector]],
-    means: &[f64],
-    shared: &mut Gaussian,
-    factor: Option<&[f64]>,
-    traffic: Traffic,
-) -> Result<(), crate::linalg::LinalgError> {
-    /// Trials whose errors and NEES are computed before any is accumulated: their
-    /// Cholesky solves (two dependent divisions each) then overlap.
-    const GROUP: usize = 4;
-    let n = shared.mean.len();
-    let trace = trace(&shared.cov);
-    let counts = traffic_counts(traffic);
-    sums.add_senders(&traffic, states.len().min(truths.len()) as u64);
-    let trials = states.iter_mut().zip(truths).zip(means.chunks_exact(n));
-    let mut trials = trials.peekable();
-    while trials.peek().is_some() {
-        let group: [_; GROUP] = std::array::from_fn(|_| trials.next());
-        let mut errs = [[0.0; STACK_WIDTH]; GROUP];
-        let mut nees = [None; GROUP];
-        for ((trial, err), nees) in group.iter().zip(&mut errs).zip(&mut nees) {
-            let Some(((_, truth), mean)) = trial else {
-                break;
-            };
-            let truth = &truth[k - 1];
-            assert_eq!(truth.len(), n, "record: truth and estimate dimensions");
-            if let Some(f) = factor.filter(|_| n <= STACK_WIDTH) {
-                let err = &mut err[..n];
-                for ((e, m), t) in err.iter_mut().zip(*mean).zip(truth.as_slice()) {
-                    *e = m - t;
-                }
-                *nees = crate::linalg::fixed::mahalanobis_sq_factored(err, f);
-            }
-        }
-        for ((trial, err), nees) in group.into_iter().zip(&errs).zip(nees) {
-            let Some(((state, truth), mean)) = trial else {
-                break;
-            };
-            match nees {
-                Some(nees) => state.accumulate(sums, k, &err[..n], nees, false, trace, counts),
-                // Not factored: the general record (which also reports what is wrong).
-                None => {
-                    shared.mean.as_mut_slice().copy_from_slice(mean);
-                    state.record_inner(sums, k, &truth[k - 1], shared, factor, traffic)?;
-                }
-            }
-        }
-    }
-    Ok(())
-}
-
 /// A step's traffic counts as the floats its fields add.
 fn traffic_counts(traffic: Traffic) -> [f64; 4] {
     [
@@ -1066,46 +882,4 @@ fn trace(p: &crate::linalg::Matrix) -> f64 {
         t += s[i * n + i];
     }
     t
-}
-
-/// [`mahalanobis_sq`] with the factorization done in `buf` and the solve in `white`: the same
-/// checks (square, finite), the same Cholesky factorization of a copy of `p` and the same
-/// triangular solve, hence the same number, without allocating.
-fn nees_buffered(
-    e: &[f64],
-    p: &crate::linalg::Matrix,
-    white: &mut Vector,
-    buf: &mut Option<crate::linalg::Matrix>,
-) -> Result<f64, crate::linalg::LinalgError> {
-    use crate::linalg::LinalgError;
-    if p.nrows() != p.ncols() {
-        return Err(LinalgError::NotSquare {
-            rows: p.nrows(),
-            cols: p.ncols(),
-        });
-    }
-    if p.as_slice().iter().any(|v| !v.is_finite()) {
-        return Err(LinalgError::NonFinite);
-    }
-    // Dimensions 1..=6: the same factorization, solve and sum in fixed-size buffers.
-    if let Some(r) = crate::linalg::fixed::mahalanobis_sq_small_slice(e, p) {
-        return r.ok_or(LinalgError::NotPositiveDefinite);
-    }
-    let mut m = match buf.take() {
-        Some(m) if m.shape() == p.shape() => m,
-        _ => crate::linalg::Matrix::zeros(p.nrows(), p.ncols()),
-    };
-    m.copy_from(p);
-    let chol = nalgebra::Cholesky::new(m).ok_or(LinalgError::NotPositiveDefinite)?;
-    if white.len() != e.len() {
-        *white = Vector::zeros(e.len());
-    }
-    white.as_mut_slice().copy_from_slice(e);
-    // Only the lower triangle is read: the dirty factor solves as `chol.l()` does.
-    let solved = chol.l_dirty().solve_lower_triangular_mut(white);
-    *buf = Some(chol.unpack_dirty());
-    if !solved {
-        return Err(LinalgError::NotPositiveDefinite);
-    }
-    Ok(white.norm_squared())
 }

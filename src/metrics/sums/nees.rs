@@ -264,3 +264,45 @@ pub(super) fn approx_t_in(table: &LogTable, v: f64) -> Option<f64> {
     let log10 = e as f64 * std::f64::consts::LOG10_2 + log_c + ln1p * std::f64::consts::LOG10_E;
     Some((log10 - NeesHistogram::LO) * NeesHistogram::PER_DECADE)
 }
+
+/// [`mahalanobis_sq`] with the factorization done in `buf` and the solve in `white`: the same
+/// checks (square, finite), the same Cholesky factorization of a copy of `p` and the same
+/// triangular solve, hence the same number, without allocating.
+pub(super) fn nees_buffered(
+    e: &[f64],
+    p: &crate::linalg::Matrix,
+    white: &mut crate::linalg::Vector,
+    buf: &mut Option<crate::linalg::Matrix>,
+) -> Result<f64, crate::linalg::LinalgError> {
+    use crate::linalg::LinalgError;
+    if p.nrows() != p.ncols() {
+        return Err(LinalgError::NotSquare {
+            rows: p.nrows(),
+            cols: p.ncols(),
+        });
+    }
+    if p.as_slice().iter().any(|v| !v.is_finite()) {
+        return Err(LinalgError::NonFinite);
+    }
+    // Dimensions 1..=6: the same factorization, solve and sum in fixed-size buffers.
+    if let Some(r) = crate::linalg::fixed::mahalanobis_sq_small_slice(e, p) {
+        return r.ok_or(LinalgError::NotPositiveDefinite);
+    }
+    let mut m = match buf.take() {
+        Some(m) if m.shape() == p.shape() => m,
+        _ => crate::linalg::Matrix::zeros(p.nrows(), p.ncols()),
+    };
+    m.copy_from(p);
+    let chol = nalgebra::Cholesky::new(m).ok_or(LinalgError::NotPositiveDefinite)?;
+    if white.len() != e.len() {
+        *white = crate::linalg::Vector::zeros(e.len());
+    }
+    white.as_mut_slice().copy_from_slice(e);
+    // Only the lower triangle is read: the dirty factor solves as `chol.l()` does.
+    let solved = chol.l_dirty().solve_lower_triangular_mut(white);
+    *buf = Some(chol.unpack_dirty());
+    if !solved {
+        return Err(LinalgError::NotPositiveDefinite);
+    }
+    Ok(white.norm_squared())
+}
