@@ -3,6 +3,7 @@
 //! to the variant's sums as the mean over the nodes, each node's own beside
 //! ([`crate::metrics::TrialState::record_estimators`]), with every node's counters.
 use crate::decentralized::trial::{PeerTrial, Peers};
+use crate::engine::link_layer::Link;
 use crate::link::codec802154::{FCS_OCTETS, MHR_OCTETS};
 use crate::metrics::{Sums, TrialFailure};
 use crate::network::radio::PHY_OVERHEAD_BITS;
@@ -32,6 +33,54 @@ pub fn traffic(counts: &[NodeCounts]) -> Traffic {
     }
 }
 
+/// What each sensor node did in a step, as the engine's loop reports a sensor: sent (it put a
+/// frame on air) or silent.
+pub fn links(counts: &[NodeCounts], sensors: usize) -> Vec<Link> {
+    counts[..sensors]
+        .iter()
+        .map(|c| match crate::network::topology::tally::frames(c).0 {
+            0 => Link::Silent,
+            _ => Link::Sent,
+        })
+        .collect()
+}
+
+/// Each sensor node's payload bits on air in a step ([`traffic`] of its counters alone).
+pub fn sensor_bits(counts: &[NodeCounts], sensors: usize) -> Vec<u64> {
+    counts[..sensors]
+        .iter()
+        .map(|c| traffic(std::slice::from_ref(c)).bits)
+        .collect()
+}
+
+/// Runs decentralized variant `v` (`peers`) of trial `trial` on `measurements`, calling `f`
+/// after every step with (k, every node's estimate, every node's counters). Recorded data with
+/// holes (`available` not all true) is refused: a node without its reading is not built yet.
+pub fn run_steps(
+    exp: &Experiment,
+    v: usize,
+    peers: &Peers,
+    measurements: &[Vec<crate::linalg::Vector>],
+    (trial, available): (usize, Option<&[Vec<bool>]>),
+    f: &mut crate::decentralized::trial::Recorder,
+) -> Result<(), String> {
+    if available.is_some_and(|a| a.iter().any(|row| row.iter().any(|&b| !b))) {
+        return Err(
+            "a decentralized scheme needs every sensor's reading at every step (recorded data with holes is not supported for it yet)".into(),
+        );
+    }
+    let net = exp
+        .graph_of(&exp.variants[v])
+        .expect("a decentralized scheme has a graph");
+    let t = PeerTrial {
+        net: &net,
+        measurements,
+        seed: exp.seed,
+        trial: trial as u64,
+    };
+    peers.run_trial(&t, f)
+}
+
 /// One trial of decentralized variant `v` (`peers`) on `data`, into `sums`; a failed trial is
 /// recorded as the variant's failure, as the engine's loop does.
 pub fn run_variant(
@@ -43,24 +92,19 @@ pub fn run_variant(
     sums: &mut Sums,
 ) {
     let label = &exp.curves[exp.variants[v].curve].label;
-    let net = exp
-        .graph_of(&exp.variants[v])
-        .expect("a decentralized scheme has a graph");
     let mut obs = sums.trial(&exp.groups, exp.steady_from);
-    let t = PeerTrial {
-        net: &net,
-        measurements: &data.measurements,
-        seed: exp.seed,
-        trial: trial as u64,
-    };
     let mut failed_at = 0;
-    let outcome = peers.run_trial(&t, &mut |k, estimates, counts| {
-        failed_at = k;
-        obs.record_estimators(k, &data.truth[k - 1], estimates, traffic(counts))
-            .map_err(|e| format!("a node's covariance is not positive definite ({e})"))?;
-        obs.record_nodes(k, counts);
-        Ok(())
-    });
+    let outcome = run_steps(
+        exp,
+        v,
+        peers,
+        &data.measurements,
+        (trial, None),
+        &mut |k, estimates, counts| {
+            failed_at = k;
+            record(&mut obs, k, &data.truth[k - 1], estimates, counts)
+        },
+    );
     match outcome {
         Ok(()) => obs.finish(),
         Err(message) => sums.record_failure(TrialFailure {
@@ -69,4 +113,19 @@ pub fn run_variant(
             message: format!("scheme {label}, trial {trial}: {message}"),
         }),
     }
+}
+
+/// Step `k` of a decentralized scheme into a trial's metrics: the nodes' estimates against
+/// `truth`, and every node's counters.
+pub fn record(
+    obs: &mut crate::metrics::TrialObserver,
+    k: usize,
+    truth: &crate::linalg::Vector,
+    estimates: &[&crate::filter::Gaussian],
+    counts: &[NodeCounts],
+) -> Result<(), String> {
+    obs.record_estimators(k, truth, estimates, traffic(counts))
+        .map_err(|e| format!("a node's covariance is not positive definite ({e})"))?;
+    obs.record_nodes(k, counts);
+    Ok(())
 }

@@ -3,6 +3,7 @@
 //! engine's loop ([`crate::engine::trial`]): the same truths, measurements and coins as the
 //! runner; a variant's coins come from its own stream, or from variant 0's for every variant
 //! when each scheme ran alone, as calibrated arenas do.
+use crate::engine::peers;
 use crate::engine::runner::draw_trial;
 use crate::engine::trial::{self, LoopBuffers, Observer, ObserverError, TrialSpec};
 pub use crate::engine::trial::{Link, StepOutput};
@@ -77,9 +78,40 @@ pub fn run_variant_with(
     f: &mut dyn FnMut(&StepOutput) -> Result<(), String>,
 ) -> Result<(), String> {
     let label = &exp.curves[exp.variants[v].curve].label;
+    if let Some(peers) = exp.variants[v].scheme.peers() {
+        let sensors = exp.system.n_sensors();
+        let at = (opts.trial, opts.available);
+        return peers::run_steps(exp, v, peers, measurements, at, &mut |k, est, counts| {
+            let (links, bits) = (
+                peers::links(counts, sensors),
+                peers::sensor_bits(counts, sensors),
+            );
+            f(&peer_step(k, est, counts, (&links, &bits)))
+        })
+        .map_err(|e| format!("scheme {label}: {e}"));
+    }
     let mut buffers = LoopBuffers::new(exp.system.n_sensors());
     trial::run_trial(exp, measurements, opts.spec(v), &mut buffers, &mut Calls(f))
         .map_err(|e| e.describe(label))
+}
+
+/// A decentralized scheme's step as the engine's loop reports one: its first node's estimate,
+/// each sensor node sent or silent with its payload bits, the network's traffic and counters.
+fn peer_step<'a>(
+    k: usize,
+    estimates: &[&'a Gaussian],
+    counts: &'a [crate::network::topology::tally::NodeCounts],
+    (links, bits): (&'a [Link], &'a [u64]),
+) -> StepOutput<'a> {
+    StepOutput {
+        k,
+        estimate: estimates[0],
+        links,
+        bits,
+        traffic: peers::traffic(counts),
+        ess: None,
+        nodes: counts,
+    }
 }
 
 /// A trial's metrics beside a closure: every step into the sums, then to the closure.
@@ -112,6 +144,22 @@ pub fn run_variant_into(
     f: &mut dyn FnMut(&StepOutput) -> Result<(), String>,
 ) -> Result<(), String> {
     let label = &exp.curves[exp.variants[v].curve].label;
+    if let Some(peers) = exp.variants[v].scheme.peers() {
+        let sensors = exp.system.n_sensors();
+        let mut obs = sums.trial(&exp.groups, exp.steady_from);
+        let at = (opts.trial, opts.available);
+        peers::run_steps(exp, v, peers, measurements, at, &mut |k, est, counts| {
+            peers::record(&mut obs, k, &truth[k - 1], est, counts)?;
+            let (links, bits) = (
+                peers::links(counts, sensors),
+                peers::sensor_bits(counts, sensors),
+            );
+            f(&peer_step(k, est, counts, (&links, &bits)))
+        })
+        .map_err(|e| format!("scheme {label}: {e}"))?;
+        obs.finish();
+        return Ok(());
+    }
     let mut buffers = LoopBuffers::new(exp.system.n_sensors());
     let mut observer = SumsAndCalls {
         obs: sums.trial(&exp.groups, exp.steady_from),
@@ -140,27 +188,19 @@ fn run_variant(
     f: EstimatesFn,
 ) -> Result<(), String> {
     if let Some(peers) = exp.variants[v].scheme.peers() {
-        let net = exp
-            .graph_of(&exp.variants[v])
-            .expect("a decentralized scheme has a graph");
-        let t = crate::decentralized::trial::PeerTrial {
-            net: &net,
-            measurements: &data.measurements,
-            seed: exp.seed,
-            trial: trial as u64,
-        };
         let sensors = exp.system.n_sensors();
-        return peers.run_trial(&t, &mut |k, estimates, counts| {
-            let links: Vec<Link> = counts[..sensors]
-                .iter()
-                .map(|c| match crate::network::topology::tally::frames(c).0 {
-                    0 => Link::Silent,
-                    _ => Link::Sent,
-                })
-                .collect();
-            f(k, &data.truth[k - 1], estimates, &links);
-            Ok(())
-        });
+        let at = (trial, None);
+        return peers::run_steps(
+            exp,
+            v,
+            peers,
+            &data.measurements,
+            at,
+            &mut |k, est, counts| {
+                f(k, &data.truth[k - 1], est, &peers::links(counts, sensors));
+                Ok(())
+            },
+        );
     }
     let opts = LoopOptions {
         trial,
