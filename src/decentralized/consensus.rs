@@ -92,6 +92,8 @@ pub struct ConsensusNode {
     /// What the consensus runs on during the step: the corrected pair (CI), the novel pair
     /// (CM), or the prior and the novel pair (hybrid).
     pairs: Vec<Pair>,
+    /// The previous iteration's pairs, reused as the next one's work space.
+    spare: Vec<Pair>,
     estimate: Gaussian,
 }
 
@@ -119,6 +121,7 @@ impl ConsensusNode {
             iterations,
             fusion,
             pairs: Vec::new(),
+            spare: Vec::new(),
             prior: (omega, q),
             estimate: prior.clone(),
         })
@@ -129,13 +132,26 @@ impl ConsensusNode {
         iterations + 1
     }
 
-    /// One consensus iteration on what arrived (iteration `l − 1`'s pairs of this step).
+    /// One consensus iteration on what arrived (iteration `l − 1`'s pairs of this step), into
+    /// the node's spare pairs (kept from iteration to iteration: nothing allocated once their
+    /// shapes are set).
     fn combine(&mut self, k: usize, l: usize, inbox: &[Envelope<InformationPairs>]) {
-        let mut mixed: Vec<Pair> = self
-            .pairs
-            .iter()
-            .map(|(m, v)| (m * self.own_weight, v * self.own_weight))
-            .collect();
+        let mut mixed = std::mem::take(&mut self.spare);
+        mixed.truncate(self.pairs.len());
+        for (i, (m, v)) in self.pairs.iter().enumerate() {
+            match mixed.get_mut(i) {
+                Some((mm, mv)) if mm.shape() == m.shape() && mv.len() == v.len() => {
+                    mm.copy_from(m);
+                    mv.copy_from(v);
+                }
+                Some(slot) => *slot = (m.clone(), v.clone()),
+                None => mixed.push((m.clone(), v.clone())),
+            }
+        }
+        for (m, v) in &mut mixed {
+            *m *= self.own_weight;
+            *v *= self.own_weight;
+        }
         for &(j, w) in &self.neighbours {
             let got = inbox
                 .iter()
@@ -143,11 +159,11 @@ impl ConsensusNode {
             // Lost: the node's own pairs in its place.
             let theirs = got.map_or(&self.pairs, |e| &e.payload.pairs);
             for ((m, v), (tm, tv)) in mixed.iter_mut().zip(theirs) {
-                *m += tm * w;
-                *v += tv * w;
+                add_scaled(m.as_mut_slice(), tm.as_slice(), w);
+                add_scaled(v.as_mut_slice(), tv.as_slice(), w);
             }
         }
-        self.pairs = mixed;
+        self.spare = std::mem::replace(&mut self.pairs, mixed);
     }
 
     /// The pairs the consensus starts from at step `k` with reading `z`.
@@ -195,6 +211,13 @@ impl ConsensusNode {
     fn broadcast(&self, iteration: usize, out: &mut Outbox<InformationPairs>) {
         let pairs = self.pairs.clone();
         out.send(Address::Neighbours, InformationPairs { iteration, pairs });
+    }
+}
+
+/// `a += b w`, element by element: the same numbers as nalgebra's `a + b * w`, in place.
+fn add_scaled(a: &mut [f64], b: &[f64], w: f64) {
+    for (x, y) in a.iter_mut().zip(b) {
+        *x += y * w;
     }
 }
 

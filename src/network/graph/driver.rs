@@ -37,6 +37,9 @@ pub struct GraphDriver<P> {
     later: Vec<(usize, usize, Envelope<P>)>,
     out: Outbox<P>,
     done: usize,
+    /// Work lists of a broadcast: the neighbours that heard it (with their delays), by index.
+    heard: Vec<(usize, u32)>,
+    receivers: Vec<usize>,
 }
 
 impl<P: Payload + Clone> GraphDriver<P> {
@@ -72,6 +75,8 @@ impl<P: Payload + Clone> GraphDriver<P> {
             later: Vec::new(),
             out: Outbox::default(),
             done: 0,
+            heard: Vec::new(),
+            receivers: Vec::new(),
         }
     }
 
@@ -163,18 +168,30 @@ impl<P: Payload + Clone> GraphDriver<P> {
                 self.deliver(k, d, delay, envelope(last, path.len() as u32, payload));
             }
             Address::Neighbours => {
-                let mut heard = Vec::new();
+                // The work lists are kept from call to call (a consensus step broadcasts L
+                // times from every node).
+                let (mut heard, mut receivers) =
+                    (std::mem::take(&mut self.heard), std::mem::take(&mut self.receivers));
+                heard.clear();
                 for &b in &self.neighbours[from] {
                     let f = self.fates.frame(k, from, b, from, false);
                     if !f.lost {
                         heard.push((b, f.delay));
                     }
                 }
-                let receivers: Vec<usize> = heard.iter().map(|&(b, _)| b).collect();
+                receivers.clear();
+                receivers.extend(heard.iter().map(|&(b, _)| b));
                 self.tally.broadcast(from, &receivers, bits);
-                for (b, delay) in heard {
-                    self.deliver(k, b, delay, envelope(from, 1, payload.clone()));
+                // Every receiver but the last gets a copy; the last gets the payload itself.
+                let mut payload = Some(payload);
+                for (i, &(b, delay)) in heard.iter().enumerate() {
+                    let p = match i + 1 == heard.len() {
+                        true => payload.take().expect("the last receiver's"),
+                        false => payload.clone().expect("kept for the last receiver"),
+                    };
+                    self.deliver(k, b, delay, envelope(from, 1, p));
                 }
+                (self.heard, self.receivers) = (heard, receivers);
             }
             Address::Down => {
                 let ppdu = bits + PHY_OVERHEAD_BITS;
