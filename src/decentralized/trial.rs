@@ -84,16 +84,53 @@ type NodeWeights = (f64, Vec<(usize, f64)>);
 /// Most consensus iterations a step (each one a broadcast of every node).
 pub const MAX_ITERATIONS: usize = 10_000;
 
+/// The largest MAC payload of one 802.15.4 frame: 127 octets less the 11 of the MAC header and
+/// FCS ([`crate::link::codec802154::mpdu_bits_for_payload`]).
+pub const MAX_PAYLOAD_OCTETS: usize = 116;
+
 impl Peers {
     /// Whether the scheme can run on `net`: the channel filter needs a tree of lossless links;
     /// weights given by hand must fit the graph. An error names the field.
     pub fn check(&self, net: &Topology) -> Result<(), String> {
+        let singles = self.largest_message();
+        let octets = 4 * singles;
+        if octets > MAX_PAYLOAD_OCTETS {
+            return Err(format!(
+                "a message carries {singles} singles ({octets} octets), more than one 802.15.4 frame holds ({MAX_PAYLOAD_OCTETS} octets of payload); splitting a message across frames is not built yet"
+            ));
+        }
         match &self.kind {
             PeerKind::ChannelFilter => channel_filter::check_network(net),
             PeerKind::Consensus { weights, .. } | PeerKind::Diffusion { weights, .. } => {
                 Weights::new(weights, net.nodes.len(), &net.edges()).map(|_| ())
             }
             _ => Ok(()),
+        }
+    }
+
+    /// Singles in the scheme's largest message (its state of dimension n, its sensors'
+    /// readings of dimension m): a pair n + n(n+1)/2 (the matrix symmetric), a vector n.
+    fn largest_message(&self) -> usize {
+        let n = self.model.a.nrows();
+        let m = self
+            .sensors
+            .iter()
+            .map(|(h, _)| h.nrows())
+            .max()
+            .unwrap_or(0);
+        let pair = n + n * (n + 1) / 2;
+        match &self.kind {
+            PeerKind::Consensus {
+                fusion: FusionKind::Hybrid,
+                ..
+            } => 2 * pair,
+            PeerKind::Consensus { .. } | PeerKind::PeerFusion(_) | PeerKind::ChannelFilter => pair,
+            PeerKind::KalmanConsensus { .. } => n,
+            PeerKind::Diffusion {
+                order: Order::AdaptThenCombine,
+                ..
+            } => n.max(m),
+            PeerKind::Diffusion { .. } => n + m,
         }
     }
 
@@ -268,4 +305,46 @@ fn drive<P: Payload + Clone>(
         record(j + 1, &estimates, driver.counts())?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::decentralized::fixture::ring;
+
+    fn peers(n: usize, kind: PeerKind) -> Peers {
+        let i = Matrix::identity(n, n);
+        let mut h = Matrix::zeros(1, n);
+        h[(0, 0)] = 1.0;
+        Peers {
+            kind,
+            model: Model {
+                a: i.clone(),
+                q: i.clone(),
+            },
+            prior: Gaussian::new(crate::linalg::Vector::zeros(n), i),
+            sensors: vec![(h, Matrix::identity(1, 1)); 3],
+        }
+    }
+
+    /// A 6-state pair is 27 singles, 108 octets: one frame; the hybrid's two pairs, 216
+    /// octets, are not, and are refused rather than priced as one frame.
+    #[test]
+    fn a_message_larger_than_a_frame_is_refused() {
+        let net = ring("kind = \"ideal\"");
+        let consensus = |fusion| PeerKind::Consensus {
+            fusion,
+            weights: WeightRule::MetropolisHastings,
+            iterations: 1,
+            omega: None,
+        };
+        assert!(peers(6, consensus(FusionKind::Information))
+            .check(&net)
+            .is_ok());
+        let e = peers(6, consensus(FusionKind::Hybrid))
+            .check(&net)
+            .unwrap_err();
+        assert!(e.contains("54 singles (216 octets)"), "{e}");
+        assert!(peers(4, consensus(FusionKind::Hybrid)).check(&net).is_ok());
+    }
 }

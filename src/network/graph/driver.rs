@@ -170,8 +170,10 @@ impl<P: Payload + Clone> GraphDriver<P> {
             Address::Neighbours => {
                 // The work lists are kept from call to call (a consensus step broadcasts L
                 // times from every node).
-                let (mut heard, mut receivers) =
-                    (std::mem::take(&mut self.heard), std::mem::take(&mut self.receivers));
+                let (mut heard, mut receivers) = (
+                    std::mem::take(&mut self.heard),
+                    std::mem::take(&mut self.receivers),
+                );
                 heard.clear();
                 for &b in &self.neighbours[from] {
                     let f = self.fates.frame(k, from, b, from, false);
