@@ -19,7 +19,6 @@ use crate::engine::fusion_side::{scheduled, FusionSide};
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
 use crate::link::{Message, Received, Transmission};
-use crate::network::channel::ChannelSpec;
 use crate::network::graph::driver::GraphDriver;
 use crate::network::graph::{Address, Envelope, NetworkNode, Outbox, Payload, Round};
 use crate::network::radio::{DOWNLINK_OVERHEAD_BITS, PHY_OVERHEAD_BITS};
@@ -190,10 +189,7 @@ pub fn star_nodes(
     let n = exp.system.n_sensors();
     let net = match &exp.network {
         Some(net) => (**net).clone(),
-        None => {
-            let specs = v.channel.as_deref().cloned();
-            Topology::star(&specs.unwrap_or_else(|| vec![ChannelSpec::default(); n]))
-        }
+        None => v.star(n),
     };
     if !exp.reals.is_f32() {
         return Err("the graph's star nodes send singles: reals = \"f64\" is not supported".into());

@@ -402,17 +402,9 @@ fn check_decentralized(
             (Some(peers), Some(net)) => peers
                 .check(net)
                 .map_err(|m| ctx.err(&field, format!("{label}: {m}")))?,
-            (Some(peers), None) => {
-                let channels = v
-                    .channel
-                    .as_deref()
-                    .cloned()
-                    .unwrap_or_else(|| vec![Default::default(); sensors]);
-                let star = crate::network::topology::Topology::star(&channels);
-                peers
-                    .check(&star)
-                    .map_err(|m| ctx.err(&field, format!("{label}: {m}")))?
-            }
+            (Some(peers), None) => peers
+                .check(&v.star(sensors))
+                .map_err(|m| ctx.err(&field, format!("{label}: {m}")))?,
             _ => {}
         }
     }

@@ -26,6 +26,15 @@ pub struct Variant {
 }
 
 impl Variant {
+    /// The one-hop star of this variant's links over `sensors` sensors (ideal where it has
+    /// none), as a graph: sensor i linked to the sink over its channel.
+    pub fn star(&self, sensors: usize) -> Topology {
+        match self.channel.as_deref() {
+            Some(channels) => Topology::star(channels),
+            None => Topology::star(&vec![ChannelSpec::default(); sensors]),
+        }
+    }
+
     /// Whether the relays of `network` sum this variant's reports
     /// ([`crate::network::aggregate`]): a multi-hop network that aggregates, and a scheme whose
     /// reports may be summed.
@@ -86,15 +95,7 @@ impl Experiment {
     pub fn graph_of(&self, v: &Variant) -> Option<std::borrow::Cow<'_, Topology>> {
         match (&self.network, v.scheme.peers()) {
             (Some(net), _) => Some(std::borrow::Cow::Borrowed(net.as_ref())),
-            (None, Some(_)) => {
-                let n = self.system.n_sensors();
-                let channels = v
-                    .channel
-                    .as_deref()
-                    .cloned()
-                    .unwrap_or_else(|| vec![ChannelSpec::default(); n]);
-                Some(std::borrow::Cow::Owned(Topology::star(&channels)))
-            }
+            (None, Some(_)) => Some(std::borrow::Cow::Owned(v.star(self.system.n_sensors()))),
             (None, None) => None,
         }
     }
