@@ -7,7 +7,7 @@ use crate::engine::link_layer::Link;
 use crate::link::codec802154::{FCS_OCTETS, MHR_OCTETS};
 use crate::metrics::{Sums, TrialFailure};
 use crate::network::radio::PHY_OVERHEAD_BITS;
-use crate::network::topology::tally::{NodeCounts, NODE_COUNTERS};
+use crate::network::topology::tally::NodeCounts;
 use crate::network::Traffic;
 use crate::scenario::draw::TrialData;
 use crate::scenario::experiment::Experiment;
@@ -15,15 +15,10 @@ use crate::scenario::experiment::Experiment;
 /// A step's traffic over the whole network from every node's counters: frames on air (every
 /// node's, each a broadcast or an attempt), their MAC frame bits and their payload bits.
 pub fn traffic(counts: &[NodeCounts]) -> Traffic {
-    let field = |name: &str| {
-        NODE_COUNTERS
-            .iter()
-            .position(|c| *c == name)
-            .expect("a counter")
-    };
-    let (tx, tx_bits) = (field("frames_sent"), field("frame_bits_sent"));
-    let frames: u64 = counts.iter().map(|c| c[tx]).sum();
-    let ppdu: u64 = counts.iter().map(|c| c[tx_bits]).sum();
+    let (frames, ppdu) = counts
+        .iter()
+        .map(crate::network::topology::tally::sent)
+        .fold((0, 0), |(f, b), (x, y)| (f + x, b + y));
     let frame_bits = ppdu - frames * PHY_OVERHEAD_BITS;
     Traffic {
         messages: frames,

@@ -53,14 +53,7 @@ impl<P: Payload + Clone> GraphDriver<P> {
                 children[*p].push(c);
             }
         }
-        let mut neighbours = vec![Vec::new(); n];
-        for l in &net.links {
-            neighbours[l.a].push(l.b);
-            neighbours[l.b].push(l.a);
-        }
-        for list in &mut neighbours {
-            list.sort_unstable();
-        }
+        let neighbours: Vec<Vec<usize>> = (0..n).map(|i| net.neighbours(i)).collect();
         Self {
             fates: GraphFates::new(net, steps, seed, trial),
             tally: Tally::new(net),

@@ -223,6 +223,12 @@ pub fn activity(counts: &NodeCounts, node_steps: f64) -> Activity {
     }
 }
 
+/// Data frames a node put on air (every attempt) and their bits on air (PPDU), from its
+/// counters.
+pub fn sent(counts: &NodeCounts) -> (u64, u64) {
+    (counts[TX], counts[TX_BITS])
+}
+
 /// Frames a node sent (every attempt, its own and forwarded) and received, from its counters.
 pub fn frames(counts: &NodeCounts) -> (u64, u64, u64) {
     (counts[TX], counts[RX], counts[FORWARDED])
