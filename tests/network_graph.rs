@@ -287,6 +287,81 @@ fn a_star_network_is_todays_run() {
     assert!(a.schemes[0].network.is_none());
 }
 
+/// `broadcast_estimate = true` on s0 → r0 → sink, ideal links, the all-data KF of a scalar
+/// state: after every step the sink sends its estimate (mean and variance: 2 singles, 64 bits)
+/// down the tree in a frame of 136 bits of PHY and MAC overhead, 200 bits = 800 µs on air.
+/// Every node holding children sends it once; every node below the sink listens one window
+/// for it and receives it. The estimates do not move.
+#[test]
+fn the_estimate_sent_down_the_tree_by_hand() {
+    let line = "relays = 1\nedges = [[\"s0\", \"r0\"], [\"r0\", \"sink\"]]\n";
+    let plain = summary(&scenario(1, "", line, ALL_DATA, 3));
+    let text = scenario(
+        1,
+        "",
+        &format!("{line}broadcast_estimate = true\n"),
+        ALL_DATA,
+        3,
+    );
+    let s = summary(&text);
+    let (a, b) = (&plain.schemes[0], &s.schemes[0]);
+    assert_eq!(a.rmse, b.rmse);
+    assert_eq!(
+        (a.downlink_bits_per_step, b.downlink_bits_per_step),
+        (0.0, 64.0)
+    );
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-9 * b.abs().max(1.0);
+    let (rx_mw, tx_mw) = (3.0 * 18.8, 3.0 * 17.4);
+    let down_tx = tx_mw * (800.0 + 192.0) / 1000.0;
+    let part = |s: &SchemeSummary, n: &str| node(s, n).energy_parts_per_step_uj;
+    // s0: one window for its parent's frame, and the frame.
+    assert!(close(
+        part(b, "s0").downlink,
+        rx_mw * (1000.0 + 800.0) / 1000.0
+    ));
+    assert!(close(part(b, "s0").relay, 0.0));
+    // r0: the window of its child (as before) and its parent's, the frame; it sends it down.
+    assert!(close(
+        part(b, "r0").downlink,
+        rx_mw * (2000.0 + 800.0) / 1000.0
+    ));
+    assert!(close(part(b, "r0").relay - part(a, "r0").relay, down_tx));
+    // The sink sends it (on mains: reported, not in the network's total).
+    assert!(close(
+        part(b, "sink").relay - part(a, "sink").relay,
+        down_tx
+    ));
+    let sleep = |s: &SchemeSummary| s.energy.energy_parts_per_step_uj.sleep;
+    let more = b.energy.energy_per_step_uj - a.energy.energy_per_step_uj;
+    let awake_more = (1000.0 + 800.0) + (1000.0 + 800.0 + 992.0);
+    assert!(close(sleep(a) - sleep(b), 0.06 * awake_more / 1000.0));
+    let expected = rx_mw * 3600.0 / 1000.0 + down_tx - 0.06 * awake_more / 1000.0;
+    assert!(close(more, expected), "{more} vs {expected}");
+}
+
+/// On a one-hop star the estimate goes down in one broadcast: the star keeps its numbers and
+/// every sensor pays the listening and the frame; a network of peers has no sink to send it.
+#[test]
+fn the_estimate_sent_down_a_star_and_refused_without_a_sink() {
+    let schemes = "[[schemes]]\nkind = \"send-on-delta\"\ndelta = 1.0\n";
+    let plain = summary(&scalar_system(0.95, 3, 40, "", schemes, 20));
+    let net = "[network]\nedges = \"star\"\nbroadcast_estimate = true\n";
+    let star = summary(&scalar_system(0.95, 3, 40, net, schemes, 20));
+    let (a, b) = (&plain.schemes[0], &star.schemes[0]);
+    assert_eq!((a.rmse.clone(), a.rate), (b.rmse.clone(), b.rate));
+    let rx_mw = 3.0 * 18.8;
+    for i in 0..3 {
+        let got = node(b, &format!("s{i}")).energy_parts_per_step_uj.downlink;
+        assert!((got - rx_mw * 1.8).abs() < 1e-9, "s{i}: {got}");
+    }
+    let peers = "[network]\nsink = false\nedges = \"ring\"\nbroadcast_estimate = true\n";
+    let kf = "[[schemes]]\nkind = \"peer-ci\"\n";
+    let (code, err) = run_cli(&scalar_system(0.95, 3, 40, peers, kf, 2));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("network.broadcast_estimate"), "{err}");
+    assert!(err.contains("needs a sink"), "{err}");
+}
+
 /// Runs `text` through the command line: (exit code, stderr).
 fn run_cli(text: &str) -> (Option<i32>, String) {
     let dir = tempfile::tempdir().unwrap();

@@ -364,6 +364,11 @@ where
         let singles = exp.reals.is_f32();
         traffic.downlink_bits =
             self.fusion.feedback().map_or(0, |f| f.bits(n_sensors)) * if singles { 1 } else { 2 };
+        // The sink's estimate going down the tree rides in the feedback's frame (a network's
+        // reals are singles).
+        if exp.network.as_ref().is_some_and(|n| n.broadcast_estimate) {
+            traffic.downlink_bits += 32 * network::estimate_reals(exp.system.state_dim());
+        }
         traffic.scheduled = scheduled_mask;
         if let Some(l) = link {
             l.uplink(k, inbox, &mut traffic);

@@ -13,7 +13,7 @@
 //!   which it knows from the model. (A single report thus travels as per-source forwarding
 //!   sends it.)
 //! - A node holding more than one report sends the sum (y, Y): the n entries of the
-//!   vector and the n(n+1)/2 distinct entries of the symmetric matrix ([`sum_reals`]), each a
+//!   vector and the n(n+1)/2 distinct entries of the symmetric matrix ([`super::estimate_reals`]), each a
 //!   single as priced. The matrix must travel: under losses the sink cannot know whose
 //!   contributions a sum holds.
 //! - A node with nothing to send (no measurement of its own, no child's frame arrived) is
@@ -34,12 +34,6 @@ use crate::network::channel::{Fate, FateTable};
 use crate::network::topology::tally::Tally;
 use crate::network::Traffic;
 
-/// Reals of an aggregate frame for state dimension `n`: the vector and the distinct entries of
-/// the symmetric matrix, n + n(n+1)/2.
-pub fn sum_reals(n: usize) -> u64 {
-    (n + n * (n + 1) / 2) as u64
-}
-
 /// What a node puts on its uplink at a step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Frame {
@@ -48,7 +42,7 @@ pub enum Frame {
     /// The measurement of one sensor (the node's own, or the one report it holds), as the
     /// sensor sent it on the star.
     Measurement(usize),
-    /// An information sum ([`sum_reals`] reals).
+    /// An information sum ([`super::estimate_reals`] reals).
     Sum,
 }
 
@@ -214,7 +208,7 @@ impl Aggregation {
     /// H_i^T R_i^{-1} H_i)` (state dimension their rows).
     pub fn new(routes: &Routes, sensors: Vec<(Matrix, Matrix)>) -> Self {
         let dim = sensors.first().map_or(0, |(a, _)| a.nrows());
-        let payload = sum_reals(dim) * BITS_PER_COMPONENT;
+        let payload = super::estimate_reals(dim) * BITS_PER_COMPONENT;
         Aggregation {
             folder: Folder::new(routes, dim),
             sensors,
@@ -391,8 +385,8 @@ mod tests {
         );
         f.start();
         assert!(f.fold(|_, fr| fr != Frame::None, |_| {}).is_none());
-        assert_eq!(sum_reals(2), 5);
-        assert_eq!(sum_reals(4), 14);
+        assert_eq!(crate::network::estimate_reals(2), 5);
+        assert_eq!(crate::network::estimate_reals(4), 14);
     }
 
     /// A random tree over `n` nodes whose sink is the last: each node's parent is a later node.

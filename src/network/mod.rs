@@ -73,6 +73,12 @@ impl Traffic {
     }
 }
 
+/// Reals of an estimate (or an information pair) of an `n`-dimensional state sent whole: the
+/// vector and the n(n+1)/2 distinct entries of the symmetric matrix.
+pub fn estimate_reals(n: usize) -> u64 {
+    (n + n * (n + 1) / 2) as u64
+}
+
 /// Sensor `i`'s bit in [`Traffic::senders`] and [`Traffic::scheduled`]; 0 (not recorded) from
 /// [`MASKED_SENSORS`] on.
 pub fn sensor_bit(i: usize) -> u128 {

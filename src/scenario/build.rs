@@ -226,7 +226,7 @@ pub fn build_with(
     let parts = crate::scenario::system::build_system(&ctx, &file_spec)?;
     let system = Arc::new(parts.system);
     let channel = crate::scenario::channel::build_channel(&ctx, &file_spec, system.n_sensors())?;
-    let network = build_network(&ctx, &file_spec, system.n_sensors())?;
+    let network = build_network(&ctx, &file_spec, system.n_sensors(), system.state_dim())?;
     let path_loss: Option<Vec<f64>> = network
         .as_ref()
         .map(|t| (0..system.n_sensors()).map(|i| t.path_loss(i)).collect());
@@ -339,11 +339,13 @@ pub fn build_with(
 /// Builds `[network]` ([`crate::network::topology`]): every bad topology is refused by field
 /// and node. `None` without `[network]`, and for the one-hop star without links of its own
 /// (today's network, run exactly as without the table). A sensor's own `channel` is refused
-/// with a network: its links are `[[network.links]]`.
+/// with a network: its links are `[[network.links]]`. `broadcast_estimate` needs a sink and an
+/// estimate of an `n`-dimensional state that fits one frame.
 fn build_network(
     ctx: &Ctx,
     file: &ScenarioFile,
     sensors: usize,
+    n: usize,
 ) -> Result<Option<Arc<crate::network::topology::Topology>>, ScenarioError> {
     use crate::network::topology::Topology;
     let Some(spec) = &file.network else {
@@ -358,7 +360,13 @@ fn build_network(
     positions.resize(sensors, None);
     let topology = Topology::build(spec, &positions, file.channel.as_ref())
         .map_err(|e| ctx.err(format!("network.{}", e.field), e.message))?;
-    if topology.is_star() && spec.links.is_empty() {
+    if topology.broadcast_estimate {
+        check_broadcast_estimate(&topology, n)
+            .map_err(|m| ctx.err("network.broadcast_estimate", m))?;
+    }
+    // A star that sends its estimate back keeps its network: the star's own loop prices no
+    // estimate going down.
+    if topology.is_star() && spec.links.is_empty() && !topology.broadcast_estimate {
         return Ok(None);
     }
     if let Some(i) = file.sensors.iter().position(|s| s.channel.is_some()) {
@@ -375,6 +383,23 @@ fn build_network(
         ));
     }
     Ok(Some(Arc::new(topology)))
+}
+
+/// The sink's estimate must have a sink to come from and fit one 802.15.4 frame: its mean and
+/// covariance (upper triangle) as singles, `n + n(n+1)/2` of them, at most 116 octets.
+fn check_broadcast_estimate(
+    net: &crate::network::topology::Topology,
+    n: usize,
+) -> Result<(), String> {
+    net.sink_for("sending the estimate down the tree")?;
+    let octets = 4 * crate::network::estimate_reals(n);
+    let max = crate::decentralized::trial::MAX_PAYLOAD_OCTETS;
+    if octets > max as u64 {
+        return Err(format!(
+            "the estimate of a {n}-dimensional state is {octets} octets as singles (mean and covariance), more than the {max} a frame carries"
+        ));
+    }
+    Ok(())
 }
 
 /// A network of peers (`sink = false`) runs only decentralized schemes (a center scheme needs

@@ -68,6 +68,9 @@ pub struct Topology {
     /// Whether the relays sum the information of aggregable schemes
     /// ([`crate::network::aggregate`]) rather than forward their reports per source.
     pub aggregate: bool,
+    /// Whether the sink sends its estimate down the tree after every step (`[network]
+    /// broadcast_estimate`; priced by [`tally::Tally::feedback`], the frame of the feedback).
+    pub broadcast_estimate: bool,
     graph: UnGraph<(), usize>,
 }
 
@@ -171,6 +174,7 @@ impl Topology {
             parent: vec![None; nodes.len()],
             sink_mains: spec.sink_mains.unwrap_or(true),
             aggregate: spec.aggregate.unwrap_or(true),
+            broadcast_estimate: spec.broadcast_estimate.unwrap_or(false),
             nodes,
             links,
             graph,
@@ -234,6 +238,7 @@ impl Topology {
             parent,
             sink_mains: true,
             aggregate: false,
+            broadcast_estimate: false,
             graph,
         }
     }

@@ -43,6 +43,13 @@ pub struct NetworkSpec {
     /// [`crate::network::aggregate`]); `false` forwards every report per source.
     #[serde(default)]
     pub aggregate: Option<bool>,
+    /// Whether the sink sends its estimate (mean and covariance) down the routing tree after
+    /// every step, so that every node knows it (default false; the sink schemes only, the
+    /// decentralized ones estimate at every node already). It rides in the step's feedback
+    /// frame where the scheme sends one, else in a frame of its own, one per node with
+    /// children.
+    #[serde(default)]
+    pub broadcast_estimate: Option<bool>,
     /// Every link's loss from its length ([`super::distance`]), unless `[[network.links]]`
     /// gives the link its own channel.
     #[serde(default)]
