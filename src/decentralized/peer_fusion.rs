@@ -3,7 +3,7 @@
 //!
 //! - **Covariance intersection** (Julier & Uhlmann, "A non-divergent estimation algorithm in the
 //!   presence of unknown correlations", ACC 1997, eqs. (7)–(8)): P⁻¹ = ωA⁻¹ + (1 − ω)B⁻¹,
-//!   x̂ = P(ωA⁻¹a + (1 − ω)B⁻¹b), ω ∈ [0, 1] minimizing det P (golden-section search). Consistent
+//!   x̂ = P(ωA⁻¹a + (1 − ω)B⁻¹b), ω ∈ [0, 1] minimizing det P (golden-section search on a product of scalars, [`intersect`]). Consistent
 //!   whatever the cross-covariance of the two, so the peers' shared history (their common prior,
 //!   each other's fused estimates) is never counted twice; several neighbours are folded in one
 //!   after another, each fold consistent.
@@ -146,12 +146,28 @@ fn best_omega(score: impl Fn(f64) -> f64) -> f64 {
     w
 }
 
-/// Covariance intersection of `a` and `b` with ω minimizing det P.
+/// The eigenvalues of `base⁻¹ x` for symmetric positive definite `x` and `base` (those of
+/// `L⁻¹ x L⁻ᵀ`, `base = L Lᵀ`): positive reals, which turn the determinants of the fusion
+/// rules' matrix pencils into products of scalars.
+fn relative_eigenvalues(x: &Matrix, base: &Matrix) -> Result<Vector, String> {
+    let l = crate::linalg::cholesky(base)
+        .map_err(|_| "an estimate is not positive definite")?
+        .l();
+    let lx = l
+        .solve_lower_triangular(x)
+        .ok_or("an estimate is not positive definite")?;
+    let m = l
+        .solve_lower_triangular(&lx.transpose())
+        .ok_or("an estimate is not positive definite")?;
+    Ok(m.symmetric_eigenvalues())
+}
+
+/// Covariance intersection of `a` and `b` with ω minimizing det P. With μᵢ the eigenvalues of
+/// A⁻¹B, det(ωA⁻¹ + (1 − ω)B⁻¹) = det B⁻¹ · Πᵢ (1 + ω(μᵢ − 1)): the search scores the product,
+/// n multiplications, rather than a determinant per trial ω.
 pub fn intersect(a: &Gaussian, b: &Gaussian) -> Result<Gaussian, String> {
-    let ia = inverse(&a.cov).ok_or("an estimate is not positive definite")?;
-    let ib = inverse(&b.cov).ok_or("an estimate is not positive definite")?;
-    let info = |w: f64| &ia * w + &ib * (1.0 - w);
-    let w = best_omega(|w| info(w).determinant());
+    let mu = relative_eigenvalues(&b.cov, &a.cov)?;
+    let w = best_omega(|w| mu.iter().map(|m| 1.0 + w * (m - 1.0)).product());
     intersect_at(a, b, w)
 }
 
@@ -164,15 +180,18 @@ pub fn intersect_at(a: &Gaussian, b: &Gaussian, w: f64) -> Result<Gaussian, Stri
     Ok(Gaussian::new(mean, cov))
 }
 
-/// Inverse covariance intersection of `a` and `b` with ω minimizing det P.
+/// Inverse covariance intersection of `a` and `b` with ω minimizing det P. With λᵢ the
+/// eigenvalues of B⁻¹A and T with A = TΛTᵀ, B = TTᵀ, the fused information
+/// A⁻¹ + B⁻¹ − (ωA + (1 − ω)B)⁻¹ is T⁻ᵀ diag(1/λᵢ + 1 − 1/(1 + ω(λᵢ − 1))) T⁻¹: its determinant
+/// is det T⁻² times the product of those n scalars, which the search scores.
 pub fn inverse_intersect(a: &Gaussian, b: &Gaussian) -> Result<Gaussian, String> {
-    let ia = inverse(&a.cov).ok_or("an estimate is not positive definite")?;
-    let ib = inverse(&b.cov).ok_or("an estimate is not positive definite")?;
-    let info = |w: f64| {
-        let mix = &a.cov * w + &b.cov * (1.0 - w);
-        inverse(&mix).map(|m| &ia + &ib - m)
-    };
-    let w = best_omega(|w| info(w).map_or(f64::NEG_INFINITY, |m| m.determinant()));
+    let lambda = relative_eigenvalues(&a.cov, &b.cov)?;
+    let w = best_omega(|w| {
+        lambda
+            .iter()
+            .map(|l| 1.0 / l + 1.0 - 1.0 / (1.0 + w * (l - 1.0)))
+            .product()
+    });
     inverse_intersect_at(a, b, w)
 }
 

@@ -133,6 +133,11 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/arena-graph.toml"),
     ),
     (
+        "arena-graph-rgg",
+        "Arena on a random geometric graph: 29 sensors and the sink within 30 m of each other in a 100 m square, the sink schemes (estimate sent back) beside the decentralized ones",
+        include_str!("../../scenarios/arena-graph-rgg.toml"),
+    ),
+    (
         "arena-1d",
         "Arena: 1-D constant velocity, 4 scalar linear sensors, every scheme of the registry (--budget, --budgets)",
         include_str!("../../scenarios/arena-1d.toml"),

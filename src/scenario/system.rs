@@ -201,8 +201,12 @@ pub(crate) fn sensor(
     if let Some(kind) = kind {
         return placed_sensor(ctx, at, kind, s, n);
     }
+    // A linear sensor may have a position: where its node sits in a `[network]` (the edge
+    // rules `radius` and `grid`, distance loss, the map); its measurement does not use it.
+    if s.position.is_some_and(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(ctx.err(f("position"), "expected finite coordinates"));
+    }
     for (name, present) in [
-        ("position", s.position.is_some()),
         ("position_indices", s.position_indices.is_some()),
         ("p0", s.p0.is_some()),
         ("path_loss_alpha", s.path_loss_alpha.is_some()),
