@@ -557,6 +557,11 @@ pub fn render(input: &Input) -> Result<String, String> {
     if let Some(svg) = crate::output::network_map::map_svg(exp, s) {
         let _ = writeln!(h, "<h2>The network</h2>\n<p>Every node at its place, filled by its radio's energy per step; dark links carry the routes to the sink (the square); the node circled in red dies first; &ldquo;relays sum&rdquo;: the relays added that scheme's reports into one frame per link. Per node and per step figures are in <code>summary.json</code> (<code>network.nodes</code>).</p>\n<figure>{}</figure>", svg?);
     }
+    if input.arena.is_none() {
+        if let Some(svg) = crate::output::energy_front::svg(exp, s) {
+            let _ = writeln!(h, "<h2>Error against the network's energy</h2>\n<p>Every scheme at its network radio energy per step (every battery-powered node; a sink on mains left out) and its mean RMSE of {}, as written (no knob calibrated: <code>--budgets</code> calibrates them to equal energy); the dashed black line is the Pareto front, the dashed grey one the all-data bound.</p>\n<figure>{}</figure>", esc(group), svg?);
+        }
+    }
     let within = |i: usize| {
         input.arena.is_none_or(|o| {
             let c = &o.rows[0][i];

@@ -3,6 +3,7 @@
 pub mod arena;
 pub mod arena_files;
 pub mod durable;
+pub mod energy_front;
 pub mod folder;
 pub mod html;
 pub mod network_map;

@@ -76,6 +76,7 @@ fn plot_err(e: impl std::fmt::Display) -> String {
 }
 
 /// A named line of (x, y) points.
+#[derive(Debug, Clone)]
 pub struct Line {
     pub name: String,
     pub points: Vec<(f64, f64)>,

@@ -188,6 +188,7 @@ fn stage_part(
                     .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
                 let mut plots = plot::write_all(r.exp, summary, &dir)?;
                 plots.extend(crate::output::network_map::write(r.exp, summary, &dir)?);
+                plots.extend(crate::output::energy_front::write(r.exp, summary, &dir)?);
                 let plots: Vec<String> =
                     plots.into_iter().map(|p| format!("{prefix}{p}")).collect();
                 out_dir.record(plots.iter().cloned());
