@@ -191,3 +191,44 @@ fn two_peers_run_the_channel_filter_as_the_all_data_filter() {
         "consensus on information should not be the all-data filter"
     );
 }
+
+/// The `energy-ratio` claims of `consensus-energy-ring` hold (each energy equal to the checker's
+/// independent count of frames, windows and sleep); they fail when a measured energy is 1e-6
+/// off its count, when the ratio falls short of the claim, and on a lossy network (the count
+/// assumes every frame arrives).
+#[test]
+fn the_consensus_energy_claims_hold_and_can_fail() {
+    use hushfuse::output::report::{self, Verdict};
+    let text = hushfuse::scenario::builtin::get("consensus-energy-ring").unwrap();
+    let text = text
+        .replace("trials = 20", "trials = 2")
+        .replace("steps = 40", "steps = 22");
+    let exp = hushfuse::scenario::build::load(&text, "ring.toml").unwrap();
+    let sums = hushfuse::engine::runner::run(&exp, Default::default(), &|_| {}).unwrap();
+    let summary = hushfuse::metrics::results::summarize(&exp, &sums);
+    let claims = report::check_claims(&exp, &summary);
+    let v: Vec<Verdict> = claims.iter().map(|c| c.verdict).collect();
+    assert_eq!(&v[..2], &[Verdict::Holds, Verdict::Holds], "{claims:#?}");
+    assert!(
+        claims[0].evidence.contains("ratio 164.2"),
+        "{}",
+        claims[0].evidence
+    );
+    let mut off = summary.clone();
+    off.schemes[0].energy.energy_per_step_uj *= 1.0 + 1e-6;
+    assert_eq!(report::check_claims(&exp, &off)[0].verdict, Verdict::Fails);
+    let higher = text.replace("at_least = 100.0", "at_least = 170.0");
+    let exp2 = hushfuse::scenario::build::load(&higher, "ring.toml").unwrap();
+    assert_eq!(
+        report::check_claims(&exp2, &summary)[0].verdict,
+        Verdict::Fails
+    );
+    let lossy = text.replace(
+        "[network]",
+        "[channel]\nkind = \"bernoulli\"\nloss = 0.1\n\n[network]",
+    );
+    let exp3 = hushfuse::scenario::build::load(&lossy, "ring.toml").unwrap();
+    let c = &report::check_claims(&exp3, &summary)[0];
+    assert_eq!(c.verdict, Verdict::Fails);
+    assert!(c.evidence.contains("lossy"), "{}", c.evidence);
+}

@@ -138,6 +138,11 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/arena-graph-rgg.toml"),
     ),
     (
+        "consensus-energy-ring",
+        "Consensus on information to 1e-3 (L = 209) against the all-data KF's convergecast and broadcast back on a ring of 20: network energy a step, checked against an independent count",
+        include_str!("../../scenarios/consensus-energy-ring.toml"),
+    ),
+    (
         "arena-1d",
         "Arena: 1-D constant velocity, 4 scalar linear sensors, every scheme of the registry (--budget, --budgets)",
         include_str!("../../scenarios/arena-1d.toml"),

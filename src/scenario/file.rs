@@ -450,6 +450,16 @@ pub enum ClaimSpec {
         #[serde(default)]
         within: Option<f64>,
     },
+    /// Curve `a`'s network radio energy a step (a consensus scheme) is at least `at_least`
+    /// times curve `b`'s (the all-data KF summed by the relays), each energy equal to the claim
+    /// checker's independent count of frames, windows and sleep
+    /// (`crate::output::report::energy_ratio`).
+    EnergyRatio {
+        text: String,
+        a: String,
+        b: String,
+        at_least: f64,
+    },
 }
 
 /// What an `inflation` claim checks.

@@ -238,9 +238,23 @@ pub(crate) fn check(
                 check_intermittent(ctx, &at, (ci, &curves[ci]), variants, system, c)?;
             }
             ClaimSpec::Inflation { .. } => check_inflation_claim(&s, &at, variants, system, c)?,
+            ClaimSpec::EnergyRatio { a, b, at_least, .. } => {
+                s.curve(&at("a"), a)?;
+                s.curve(&at("b"), b)?;
+                positive(ctx, &at("at_least"), *at_least)?;
+            }
         }
     }
     Ok(())
+}
+
+/// A finite number > 0, or an error naming `field`.
+fn positive(ctx: &Ctx, field: &str, v: f64) -> Result<(), ScenarioError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(ctx.err(field, format!("expected a finite number > 0, got {v}")))
+    }
 }
 
 /// An `intermittent` claim needs sensible `range`, `within` and `sequences`, the all-data Kalman filter on a scalar system, every variant's

@@ -1,6 +1,7 @@
 //! `hushfuse reproduce`: our numbers beside the paper's published ones, and each of the paper's
 //! claims checked on our numbers.
 pub mod classic;
+pub mod energy_ratio;
 pub mod intermittent;
 #[cfg(test)]
 mod tests;
@@ -133,6 +134,9 @@ pub fn check_claims(exp: &Experiment, summary: &Summary) -> Vec<ClaimResult> {
             }
             ClaimSpec::Inflation { text, scheme, check, reference, within } => {
                 classic::check(exp, summary, text, scheme, (*check, reference.as_deref(), *within))
+            }
+            ClaimSpec::EnergyRatio { text, a, b, at_least } => {
+                energy_ratio::check(exp, summary, text, (a, b), *at_least)
             }
         })
         .collect()
