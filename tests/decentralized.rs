@@ -232,3 +232,43 @@ fn the_consensus_energy_claims_hold_and_can_fail() {
     assert_eq!(c.verdict, Verdict::Fails);
     assert!(c.evidence.contains("lossy"), "{}", c.evidence);
 }
+
+/// et-ddf on the built-in tree (30 agents, 4 sensors, 40 trials): on lossless links every
+/// trigger keeps the agents consistent (steady-state ANEES at most 1 + 3 standard errors, as a
+/// CI-fused filter should be); at drop 0.5 a lost reading read as silence makes delta = 1
+/// overconfident by far more than its error (ANEES above 1 + 3 standard errors), while CI every
+/// step stays consistent.
+#[test]
+fn et_ddf_is_consistent_on_lossless_links_and_not_when_silence_is_misread() {
+    let text = hushfuse::scenario::builtin::get("et-ddf-tree").unwrap();
+    let run = |text: &str| {
+        let exp = hushfuse::scenario::build::load(text, "tree.toml").unwrap();
+        let sums = hushfuse::engine::runner::run(&exp, Default::default(), &|_| {}).unwrap();
+        hushfuse::metrics::results::summarize(&exp, &sums)
+    };
+    let clean = run(text);
+    for s in &clean.schemes {
+        let ss = &s.steady_state;
+        assert!(
+            ss.anees <= 1.0 + 3.0 * ss.anees_se,
+            "{} {:?}: {}",
+            s.name,
+            s.params,
+            ss.anees
+        );
+    }
+    let lossy = run(&text.replace("kind = \"ideal\"", "kind = \"bernoulli\"\nloss = 0.5"));
+    let at = |delta: f64| {
+        lossy
+            .schemes
+            .iter()
+            .find(|s| {
+                matches!(s.params.get("delta"), Some(hushfuse::scenario::ParamValue::Number(d)) if *d == delta)
+            })
+            .unwrap()
+    };
+    let d1 = &at(1.0).steady_state;
+    assert!(d1.anees > 1.0 + 3.0 * d1.anees_se, "{}", d1.anees);
+    let ci = &lossy.schemes.last().unwrap().steady_state;
+    assert!(ci.anees <= 1.0 + 3.0 * ci.anees_se, "{}", ci.anees);
+}

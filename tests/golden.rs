@@ -74,7 +74,7 @@
 //! ω by a product of relative eigenvalues instead of a determinant (peer-ci and peer-inverse-ci
 //! moved within their Monte Carlo error where det P is flat in ω: steady MSE 1.398925 → 1.398803
 //! ± 0.049 on arena-graph-rgg at 20 trials; their covariance traces agree to 1e-9); no other
-//! hash moved. `arena-graph-rgg` and `consensus-energy-ring` recorded when added.
+//! hash moved. `arena-graph-rgg`, `consensus-energy-ring` and `et-ddf-tree` recorded when added.
 //!
 //! When a change is *meant* to move numbers, rerun with `HUSHFUSE_PRINT_GOLDEN=1 cargo test
 //! --release --test golden -- --nocapture`, paste the printed table, and say in the commit
@@ -111,6 +111,7 @@ const GOLDEN: &[(&str, usize, u64, usize)] = &[
     ("arena-graph", 4, 0x13768fa9aa3ad7b0, 628310),
     ("arena-graph-rgg", 4, 0xc5eb1fe217a8b21c, 747552),
     ("consensus-energy-ring", 4, 0xe0093e86895aeeb3, 118786),
+    ("et-ddf-tree", 4, 0xbe878dcc11201099, 549382),
     ("arena-1d", 4, 0xcbb4d0e4d04e2586, 810489),
     ("arena-nca", 4, 0x7d6f5d20dcb128cc, 722424),
     ("arena-rss", 4, 0xea42c43c4cae5dcd, 123570),

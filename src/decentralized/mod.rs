@@ -4,6 +4,7 @@
 pub mod channel_filter;
 pub mod consensus;
 pub mod diffusion;
+pub mod et_ddf;
 #[cfg(test)]
 mod fixture;
 pub mod kalman_consensus;

@@ -44,6 +44,9 @@ pub enum PeerKind {
     PeerFusion(Rule),
     /// The channel filter on a tree ([`super::channel_filter`]).
     ChannelFilter,
+    /// Event-triggered sharing of reading elements with implicit updates, CI on demand
+    /// ([`super::et_ddf`]): trigger `delta` (measurement units), CI when tr(P) > `tau`.
+    EventTriggered { delta: f64, tau: Option<f64> },
 }
 
 /// A member of the consensus family, before ω is known.
@@ -104,6 +107,10 @@ impl Peers {
             PeerKind::Consensus { weights, .. } | PeerKind::Diffusion { weights, .. } => {
                 Weights::new(weights, net.nodes.len(), &net.edges()).map(|_| ())
             }
+            PeerKind::EventTriggered { .. } => self
+                .sensors
+                .iter()
+                .try_for_each(|(h, r)| super::et_ddf::elements(h, r).map(|_| ())),
             _ => Ok(()),
         }
     }
@@ -131,6 +138,8 @@ impl Peers {
                 ..
             } => n.max(m),
             PeerKind::Diffusion { .. } => n + m,
+            // Elements are singles (with a mask octet); CI requests carry an estimate.
+            PeerKind::EventTriggered { .. } => pair.max(m + 1),
         }
     }
 
@@ -142,6 +151,7 @@ impl Peers {
             PeerKind::Diffusion { order, .. } => DiffusionNode::rounds(*order),
             PeerKind::PeerFusion(_) => peer_fusion::ROUNDS,
             PeerKind::ChannelFilter => channel_filter::ROUNDS,
+            PeerKind::EventTriggered { .. } => super::et_ddf::ROUNDS,
         }
     }
 
@@ -255,6 +265,30 @@ impl Peers {
                         PeerFusionNode::new(*rule, model.clone(), prior, s, neighbours[i].clone())
                     })
                     .collect::<Result<Vec<_>, _>>()?;
+                drive(t, self.rounds(), boxed(nodes), record)
+            }
+            PeerKind::EventTriggered { delta, tau } => {
+                let elements = (0..n)
+                    .map(|i| {
+                        self.sensor_of(net, i)
+                            .map(|(h, r)| super::et_ddf::elements(h, r))
+                            .transpose()
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                let nodes = (0..n)
+                    .map(|i| {
+                        let neighbours = neighbours[i].clone();
+                        let params = (*delta, *tau);
+                        super::et_ddf::EtDdfNode::new(
+                            model.clone(),
+                            prior,
+                            &elements,
+                            i,
+                            neighbours,
+                            params,
+                        )
+                    })
+                    .collect();
                 drive(t, self.rounds(), boxed(nodes), record)
             }
             PeerKind::ChannelFilter => {

@@ -143,6 +143,11 @@ pub const BUILTIN: &[(&str, &str, &str)] = &[
         include_str!("../../scenarios/consensus-energy-ring.toml"),
     ),
     (
+        "et-ddf-tree",
+        "et-ddf at small scale: 30 agents in a tree, absolute sensors on 4; MSE and messages against the trigger (scripts/et-ddf-study.sh adds the drop probability)",
+        include_str!("../../scenarios/et-ddf-tree.toml"),
+    ),
+    (
         "arena-1d",
         "Arena: 1-D constant velocity, 4 scalar linear sensors, every scheme of the registry (--budget, --budgets)",
         include_str!("../../scenarios/arena-1d.toml"),

@@ -49,6 +49,7 @@ pub const DECENTRALIZED: &[registry::SchemeEntry] = &[
     decentralized::params::PEER_ICI,
     decentralized::params::PEER_NAIVE,
     decentralized::params::CHANNEL_FILTER,
+    decentralized::params::ET_DDF,
 ];
 
 use crate::filter::{FilterError, Gaussian};

@@ -92,6 +92,15 @@ enum OrderName {
     Cta,
 }
 
+/// `et-ddf`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EtDdfParams {
+    delta: f64,
+    #[serde(default)]
+    tau: Option<f64>,
+}
+
 /// The schemes without parameters.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -229,6 +238,30 @@ fn build_diffusion(t: toml::Table, cx: &BuildContext) -> Result<Box<dyn Scheme>,
             order,
             weights,
             threshold: p.threshold,
+        },
+    )
+}
+
+fn build_et_ddf(t: toml::Table, cx: &BuildContext) -> Result<Box<dyn Scheme>, ParamError> {
+    let p: EtDdfParams = registry::parse(t)?;
+    if !(p.delta.is_finite() && p.delta >= 0.0) {
+        let d = p.delta;
+        return Err(ParamError::at(
+            "delta",
+            format!("delta = {d}: expected a finite number >= 0"),
+        ));
+    }
+    if let Some(tau) = p.tau.filter(|t| !(t.is_finite() && *t >= 0.0)) {
+        return Err(ParamError::at(
+            "tau",
+            format!("tau = {tau}: expected a finite number >= 0"),
+        ));
+    }
+    peers(
+        cx,
+        PeerKind::EventTriggered {
+            delta: p.delta,
+            tau: p.tau,
         },
     )
 }
@@ -391,12 +424,37 @@ pub const DIFFUSION: SchemeEntry = SchemeEntry {
     missing_packet: "a neighbour's message that did not arrive: its measurement is left out, its weight goes to the node itself",
 };
 
+pub const ET_DDF: SchemeEntry = SchemeEntry {
+    kind: "et-ddf",
+    label: "Event-triggered DDF (et-ddf, Loefgren & Ahmed)",
+    summary: "every node runs a KF; a sensor shares a reading element only when it is more than delta from what its neighbours predict, and the neighbours read its silence by an implicit (truncated-Gaussian) update; covariance intersection with the neighbours when tr(P) > tau (COHRINT's et-ddf; Dagan & Ahmed)",
+    params: &[
+        ParamDoc {
+            name: "delta",
+            values: "number >= 0 (measurement units)",
+            default: "required",
+            meaning: "send an element when |z - h x_shared| > delta (0: send every element)",
+        },
+        ParamDoc {
+            name: "tau",
+            values: "number >= 0",
+            default: "none (no covariance intersection)",
+            meaning: "a node whose tr(P) exceeds tau asks its neighbours for covariance intersection",
+        },
+    ],
+    knob: Some(Knob::threshold("delta")),
+    applies: Applies::LinearSensors,
+    build: build_et_ddf,
+    example: "delta = 1.0",
+    missing_packet: "a lost frame is read as silence: the implicit update instead of the explicit one, and the receiver's replica of the sender's shared filter drifts",
+};
+
 const PEER_MISSING: &str = "a neighbour's estimate that did not arrive is left out of the fusion";
 
 pub const PEER_CI: SchemeEntry = SchemeEntry {
     kind: "peer-ci",
     label: "Peers + covariance intersection (Julier & Uhlmann)",
-    summary: "every node runs its local KF and fuses its neighbours' broadcast estimates by covariance intersection (trace-minimizing weights): consistent on any graph",
+    summary: "every node runs its local KF and fuses its neighbours' broadcast estimates by covariance intersection (determinant-minimizing weights): consistent on any graph",
     params: &[],
     knob: None,
     applies: Applies::LinearSensors,
