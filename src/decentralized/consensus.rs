@@ -95,6 +95,18 @@ pub struct ConsensusNode {
     /// The previous iteration's pairs, reused as the next one's work space.
     spare: Vec<Pair>,
     estimate: Gaussian,
+    /// Work space of [`ConsensusNode::predict`] and [`ConsensusNode::start`], kept from step
+    /// to step (nothing allocated once sized): a factor, A P, the prediction, Aᵀ, Hᵀ R⁻¹ z.
+    work: Work,
+}
+
+/// A node's work space ([`ConsensusNode::predict`]).
+struct Work {
+    factor: Matrix,
+    ap: Matrix,
+    predicted: Gaussian,
+    a_t: Matrix,
+    novel_q: Vector,
 }
 
 impl ConsensusNode {
@@ -113,7 +125,16 @@ impl ConsensusNode {
         let omega = inverse(&prior.cov).ok_or("the prior covariance is not positive definite")?;
         let q = &omega * &prior.mean;
         let sensor = sensor_information(sensor)?;
+        let n = q.len();
+        let work = Work {
+            factor: Matrix::zeros(n, n),
+            ap: Matrix::zeros(n, n),
+            predicted: prior.clone(),
+            a_t: model.a.transpose(),
+            novel_q: Vector::zeros(n),
+        };
         Ok(Self {
+            work,
             model,
             sensor,
             own_weight,
@@ -166,8 +187,28 @@ impl ConsensusNode {
         self.spare = std::mem::replace(&mut self.pairs, mixed);
     }
 
-    /// The pairs the consensus starts from at step `k` with reading `z`.
+    /// The pairs the consensus starts from at step `k` with reading `z`. Consensus on
+    /// information writes into the pair it kept (the same sums as `omega + U`, `q + Hᵀ R⁻¹ z`,
+    /// a missing reading adding zeros, without allocating).
     fn start(&mut self, z: Option<&Vector>) {
+        if self.fusion == Fusion::Information && self.pairs.len() == 1 {
+            let (omega, q) = &self.prior;
+            let (m, v) = &mut self.pairs[0];
+            m.copy_from(omega);
+            v.copy_from(q);
+            match (&self.sensor, z) {
+                (Some((ht_rinv, u)), Some(z)) => {
+                    *m += u;
+                    ht_rinv.mul_to(z, &mut self.work.novel_q);
+                    *v += &self.work.novel_q;
+                }
+                _ => {
+                    m.iter_mut().for_each(|x| *x += 0.0);
+                    v.iter_mut().for_each(|x| *x += 0.0);
+                }
+            }
+            return;
+        }
         let (omega, q) = &self.prior;
         let n = q.len();
         let novel = match (&self.sensor, z) {
@@ -181,8 +222,9 @@ impl ConsensusNode {
         };
     }
 
-    /// The corrected pair after the consensus.
-    fn corrected(&self) -> Pair {
+    /// The corrected pair after the consensus, for the members that combine two pairs (consensus
+    /// on information's is its pair).
+    fn corrected_other(&self) -> Pair {
         match self.fusion {
             Fusion::Information => self.pairs[0].clone(),
             Fusion::Measurements { omega } => {
@@ -196,15 +238,34 @@ impl ConsensusNode {
         }
     }
 
-    /// The estimate from the corrected pair, then the prediction to the next step's prior.
+    /// The estimate from the corrected pair, then the prediction to the next step's prior:
+    /// P = Ω⁻¹, x̂ = P q, P⁻ = A P Aᵀ + Q, x̂⁻ = A x̂, Ω⁻ = (P⁻)⁻¹, q⁻ = Ω⁻ x̂⁻, each into the
+    /// node's kept matrices (the same operations as the allocating forms, hence the same bits).
     fn predict(&mut self) -> Result<(), String> {
-        let (omega, q) = self.corrected();
-        let p = inverse(&omega).ok_or("the fused information is not positive definite")?;
-        self.estimate = Gaussian::new(&p * q, p);
-        let predicted = self.model.predict(&self.estimate);
-        let omega_pred = inverse(&predicted.cov).ok_or("the predicted covariance is singular")?;
-        let q_pred = &omega_pred * &predicted.mean;
-        self.prior = (omega_pred, q_pred);
+        let corrected = match self.fusion {
+            Fusion::Information => None,
+            _ => Some(self.corrected_other()),
+        };
+        let w = &mut self.work;
+        let est = &mut self.estimate;
+        let fail = |m: &str| m.to_string();
+        {
+            let (omega, q) = match &corrected {
+                None => (&self.pairs[0].0, &self.pairs[0].1),
+                Some((m, v)) => (m, v),
+            };
+            crate::linalg::spd_inverse_into(omega, &mut est.cov, &mut w.factor)
+                .map_err(|_| fail("the fused information is not positive definite"))?;
+            est.cov.mul_to(q, &mut est.mean);
+        }
+        self.model.a.mul_to(&est.cov, &mut w.ap);
+        w.ap.mul_to(&w.a_t, &mut w.predicted.cov);
+        w.predicted.cov += &self.model.q;
+        self.model.a.mul_to(&est.mean, &mut w.predicted.mean);
+        let (omega_pred, q_pred) = &mut self.prior;
+        crate::linalg::spd_inverse_into(&w.predicted.cov, omega_pred, &mut w.factor)
+            .map_err(|_| fail("the predicted covariance is singular"))?;
+        omega_pred.mul_to(&w.predicted.mean, q_pred);
         Ok(())
     }
 
@@ -252,5 +313,6 @@ impl NetworkNode<InformationPairs> for ConsensusNode {
     }
 }
 
+pub mod lockstep;
 #[cfg(test)]
 mod tests;

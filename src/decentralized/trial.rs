@@ -194,7 +194,7 @@ impl Peers {
                     FusionKind::Measurements => Fusion::Measurements { omega },
                     FusionKind::Hybrid => Fusion::Hybrid { omega },
                 };
-                let nodes = weighted(weights)?
+                let mut nodes = weighted(weights)?
                     .into_iter()
                     .enumerate()
                     .map(|(i, (own, others))| {
@@ -210,6 +210,10 @@ impl Peers {
                         )
                     })
                     .collect::<Result<Vec<_>, _>>()?;
+                // Lossless links: the lock-step loop, the driver's numbers without its envelopes.
+                if super::consensus::lockstep::applies(t) {
+                    return super::consensus::lockstep::run(t, &mut nodes, record);
+                }
                 drive(t, self.rounds(), boxed(nodes), record)
             }
             PeerKind::KalmanConsensus { gamma } => {
