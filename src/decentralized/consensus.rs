@@ -254,7 +254,7 @@ impl ConsensusNode {
                 None => (&self.pairs[0].0, &self.pairs[0].1),
                 Some((m, v)) => (m, v),
             };
-            crate::linalg::spd_inverse_into(omega, &mut est.cov, &mut w.factor)
+            crate::linalg::spd_inverse_small_into(omega, &mut est.cov, &mut w.factor)
                 .map_err(|_| fail("the fused information is not positive definite"))?;
             est.cov.mul_to(q, &mut est.mean);
         }
@@ -263,7 +263,7 @@ impl ConsensusNode {
         w.predicted.cov += &self.model.q;
         self.model.a.mul_to(&est.mean, &mut w.predicted.mean);
         let (omega_pred, q_pred) = &mut self.prior;
-        crate::linalg::spd_inverse_into(&w.predicted.cov, omega_pred, &mut w.factor)
+        crate::linalg::spd_inverse_small_into(&w.predicted.cov, omega_pred, &mut w.factor)
             .map_err(|_| fail("the predicted covariance is singular"))?;
         omega_pred.mul_to(&w.predicted.mean, q_pred);
         Ok(())

@@ -237,12 +237,55 @@ pub fn spd_inverse_into(
     Ok(())
 }
 
+/// [`spd_inverse_into`] for n <= 6 on the stack: the same checks, then the factorization and
+/// the solves of `fixed::cholesky_square` and `fixed::chol_inverse_sym_square` (tested bit for
+/// bit against `cholesky`, `chol_solve_matrix` and `symmetrize`), without touching a factor's
+/// matrix; other sizes take [`spd_inverse_into`].
+pub fn spd_inverse_small_into(
+    a: &Matrix,
+    out: &mut Matrix,
+    factor: &mut Matrix,
+) -> Result<(), LinalgError> {
+    fn square<const N: usize>(a: &[f64], out: &mut [f64]) -> bool {
+        let mut m = [0.0f64; 36];
+        m[..N * N].copy_from_slice(&a[..N * N]);
+        if !fixed::cholesky_square::<N>(&mut m) {
+            return false;
+        }
+        fixed::chol_inverse_sym_square::<N>(&m, out);
+        true
+    }
+    let n = a.nrows();
+    if n != a.ncols() || !(1..=6).contains(&n) {
+        return spd_inverse_into(a, out, factor);
+    }
+    check_square_finite(a)?;
+    if out.shape() != a.shape() {
+        *out = Matrix::zeros(n, n);
+    }
+    let (a, o) = (a.as_slice(), out.as_mut_slice());
+    let ok = match n {
+        1 => square::<1>(a, o),
+        2 => square::<2>(a, o),
+        3 => square::<3>(a, o),
+        4 => square::<4>(a, o),
+        5 => square::<5>(a, o),
+        _ => square::<6>(a, o),
+    };
+    if ok {
+        Ok(())
+    } else {
+        Err(LinalgError::NotPositiveDefinite)
+    }
+}
+
 #[cfg(test)]
 mod in_place_tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    /// `cholesky_into` is `cholesky` and `spd_inverse_into` is `spd_inverse`, bit for bit, on
+    /// `cholesky_into` is `cholesky` and `spd_inverse_into` (and `spd_inverse_small_into`) is
+    /// `spd_inverse`, bit for bit, on
     /// random SPD matrices of dimensions 1..=9 (the fixed-size kernels and nalgebra's dynamic path), with reused buffers of a
     /// different size at first, and refuses what `spd_inverse` refuses.
     #[test]
@@ -259,6 +302,10 @@ mod in_place_tests {
             assert_eq!(chol.l_dirty(), cholesky(&a).unwrap().l_dirty(), "n {n}");
             factor = chol.unpack_dirty();
             spd_inverse_into(&a, &mut out, &mut factor).unwrap();
+            let mut small = Matrix::zeros(1, 1);
+            spd_inverse_small_into(&a, &mut small, &mut factor).unwrap();
+            let bits = |m: &Matrix| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&small), bits(&out), "spd_inverse_small_into, n {n}");
             assert_eq!(
                 want.as_slice()
                     .iter()
@@ -281,5 +328,11 @@ mod in_place_tests {
             spd_inverse_into(&nan, &mut out, &mut factor),
             Err(LinalgError::NonFinite)
         );
+        for bad in [&indefinite, &nan] {
+            assert_eq!(
+                spd_inverse_small_into(bad, &mut out, &mut factor),
+                spd_inverse_into(bad, &mut out, &mut factor)
+            );
+        }
     }
 }
