@@ -15,7 +15,6 @@ use crate::filter::Gaussian;
 use crate::linalg::{Matrix, Vector};
 use crate::network::graph::driver::GraphDriver;
 use crate::network::graph::{NetworkNode, Payload};
-use crate::network::topology::tally::NodeCounts;
 use crate::network::topology::{NodeKind, Topology};
 
 /// Which decentralized scheme, with its knobs.
@@ -79,7 +78,7 @@ pub struct PeerTrial<'a> {
 }
 
 /// Gets step k's estimates of every node and every node's counters of the step.
-pub type Recorder<'r> = dyn FnMut(usize, &[&Gaussian], &[NodeCounts]) -> Result<(), String> + 'r;
+pub type Recorder<'r> = super::consensus::lockstep::Record<'r>;
 
 /// A node's own weight and its neighbours' (node, weight).
 type NodeWeights = (f64, Vec<(usize, f64)>);
@@ -211,8 +210,13 @@ impl Peers {
                     })
                     .collect::<Result<Vec<_>, _>>()?;
                 // Lossless links: the lock-step loop, the driver's numbers without its envelopes.
-                if super::consensus::lockstep::applies(t) {
-                    return super::consensus::lockstep::run(t, &mut nodes, record);
+                if super::consensus::lockstep::applies(net) {
+                    return super::consensus::lockstep::run(
+                        net,
+                        t.measurements,
+                        &mut nodes,
+                        record,
+                    );
                 }
                 drive(t, self.rounds(), boxed(nodes), record)
             }

@@ -7,25 +7,31 @@
 //! are the driver's bit for bit (tested), as are the counters: every node broadcasts L frames a
 //! step, each received by every neighbour, and listens its L windows per neighbour.
 use super::{ConsensusNode, InformationPairs};
-use crate::decentralized::trial::{PeerTrial, Recorder};
 use crate::filter::Gaussian;
+use crate::linalg::Vector;
 use crate::network::graph::{NetworkNode, Payload};
+use crate::network::topology::tally::NodeCounts;
+use crate::network::topology::Topology;
 
 use crate::network::topology::tally::Tally;
 
-/// Whether every link of `t`'s graph is lossless: the lock-step loop gives the driver's numbers.
-pub fn applies(t: &PeerTrial) -> bool {
-    t.net.links.iter().all(|l| l.channel.is_lossless())
+/// Whether every link of `net` is lossless: the lock-step loop gives the driver's numbers.
+pub fn applies(net: &Topology) -> bool {
+    net.links.iter().all(|l| l.channel.is_lossless())
 }
 
-/// Runs `nodes` (one per node of `t.net`) over every step of `t.measurements` in lock step,
-/// each step's estimates and counters to `record`.
+/// Gets step k's estimates of every node and every node's counters of the step (the trial's
+/// recorder, `crate::decentralized::trial::Recorder`).
+pub type Record<'r> = dyn FnMut(usize, &[&Gaussian], &[NodeCounts]) -> Result<(), String> + 'r;
+
+/// Runs `nodes` (one per node of `net`) over every step of `measurements` (`[k - 1][i]`:
+/// sensor i's reading at step k) in lock step, each step's estimates and counters to `record`.
 pub fn run(
-    t: &PeerTrial,
+    net: &Topology,
+    measurements: &[Vec<Vector>],
     nodes: &mut [ConsensusNode],
-    record: &mut Recorder,
+    record: &mut Record,
 ) -> Result<(), String> {
-    let net = t.net;
     let sensors = net.sensors();
     let mut tally = Tally::new(net);
     let hearers: Vec<Vec<usize>> = nodes
@@ -38,7 +44,7 @@ pub fn run(
         .collect();
     let mut current: Vec<f64> = Vec::new();
     let mut mixed: Vec<f64> = Vec::new();
-    for (j, z) in t.measurements.iter().enumerate() {
+    for (j, z) in measurements.iter().enumerate() {
         let k = j + 1;
         tally.start_step();
         for (i, node) in nodes.iter_mut().enumerate() {
@@ -52,10 +58,8 @@ pub fn run(
                 pairs: nodes[0].pairs.clone(),
             }
             .mac_bits();
-            for _ in 0..iterations {
-                for (i, heard) in hearers.iter().enumerate() {
-                    tally.broadcast(i, heard, bits);
-                }
+            for (i, heard) in hearers.iter().enumerate() {
+                tally.broadcast_times(i, heard, bits, iterations as u64);
             }
         }
         gather(nodes, stride, &mut current);

@@ -12,6 +12,18 @@ use crate::network::topology::Topology;
 type Nodes = Vec<Box<dyn NetworkNode<InformationPairs>>>;
 
 fn nodes(t: &Topology, fusion: Fusion, rule: &WeightRule, iterations: usize) -> Nodes {
+    unboxed(t, fusion, rule, iterations)
+        .into_iter()
+        .map(|n| Box::new(n) as Box<dyn NetworkNode<InformationPairs>>)
+        .collect()
+}
+
+fn unboxed(
+    t: &Topology,
+    fusion: Fusion,
+    rule: &WeightRule,
+    iterations: usize,
+) -> Vec<ConsensusNode> {
     let edges: Vec<(usize, usize)> = t.links.iter().map(|l| (l.a, l.b)).collect();
     let n = t.nodes.len();
     let w = Weights::new(rule, n, &edges).unwrap();
@@ -23,18 +35,16 @@ fn nodes(t: &Topology, fusion: Fusion, rule: &WeightRule, iterations: usize) -> 
                 .map(|j| (j, w.get(i, j)))
                 .collect();
             let sensor = s.get(i).map(|(h, r)| (h, r));
-            Box::new(
-                ConsensusNode::new(
-                    fusion,
-                    model(),
-                    &prior(),
-                    sensor,
-                    w.get(i, i),
-                    neighbours,
-                    iterations,
-                )
-                .unwrap(),
-            ) as Box<dyn NetworkNode<InformationPairs>>
+            ConsensusNode::new(
+                fusion,
+                model(),
+                &prior(),
+                sensor,
+                w.get(i, i),
+                neighbours,
+                iterations,
+            )
+            .unwrap()
         })
         .collect()
 }
@@ -182,4 +192,46 @@ fn the_hybrid_with_omega_one_is_consensus_on_information() {
     // The hybrid's frame carries two pairs: 10 singles, 40 octets of payload.
     let ppdu = mpdu_bits_for_payload(320) + PHY_OVERHEAD_BITS;
     assert_eq!(hybrid[0].1[0][1], 3 * ppdu);
+}
+
+/// On lossless links the lock-step loop ([`lockstep`]) gives the graph driver's estimates and
+/// counters bit for bit, for every member of the family.
+#[test]
+fn the_lock_step_loop_is_the_driver_bit_for_bit() {
+    let t = ring("kind = \"ideal\"");
+    let steps = 7;
+    let measurements: Vec<Vec<Vector>> = (1..=steps)
+        .map(|k| (0..3).map(|i| reading(k, i)).collect())
+        .collect();
+    let bits = |g: &Gaussian| {
+        g.mean
+            .iter()
+            .chain(g.cov.iter())
+            .map(|v| v.to_bits())
+            .collect::<Vec<_>>()
+    };
+    for fusion in [
+        Fusion::Information,
+        Fusion::Measurements { omega: 4.0 },
+        Fusion::Hybrid { omega: 4.0 },
+    ] {
+        let rule = WeightRule::MetropolisHastings;
+        let want = run_with(&t, fusion, &rule, 3, steps);
+        let mut nodes = unboxed(&t, fusion, &rule, 3);
+        assert!(lockstep::applies(&t));
+        let mut got = Vec::new();
+        lockstep::run(&t, &measurements, &mut nodes, &mut |_, est, counts| {
+            got.push((
+                est.iter().map(|g| bits(g)).collect::<Vec<_>>(),
+                counts.to_vec(),
+            ));
+            Ok(())
+        })
+        .unwrap();
+        for (k, ((est, counts), (we, wc))) in got.iter().zip(&want).enumerate() {
+            let we: Vec<_> = we.iter().map(bits).collect();
+            assert_eq!(est, &we, "{fusion:?}, step {}", k + 1);
+            assert_eq!(counts, wc, "{fusion:?}, step {}", k + 1);
+        }
+    }
 }

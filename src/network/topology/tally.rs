@@ -159,6 +159,18 @@ impl Tally {
         }
     }
 
+    /// [`Tally::broadcast`] `times` times over: the same counts, added at once (the consensus
+    /// family's L identical broadcasts of a step on lossless links).
+    pub fn broadcast_times(&mut self, sender: usize, heard: &[usize], mac_bits: u64, times: u64) {
+        let ppdu = mac_bits + PHY_OVERHEAD_BITS;
+        self.counts[sender][TX] += times;
+        self.counts[sender][TX_BITS] += times * ppdu;
+        for &r in heard {
+            self.counts[r][RX] += times;
+            self.counts[r][RX_BITS] += times * ppdu;
+        }
+    }
+
     /// Node `n` sends one frame down the tree to its children (the feedback's frame, one for
     /// all of them), `ppdu_bits` on air.
     pub fn down_sent(&mut self, n: usize, ppdu_bits: u64) {
