@@ -2,7 +2,7 @@
 //! every broadcast reaches every neighbour at once, so the graph driver's envelopes, fates and
 //! per-receiver copies carry nothing a flat array does not. The nodes' pairs live in one buffer
 //! (node by node: each pair's matrix column by column, then its vector), and each iteration
-//! mixes it into a second buffer with exactly the operations of [`ConsensusNode::combine`] in
+//! mixes it into a second buffer with exactly the operations of `ConsensusNode::combine` in
 //! the same order (own weight first, then the neighbours in the node's order), so the numbers
 //! are the driver's bit for bit (tested), as are the counters: every node broadcasts L frames a
 //! step, each received by every neighbour, and listens its L windows per neighbour.
@@ -96,7 +96,7 @@ pub fn run(
 }
 
 /// One consensus iteration of rows of `S` reals: row i of `mixed` is πᵢᵢ times row i of
-/// `current` plus πᵢⱼ times row j for each neighbour j in order ([`ConsensusNode::combine`]).
+/// `current` plus πᵢⱼ times row j for each neighbour j in order (`ConsensusNode::combine`).
 fn mix<const S: usize>(weights: &[(f64, Vec<(usize, f64)>)], current: &[f64], mixed: &mut [f64]) {
     let rows: Vec<&[f64; S]> = current
         .chunks_exact(S)
