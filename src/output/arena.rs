@@ -307,8 +307,8 @@ pub fn scheme_lines(
     lines
 }
 
-/// Adds the bound as a dashed grey horizontal line across the points' range of bits.
-fn with_bound(mut lines: Vec<Line>, bound: Option<f64>) -> Vec<Line> {
+/// Adds the bound as a dashed grey horizontal line across the points' range of x.
+pub fn with_bound(mut lines: Vec<Line>, bound: Option<f64>) -> Vec<Line> {
     let xs = lines.iter().flat_map(|l| l.points.iter().map(|p| p.0));
     let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
         (a.min(x), b.max(x))

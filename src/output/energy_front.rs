@@ -6,7 +6,7 @@
 //! sink over relays, or let the peers agree, at the same battery? — for the schemes as written;
 //! `run --budgets` draws the same figure with every knob calibrated to each energy budget.
 use crate::metrics::results::Summary;
-use crate::output::arena::pareto_front;
+use crate::output::arena::{pareto_front, with_bound};
 use crate::output::plot::{self, Line};
 use crate::scenario::build::Experiment;
 use std::path::Path;
@@ -54,21 +54,12 @@ pub fn lines(exp: &Experiment, summary: &Summary, group: &str) -> Option<Vec<Lin
             markers: false,
         });
     }
-    let bound = summary.pcrb.as_ref().and_then(|b| b.mean_rmse.get(group));
-    if let Some(&b) = bound.filter(|b| b.is_finite()) {
-        let (lo, hi) = all
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), p| {
-                (a.min(p.0), c.max(p.0))
-            });
-        lines.push(Line {
-            name: "PCRB (all data, any estimator)".into(),
-            points: vec![(lo, b), (hi, b)],
-            dashed: true,
-            color: 9,
-            markers: false,
-        });
-    }
+    let bound = summary
+        .pcrb
+        .as_ref()
+        .and_then(|b| b.mean_rmse.get(group))
+        .copied();
+    let lines = with_bound(lines, bound);
     Some(lines)
 }
 
