@@ -86,9 +86,8 @@ type NodeWeights = (f64, Vec<(usize, f64)>);
 /// Most consensus iterations a step (each one a broadcast of every node).
 pub const MAX_ITERATIONS: usize = 10_000;
 
-/// The largest MAC payload of one 802.15.4 frame: 127 octets less the 11 of the MAC header and
-/// FCS ([`crate::link::codec802154::mpdu_bits_for_payload`]).
-pub const MAX_PAYLOAD_OCTETS: usize = 116;
+/// The largest MAC payload of one 802.15.4 frame (116 octets).
+pub use crate::link::codec802154::MAX_PAYLOAD_OCTETS;
 
 impl Peers {
     /// Whether the scheme can run on `net`: the channel filter needs a tree of lossless links;

@@ -43,8 +43,8 @@ pub const VERSION: u8 = 1;
 pub const HEADER_OCTETS: usize = 16;
 /// The envelope's CRC after the body.
 pub const CRC_OCTETS: usize = 2;
-/// Largest MPDU of 802.15.4 (`aMaxPHYPacketSize`, 2006 §6.4.1).
-pub const MAX_MPDU_OCTETS: usize = 127;
+/// Octets of an 802.15.4 MPDU at most (aMaxPHYPacketSize, 2006 §6.4.1).
+pub use crate::link::codec802154::MAX_MPDU_OCTETS;
 /// The live network's PAN id (the one the quantized-innovation codecs use).
 pub const PAN_ID: u16 = 0x0003;
 /// The fusion center's short address; sensor i has `i + 1`.

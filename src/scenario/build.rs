@@ -393,7 +393,7 @@ fn check_broadcast_estimate(
 ) -> Result<(), String> {
     net.sink_for("sending the estimate down the tree")?;
     let octets = 4 * crate::network::estimate_reals(n);
-    let max = crate::decentralized::trial::MAX_PAYLOAD_OCTETS;
+    let max = crate::link::codec802154::MAX_PAYLOAD_OCTETS;
     if octets > max as u64 {
         return Err(format!(
             "the estimate of a {n}-dimensional state is {octets} octets as singles (mean and covariance), more than the {max} a frame carries"

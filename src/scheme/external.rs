@@ -111,7 +111,7 @@ pub fn is_external(kind: &str) -> bool {
 }
 
 /// Octets of an 802.15.4 MPDU at most (aMaxPHYPacketSize, 2006 §6.4.1).
-pub const MAX_MPDU_OCTETS: usize = 127;
+pub use crate::link::codec802154::MAX_MPDU_OCTETS;
 
 /// Octets of the MAC header before a payload frame's payload.
 const HEADER: usize = codec802154::MHR_OCTETS;

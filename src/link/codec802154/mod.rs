@@ -113,6 +113,10 @@ pub const ACK_PPDU_OCTETS: usize = PREAMBLE_OCTETS + SFD_OCTETS + PHR_OCTETS + A
 /// Bits of one acknowledgment on air ([`ACK_PPDU_OCTETS`] x 8 = 88), what the network's ARQ
 /// counts per ACK (`crate::network::Traffic::ack_bits`).
 pub const ACK_PPDU_BITS: u64 = 8 * ACK_PPDU_OCTETS as u64;
+/// Largest MPDU of 802.15.4 (`aMaxPHYPacketSize`, 2006 §6.4.1), octets.
+pub const MAX_MPDU_OCTETS: usize = 127;
+/// The largest MAC payload of one frame: [`MAX_MPDU_OCTETS`] less the MAC header and FCS (116).
+pub const MAX_PAYLOAD_OCTETS: usize = MAX_MPDU_OCTETS - MHR_OCTETS - FCS_OCTETS;
 /// Bits of the 802.15.4 MAC frame (MPDU) around a payload of `payload_bits` bits: the MAC
 /// header and footer ([`MHR_OCTETS`] + [`FCS_OCTETS`] = 11 octets) around the payload in whole
 /// octets. Every message the network prices outside a codec's own frame, and every payload
