@@ -52,9 +52,16 @@ pub struct InformationPairs {
 impl Payload for InformationPairs {
     /// n + n(n+1)/2 singles a pair (the matrix is symmetric), in one MAC frame.
     fn mac_bits(&self) -> u64 {
-        let n = self.pairs.first().map_or(0, |p| p.1.len()) as u64;
-        let singles = self.pairs.len() as u64 * (n + n * (n + 1) / 2);
-        mpdu_bits_for_payload(BITS_PER_COMPONENT * singles)
+        let n = self.pairs.first().map_or(0, |p| p.1.len());
+        InformationPairs::frame_bits(self.pairs.len(), n)
+    }
+}
+
+impl InformationPairs {
+    /// MAC bits of the frame that carries `pairs` pairs of an `n`-dimensional state.
+    pub fn frame_bits(pairs: usize, n: usize) -> u64 {
+        let (pairs, n) = (pairs as u64, n as u64);
+        mpdu_bits_for_payload(BITS_PER_COMPONENT * pairs * (n + n * (n + 1) / 2))
     }
 }
 
@@ -146,6 +153,14 @@ impl ConsensusNode {
             prior: (omega, q),
             estimate: prior.clone(),
         })
+    }
+
+    /// How many pairs the node broadcasts: the hybrid's prior and novel pair, else one.
+    pub fn pair_count(&self) -> usize {
+        match self.fusion {
+            Fusion::Hybrid { .. } => 2,
+            _ => 1,
+        }
     }
 
     /// Rounds a step takes: the correction, then one per consensus iteration.

@@ -235,3 +235,101 @@ fn the_lock_step_loop_is_the_driver_bit_for_bit() {
         }
     }
 }
+
+/// Consensus on information's fixed-size start and prediction in the lock-step loop (states of
+/// 1 to 6 dimensions) give the graph driver's estimates, bit for bit: a coupled model, sensors
+/// of one and two rows on different components, and a sensor silent at some steps.
+#[test]
+fn the_fixed_size_information_step_is_the_nodes_own_bit_for_bit() {
+    let t = ring("kind = \"ideal\"");
+    let rule = WeightRule::MetropolisHastings;
+    let edges: Vec<(usize, usize)> = t.links.iter().map(|l| (l.a, l.b)).collect();
+    let w = Weights::new(&rule, 4, &edges).unwrap();
+    let bits = |g: &Gaussian| {
+        let all = g.mean.iter().chain(g.cov.iter());
+        all.map(|v| v.to_bits()).collect::<Vec<_>>()
+    };
+    for d in 1..=6 {
+        let model = Model {
+            a: Matrix::from_fn(d, d, |r, c| match c as isize - r as isize {
+                0 => 1.0,
+                1 => 0.7,
+                _ => 0.0,
+            }),
+            q: Matrix::from_fn(
+                d,
+                d,
+                |r, c| if r == c { 0.1 + 0.03 * r as f64 } else { 0.01 },
+            ),
+        };
+        let prior = Gaussian::new(
+            Vector::from_fn(d, |r, _| 0.3 * r as f64 - 1.0),
+            Matrix::from_fn(d, d, |r, c| if r == c { 4.0 + r as f64 } else { 0.5 }),
+        );
+        let sensors: Vec<(Matrix, Matrix)> = (0..3)
+            .map(|i| {
+                let rows = 1 + i % 2;
+                let h = Matrix::from_fn(rows, d, |r, c| {
+                    if c == (i + r) % d {
+                        1.0
+                    } else {
+                        0.1 * (r + c) as f64
+                    }
+                });
+                let r =
+                    Matrix::from_fn(rows, rows, |a, b| if a == b { 0.5 + i as f64 } else { 0.2 });
+                (h, r)
+            })
+            .collect();
+        let make = || -> Vec<ConsensusNode> {
+            (0..4)
+                .map(|i| {
+                    let neighbours = (0..4)
+                        .filter(|&j| j != i && t.link(i, j).is_some())
+                        .map(|j| (j, w.get(i, j)))
+                        .collect();
+                    let sensor = sensors.get(i).map(|(h, r)| (h, r));
+                    let (fusion, a) = (Fusion::Information, w.get(i, i));
+                    ConsensusNode::new(fusion, model.clone(), &prior, sensor, a, neighbours, 3)
+                        .unwrap()
+                })
+                .collect()
+        };
+        let steps = 6;
+        // Sensor 2 is silent at even steps (the lock-step loop reads a missing trailing entry).
+        let measurements: Vec<Vec<Vector>> = (1..=steps)
+            .map(|k| {
+                let heard = if k % 2 == 0 { 2 } else { 3 };
+                (0..heard)
+                    .map(|i| {
+                        Vector::from_fn(sensors[i].0.nrows(), |r, _| reading(k, i)[0] + r as f64)
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut boxed: Nodes = make()
+            .into_iter()
+            .map(|n| Box::new(n) as Box<dyn NetworkNode<InformationPairs>>)
+            .collect();
+        let mut driver = GraphDriver::new(&t, ConsensusNode::rounds(3), steps, 5, 0);
+        let mut want = Vec::new();
+        for (j, z) in measurements.iter().enumerate() {
+            let readings: Vec<Option<&Vector>> = (0..3).map(|i| z.get(i)).collect();
+            driver.step(j + 1, &mut boxed, &readings).unwrap();
+            want.push(
+                boxed
+                    .iter()
+                    .map(|x| bits(x.estimate().unwrap()))
+                    .collect::<Vec<_>>(),
+            );
+        }
+        let mut nodes = make();
+        let mut got = Vec::new();
+        lockstep::run(&t, &measurements, &mut nodes, &mut |_, est, _| {
+            got.push(est.iter().map(|g| bits(g)).collect::<Vec<_>>());
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(got, want, "state of {d} dimensions");
+    }
+}
