@@ -18,6 +18,7 @@ use crate::linalg::Vector;
 use crate::network::graph::NetworkNode;
 use crate::network::topology::tally::NodeCounts;
 use crate::network::topology::Topology;
+use multiversion::multiversion;
 
 use crate::network::topology::tally::Tally;
 
@@ -93,21 +94,7 @@ pub fn run(
             }
         }
         mixed.resize(current.len(), 0.0);
-        for _ in 0..iterations {
-            // The common strides (one pair of a 1- to 4-dimensional state, two for the hybrid)
-            // as fixed-size rows the compiler unrolls; any other in slices. The same sums.
-            match stride {
-                2 => mix::<2>(&weights, &current, &mut mixed),
-                4 => mix::<4>(&weights, &current, &mut mixed),
-                6 => mix::<6>(&weights, &current, &mut mixed),
-                12 => mix::<12>(&weights, &current, &mut mixed),
-                20 => mix::<20>(&weights, &current, &mut mixed),
-                24 => mix::<24>(&weights, &current, &mut mixed),
-                40 => mix::<40>(&weights, &current, &mut mixed),
-                _ => mix_any(stride, &weights, &current, &mut mixed),
-            }
-            std::mem::swap(&mut current, &mut mixed);
-        }
+        iterate(iterations, stride, &weights, &mut current, &mut mixed);
         let predicted = match fixed_dim {
             Some(n) => for_dim!(n, predict_information(nodes, &current)),
             None => {
@@ -237,20 +224,46 @@ fn spd_inverse<const N: usize>(a: &[f64], out: &mut [f64]) -> bool {
     true
 }
 
+/// `iterations` consensus iterations on `current` (rows of `stride` reals), `mixed` the work
+/// space. The common strides (one pair of a 1- to 4-dimensional state, two for the hybrid) as
+/// fixed-size rows the compiler unrolls, any other in slices: the same sums. Compiled also for
+/// AVX2 and picked at run time (the same IEEE operations on wider vectors, so the same bits).
+#[multiversion(targets("x86_64+avx2"))]
+fn iterate(
+    iterations: usize,
+    stride: usize,
+    weights: &[(f64, Vec<(usize, f64)>)],
+    current: &mut Vec<f64>,
+    mixed: &mut Vec<f64>,
+) {
+    for _ in 0..iterations {
+        match stride {
+            2 => mix::<2>(weights, current, mixed),
+            4 => mix::<4>(weights, current, mixed),
+            6 => mix::<6>(weights, current, mixed),
+            12 => mix::<12>(weights, current, mixed),
+            20 => mix::<20>(weights, current, mixed),
+            24 => mix::<24>(weights, current, mixed),
+            40 => mix::<40>(weights, current, mixed),
+            _ => mix_any(stride, weights, current, mixed),
+        }
+        std::mem::swap(current, mixed);
+    }
+}
+
 /// One consensus iteration of rows of `S` reals: row i of `mixed` is πᵢᵢ times row i of
 /// `current` plus πᵢⱼ times row j for each neighbour j in order (`ConsensusNode::combine`).
+#[inline(always)]
 fn mix<const S: usize>(weights: &[(f64, Vec<(usize, f64)>)], current: &[f64], mixed: &mut [f64]) {
-    let rows: Vec<&[f64; S]> = current
-        .chunks_exact(S)
-        .map(|r| r.try_into().expect("rows of S reals"))
-        .collect();
+    let row_of =
+        |n: usize| -> &[f64; S] { current[n * S..(n + 1) * S].try_into().expect("S reals") };
     for (i, ((own, others), out)) in weights.iter().zip(mixed.chunks_exact_mut(S)).enumerate() {
         let mut row = [0.0; S];
-        for (x, y) in row.iter_mut().zip(rows[i]) {
+        for (x, y) in row.iter_mut().zip(row_of(i)) {
             *x = y * own;
         }
         for &(n, w) in others {
-            for (x, y) in row.iter_mut().zip(rows[n]) {
+            for (x, y) in row.iter_mut().zip(row_of(n)) {
                 *x += y * w;
             }
         }
@@ -259,6 +272,7 @@ fn mix<const S: usize>(weights: &[(f64, Vec<(usize, f64)>)], current: &[f64], mi
 }
 
 /// [`mix`] for any row length.
+#[inline(always)]
 fn mix_any(
     stride: usize,
     weights: &[(f64, Vec<(usize, f64)>)],
