@@ -3,6 +3,7 @@
 pub mod codec802154;
 pub mod message;
 pub mod quantizer;
+pub mod security;
 
 pub use message::{
     as_sent, round_as_sent, Message, Reals, Received, Transmission, BITS_PER_COMPONENT,
