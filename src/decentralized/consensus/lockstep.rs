@@ -9,7 +9,7 @@
 //!
 //! Consensus on information of a state of 1 to 6 dimensions (every node's one pair, the
 //! benchmark's case) starts and predicts in fixed size straight from and into the flat buffer
-//! ([`start_information`], [`predict_information`]): `ConsensusNode::start` and `predict`'s
+//! (`start_information`, `predict_information`): `ConsensusNode::start` and `predict`'s
 //! operations in their order on arrays, without the matrices' dispatch and copies.
 use super::{ConsensusNode, Fusion, InformationPairs};
 use crate::filter::Gaussian;
