@@ -182,6 +182,7 @@ fn run_block<'e>(
         let states = &mut worker.states[..n];
         states.iter_mut().for_each(|state| state.restart(s));
         let mut recorder = BatchRecorder {
+            security: exp.security,
             states,
             truths: &truths[..n],
             sums: s,
@@ -239,6 +240,8 @@ pub(crate) fn note_readings(
 /// The sink of a batch: one trial state per trial of the block, all adding into the
 /// variant's block sums in trial order at every step.
 struct BatchRecorder<'a, 'e> {
+    /// What securing the frames adds to each step's traffic (the fast paths price none).
+    security: crate::link::security::SecuritySpec,
     sums: &'a mut Sums,
     states: &'a mut [crate::metrics::TrialState<'e>],
     truths: &'a [&'a [Vector]],
@@ -260,8 +263,9 @@ impl crate::scheme::fast_path::BatchSink for BatchRecorder<'_, '_> {
         k: usize,
         estimate: &crate::filter::Gaussian,
         factor: Option<&[f64]>,
-        traffic: network::Traffic,
+        mut traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
+        traffic.secure(&self.security);
         let (state, truth) = (&mut self.states[j], &self.truths[j][k - 1]);
         match factor {
             Some(f) => state.record_factored(self.sums, k, truth, estimate, f, traffic)?,
@@ -277,8 +281,9 @@ impl crate::scheme::fast_path::BatchSink for BatchRecorder<'_, '_> {
         means: &[f64],
         shared: &mut crate::filter::Gaussian,
         factor: Option<&[f64]>,
-        traffic: network::Traffic,
+        mut traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
+        traffic.secure(&self.security);
         // No ESS to record (`record_ess` of `None` adds nothing).
         crate::metrics::record_shared(
             self.states,
@@ -328,6 +333,8 @@ fn run_trial_with(
 /// The metrics of one variant's trial as an engine [`Observer`]: every fused step into its
 /// trial's sums, and the sink of the scheme's fast path (no links needed).
 struct SumsObserver<'a, 'b> {
+    /// What securing the frames adds to a fast path's traffic (the loop's steps have it).
+    security: crate::link::security::SecuritySpec,
     obs: &'b mut crate::metrics::TrialObserver<'a>,
     truth: &'b [Vector],
 }
@@ -359,8 +366,9 @@ impl crate::scheme::fast_path::BatchSink for SumsObserver<'_, '_> {
         k: usize,
         estimate: &crate::filter::Gaussian,
         factor: Option<&[f64]>,
-        traffic: network::Traffic,
+        mut traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
+        traffic.secure(&self.security);
         let truth = &self.truth[k - 1];
         match factor {
             Some(f) => self.obs.record_factored(k, truth, estimate, f, traffic)?,
@@ -393,6 +401,7 @@ fn run_variant(
         available: None,
     };
     let mut observer = SumsObserver {
+        security: exp.security,
         obs: &mut obs,
         truth: &data.truth,
     };

@@ -369,6 +369,7 @@ where
         if exp.network.as_ref().is_some_and(|n| n.broadcast_estimate) {
             traffic.downlink_bits += 32 * network::estimate_reals(exp.system.state_dim());
         }
+        traffic.secure(&exp.security);
         traffic.scheduled = scheduled_mask;
         if let Some(l) = link {
             l.uplink(k, inbox, &mut traffic);

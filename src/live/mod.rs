@@ -60,6 +60,9 @@ pub fn check_live(exp: &Experiment) -> Result<(), String> {
             "reals = \"f64\" is not supported in a live run: its frames carry singles".into(),
         );
     }
+    if exp.security.is_secured() {
+        return Err("[security] is not supported in a live run yet: the live frames are not secured (price it with `hushfuse run`)".into());
+    }
     if exp.network.is_some() {
         return Err("a multi-hop [network] is not supported in a live run yet: the live processes talk over the one-hop star (run it with `hushfuse run`)".into());
     }

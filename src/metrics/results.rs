@@ -249,6 +249,10 @@ pub struct Summary {
     /// Group names in file order.
     pub group_order: Vec<String>,
     pub schemes: Vec<SchemeSummary>,
+    /// The frames' 802.15.4 security when the scenario secures them (`[security]`): every
+    /// scheme's frame bits, feedback bits and energy include its auxiliary header and MIC.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub security: Option<crate::link::security::SecuritySpec>,
     /// The posterior Cramér–Rao bound of the model with every sensor at every step, where it
     /// is defined (see [`crate::metrics::pcrb`]); absent where it was not computed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -422,6 +426,7 @@ pub fn summarize_schemes(exp: &Experiment, sums: &[Sums]) -> Summary {
         groups: exp.groups.iter().cloned().collect(),
         group_order: exp.groups.iter().map(|(g, _)| g.clone()).collect(),
         schemes,
+        security: exp.security.is_secured().then_some(exp.security),
         pcrb: None,
         rate_distortion_floor: None,
         rate_distortion_floor_note: None,

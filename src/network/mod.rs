@@ -60,6 +60,22 @@ pub struct Traffic {
 pub const MASKED_SENSORS: usize = 128;
 
 impl Traffic {
+    /// 802.15.4 security's price (`[security]`, [`crate::link::security`]): every data frame
+    /// on air (each attempt) carries the auxiliary security header and the MIC, and so does the
+    /// step's one feedback frame when the feedback is secured. ACKs are never secured (2006
+    /// §7.2.2.3). The payload bits, hence R_eff, do not change: security adds no information.
+    /// The engine's loop applies it to every step it outputs, the runner's sinks to the fast
+    /// paths' steps.
+    pub fn secure(&mut self, security: &crate::link::security::SecuritySpec) {
+        if !security.is_secured() {
+            return;
+        }
+        self.frame_bits += (self.messages + self.retransmissions) * security.overhead_bits();
+        if self.downlink_bits > 0 {
+            self.downlink_bits += security.feedback_overhead_bits();
+        }
+    }
+
     /// A frame of `payload_bits` in a MAC frame of `mac_bits` that met fate `f`: every attempt
     /// on air costs its bits, and its retries, duplicates and acknowledgements are counted.
     pub fn add_frames(&mut self, f: &Fate, payload_bits: u64, mac_bits: u64) {

@@ -288,6 +288,10 @@ pub fn build_with(
         &variants,
         system.n_sensors(),
     )?;
+    if let Some(security) = &file_spec.security {
+        check_security(security, link.2.is_some(), &variants, &system)
+            .map_err(|m| ctx.err("security.level", m))?;
+    }
     if link.2.is_some() {
         check_network_variants(&ctx, &link.0, &curves, &variants, file_spec.reals)?;
         check_aggregation(&ctx, link.2.as_deref(), &curves, &variants)?;
@@ -397,6 +401,50 @@ fn check_broadcast_estimate(
     if octets > max as u64 {
         return Err(format!(
             "the estimate of a {n}-dimensional state is {octets} octets as singles (mean and covariance), more than the {max} a frame carries"
+        ));
+    }
+    Ok(())
+}
+
+/// `[security]` is priced on the one-hop star (each data frame and the step's feedback frame
+/// grow by the auxiliary security header and the MIC); a multi-hop network or a decentralized
+/// scheme with a secured level is refused until the graph's per-node counters carry it. A
+/// secured frame must still fit 127 octets: the largest reading, and an estimate of the state
+/// (mean and covariance, which estimate-sending schemes and the prediction feedback carry), in
+/// what the MIC and auxiliary header leave of the 116 octets of payload (conservative: checked
+/// whatever the schemes send).
+fn check_security(
+    security: &crate::link::security::SecuritySpec,
+    network: bool,
+    variants: &[crate::scenario::experiment::Variant],
+    system: &crate::scheme::System,
+) -> Result<(), String> {
+    if !security.is_secured() {
+        return Ok(());
+    }
+    let level = security.level.name();
+    if network || variants.iter().any(|v| v.scheme.peers().is_some()) {
+        return Err(format!(
+            "level \"{level}\" on a [network] or with a decentralized scheme is not priced yet: \
+             [security] applies to the one-hop star (drop [network], or set level = \"none\")"
+        ));
+    }
+    let room = crate::link::codec802154::MAX_PAYLOAD_OCTETS - security.overhead_octets();
+    let reading = system
+        .sensors
+        .iter()
+        .map(|s| s.meas_dim())
+        .max()
+        .unwrap_or(0)
+        * 4;
+    let estimate = 4 * crate::network::estimate_reals(system.state_dim()) as usize;
+    let largest = reading.max(estimate);
+    if largest > room {
+        return Err(format!(
+            "a secured frame at level \"{level}\" carries at most {room} octets of payload \
+             (116 less {} of auxiliary header and MIC); this system's largest message is {largest} \
+             octets (a reading, or the state's estimate with its covariance as singles)",
+            security.overhead_octets()
         ));
     }
     Ok(())
@@ -533,6 +581,7 @@ fn assemble(
         radio,
         network,
         reals: file_spec.reals,
+        security: file_spec.security.unwrap_or_default(),
     }
 }
 

@@ -86,6 +86,9 @@ pub struct Experiment {
     pub network: Option<Arc<crate::network::topology::Topology>>,
     /// How real numbers cross the network (`reals`; singles by default).
     pub reals: crate::link::Reals,
+    /// The frames' 802.15.4 security (`[security]`; none by default): what each data frame and
+    /// the step's feedback frame add on air.
+    pub security: crate::link::security::SecuritySpec,
 }
 
 impl Experiment {

@@ -22,8 +22,7 @@ use serde::{Deserialize, Serialize};
 
 /// The security level of every secured frame (§7.6.2.2.1, Table 95), by name. Level 4 (`enc`,
 /// encryption without a MIC) is refused: it authenticates nothing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SecurityLevel {
     /// Level 0: no security; frames as without `[security]`.
     #[default]
@@ -98,6 +97,13 @@ impl SecurityLevel {
     /// Whether the payload is encrypted (levels 5–7).
     pub fn encrypts(self) -> bool {
         self.code() >= 5
+    }
+}
+
+impl Serialize for SecurityLevel {
+    /// By name ([`SecurityLevel::name`]), as a scenario writes it.
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
     }
 }
 

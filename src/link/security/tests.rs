@@ -324,3 +324,16 @@ fn key_files_are_parsed_and_refused_with_the_file_named() {
         made
     );
 }
+
+/// A spec written out (the scenario as run, `summary.json`) reads back the same.
+#[test]
+fn a_spec_round_trips_through_toml_by_name() {
+    for level in SecurityLevel::ALL {
+        for mode in MODES {
+            let s = spec(level, mode);
+            let text = toml::to_string(&s).unwrap();
+            assert!(text.contains(&format!("\"{}\"", level.name())), "{text}");
+            assert_eq!(toml::from_str::<SecuritySpec>(&text).unwrap(), s);
+        }
+    }
+}
