@@ -337,3 +337,64 @@ fn a_spec_round_trips_through_toml_by_name() {
         }
     }
 }
+
+/// Every codec's frame (Zhang et al.'s dynamic codes and the fixed-length baselines, each of
+/// their levels that sends) and the live wire's frames of 1 to 29 readings grow by exactly
+/// [`SecuritySpec::overhead_octets`] at every level, and open back to themselves; a secured frame
+/// still decodes with its codec once opened.
+#[test]
+fn every_codecs_frames_grow_by_the_standards_octets() {
+    use crate::link::codec802154::{
+        DynamicCodec, FixedLengthCodec, LevelCodec, LinkAddressing, Strategy,
+    };
+    use crate::link::quantizer::Level;
+    let link = LinkAddressing::new(0x0003, 0x0000).unwrap();
+    let mut codecs: Vec<Box<dyn LevelCodec>> = vec![Box::new(FixedLengthCodec::sign(link))];
+    for s in [Strategy::FlagZone, Strategy::NoFlagZone] {
+        for c in 1..=3 {
+            codecs.push(Box::new(DynamicCodec::new(s, c, link).unwrap()));
+        }
+    }
+    for c in [1, 3, 8] {
+        codecs.push(Box::new(FixedLengthCodec::msechu(c, link).unwrap()));
+        codecs.push(Box::new(FixedLengthCodec::you(c, link).unwrap()));
+    }
+    let key = Key::new([3; 16]);
+    let mut frames: Vec<(Vec<u8>, Option<usize>)> = Vec::new();
+    for (j, codec) in codecs.iter().enumerate() {
+        for l in 0..codec.levels() {
+            if let Some(f) = codec.encode(Level::new(l as u16), 1, 9).unwrap() {
+                frames.push((f, Some(j)));
+            }
+        }
+    }
+    for m in 1..=29 {
+        let payload = crate::live::wire::f32_payload((0..m).map(|i| i as f64 * 0.5));
+        frames.push((
+            crate::live::wire::mpdu(4, 0x0000, 0x0001, &payload).unwrap(),
+            None,
+        ));
+    }
+    for level in SecurityLevel::ALL.into_iter().skip(1) {
+        for mode in MODES {
+            let s = spec(level, mode);
+            for (plain, codec) in &frames {
+                let room = crate::link::codec802154::MAX_MPDU_OCTETS;
+                match secure(plain, &s, &key, eui64(1), 77) {
+                    Ok(secured) => {
+                        assert_eq!(secured.len(), plain.len() + s.overhead_octets());
+                        let opened = open(&secured, &s, &key, eui64(1)).unwrap().frame;
+                        assert_eq!(&opened, plain);
+                        if let Some(j) = codec {
+                            assert!(codecs[*j].decode(&opened).is_ok());
+                        }
+                    }
+                    Err(SecurityError::TooLong(n)) => {
+                        assert!(n > room && plain.len() + s.overhead_octets() == n)
+                    }
+                    Err(e) => panic!("{s:?}: {e}"),
+                }
+            }
+        }
+    }
+}
