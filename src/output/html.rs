@@ -618,6 +618,17 @@ fn header(h: &mut String, input: &Input) {
         s.sensors,
         s.state_dim
     );
+    if let Some(sec) = &s.security {
+        let _ = writeln!(
+            h,
+            "<p class=\"legend\">802.15.4 security: level {} (key identifier mode {}), feedback {}. Every data frame carries {} more octets (auxiliary security header and MIC){}: the frame bits and energy below include them; payload bits and estimates are those of the unsecured run.</p>",
+            esc(sec.level.name()),
+            esc(sec.key_id_mode.name()),
+            if sec.secure_feedback { "secured" } else { "in clear" },
+            sec.overhead_octets(),
+            if sec.secure_feedback { ", and so does each step's feedback frame" } else { "" },
+        );
+    }
 }
 
 /// The calibrated arena's section: the best scheme per budget, accuracy and ANEES against bits,

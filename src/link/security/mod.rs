@@ -147,6 +147,16 @@ pub enum KeyIdMode {
 }
 
 impl KeyIdMode {
+    /// The name in a scenario file.
+    pub fn name(self) -> &'static str {
+        match self {
+            KeyIdMode::Implicit => "implicit",
+            KeyIdMode::Index => "index",
+            KeyIdMode::Source4 => "source4",
+            KeyIdMode::Source8 => "source8",
+        }
+    }
+
     /// The mode's number in the security control field.
     pub fn code(self) -> u8 {
         match self {
