@@ -14,6 +14,7 @@
 //! Security adds no information: R_eff and every estimate are those of the unsecured run; only
 //! frame bits, feedback bits and radio energy grow.
 pub mod ccm_star;
+pub mod counter;
 pub mod keys;
 #[cfg(test)]
 mod tests;
