@@ -38,6 +38,7 @@ mod folder;
 mod local;
 mod node;
 pub mod proxy;
+pub mod secure;
 pub mod wire;
 
 pub use center::{Accepted, Center, Dropped, SensorRecord, StepRecord};
