@@ -95,9 +95,14 @@ impl Peers {
     pub fn check(&self, net: &Topology) -> Result<(), String> {
         let singles = self.largest_message();
         let octets = 4 * singles;
-        if octets > MAX_PAYLOAD_OCTETS {
+        let room = MAX_PAYLOAD_OCTETS - net.security.overhead_octets();
+        if octets > room {
+            let secured = match net.security.is_secured() {
+                true => format!(", less {} of security", net.security.overhead_octets()),
+                false => String::new(),
+            };
             return Err(format!(
-                "a message carries {singles} singles ({octets} octets), more than one 802.15.4 frame holds ({MAX_PAYLOAD_OCTETS} octets of payload); splitting a message across frames is not built yet"
+                "a message carries {singles} singles ({octets} octets), more than one 802.15.4 frame holds ({room} octets of payload{secured}); splitting a message across frames is not built yet"
             ));
         }
         match &self.kind {

@@ -265,7 +265,7 @@ impl crate::scheme::fast_path::BatchSink for BatchRecorder<'_, '_> {
         factor: Option<&[f64]>,
         mut traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        traffic.secure(&self.security);
+        traffic.secure(&self.security, traffic.star_frames());
         let (state, truth) = (&mut self.states[j], &self.truths[j][k - 1]);
         match factor {
             Some(f) => state.record_factored(self.sums, k, truth, estimate, f, traffic)?,
@@ -283,7 +283,7 @@ impl crate::scheme::fast_path::BatchSink for BatchRecorder<'_, '_> {
         factor: Option<&[f64]>,
         mut traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        traffic.secure(&self.security);
+        traffic.secure(&self.security, traffic.star_frames());
         // No ESS to record (`record_ess` of `None` adds nothing).
         crate::metrics::record_shared(
             self.states,
@@ -368,7 +368,7 @@ impl crate::scheme::fast_path::BatchSink for SumsObserver<'_, '_> {
         factor: Option<&[f64]>,
         mut traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        traffic.secure(&self.security);
+        traffic.secure(&self.security, traffic.star_frames());
         let truth = &self.truth[k - 1];
         match factor {
             Some(f) => self.obs.record_factored(k, truth, estimate, f, traffic)?,

@@ -189,7 +189,7 @@ pub fn star_nodes(
     let n = exp.system.n_sensors();
     let net = match &exp.network {
         Some(net) => (**net).clone(),
-        None => v.star(n),
+        None => exp.star_of(v),
     };
     if !exp.reals.is_f32() {
         return Err("the graph's star nodes send singles: reals = \"f64\" is not supported".into());

@@ -369,13 +369,26 @@ where
         if exp.network.as_ref().is_some_and(|n| n.broadcast_estimate) {
             traffic.downlink_bits += 32 * network::estimate_reals(exp.system.state_dim());
         }
-        traffic.secure(&exp.security);
         traffic.scheduled = scheduled_mask;
         if let Some(l) = link {
             l.uplink(k, inbox, &mut traffic);
             l.feedback_down(k, traffic.downlink_bits);
             traffic.downlink_lost = downlink_lost;
         }
+        // After the feedback went down (the tally secures each hop's frame itself).
+        // On a multi-hop network every hop's frame is secured: the nodes' counters have them.
+        let hop_frames = link
+            .as_ref()
+            .map(|l| l.nodes())
+            .filter(|nodes| !nodes.is_empty())
+            .map(|nodes| {
+                nodes
+                    .iter()
+                    .map(|c| network::topology::tally::sent(c).0)
+                    .sum()
+            });
+        let frames = hop_frames.unwrap_or_else(|| traffic.star_frames());
+        traffic.secure(&exp.security, frames);
         doubles.restore(inbox, &mut traffic);
         if schedule != Schedule::All || available.is_some() {
             for (i, r) in inbox.iter_mut().enumerate() {

@@ -60,17 +60,23 @@ pub struct Traffic {
 pub const MASKED_SENSORS: usize = 128;
 
 impl Traffic {
-    /// 802.15.4 security's price (`[security]`, [`crate::link::security`]): every data frame
-    /// on air (each attempt) carries the auxiliary security header and the MIC, and so does the
-    /// step's one feedback frame when the feedback is secured. ACKs are never secured (2006
-    /// §7.2.2.3). The payload bits, hence R_eff, do not change: security adds no information.
-    /// The engine's loop applies it to every step it outputs, the runner's sinks to the fast
-    /// paths' steps.
-    pub fn secure(&mut self, security: &crate::link::security::SecuritySpec) {
+    /// Data frames on air on the one-hop star: every message's every attempt.
+    pub fn star_frames(&self) -> u64 {
+        self.messages + self.retransmissions
+    }
+
+    /// 802.15.4 security's price (`[security]`, [`crate::link::security`]): each of the step's
+    /// `data_frames` on air (every attempt; on a multi-hop network every hop's, from the
+    /// nodes' counters; on the star [`Traffic::star_frames`]) carries the auxiliary security
+    /// header and the MIC, and so does the step's one feedback frame when the feedback is
+    /// secured. ACKs are never secured (2006 §7.2.2.3). The payload bits, hence R_eff, do not
+    /// change: security adds no information. The engine's loop applies it to every step it
+    /// outputs, the runner's sinks to the fast paths' steps.
+    pub fn secure(&mut self, security: &crate::link::security::SecuritySpec, data_frames: u64) {
         if !security.is_secured() {
             return;
         }
-        self.frame_bits += (self.messages + self.retransmissions) * security.overhead_bits();
+        self.frame_bits += data_frames * security.overhead_bits();
         if self.downlink_bits > 0 {
             self.downlink_bits += security.feedback_overhead_bits();
         }

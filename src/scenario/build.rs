@@ -286,11 +286,10 @@ pub fn build_with(
         link.2.as_deref(),
         &curves,
         &variants,
-        system.n_sensors(),
+        (system.n_sensors(), file_spec.security.unwrap_or_default()),
     )?;
     if let Some(security) = &file_spec.security {
-        check_security(security, link.2.is_some(), &variants, &system)
-            .map_err(|m| ctx.err("security.level", m))?;
+        check_security(security, &system).map_err(|m| ctx.err("security.level", m))?;
     }
     if link.2.is_some() {
         check_network_variants(&ctx, &link.0, &curves, &variants, file_spec.reals)?;
@@ -362,8 +361,9 @@ fn build_network(
         positions.extend(placed.iter().map(|s| s.position));
     }
     positions.resize(sensors, None);
-    let topology = Topology::build(spec, &positions, file.channel.as_ref())
+    let mut topology = Topology::build(spec, &positions, file.channel.as_ref())
         .map_err(|e| ctx.err(format!("network.{}", e.field), e.message))?;
+    topology.security = file.security.unwrap_or_default();
     if topology.broadcast_estimate {
         check_broadcast_estimate(&topology, n)
             .map_err(|m| ctx.err("network.broadcast_estimate", m))?;
@@ -397,38 +397,30 @@ fn check_broadcast_estimate(
 ) -> Result<(), String> {
     net.sink_for("sending the estimate down the tree")?;
     let octets = 4 * crate::network::estimate_reals(n);
-    let max = crate::link::codec802154::MAX_PAYLOAD_OCTETS;
+    let max = crate::link::codec802154::MAX_PAYLOAD_OCTETS - net.security.overhead_octets();
     if octets > max as u64 {
         return Err(format!(
-            "the estimate of a {n}-dimensional state is {octets} octets as singles (mean and covariance), more than the {max} a frame carries"
+            "the estimate of a {n}-dimensional state is {octets} octets as singles (mean and covariance), more than the {max} a frame carries{}",
+            if net.security.is_secured() { " once secured" } else { "" }
         ));
     }
     Ok(())
 }
 
-/// `[security]` is priced on the one-hop star (each data frame and the step's feedback frame
-/// grow by the auxiliary security header and the MIC); a multi-hop network or a decentralized
-/// scheme with a secured level is refused until the graph's per-node counters carry it. A
-/// secured frame must still fit 127 octets: the largest reading, and an estimate of the state
-/// (mean and covariance, which estimate-sending schemes and the prediction feedback carry), in
-/// what the MIC and auxiliary header leave of the 116 octets of payload (conservative: checked
-/// whatever the schemes send).
+/// `[security]` is priced on every frame: on the one-hop star by the step's traffic
+/// (`Traffic::secure`), on a graph per hop and per node (`Tally`). A secured frame must still
+/// fit 127 octets: the largest reading, and an estimate of the state (mean and covariance, which
+/// estimate-sending schemes and the prediction feedback carry), in what the MIC and auxiliary
+/// header leave of the 116 octets of payload (conservative: checked whatever the schemes send;
+/// the decentralized schemes' own messages are checked by `Peers::check`).
 fn check_security(
     security: &crate::link::security::SecuritySpec,
-    network: bool,
-    variants: &[crate::scenario::experiment::Variant],
     system: &crate::scheme::System,
 ) -> Result<(), String> {
     if !security.is_secured() {
         return Ok(());
     }
     let level = security.level.name();
-    if network || variants.iter().any(|v| v.scheme.peers().is_some()) {
-        return Err(format!(
-            "level \"{level}\" on a [network] or with a decentralized scheme is not priced yet: \
-             [security] applies to the one-hop star (drop [network], or set level = \"none\")"
-        ));
-    }
     let room = crate::link::codec802154::MAX_PAYLOAD_OCTETS - security.overhead_octets();
     let reading = system
         .sensors
@@ -458,7 +450,7 @@ fn check_decentralized(
     network: Option<&crate::network::topology::Topology>,
     curves: &[crate::scenario::experiment::Curve],
     variants: &[crate::scenario::experiment::Variant],
-    sensors: usize,
+    (sensors, security): (usize, crate::link::security::SecuritySpec),
 ) -> Result<(), ScenarioError> {
     for v in variants {
         let label = &curves[v.curve].label;
@@ -476,7 +468,11 @@ fn check_decentralized(
                 .check(net)
                 .map_err(|m| ctx.err(&field, format!("{label}: {m}")))?,
             (Some(peers), None) => peers
-                .check(&v.star(sensors))
+                .check(&{
+                    let mut star = v.star(sensors);
+                    star.security = security;
+                    star
+                })
                 .map_err(|m| ctx.err(&field, format!("{label}: {m}")))?,
             _ => {}
         }

@@ -92,13 +92,21 @@ pub struct Experiment {
 }
 
 impl Experiment {
+    /// The one-hop star of variant `v`'s sensor links ([`Variant::star`]) with the run's
+    /// security.
+    pub fn star_of(&self, v: &Variant) -> Topology {
+        let mut star = v.star(self.system.n_sensors());
+        star.security = self.security;
+        star
+    }
+
     /// The graph variant `v` runs on: the scenario's `[network]`; without one, for a
     /// decentralized scheme the star of its sensors' links (the sink a node without a sensor),
     /// for a center scheme `None` (the engine's one-hop star).
     pub fn graph_of(&self, v: &Variant) -> Option<std::borrow::Cow<'_, Topology>> {
         match (&self.network, v.scheme.peers()) {
             (Some(net), _) => Some(std::borrow::Cow::Borrowed(net.as_ref())),
-            (None, Some(_)) => Some(std::borrow::Cow::Owned(v.star(self.system.n_sensors()))),
+            (None, Some(_)) => Some(std::borrow::Cow::Owned(self.star_of(v))),
             (None, None) => None,
         }
     }

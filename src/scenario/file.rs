@@ -117,7 +117,8 @@ pub struct ScenarioFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radio: Option<crate::network::radio::RadioSpec>,
     /// 802.15.4 MAC security of every frame (`link::security`): its auxiliary header and MIC
-    /// are priced on every data and feedback frame; absent or `level = "none"`: unsecured.
+    /// are priced on every data and feedback frame, on a graph per hop and node; absent or
+    /// `level = "none"`: unsecured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub security: Option<crate::link::security::SecuritySpec>,
     /// Published numbers and claims to check (`hushfuse reproduce`).

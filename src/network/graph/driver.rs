@@ -15,7 +15,6 @@
 use super::fates::GraphFates;
 use super::{Address, Envelope, NetworkNode, Outbox, Payload, Round};
 use crate::linalg::Vector;
-use crate::network::radio::PHY_OVERHEAD_BITS;
 use crate::network::topology::tally::{NodeCounts, Tally};
 use crate::network::topology::Topology;
 
@@ -189,7 +188,7 @@ impl<P: Payload + Clone> GraphDriver<P> {
                 (self.heard, self.receivers) = (heard, receivers);
             }
             Address::Down => {
-                let ppdu = bits + PHY_OVERHEAD_BITS;
+                let ppdu = self.tally.ppdu(bits);
                 let mut holders = vec![(from, 0u32)];
                 while let Some((m, depth)) = holders.pop() {
                     if self.children[m].is_empty() {

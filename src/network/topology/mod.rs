@@ -71,6 +71,9 @@ pub struct Topology {
     /// Whether the sink sends its estimate down the tree after every step (`[network]
     /// broadcast_estimate`; priced by [`tally::Tally::feedback`], the frame of the feedback).
     pub broadcast_estimate: bool,
+    /// The frames' 802.15.4 security (`[security]`): what every data frame and the feedback's
+    /// frame add on air, priced per hop by [`tally::Tally`]. None unless the scenario sets it.
+    pub security: crate::link::security::SecuritySpec,
     graph: UnGraph<(), usize>,
 }
 
@@ -175,6 +178,7 @@ impl Topology {
             sink_mains: spec.sink_mains.unwrap_or(true),
             aggregate: spec.aggregate.unwrap_or(true),
             broadcast_estimate: spec.broadcast_estimate.unwrap_or(false),
+            security: Default::default(),
             nodes,
             links,
             graph,
@@ -239,6 +243,7 @@ impl Topology {
             sink_mains: true,
             aggregate: false,
             broadcast_estimate: false,
+            security: Default::default(),
             graph,
         }
     }

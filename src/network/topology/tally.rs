@@ -63,6 +63,10 @@ const LISTENS: usize = 11;
 pub struct Tally {
     counts: Vec<NodeCounts>,
     children: Vec<u64>,
+    /// Bits 802.15.4 security adds to every data frame, and to the feedback's frame
+    /// ([`Topology::security`]; 0 unsecured).
+    secured: u64,
+    secured_feedback: u64,
 }
 
 impl Tally {
@@ -79,7 +83,15 @@ impl Tally {
                     c[p] += 1;
                     c
                 }),
+            secured: net.security.overhead_bits(),
+            secured_feedback: net.security.feedback_overhead_bits(),
         }
+    }
+
+    /// Bits on air of a data frame whose MAC frame (header, payload, FCS) has `mac_bits` bits:
+    /// the PHY header, and the auxiliary security header and MIC of a secured network.
+    pub fn ppdu(&self, mac_bits: u64) -> u64 {
+        mac_bits + PHY_OVERHEAD_BITS + self.secured
     }
 
     /// A new step: every counter back to zero.
@@ -125,7 +137,7 @@ impl Tally {
         arq: bool,
         forwarded: bool,
     ) -> bool {
-        let ppdu = mac_bits + PHY_OVERHEAD_BITS;
+        let ppdu = self.ppdu(mac_bits);
         let attempts = u64::from(1 + f.retries);
         let arrived = if arq {
             u64::from(f.acks)
@@ -150,7 +162,7 @@ impl Tally {
     /// One broadcast frame of `mac_bits` bits from `sender` (no acknowledgement, no retry):
     /// one frame on air, received by each of `heard` (the neighbours whose fate kept it).
     pub fn broadcast(&mut self, sender: usize, heard: &[usize], mac_bits: u64) {
-        let ppdu = mac_bits + PHY_OVERHEAD_BITS;
+        let ppdu = self.ppdu(mac_bits);
         self.counts[sender][TX] += 1;
         self.counts[sender][TX_BITS] += ppdu;
         for &r in heard {
@@ -162,7 +174,7 @@ impl Tally {
     /// [`Tally::broadcast`] `times` times over: the same counts, added at once (the consensus
     /// family's L identical broadcasts of a step on lossless links).
     pub fn broadcast_times(&mut self, sender: usize, heard: &[usize], mac_bits: u64, times: u64) {
-        let ppdu = mac_bits + PHY_OVERHEAD_BITS;
+        let ppdu = self.ppdu(mac_bits);
         self.counts[sender][TX] += times;
         self.counts[sender][TX_BITS] += times * ppdu;
         for &r in heard {
@@ -192,7 +204,7 @@ impl Tally {
     /// The step's listening and its feedback of `payload_bits` (0: none) going down the tree;
     /// `holds(n)`: whether node n got it.
     pub fn feedback(&mut self, routes: &Routes, payload_bits: u64, holds: impl Fn(usize) -> bool) {
-        let frame = DOWNLINK_OVERHEAD_BITS + payload_bits;
+        let frame = DOWNLINK_OVERHEAD_BITS + payload_bits + self.secured_feedback;
         for n in 0..self.counts.len() {
             self.listen(n, self.children[n]);
             if payload_bits == 0 {

@@ -177,6 +177,11 @@ fn counted(exp: &Experiment, label: &str) -> Result<f64, String> {
     if net.links.iter().any(|l| !l.channel.is_lossless()) {
         return Err("the claim counts frames on ideal links; this network has a lossy one".into());
     }
+    if net.security.is_secured() {
+        return Err(
+            "the claim counts unsecured frames; this scenario sets a [security] level".into(),
+        );
+    }
     let ci =
         super::curve_index(exp, label).ok_or_else(|| format!("no scheme labelled {label:?}"))?;
     let v = exp
