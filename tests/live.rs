@@ -372,13 +372,13 @@ fn killed_node_ends_as_a_run_with_its_missed_steps_lost() {
         })
         .collect();
     let fp = live::fingerprint(&exp, &text, 0);
-    let mut center = Center::new(&exp, 0, fp, variants).unwrap();
+    let mut center = Center::new(&exp, 0, fp, variants, None).unwrap();
     let mut nodes: Vec<Node> = (0..4)
         .map(|i| {
             let mine = (0..100)
                 .map(|k| rec.available[k][i].then(|| rec.measurements[k][i].clone()))
                 .collect();
-            Node::new(&exp, i, 0, Box::new(live::Recorded(mine))).unwrap()
+            Node::new(&exp, i, 0, Box::new(live::Recorded(mine)), None).unwrap()
         })
         .collect();
     let records = live::run_local(&mut center, &mut nodes, |dg| {

@@ -6,6 +6,7 @@
 //! [`Received::NotScheduled`]. A sensor that did not report by the step's end is a silence too
 //! (the center cannot tell a dead node from a quiet one, as it cannot tell a lost packet from
 //! a silence) and is logged. [`super::run_center`] drives it over UDP.
+use super::secure::{self, SecureEnd};
 use super::wire::{self, Datagram, Kind, MessageKind, DONE_READING, HELLO_FRESH, STEP_CATCH_UP};
 use crate::engine::fusion_side::FusionSide;
 use crate::filter::Gaussian;
@@ -50,6 +51,8 @@ enum Unusable {
     Corrupt,
     /// Well-formed, but its content is not usable: [`Dropped::rejected`].
     Content,
+    /// Its security does not verify: counted by the [`SecureEnd`].
+    Security,
 }
 
 /// What became of one sensor at a fused step, as `estimates.csv` says it.
@@ -114,6 +117,20 @@ pub struct Center<'a> {
     /// fused again without it on a center rebuilt from them ([`Center::rebuild`]).
     history: Vec<Vec<Received>>,
     pub dropped: Dropped,
+    /// The center's end of the secured link, when the scenario secures its frames.
+    secure: Option<SecureEnd>,
+}
+
+/// Refuses a secured scenario without the run's keys, and keys for an unsecured one.
+pub(super) fn check_keys(exp: &Experiment, secure: Option<&SecureEnd>) -> Result<(), String> {
+    match (exp.security.is_secured(), secure.is_some()) {
+        (true, false) => Err(format!(
+            "the scenario secures its frames ([security] level = \"{}\"): give the run's key file (--key FILE; `hushfuse keygen` makes one, `hushfuse live` makes its own)",
+            exp.security.level.name()
+        )),
+        (false, true) => Err("a key file was given, but the scenario has no [security] level: its frames go unsecured".into()),
+        _ => Ok(()),
+    }
 }
 
 impl<'a> Center<'a> {
@@ -122,8 +139,10 @@ impl<'a> Center<'a> {
         trial: usize,
         fingerprint: [u8; 8],
         variants: Vec<usize>,
+        secure: Option<SecureEnd>,
     ) -> Result<Self, String> {
         super::check_live(exp)?;
+        check_keys(exp, secure.as_ref())?;
         if variants.is_empty() {
             return Err("no scheme to run".into());
         }
@@ -144,6 +163,7 @@ impl<'a> Center<'a> {
             },
             history: Vec::new(),
             dropped: Dropped::default(),
+            secure,
         };
         c.start_variant()?;
         Ok(c)
@@ -194,8 +214,58 @@ impl<'a> Center<'a> {
     }
 
     /// The announcements of the current step, one per sensor: the step and the feedback each
-    /// sensor is sent.
+    /// sensor is sent (sealed afresh at each call in a secured run: a node refuses an
+    /// envelope's counter twice).
     pub fn announce(&mut self) -> Result<Vec<Vec<u8>>, String> {
+        let k = self.position().1;
+        self.make_announcements()?;
+        (0..self.sensors())
+            .map(|i| {
+                let d = self.announced[k - 1][i].clone();
+                self.seal_down(&d, i)
+            })
+            .collect()
+    }
+
+    /// The current step's announcement to sensor `i` alone, sealed afresh (sent again to a
+    /// node that has not reported).
+    pub fn announcement(&mut self, i: usize) -> Result<Vec<u8>, String> {
+        let k = self.position().1;
+        self.make_announcements()?;
+        let d = self.announced[k - 1][i].clone();
+        self.seal_down(&d, i)
+    }
+
+    /// The datagram that ends the run, for sensor `i`.
+    pub fn end_datagram(&mut self, i: usize) -> Result<Vec<u8>, String> {
+        self.seal_down(&Datagram::new(Kind::End, i, 0, 0).encode(), i)
+    }
+
+    /// A datagram to sensor `i` as it goes down: sealed when the downlink is secured.
+    fn seal_down(&mut self, datagram: &[u8], i: usize) -> Result<Vec<u8>, String> {
+        match self.secure.as_mut() {
+            Some(end) if end.secures_downlink() => end.seal_datagram(datagram, i),
+            _ => Ok(datagram.to_vec()),
+        }
+    }
+
+    /// What the center's end of the secured link dropped (`None`: the run is not secured).
+    pub fn security_dropped(&self) -> Option<secure::Dropped> {
+        self.secure.as_ref().map(SecureEnd::dropped)
+    }
+
+    /// Saves the frame counters accepted so far beside the key (a restarted center refuses
+    /// what it took before): at most twice a second, unless `force` (the end of the run); call
+    /// once a fused step is journaled ([`SecureEnd::save_seen`]).
+    pub fn save_seen(&mut self, force: bool) -> Result<(), String> {
+        self.secure
+            .as_mut()
+            .map_or(Ok(()), |end| end.save_seen(force))
+    }
+
+    /// Makes the current step's announcements (unsealed envelopes; the feedback frame inside
+    /// is secured once, as a radio would send it), if not made yet.
+    fn make_announcements(&mut self) -> Result<(), String> {
         let (v, k) = self.position();
         if self.announced.len() < k {
             let n = self.exp.system.n_sensors();
@@ -208,7 +278,10 @@ impl<'a> Center<'a> {
                     })? {
                         Some((flags, frame)) => {
                             d.flags = flags;
-                            d.body = frame;
+                            d.body = match self.secure.as_mut() {
+                                Some(end) if end.secures_downlink() => end.seal_frame(&frame, i)?,
+                                _ => frame,
+                            };
                         }
                         // An innovation reference with nothing for sensor i.
                         None => d.flags = wire::STEP_REFERENCE,
@@ -219,12 +292,13 @@ impl<'a> Center<'a> {
             self.announced.push(all);
         }
         // Every step before k was announced (by the driver, or by `fuse` on a resume).
-        self.announced.get(k - 1).cloned().ok_or_else(|| {
-            format!(
+        if self.announced.len() < k {
+            return Err(format!(
                 "step {k} announced before step {}",
                 self.announced.len() + 1
-            )
-        })
+            ));
+        }
+        Ok(())
     }
 
     /// The scenario's number of sensors.
@@ -256,6 +330,32 @@ impl<'a> Center<'a> {
 
     /// Takes one datagram from a node.
     pub fn accept(&mut self, octets: &[u8]) -> Accepted {
+        let opened;
+        let octets = match self.secure.as_mut() {
+            None => octets,
+            Some(end) => {
+                // The sender's index picks the key; the MIC then vouches for it.
+                let inner = secure::unsealed_part(octets, end.spec());
+                let Some(i) = inner
+                    .get(4..6)
+                    .map(|s| usize::from(u16::from_le_bytes([s[0], s[1]])))
+                else {
+                    self.dropped.corrupt += 1;
+                    return Accepted::default();
+                };
+                if i >= self.exp.system.n_sensors() {
+                    self.dropped.unknown_sensor += 1;
+                    return Accepted::default();
+                }
+                match end.open_datagram(octets, wire::sensor_address(i), i) {
+                    Ok(inner) => {
+                        opened = inner;
+                        opened
+                    }
+                    Err(_) => return Accepted::default(),
+                }
+            }
+        };
         let Ok(d) = Datagram::decode(octets) else {
             self.dropped.corrupt += 1;
             return Accepted::default();
@@ -282,6 +382,7 @@ impl<'a> Center<'a> {
                     match why {
                         Unusable::Corrupt => self.dropped.bad_frame += 1,
                         Unusable::Content => self.dropped.rejected += 1,
+                        Unusable::Security => {}
                     }
                 } else if usize::from(d.variant) != v || d.step as usize != k {
                     self.dropped.stale += 1;
@@ -311,15 +412,15 @@ impl<'a> Center<'a> {
                 .to_vec();
             return Accepted {
                 hello: None,
-                replies: vec![x.encode()],
+                replies: self.seal_down(&x.encode(), i).into_iter().collect(),
             };
         }
         let mut replies = Vec::new();
         // Once the current step is out (not while the driver waits for the first greetings,
         // when it announces to every node at once), a node that greets gets it.
         if !self.finished() && self.announced.len() >= self.k {
-            if let Ok(all) = self.announce() {
-                replies.push(all[i].clone());
+            if let Ok(d) = self.announcement(i) {
+                replies.push(d);
             }
         }
         Accepted {
@@ -335,7 +436,7 @@ impl<'a> Center<'a> {
         if self.finished() || usize::from(d.variant) != v || d.step as usize >= k {
             return Accepted::default();
         }
-        let mut replies: Vec<Vec<u8>> = (d.step as usize + 1..k)
+        let missed: Vec<Vec<u8>> = (d.step as usize + 1..k)
             .filter_map(|j| self.announced.get(j - 1))
             .map(|all| {
                 let mut s = Datagram::decode(&all[i]).expect("our own datagram");
@@ -343,8 +444,12 @@ impl<'a> Center<'a> {
                 s.encode()
             })
             .collect();
-        if let Ok(all) = self.announce() {
-            replies.push(all[i].clone());
+        let mut replies: Vec<Vec<u8>> = missed
+            .iter()
+            .filter_map(|m| self.seal_down(m, i).ok())
+            .collect();
+        if let Ok(d) = self.announcement(i) {
+            replies.push(d);
         }
         Accepted {
             hello: None,
@@ -354,10 +459,17 @@ impl<'a> Center<'a> {
 
     /// The message of a [`Kind::Frame`] and the payload bits that arrived in it (what is
     /// counted, never the envelope's claim, which must agree with it), or why it is unusable.
-    fn read_frame(&self, i: usize, d: &Datagram) -> Result<(Received, u64), Unusable> {
+    fn read_frame(&mut self, i: usize, d: &Datagram) -> Result<(Received, u64), Unusable> {
         let src = wire::sensor_address(i);
+        // Secured: the frame as the radio sent it is opened (verified, not a replay) first.
+        let body = match self.secure.as_mut() {
+            Some(end) => end
+                .open_frame(&d.body, src, i)
+                .map_err(|_| Unusable::Security)?,
+            None => d.body.clone(),
+        };
         let payload =
-            wire::check_mpdu(&d.body, src, wire::CENTER_ADDRESS).map_err(|_| Unusable::Corrupt)?;
+            wire::check_mpdu(&body, src, wire::CENTER_ADDRESS).map_err(|_| Unusable::Corrupt)?;
         let sys = &self.exp.system;
         let reals = |dim: usize| -> Result<Vector, Unusable> {
             let v = wire::read_f32s(payload, dim).map_err(|_| Unusable::Corrupt)?;
@@ -383,11 +495,11 @@ impl<'a> Center<'a> {
             MessageKind::Codec => {
                 let fits = claimed > 0
                     && crate::link::codec802154::mpdu_bits_for_payload(claimed)
-                        == 8 * d.body.len() as u64;
+                        == 8 * body.len() as u64;
                 if !fits {
                     return Err(Unusable::Content);
                 }
-                (Received::Frame(d.body.clone()), claimed)
+                (Received::Frame(body.clone()), claimed)
             }
         };
         if claimed != bits {
@@ -455,7 +567,7 @@ impl<'a> Center<'a> {
         }
         // The step's announcement (its feedback), kept for nodes that catch up: a resumed center
         // fuses its journal without announcing.
-        self.announce()?;
+        self.make_announcements()?;
         let label = self.label(v).to_string();
         loop {
             let fusion = self.fusion.as_mut().expect("a variant is running");
@@ -524,7 +636,7 @@ mod tests {
     fn a_step_takes_what_arrived_and_drops_the_rest() {
         let exp = exp();
         let v = sod(&exp);
-        let mut c = Center::new(&exp, 0, [0; 8], vec![v]).unwrap();
+        let mut c = Center::new(&exp, 0, [0; 8], vec![v], None).unwrap();
         assert_eq!(c.announce().unwrap().len(), 4);
         let z = |x: f64| Message::Measurement(Vector::from_vec(vec![x]));
         let done = |i: usize, k: usize, reading: bool| {
@@ -607,8 +719,8 @@ mod tests {
         };
         let z = |x: f64| Message::Measurement(Vector::from_vec(vec![x]));
         // Reference: a center fed only honest frames.
-        let mut clean = Center::new(&exp, 0, [0; 8], vec![v]).unwrap();
-        let mut c = Center::new(&exp, 0, [0; 8], vec![v]).unwrap();
+        let mut clean = Center::new(&exp, 0, [0; 8], vec![v], None).unwrap();
+        let mut c = Center::new(&exp, 0, [0; 8], vec![v], None).unwrap();
         for k in 1..=3 {
             clean.announce().unwrap();
             c.announce().unwrap();
@@ -684,7 +796,7 @@ mod tests {
         let exp = exp();
         let v = sod(&exp);
         let fp = [7; 8];
-        let mut c = Center::new(&exp, 0, fp, vec![v]).unwrap();
+        let mut c = Center::new(&exp, 0, fp, vec![v], None).unwrap();
         for _ in 0..3 {
             c.announce().unwrap();
             c.close().unwrap();
@@ -692,9 +804,9 @@ mod tests {
         let readings = (1..=5)
             .map(|k| Some(Vector::from_vec(vec![k as f64])))
             .collect();
-        let mut node = Node::new(&exp, 1, 0, Box::new(Recorded(readings))).unwrap();
+        let mut node = Node::new(&exp, 1, 0, Box::new(Recorded(readings)), None).unwrap();
         c.announce().unwrap();
-        let hello = c.accept(&node.hello(fp));
+        let hello = c.accept(&node.hello(fp).unwrap());
         assert_eq!(hello.hello, Some((1, true)));
         let ask = node.handle(&hello.replies[0]).unwrap().datagrams;
         assert_eq!(Datagram::decode(&ask[0]).unwrap().kind, Kind::CatchUp);
@@ -710,20 +822,20 @@ mod tests {
             .collect();
         assert_eq!(*kinds.last().unwrap(), Kind::Done);
         // A center resumed from its journal at step 4 serves the catch-up as well.
-        let mut resumed = Center::new(&exp, 0, fp, vec![v]).unwrap();
+        let mut resumed = Center::new(&exp, 0, fp, vec![v], None).unwrap();
         for k in 1..=3 {
             resumed
                 .fuse(v, k, vec![Received::Silent; 4], Vec::new())
                 .unwrap();
         }
-        let fresh = Node::new(&exp, 1, 0, Box::new(Recorded(vec![None; 5]))).unwrap();
-        let hello = resumed.accept(&fresh.hello(fp));
+        let mut fresh = Node::new(&exp, 1, 0, Box::new(Recorded(vec![None; 5])), None).unwrap();
+        let hello = resumed.accept(&fresh.hello(fp).unwrap());
         assert!(hello.replies.is_empty(), "step 4 not yet announced");
         resumed.announce().unwrap();
         let ask = Datagram::new(Kind::CatchUp, 1, v, 0).encode();
         assert_eq!(resumed.accept(&ask).replies.len(), 4);
         // Another run's node is refused.
-        let other = c.accept(&node.hello([8; 8]));
+        let other = c.accept(&node.hello([8; 8]).unwrap());
         assert_eq!(other.hello, None);
         assert!(node
             .handle(&other.replies[0])

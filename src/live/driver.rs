@@ -100,7 +100,7 @@ pub fn run_center(
                 resent = now;
                 for i in center.missing() {
                     if let Some(to) = nodes.get(&i) {
-                        send(&announced[i], *to);
+                        send(&center.announcement(i)?, *to);
                     }
                 }
             }
@@ -129,14 +129,15 @@ pub fn run_center(
         }
         status.bits += record.bits;
         sink.record(center, &record)?;
+        center.save_seen(false)?;
         steps_done += 1;
         status.show(center, n);
     }
     status.finish();
-    let end = super::wire::Datagram::new(super::wire::Kind::End, 0, 0, 0).encode();
+    center.save_seen(true)?;
     for _ in 0..3 {
-        for to in nodes.values() {
-            send(&end, *to);
+        for (&i, to) in &nodes {
+            send(&center.end_datagram(i)?, *to);
         }
     }
     let d = center.dropped;
@@ -144,6 +145,13 @@ pub fn run_center(
         "datagrams dropped: {} corrupt, {} bad frames, {} stale, {} duplicates, {} of unknown sensors, {} rejected (content not usable)",
         d.corrupt, d.bad_frame, d.stale, d.duplicate, d.unknown_sensor, d.rejected
     ));
+    if let Some(s) = center.security_dropped() {
+        let kinds: Vec<String> = s.kinds().iter().map(|(k, n)| format!("{n} {k}")).collect();
+        sink.event(&format!(
+            "dropped by the security check: {}",
+            kinds.join(", ")
+        ));
+    }
     Ok(())
 }
 

@@ -168,6 +168,22 @@ impl<'a> LiveFolder<'a> {
         hash: &str,
         run: &RunId,
     ) -> Result<Self, String> {
+        Self::refuse_interrupted(exp, dir)?;
+        let mut out = OutputDir::open(dir)?;
+        out.stage(ESTIMATES, replay::estimates_header(exp).as_bytes())?;
+        out.stage(JOURNAL, run.head_line().as_bytes())?;
+        out.stage(LOG, b"")?;
+        out.commit(output::Manifest::new("live", &exp.name, hash), false)?;
+        let lock = output::lock_folder(dir, output::LOCK)?;
+        Self::open(exp, dir, lock)
+    }
+
+    /// Refuses `dir` when it holds an interrupted run's journal: it would be lost (or, for
+    /// `hushfuse live`, the key it needs to resume replaced); `--resume` continues it.
+    pub fn refuse_interrupted(exp: &Experiment, dir: &Path) -> Result<(), String> {
+        if !dir.exists() {
+            return Ok(());
+        }
         {
             // Looked at under the lock, so a running center's journal is never judged mid-write.
             let _lock = output::lock_folder(dir, output::LOCK)?;
@@ -191,13 +207,7 @@ impl<'a> LiveFolder<'a> {
                 }
             }
         }
-        let mut out = OutputDir::open(dir)?;
-        out.stage(ESTIMATES, replay::estimates_header(exp).as_bytes())?;
-        out.stage(JOURNAL, run.head_line().as_bytes())?;
-        out.stage(LOG, b"")?;
-        out.commit(output::Manifest::new("live", &exp.name, hash), false)?;
-        let lock = output::lock_folder(dir, output::LOCK)?;
-        Self::open(exp, dir, lock)
+        Ok(())
     }
 
     fn open(exp: &'a Experiment, dir: &Path, lock: output::FolderLock) -> Result<Self, String> {

@@ -53,16 +53,14 @@ pub use node::{
 use crate::scenario::experiment::Experiment;
 
 /// Refuses what a live run cannot do exactly: sequence numbers (their bits would have to
-/// travel in the frame, which the live frames do not carry), and links that delay or
-/// retransmit (the live link is the real one, or the proxy's losses).
+/// travel in the frame, which the live frames do not carry), links that delay or
+/// retransmit (the live link is the real one, or the proxy's losses), and lost feedback when
+/// the feedback is secured (the proxy would have to alter a sealed datagram).
 pub fn check_live(exp: &Experiment) -> Result<(), String> {
     if !exp.reals.is_f32() {
         return Err(
             "reals = \"f64\" is not supported in a live run: its frames carry singles".into(),
         );
-    }
-    if exp.security.is_secured() {
-        return Err("[security] is not supported in a live run yet: the live frames are not secured (price it with `hushfuse run`)".into());
     }
     if exp.network.is_some() {
         return Err("a multi-hop [network] is not supported in a live run yet: the live processes talk over the one-hop star (run it with `hushfuse run`)".into());
@@ -81,6 +79,12 @@ pub fn check_live(exp: &Experiment) -> Result<(), String> {
             {
                 return Err(format!(
                     "scheme {label}: its channel delays or retransmits packets; a live run takes links that only lose packets (the proxy applies them)"
+                ));
+            }
+            let secured_down = exp.security.is_secured() && exp.security.secure_feedback;
+            if secured_down && !specs.iter().all(|s| s.downlink_spec().is_lossless()) {
+                return Err(format!(
+                    "scheme {label}: its feedback link loses packets, and the feedback is secured: the channel proxy cannot take the feedback out of a sealed announcement (set secure_feedback = false in [security], or a lossless downlink)"
                 ));
             }
         }

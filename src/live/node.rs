@@ -2,6 +2,7 @@
 //! the sensor's replies, running the scheme's own [`crate::scheme::SensorNode`] on its readings
 //! with its own coins ([`crate::stats::seeding::sensor_coins`]). A program that embeds a
 //! sensor feeds it what arrives and sends what it returns; [`run_node`] does that over UDP.
+use super::secure::{self, SecureEnd};
 use super::wire::{self, Datagram, Kind, MessageKind, DONE_READING, HELLO_FRESH, STEP_CATCH_UP};
 use crate::engine::fusion_side;
 use crate::linalg::Vector;
@@ -266,6 +267,8 @@ pub struct Node<'a> {
     readings: Box<dyn Readings + 'a>,
     current: Option<Current>,
     fresh: bool,
+    /// The node's end of the secured link, when the scenario secures its frames.
+    secure: Option<SecureEnd>,
 }
 
 /// The first eight octets of a SHA-256 of what a node and its center must agree on: the
@@ -287,6 +290,7 @@ impl<'a> Node<'a> {
         sensor: usize,
         trial: usize,
         readings: Box<dyn Readings + 'a>,
+        secure: Option<SecureEnd>,
     ) -> Result<Self, String> {
         if sensor >= exp.system.n_sensors() {
             return Err(format!(
@@ -296,6 +300,7 @@ impl<'a> Node<'a> {
             ));
         }
         super::check_live(exp)?;
+        super::center::check_keys(exp, secure.as_ref())?;
         Ok(Self {
             exp,
             sensor,
@@ -303,20 +308,39 @@ impl<'a> Node<'a> {
             readings,
             current: None,
             fresh: true,
+            secure,
         })
     }
 
-    /// The greeting that (re)announces this node to the center.
-    pub fn hello(&self, fingerprint: [u8; 8]) -> Vec<u8> {
+    /// The greeting that (re)announces this node to the center (sealed in a secured run; the
+    /// error is a frame counter file that cannot be written).
+    pub fn hello(&mut self, fingerprint: [u8; 8]) -> Result<Vec<u8>, String> {
         let mut d = Datagram::new(Kind::Hello, self.sensor, 0, 0);
         d.flags = if self.fresh { HELLO_FRESH } else { 0 };
         d.body = fingerprint.to_vec();
-        d.encode()
+        self.seal_up(d.encode())
+    }
+
+    /// A datagram to the center as it goes up: sealed in a secured run.
+    fn seal_up(&mut self, datagram: Vec<u8>) -> Result<Vec<u8>, String> {
+        match self.secure.as_mut() {
+            Some(end) => end.seal_datagram(&datagram, self.sensor),
+            None => Ok(datagram),
+        }
+    }
+
+    /// What the node's end of the secured link dropped (`None`: the run is not secured).
+    pub fn security_dropped(&self) -> Option<secure::Dropped> {
+        self.secure.as_ref().map(SecureEnd::dropped)
     }
 
     /// Whether [`Node::handle`] would answer `octets` at once: false for the announcement of a
     /// step whose reading has not come yet ([`Readings::ready`]).
     pub fn ready(&mut self, octets: &[u8]) -> bool {
+        let octets = match &self.secure {
+            Some(end) if end.secures_downlink() => secure::unsealed_part(octets, end.spec()),
+            _ => octets,
+        };
         match Datagram::decode(octets) {
             Ok(d) if d.kind == Kind::Step && usize::from(d.sensor) == self.sensor => {
                 self.readings.ready(d.step as usize)
@@ -328,9 +352,31 @@ impl<'a> Node<'a> {
     /// Handles one datagram from the center. Datagrams that are not for this node, corrupt,
     /// or of a step already done are ignored (an empty reply).
     pub fn handle(&mut self, octets: &[u8]) -> Result<Reply, String> {
+        let octets = match self.secure.as_mut() {
+            Some(end) if end.secures_downlink() => {
+                match end.open_datagram(octets, wire::CENTER_ADDRESS, self.sensor) {
+                    Ok(inner) => inner,
+                    // Forged, replayed, truncated: counted, and not heard.
+                    Err(_) => return Ok(Reply::default()),
+                }
+            }
+            _ => octets,
+        };
         let Ok(d) = Datagram::decode(octets) else {
             return Ok(Reply::default());
         };
+        let mut reply = self.handle_datagram(&d)?;
+        reply.datagrams = std::mem::take(&mut reply.datagrams)
+            .into_iter()
+            .map(|d| self.seal_up(d))
+            .collect::<Result<_, _>>()?;
+        if let Some(end) = self.secure.as_mut() {
+            end.save_seen(reply.finished)?;
+        }
+        Ok(reply)
+    }
+
+    fn handle_datagram(&mut self, d: &Datagram) -> Result<Reply, String> {
         match d.kind {
             Kind::End => Ok(Reply {
                 datagrams: Vec::new(),
@@ -340,7 +386,7 @@ impl<'a> Node<'a> {
                 "the center refused this node: {}",
                 String::from_utf8_lossy(&d.body)
             )),
-            Kind::Step if usize::from(d.sensor) == self.sensor => self.step(&d),
+            Kind::Step if usize::from(d.sensor) == self.sensor => self.step(d),
             _ => Ok(Reply::default()),
         }
     }
@@ -414,8 +460,17 @@ impl<'a> Node<'a> {
         let cur = self.current.as_mut().expect("current variant");
         let v = cur.variant;
         let label = &self.exp.curves[self.exp.variants[v].curve].label;
-        if let Ok(Some(fb)) =
-            wire::read_feedback(d.flags, &d.body, i, n, self.exp.system.state_dim())
+        // Secured feedback is opened first; feedback that does not verify is not heard.
+        let body = match self.secure.as_mut() {
+            Some(end) if end.secures_downlink() && !d.body.is_empty() => end
+                .open_frame(&d.body, wire::CENTER_ADDRESS, i)
+                .unwrap_or_default(),
+            _ => d.body.clone(),
+        };
+        if body.is_empty() != d.body.is_empty() {
+            // Not heard: the sensor keeps what it last heard.
+        } else if let Ok(Some(fb)) =
+            wire::read_feedback(d.flags, &body, i, n, self.exp.system.state_dim())
         {
             cur.held = Some(fb);
         } else if d.flags & wire::STEP_REFERENCE != 0 && d.body.is_empty() {
@@ -431,9 +486,18 @@ impl<'a> Node<'a> {
                 .step(k, z, cur.held.as_ref(), &mut cur.coins)
                 .map_err(|e| format!("scheme {label}, step {k}: {e}"))?;
             if let Transmission::Send(m) = t {
-                out.push(frame_datagram(&m, i, v, k).map_err(|e| {
+                let mut frame = frame_datagram(&m, i, v, k).map_err(|e| {
                     format!("scheme {label}, step {k}: its message cannot be sent: {e}")
-                })?);
+                })?;
+                if let Some(end) = self.secure.as_mut() {
+                    // The 802.15.4 frame secured as the radio sends it.
+                    let mut d = Datagram::decode(&frame).expect("our own datagram");
+                    d.body = end.seal_frame(&d.body, i).map_err(|e| {
+                        format!("scheme {label}, step {k}: its frame cannot be secured: {e}")
+                    })?;
+                    frame = d.encode();
+                }
+                out.push(frame);
             }
         }
         let mut done = Datagram::new(Kind::Done, i, v, k);
@@ -507,7 +571,7 @@ pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Re
         // A datagram that cannot be sent now is as good as lost: the center asks again.
         let _ = socket.send_to(octets, opts.center);
     };
-    send(&node.hello(fingerprint));
+    send(&node.hello(fingerprint)?);
     let mut heard = Instant::now();
     let mut buf = [0u8; 2048];
     // A step announced before its reading came (readings from a live input): handled once the
@@ -563,7 +627,7 @@ pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Re
                     // again, or ends the run), but greet it now and then.
                     if heard.elapsed() >= opts.hello_every {
                         heard = Instant::now();
-                        send(&node.hello(fingerprint));
+                        send(&node.hello(fingerprint)?);
                     }
                     continue;
                 }
@@ -574,7 +638,7 @@ pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Re
                         opts.give_up_after.as_secs_f64()
                     ));
                 }
-                send(&node.hello(fingerprint));
+                send(&node.hello(fingerprint)?);
             }
             Err(e) => return Err(format!("cannot receive: {e}")),
         }

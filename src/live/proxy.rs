@@ -20,6 +20,8 @@ type Tables = (Option<Arc<FateTable>>, Option<Arc<FateTable>>);
 /// The fates of one trial, per variant (variants share the tables of equal links).
 pub struct Fates {
     per_variant: Vec<Tables>,
+    /// The run's security: a relay reads a sealed datagram's envelope, and alters none.
+    security: crate::link::security::SecuritySpec,
     /// The scenario's sensors: the proxy relays for at most a few peers per sensor.
     sensors: usize,
 }
@@ -66,13 +68,28 @@ impl Fates {
         }
         Ok(Self {
             per_variant,
+            security: exp.security,
             sensors: exp.system.n_sensors(),
         })
     }
 
+    /// The datagram in `octets`, and whether it came sealed (its envelope read, not verified:
+    /// the receiver does that).
+    fn read(&self, octets: &[u8]) -> Option<(Datagram, bool)> {
+        match Datagram::decode(octets) {
+            Ok(d) => Some((d, false)),
+            Err(_) if self.security.is_secured() => {
+                Datagram::decode(super::secure::unsealed_part(octets, &self.security))
+                    .ok()
+                    .map(|d| (d, true))
+            }
+            Err(_) => None,
+        }
+    }
+
     /// The datagram as the link lets it through (`None`: lost).
     pub fn apply(&self, octets: &[u8]) -> Option<Vec<u8>> {
-        let Ok(mut d) = Datagram::decode(octets) else {
+        let Some((mut d, sealed)) = self.read(octets) else {
             // Not ours to judge: the receiver counts it.
             return Some(octets.to_vec());
         };
@@ -90,7 +107,9 @@ impl Fates {
                 Some(t) if in_table(t) && t.get(i, k).lost => None,
                 _ => Some(octets.to_vec()),
             },
-            Kind::Step if d.flags & wire::STEP_CATCH_UP == 0 && k >= 2 => match down {
+            // A sealed announcement is never altered (`check_live` refuses lost feedback when
+            // the feedback is secured).
+            Kind::Step if !sealed && d.flags & wire::STEP_CATCH_UP == 0 && k >= 2 => match down {
                 Some(t) if in_table(t) && t.get(i, k).lost => {
                     d.flags &=
                         !(wire::STEP_PREDICTION | wire::STEP_PREDICTION_COV | wire::STEP_REFERENCE);
@@ -141,8 +160,9 @@ pub fn run_proxy(listen: &UdpSocket, center: SocketAddr, fates: Fates) -> Result
                 Some(s) => s.clone(),
                 // A new peer only for a datagram of ours from one of the scenario's sensors, and
                 // only while the table has room: junk from many ports opens nothing.
-                None if !Datagram::decode(&buf[..len])
-                    .is_ok_and(|d| usize::from(d.sensor) < fates.sensors)
+                None if !fates
+                    .read(&buf[..len])
+                    .is_some_and(|(d, _)| usize::from(d.sensor) < fates.sensors)
                     || map.len() >= PEERS_PER_SENSOR * fates.sensors + EXTRA_PEERS =>
                 {
                     continue
@@ -190,7 +210,10 @@ fn downstream(
 ) {
     let mut buf = [0u8; 2048];
     while let Ok((len, _)) = from_center.recv_from(&mut buf) {
-        if Datagram::decode(&buf[..len]).is_ok_and(|d| d.kind == Kind::End) {
+        if fates
+            .read(&buf[..len])
+            .is_some_and(|(d, _)| d.kind == Kind::End)
+        {
             ended.store(true, std::sync::atomic::Ordering::Relaxed);
         }
         if let Some(out) = fates.apply(&buf[..len]) {

@@ -1,20 +1,39 @@
-//! One end of a secured live link (issue 41): what a node or the center does to every MPDU it
-//! sends and receives when the scenario sets a `[security]` level. It seals outgoing frames with
-//! the next counter of its own [`CounterStore`] and opens incoming ones: FCS, security fields,
-//! MIC under the key of the sensor concerned, then the replay check against the highest counter
-//! accepted from that sender. What it drops it counts by kind ([`Dropped`]), for `live.log`.
+//! One end of a secured live link (issue 41): what a node or the center does to every datagram
+//! it sends and receives when the scenario sets a `[security]` level.
 //!
-//! Keys: sensor i's frames, and the center's feedback to sensor i, are secured under
+//! Two layers, both AES-CCM* under the key of the sensor concerned:
+//!
+//! - **The 802.15.4 frame** (a reading, an estimate, a codec's frame, the feedback) is secured
+//!   as the standard says ([`SecureEnd::seal_frame`], [`SecureEnd::open_frame`]): auxiliary
+//!   security header, MIC, encryption at the `enc-` levels. These are the octets a radio sends
+//!   and the simulation prices.
+//! - **The envelope** of every datagram ([`super::wire`]: who, which step, "done", "hello",
+//!   catch-up) gets a MIC of its own ([`SecureEnd::seal_datagram`]): the envelope stands for
+//!   what a deployment's MAC and schedule tell for free, but in a live run it travels beside
+//!   the radio frame, and a forged "done, no reading" would change an estimate as surely as a
+//!   forged reading. Sealed: the datagram, then the sender's frame counter (4 octets, little
+//!   endian), then a MIC of the level's length over both. Not priced: it is not on air in a
+//!   deployment.
+//!
+//! Both layers take their counters from the sender's one [`CounterStore`] (never a counter
+//! twice under one key); their nonces cannot meet, since the envelope's sets the top bit of the
+//! nonce's level octet, which an 802.15.4 nonce never does. The receiver keeps the highest
+//! counter accepted per sender for each layer (the replay check) and saves them to a file
+//! beside the key ([`LiveKeys::seen_path`]) once per step, so a restarted center or node, or a
+//! new run under the same key, refuses what was captured before.
+//!
+//! With `secure_feedback = false` the downlink (announcements, feedback, the end of the run)
+//! goes unsecured, as the scenario asked: the nodes then trust any announcement.
+//!
+//! Keys: sensor i's frames, and the center's to sensor i, are secured under
 //! `KeyRing::for_sensor(i)` (the sensor's own key, else the network key). Addresses: the center
 //! is short address 0, sensor i is i + 1, and each one's EUI-64 (the nonce's source) is
-//! [`eui64`] of it.
-//!
-//! Not wired into the processes yet: `center`, `node` and `live` refuse a secured scenario
-//! (`live::check_live`) until they call this.
-use crate::link::security::ccm_star::{eui64, open, secure, SecurityError};
+//! [`eui64`] of it. What each end dropped it counts by kind ([`Dropped`]), for `live.log`.
+use crate::link::security::ccm_star::{eui64, nonce, open, seal, secure, unseal, SecurityError};
 use crate::link::security::counter::CounterStore;
 use crate::link::security::keys::{FrameCounters, KeyRing};
 use crate::link::security::SecuritySpec;
+use std::path::{Path, PathBuf};
 
 /// Frames dropped, by why.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -48,11 +67,28 @@ impl Dropped {
     }
 }
 
-/// Why [`SecureEnd::open_frame`] dropped a frame.
+/// Why [`SecureEnd::open_frame`] or [`SecureEnd::open_datagram`] dropped what it was given.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Refused {
     Security(SecurityError),
     Replayed { counter: u32, last: u32 },
+}
+
+/// The top bit of the nonce's last octet: set for an envelope's MIC, never by 802.15.4.
+const ENVELOPE_NONCE: u8 = 0x80;
+/// Octets of the frame counter after a sealed datagram.
+const COUNTER_OCTETS: usize = 4;
+
+/// Octets a sealed datagram carries after the envelope: the counter and the MIC.
+pub fn seal_octets(spec: &SecuritySpec) -> usize {
+    COUNTER_OCTETS + spec.level.mic_octets()
+}
+
+/// The datagram inside sealed `octets`, unverified: what a relay (the channel proxy) or a
+/// node deciding whether a reading is due may read, and nothing more. `octets` itself when too
+/// short.
+pub fn unsealed_part<'o>(octets: &'o [u8], spec: &SecuritySpec) -> &'o [u8] {
+    &octets[..octets.len().saturating_sub(seal_octets(spec))]
 }
 
 /// A node's or the center's end of the secured link.
@@ -63,9 +99,24 @@ pub struct SecureEnd {
     /// This end's short address (its EUI-64 is the nonce's source of what it sends).
     address: u16,
     counters: CounterStore,
-    accepted: FrameCounters,
+    /// Highest counters accepted, per sender: of 802.15.4 frames, of envelopes.
+    frames: FrameCounters,
+    envelopes: FrameCounters,
     dropped: Dropped,
+    /// Where the accepted counters are saved ([`SecureEnd::save_seen`]), if anywhere.
+    seen: Option<PathBuf>,
+    /// Whether the 802.15.4 frames' counters are saved too: at the center, yes; at a node,
+    /// no: the center sends the steps a restarted node missed again with their feedback frames
+    /// as first secured (older counters), which the node must take again. Its envelopes'
+    /// counters, saved, still refuse a replayed announcement.
+    persist_frames: bool,
+    /// When the accepted counters were last saved.
+    saved_at: Option<std::time::Instant>,
 }
+
+/// How often [`SecureEnd::save_seen`] writes, unless forced: a file write per datagram would
+/// cost more than the run.
+const SAVE_EVERY: std::time::Duration = std::time::Duration::from_millis(500);
 
 impl SecureEnd {
     /// The end at short `address` securing at `spec` with `keys`, its own counters in
@@ -76,19 +127,36 @@ impl SecureEnd {
             keys,
             address,
             counters,
-            accepted: FrameCounters::default(),
+            frames: FrameCounters::default(),
+            envelopes: FrameCounters::default(),
             dropped: Dropped::default(),
+            seen: None,
+            persist_frames: address == super::wire::CENTER_ADDRESS,
+            saved_at: None,
         }
+    }
+
+    /// The security the end applies.
+    pub fn spec(&self) -> &SecuritySpec {
+        &self.spec
+    }
+
+    /// Whether what the center sends down is secured (`secure_feedback`).
+    pub fn secures_downlink(&self) -> bool {
+        self.spec.secure_feedback
+    }
+
+    fn key(&self, sensor: usize) -> Result<&crate::link::security::keys::Key, String> {
+        self.keys
+            .for_sensor(sensor)
+            .ok_or_else(|| format!("no key for sensor {sensor}"))
     }
 
     /// `mpdu` secured under sensor `sensor`'s key (the sender's own for a node, the recipient's
     /// for the center's feedback) with this end's next frame counter.
     pub fn seal_frame(&mut self, mpdu: &[u8], sensor: usize) -> Result<Vec<u8>, String> {
-        let key = self
-            .keys
-            .for_sensor(sensor)
-            .ok_or_else(|| format!("no key for sensor {sensor}"))?;
         let counter = self.counters.take()?;
+        let key = self.key(sensor)?;
         secure(mpdu, &self.spec, key, eui64(self.address), counter).map_err(|e| e.to_string())
     }
 
@@ -119,16 +187,73 @@ impl SecureEnd {
                 return Err(Refused::Security(e));
             }
         };
-        if !self.accepted.is_fresh(from, opened.counter) {
-            self.dropped.replayed += 1;
-            let last = self.accepted.last(from).unwrap_or(0);
-            return Err(Refused::Replayed {
-                counter: opened.counter,
-                last,
-            });
-        }
-        self.accepted.accept(from, opened.counter);
+        Self::fresh(&mut self.frames, &mut self.dropped, from, opened.counter)?;
         Ok(opened.frame)
+    }
+
+    /// The replay check: accepts `counter` from `from` in `table` if it is above the last.
+    fn fresh(
+        table: &mut FrameCounters,
+        dropped: &mut Dropped,
+        from: u16,
+        counter: u32,
+    ) -> Result<(), Refused> {
+        if !table.is_fresh(from, counter) {
+            dropped.replayed += 1;
+            let last = table.last(from).unwrap_or(0);
+            return Err(Refused::Replayed { counter, last });
+        }
+        table.accept(from, counter);
+        Ok(())
+    }
+
+    /// The nonce of an envelope's MIC.
+    fn envelope_nonce(&self, source: u16, counter: u32) -> [u8; 13] {
+        let mut n = nonce(eui64(source), counter, self.spec.level);
+        n[12] |= ENVELOPE_NONCE;
+        n
+    }
+
+    /// `datagram` sealed under sensor `sensor`'s key: the datagram, this end's next frame
+    /// counter, the MIC over both.
+    pub fn seal_datagram(&mut self, datagram: &[u8], sensor: usize) -> Result<Vec<u8>, String> {
+        let counter = self.counters.take()?;
+        let nonce = self.envelope_nonce(self.address, counter);
+        let mut out = Vec::with_capacity(datagram.len() + seal_octets(&self.spec));
+        out.extend_from_slice(datagram);
+        out.extend_from_slice(&counter.to_le_bytes());
+        let mic = seal(self.key(sensor)?, &nonce, self.spec.level, &out, &mut []);
+        out.extend_from_slice(&mic);
+        Ok(out)
+    }
+
+    /// The datagram inside sealed `octets` from short address `from`, if its MIC verifies
+    /// under sensor `sensor`'s key and its counter is fresh; else the reason, counted.
+    pub fn open_datagram<'o>(
+        &mut self,
+        octets: &'o [u8],
+        from: u16,
+        sensor: usize,
+    ) -> Result<&'o [u8], Refused> {
+        let mic_octets = self.spec.level.mic_octets();
+        if octets.len() < COUNTER_OCTETS + mic_octets {
+            self.dropped.truncated += 1;
+            return Err(Refused::Security(SecurityError::Truncated(octets.len())));
+        }
+        let (signed, mic) = octets.split_at(octets.len() - mic_octets);
+        let (datagram, c) = signed.split_at(signed.len() - COUNTER_OCTETS);
+        let counter = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+        let nonce = self.envelope_nonce(from, counter);
+        let verified = self
+            .keys
+            .for_sensor(sensor)
+            .is_some_and(|key| unseal(key, &nonce, self.spec.level, signed, &mut [], mic).is_ok());
+        if !verified {
+            self.dropped.forged += 1;
+            return Err(Refused::Security(SecurityError::Forged));
+        }
+        Self::fresh(&mut self.envelopes, &mut self.dropped, from, counter)?;
+        Ok(datagram)
     }
 
     /// What this end dropped so far.
@@ -136,16 +261,182 @@ impl SecureEnd {
         self.dropped
     }
 
-    /// The highest counter accepted from `from` (for a journal that must keep it across a
-    /// restart).
+    /// The highest frame counter accepted from `from`.
     pub fn last_accepted(&self, from: u16) -> Option<u32> {
-        self.accepted.last(from)
+        self.frames.last(from)
     }
 
-    /// Restores the highest counter accepted from `from` (a restarted center, from its
-    /// journal): frames at or below it are replays from then on.
+    /// Restores the highest frame counter accepted from `from`: frames at or below it are
+    /// replays from then on.
     pub fn restore_accepted(&mut self, from: u16, counter: u32) {
-        self.accepted.accept(from, counter);
+        self.frames.accept(from, counter);
+    }
+
+    /// Keeps the accepted counters in `path` from now on, starting from what it holds (a
+    /// missing file is an end that has accepted nothing yet under this key).
+    pub fn remember_in(&mut self, path: &Path) -> Result<(), String> {
+        let shown = path.display();
+        match std::fs::read_to_string(path) {
+            Ok(text) => {
+                let mut lines = text.lines();
+                if lines.next() != Some(SEEN_HEADER) {
+                    return Err(format!(
+                        "{shown}: not a file of accepted frame counters (expected \"{SEEN_HEADER}\")"
+                    ));
+                }
+                for (n, line) in lines.enumerate() {
+                    let bad = || {
+                        format!("{shown}, line {}: expected \"frame|envelope ADDRESS COUNTER\", got {line:?}", n + 2)
+                    };
+                    let f: Vec<&str> = line.split_whitespace().collect();
+                    let [layer, source, counter] = f[..] else {
+                        return Err(bad());
+                    };
+                    let source: u16 = source.parse().map_err(|_| bad())?;
+                    let counter: u32 = counter.parse().map_err(|_| bad())?;
+                    match layer {
+                        "frame" if self.persist_frames => self.frames.accept(source, counter),
+                        "frame" => {}
+                        "envelope" => self.envelopes.accept(source, counter),
+                        _ => return Err(bad()),
+                    }
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(format!("{shown}: cannot read it: {e}")),
+        }
+        self.seen = Some(path.to_path_buf());
+        Ok(())
+    }
+
+    /// Saves the accepted counters where [`SecureEnd::remember_in`] said (a temporary file
+    /// renamed over the old one: a crash leaves one or the other, whole), at most every
+    /// [`SAVE_EVERY`] unless `force` (the end of a run).
+    ///
+    /// What a lag costs: after a crash, a datagram of the crashed run's last half second may
+    /// be taken once more by a restarted end. Within one run that is harmless: the envelope's
+    /// MIC binds the datagram to its variant and step, so a replay can only bring a genuine
+    /// datagram into its own step, as a retransmission would (and a copy of what is already
+    /// there is a duplicate). Across runs under one key it is the window a new run leaves
+    /// open; `hushfuse live` makes a fresh key for every run.
+    pub fn save_seen(&mut self, force: bool) -> Result<(), String> {
+        let Some(path) = &self.seen else {
+            return Ok(());
+        };
+        let now = std::time::Instant::now();
+        if !force
+            && self
+                .saved_at
+                .is_some_and(|t| now.duration_since(t) < SAVE_EVERY)
+        {
+            return Ok(());
+        }
+        self.saved_at = Some(now);
+        let mut text = format!("{SEEN_HEADER}\n");
+        let frames = FrameCounters::default();
+        let frames = if self.persist_frames {
+            &self.frames
+        } else {
+            &frames
+        };
+        for (layer, table) in [("frame", frames), ("envelope", &self.envelopes)] {
+            for (s, c) in table.entries() {
+                text.push_str(&format!("{layer} {s} {c}\n"));
+            }
+        }
+        let mut tmp = path.as_os_str().to_owned();
+        tmp.push(".tmp");
+        let tmp = PathBuf::from(tmp);
+        std::fs::write(&tmp, text)
+            .and_then(|_| std::fs::rename(&tmp, path))
+            .map_err(|e| format!("{}: cannot write it: {e}", path.display()))
+    }
+}
+
+/// First line of a file of accepted counters.
+const SEEN_HEADER: &str = "hushfuse accepted frame counters v1";
+
+/// A live run's key file and the state kept beside it: each end's frame counters
+/// (`KEY.counter-A`, A its short address) and the counters it accepted (`KEY.seen-A`).
+#[derive(Debug, Clone)]
+pub struct LiveKeys {
+    pub spec: SecuritySpec,
+    pub keys: KeyRing,
+    pub path: PathBuf,
+}
+
+impl LiveKeys {
+    /// The key file at `path` for a run of `sensors` sensors at `spec` (refused as
+    /// [`KeyRing::load`] says).
+    pub fn load(path: &Path, spec: SecuritySpec, sensors: usize) -> Result<Self, String> {
+        Ok(LiveKeys {
+            spec,
+            keys: KeyRing::load(path, sensors)?,
+            path: path.to_path_buf(),
+        })
+    }
+
+    fn beside(key: &Path, what: &str, address: u16) -> PathBuf {
+        let mut name = key.as_os_str().to_owned();
+        name.push(format!(".{what}-{address}"));
+        PathBuf::from(name)
+    }
+
+    /// The frame counter file of the end at short `address`.
+    pub fn counter_path(&self, address: u16) -> PathBuf {
+        Self::beside(&self.path, "counter", address)
+    }
+
+    /// The accepted-counters file of the end at short `address`.
+    pub fn seen_path(&self, address: u16) -> PathBuf {
+        Self::beside(&self.path, "seen", address)
+    }
+
+    /// The end at short `address`: its counters continued from its file (refused when
+    /// missing: see [`CounterStore::open`]), its accepted counters from its file.
+    pub fn end(&self, address: u16) -> Result<SecureEnd, String> {
+        let counters = CounterStore::open(&self.counter_path(address)).map_err(|e| {
+            format!("{e}; a key's counter files are made with it (`hushfuse keygen`), and copied with it to the node that uses them")
+        })?;
+        let mut end = SecureEnd::new(self.spec, self.keys.clone(), address, counters);
+        end.remember_in(&self.seen_path(address))?;
+        Ok(end)
+    }
+
+    /// A fresh network key at `path` (owner-only, refused if the file exists) and the frame
+    /// counter files, from 0, of the center and of `sensors` sensors beside it.
+    pub fn create(path: &Path, sensors: usize) -> Result<(), String> {
+        KeyRing::write_fresh(path)?;
+        for address in 0..=sensors {
+            let a = u16::try_from(address).map_err(|_| format!("{sensors} sensors"))?;
+            CounterStore::create(&Self::beside(path, "counter", a))?;
+        }
+        Ok(())
+    }
+
+    /// Removes the key at `path` and everything kept beside it (a run that makes a fresh key
+    /// in its folder replaces the last one's).
+    pub fn remove(path: &Path) -> Result<(), String> {
+        let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
+            return Ok(());
+        };
+        let dir = if dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            dir
+        };
+        let prefix = format!("{}.", name.to_string_lossy());
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return Ok(());
+        };
+        for e in entries.flatten() {
+            let n = e.file_name().to_string_lossy().into_owned();
+            if n == name.to_string_lossy() || n.starts_with(&prefix) {
+                std::fs::remove_file(e.path())
+                    .map_err(|err| format!("cannot remove {}: {err}", e.path().display()))?;
+            }
+        }
+        Ok(())
     }
 }
 

@@ -23,6 +23,11 @@ pub(crate) struct LiveRun {
     /// `hushfuse run --loss`); the channel proxy applies it.
     #[arg(long, value_name = "P")]
     pub(crate) loss: Option<f64>,
+    /// The run's key file, for a scenario with a [security] level (docs/live.md: format,
+    /// owner-only permissions; `hushfuse keygen` makes one). The frame counters are kept
+    /// beside it. `hushfuse live` makes a fresh one in its folder when none is given.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) key: Option<PathBuf>,
 }
 
 /// How the center paces and waits.
@@ -118,6 +123,44 @@ fn center_options(pacing: &Pacing, status: bool) -> Result<CenterOptions, Failur
     })
 }
 
+/// The end at short `address` of a secured run's link, from `--key` (`None`: the scenario is
+/// not secured). A key file that is missing, malformed or readable by others is refused.
+fn secure_end(
+    exp: &Experiment,
+    run: &LiveRun,
+    address: u16,
+) -> Result<Option<live::secure::SecureEnd>, Failure> {
+    match (&run.key, exp.security.is_secured()) {
+        (None, false) => Ok(None),
+        (Some(k), false) => Err(Failure::Input(format!(
+            "--key {}: the scenario has no [security] level, its frames go unsecured",
+            k.display()
+        ))),
+        (None, true) => Err(Failure::Input(format!(
+            "the scenario secures its frames ([security] level = \"{}\"): give the run's key file with --key FILE (`hushfuse keygen FILE --sensors {}` makes one)",
+            exp.security.level.name(),
+            exp.system.n_sensors()
+        ))),
+        (Some(k), true) => {
+            let keys = live::secure::LiveKeys::load(k, exp.security, exp.system.n_sensors())
+                .map_err(Failure::Input)?;
+            keys.end(address).map(Some).map_err(Failure::Input)
+        }
+    }
+}
+
+/// `hushfuse keygen`: a fresh network key at `path` and the frame counter files of the center
+/// and `sensors` sensors beside it.
+pub(crate) fn keygen(path: &Path, sensors: usize) -> Result<(), Failure> {
+    live::secure::LiveKeys::create(path, sensors).map_err(Failure::Input)?;
+    eprintln!(
+        "wrote the key {} (owner-only) and the frame counters of the center and {sensors} sensors beside it ({}.counter-A, A the short address: 0 the center, i + 1 sensor i); copy each node its key and its counter file",
+        path.display(),
+        path.display()
+    );
+    Ok(())
+}
+
 /// The center on `socket`, writing into `dir` (resumed from its journal with `resume`).
 #[allow(clippy::too_many_arguments)]
 fn serve(
@@ -135,7 +178,8 @@ fn serve(
     let opts = center_options(pacing, true)?;
     let chosen = variants(exp, pacing)?;
     let id = live::RunId::new(exp, text, run.trial, run.loss, &chosen);
-    let mut center = Center::new(exp, run.trial, fp, chosen).map_err(Failure::Input)?;
+    let end = secure_end(exp, run, live::wire::CENTER_ADDRESS)?;
+    let mut center = Center::new(exp, run.trial, fp, chosen, end).map_err(Failure::Input)?;
     let folder = if resume {
         LiveFolder::resume(exp, dir, &mut center, &id)
             .map_err(Failure::Input)?
@@ -295,7 +339,8 @@ pub(crate) fn node(
         }
     };
     let fp = live::fingerprint(&exp, &text, run.trial);
-    let mut node = Node::new(&exp, sensor, run.trial, readings).map_err(Failure::Input)?;
+    let end = secure_end(&exp, run, live::wire::sensor_address(sensor))?;
+    let mut node = Node::new(&exp, sensor, run.trial, readings, end).map_err(Failure::Input)?;
     let opts = NodeOptions {
         center,
         hello_every: Duration::from_secs(1),
@@ -405,13 +450,25 @@ pub(crate) fn live_all(
     // Every option checked before a process starts or the folder is touched.
     center_options(pacing, true)?;
     variants(&exp, pacing)?;
+    let dir = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(format!("{}-live", exp.name)));
+    let mut run = run;
+    if exp.security.is_secured() && run.key.is_none() {
+        // A fresh key for this run, in its folder: frames of earlier runs do not verify.
+        LiveFolder::refuse_interrupted(&exp, &dir).map_err(Failure::Input)?;
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| Failure::Run(format!("cannot create {}: {e}", dir.display())))?;
+        let key = dir.join(output::LIVE_KEY);
+        live::secure::LiveKeys::remove(&key).map_err(Failure::Run)?;
+        live::secure::LiveKeys::create(&key, exp.system.n_sensors()).map_err(Failure::Run)?;
+        run.key = Some(key);
+    }
+    secure_end(&exp, &run, live::wire::CENTER_ADDRESS)?;
     let socket = UdpSocket::bind("127.0.0.1:0").map_err(|e| Failure::Run(e.to_string()))?;
     let center_addr = socket
         .local_addr()
         .map_err(|e| Failure::Run(e.to_string()))?;
-    let dir = out
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| PathBuf::from("hushfuse-out").join(format!("{}-live", exp.name)));
     let exe = std::env::current_exe().map_err(|e| Failure::Run(e.to_string()))?;
     let common = |cmd: &mut std::process::Command| {
         cmd.arg("--trial").arg(run.trial.to_string());
@@ -421,6 +478,9 @@ pub(crate) fn live_all(
         }
         if let Some(p) = run.loss {
             cmd.arg("--loss").arg(p.to_string());
+        }
+        if let Some(k) = &run.key {
+            cmd.arg("--key").arg(k);
         }
     };
     let mut children = Children(Vec::new());

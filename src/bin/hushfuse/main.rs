@@ -260,6 +260,15 @@ enum Command {
         #[command(flatten)]
         run: live_cmd::LiveRun,
     },
+    /// A fresh key for secured live runs (`[security]`): writes FILE (owner-only) and, beside
+    /// it, the frame counter files of the center and of each sensor (docs/live.md).
+    Keygen {
+        /// Where to write the key (refused if it exists).
+        file: PathBuf,
+        /// Sensors of the run (counter files for the center and sensors 0..N-1).
+        #[arg(long, value_name = "N")]
+        sensors: usize,
+    },
     /// Run a built-in paper scenario and print our numbers beside the paper's, and its claims.
     Reproduce {
         /// Built-in scenario id (e.g. dormann-fig1) or a scenario file with a [paper] section.
@@ -403,6 +412,7 @@ fn main() -> ExitCode {
             center,
             run,
         }) => live_cmd::channel_proxy(&scenario, &listen, &center, &run),
+        Some(Command::Keygen { file, sensors }) => live_cmd::keygen(&file, sensors),
         Some(Command::Merge {
             shards,
             out,

@@ -100,7 +100,10 @@ impl CounterStore {
 fn write_atomically(path: &Path, next_unreserved: u32) -> Result<(), String> {
     let shown = path.display();
     let fail = |e: std::io::Error| format!("frame counter file {shown}: cannot write it: {e}");
-    let tmp = path.with_extension("tmp");
+    // The whole name and ".tmp": files of several ends may share a folder and a stem.
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = std::path::PathBuf::from(tmp);
     {
         let mut options = std::fs::OpenOptions::new();
         options.write(true).create(true).truncate(true);

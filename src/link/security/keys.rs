@@ -222,4 +222,11 @@ impl FrameCounters {
     pub fn last(&self, source: u16) -> Option<u32> {
         self.last.get(&source).copied()
     }
+
+    /// Every sender with the highest counter accepted from it, by address.
+    pub fn entries(&self) -> Vec<(u16, u32)> {
+        let mut all: Vec<(u16, u32)> = self.last.iter().map(|(&s, &c)| (s, c)).collect();
+        all.sort_unstable();
+        all
+    }
 }

@@ -27,6 +27,9 @@ const STAGING: &str = ".hushfuse-staging";
 const STAGING_OWNER: &str = ".hushfuse-owner";
 /// Lock file of an output folder: held (advisory `flock`) by the one run writing the folder.
 pub const LOCK: &str = ".hushfuse-lock";
+/// The key `hushfuse live` makes for its own run in its folder; its frame counters and
+/// accepted counters sit beside it as `live.key.*` (`hushfuse::live::secure::LiveKeys`).
+pub const LIVE_KEY: &str = "live.key";
 
 /// Hex of a SHA-256 digest.
 pub fn sha256_hex(bytes: &[u8]) -> String {
@@ -75,6 +78,7 @@ fn is_own_file(rel: &str) -> bool {
         || rel == LOCK
         || (name.starts_with(".hushfuse-lock-shard-") && !rel.contains('/'))
         || rel.starts_with(&format!("{STAGING}/"))
+        || (rel == LIVE_KEY || rel.starts_with(&format!("{LIVE_KEY}.")))
         || (name.starts_with("hushfuse-checkpoint") && name.ends_with(".bin"))
         || name.ends_with(".hfshard")
         || (name.starts_with('.') && name.contains(".tmp-"))
