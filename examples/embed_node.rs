@@ -39,7 +39,7 @@ fn main() -> Result<(), String> {
     let out = std::env::temp_dir().join("hushfuse-embed-node");
     std::thread::scope(|s| {
         s.spawn(|| -> Result<(), String> {
-            let mut center = Center::new(&exp, 0, fingerprint, send_on_delta)?;
+            let mut center = Center::new(&exp, 0, fingerprint, send_on_delta, None)?;
             let mut folder = LiveFolder::create(&exp, &out, "example", &run)?;
             let opts = CenterOptions {
                 pace: Pace::Lockstep {
@@ -60,12 +60,12 @@ fn main() -> Result<(), String> {
                 .collect();
             let (exp, center_addr) = (&exp, center_addr);
             s.spawn(move || -> Result<(), String> {
-                let mut node = Node::new(exp, i, 0, Box::new(live::Recorded(readings)))?;
+                let mut node = Node::new(exp, i, 0, Box::new(live::Recorded(readings)), None)?;
                 live::run_node(&mut node, fingerprint, &NodeOptions::to(center_addr))
             });
         }
         // The part a device runs: its sensor, its readings, the center's address.
-        let mut node = Node::new(&exp, 0, 0, Box::new(MySensor))?;
+        let mut node = Node::new(&exp, 0, 0, Box::new(MySensor), None)?;
         live::run_node(&mut node, fingerprint, &NodeOptions::to(center_addr))
     })?;
     println!("estimates: {}", out.join(live::ESTIMATES).display());

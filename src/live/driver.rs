@@ -135,9 +135,15 @@ pub fn run_center(
     }
     status.finish();
     center.save_seen(true)?;
+    // Sealed once and sent three times: the copies share one counter, so a copy the node never
+    // took cannot end a later run under the same key.
+    let mut ends = Vec::with_capacity(nodes.len());
+    for (&i, &to) in &nodes {
+        ends.push((center.end_datagram(i)?, to));
+    }
     for _ in 0..3 {
-        for (&i, to) in &nodes {
-            send(&center.end_datagram(i)?, *to);
+        for (end, to) in &ends {
+            send(end, *to);
         }
     }
     let d = center.dropped;

@@ -561,6 +561,21 @@ impl NodeOptions {
 
 /// Runs `node` against the center at `opts.center` until the center ends the run.
 pub fn run_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Result<(), String> {
+    let ended = serve_node(node, fingerprint, opts);
+    if let Some(d) = node.security_dropped() {
+        // The node's own count of what it refused (forged or replayed announcements), for
+        // whoever runs it; the center's is in its live.log.
+        let kinds: Vec<String> = d.kinds().iter().map(|(k, n)| format!("{n} {k}")).collect();
+        eprintln!(
+            "sensor {}: dropped by the security check: {}",
+            node.sensor,
+            kinds.join(", ")
+        );
+    }
+    ended
+}
+
+fn serve_node(node: &mut Node, fingerprint: [u8; 8], opts: &NodeOptions) -> Result<(), String> {
     let bind: SocketAddr = if opts.center.is_ipv4() {
         "0.0.0.0:0".parse().expect("address")
     } else {

@@ -160,9 +160,9 @@ pub fn run_proxy(listen: &UdpSocket, center: SocketAddr, fates: Fates) -> Result
                 Some(s) => s.clone(),
                 // A new peer only for a datagram of ours from one of the scenario's sensors, and
                 // only while the table has room: junk from many ports opens nothing.
-                None if !fates
+                None if fates
                     .read(&buf[..len])
-                    .is_some_and(|(d, _)| usize::from(d.sensor) < fates.sensors)
+                    .is_none_or(|(d, _)| usize::from(d.sensor) >= fates.sensors)
                     || map.len() >= PEERS_PER_SENSOR * fates.sensors + EXTRA_PEERS =>
                 {
                     continue

@@ -274,6 +274,7 @@ pub(crate) fn center(
     let (exp, text) = load(scenario, run, None)?;
     center_options(pacing, true)?;
     variants(&exp, pacing)?;
+    secure_end(&exp, run, live::wire::CENTER_ADDRESS)?;
     let socket = UdpSocket::bind(address(listen, "--listen")?)
         .map_err(|e| Failure::Input(format!("--listen {listen}: {e}")))?;
     let dir = out
