@@ -311,7 +311,7 @@ impl SecureEnd {
 
     /// Saves the accepted counters where [`SecureEnd::remember_in`] said (a temporary file
     /// renamed over the old one: a crash leaves one or the other, whole), at most every
-    /// [`SAVE_EVERY`] unless `force` (the end of a run).
+    /// half a second unless `force` (the end of a run).
     ///
     /// What a lag costs: after a crash, a datagram of the crashed run's last half second may
     /// be taken once more by a restarted end. Within one run that is harmless: the envelope's
@@ -443,6 +443,7 @@ impl LiveKeys {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::link::security::ccm_star::nonce;
     use crate::link::security::keys::Key;
     use crate::link::security::{KeyIdMode, SecurityLevel};
     use crate::live::wire::{f32_payload, mpdu, sensor_address, CENTER_ADDRESS};
@@ -550,5 +551,107 @@ mod tests {
                 Err(Refused::Replayed { .. })
             ));
         }
+    }
+
+    /// An envelope sealed by a node opens at the center to the same octets; a replay, a bit
+    /// flip anywhere, another key and a cut datagram are refused and counted by kind.
+    #[test]
+    fn sealed_datagrams_open_once_and_only_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        let keys = KeyRing::network(Key::new([0x11; 16]));
+        let mut node = end(dir.path(), "node", sensor_address(1), &keys);
+        let mut center = end(dir.path(), "center", CENTER_ADDRESS, &keys);
+        let d = crate::live::wire::Datagram::new(crate::live::wire::Kind::Done, 1, 0, 3).encode();
+        let sealed = node.seal_datagram(&d, 1).unwrap();
+        assert_eq!(sealed.len(), d.len() + seal_octets(&spec()));
+        assert_eq!(unsealed_part(&sealed, &spec()), &d[..]);
+        let from = sensor_address(1);
+        assert_eq!(center.open_datagram(&sealed, from, 1).unwrap(), &d[..]);
+        assert!(matches!(
+            center.open_datagram(&sealed, from, 1),
+            Err(Refused::Replayed { .. })
+        ));
+        for at in 0..sealed.len() {
+            let fresh = node.seal_datagram(&d, 1).unwrap();
+            let mut flipped = fresh.clone();
+            flipped[at] ^= 0x10;
+            assert_eq!(
+                center.open_datagram(&flipped, from, 1),
+                Err(Refused::Security(SecurityError::Forged)),
+                "a flip at octet {at}"
+            );
+        }
+        let mut other = end(
+            dir.path(),
+            "other",
+            sensor_address(1),
+            &KeyRing::network(Key::new([0x12; 16])),
+        );
+        assert!(center
+            .open_datagram(&other.seal_datagram(&d, 1).unwrap(), from, 1)
+            .is_err());
+        assert!(center.open_datagram(&sealed[..5], from, 1).is_err());
+        let dropped = center.dropped();
+        assert_eq!(
+            (dropped.replayed, dropped.forged, dropped.truncated),
+            (1, sealed.len() as u64 + 1, 1)
+        );
+        // The envelope's nonce is apart from a frame's: the same counter under the same key
+        // gives another MIC than an 802.15.4 frame's would.
+        let n = node.envelope_nonce(sensor_address(1), 7);
+        assert_eq!(n[12] & 0x7f, spec().level.code());
+        assert_ne!(n, nonce(eui64(sensor_address(1)), 7, spec().level));
+    }
+
+    /// Saved and restored, the center refuses both layers' old counters; a node keeps only
+    /// the envelopes' (the center re-sends old feedback frames to a node that catches up).
+    #[test]
+    fn accepted_counters_survive_a_restart() {
+        let dir = tempfile::tempdir().unwrap();
+        let keys = KeyRing::network(Key::new([0x21; 16]));
+        let mut node = end(dir.path(), "node", sensor_address(0), &keys);
+        let mut center = end(dir.path(), "center", CENTER_ADDRESS, &keys);
+        let seen = dir.path().join("center.seen");
+        center.remember_in(&seen).unwrap();
+        let reading = mpdu(1, CENTER_ADDRESS, sensor_address(0), &f32_payload([1.0])).unwrap();
+        let frame = node.seal_frame(&reading, 0).unwrap();
+        let d = crate::live::wire::Datagram::new(crate::live::wire::Kind::Done, 0, 0, 1).encode();
+        let sealed = node.seal_datagram(&d, 0).unwrap();
+        let from = sensor_address(0);
+        center.open_frame(&frame, from, 0).unwrap();
+        center.open_datagram(&sealed, from, 0).unwrap();
+        center.save_seen(true).unwrap();
+        let counters = CounterStore::open(&dir.path().join("center")).unwrap();
+        let mut restarted = SecureEnd::new(spec(), keys.clone(), CENTER_ADDRESS, counters);
+        restarted.remember_in(&seen).unwrap();
+        assert!(matches!(
+            restarted.open_frame(&frame, from, 0),
+            Err(Refused::Replayed { .. })
+        ));
+        assert!(matches!(
+            restarted.open_datagram(&sealed, from, 0),
+            Err(Refused::Replayed { .. })
+        ));
+
+        let node_seen = dir.path().join("node.seen");
+        node.remember_in(&node_seen).unwrap();
+        let feedback = mpdu(1, sensor_address(0), CENTER_ADDRESS, &f32_payload([0.5])).unwrap();
+        let fb = center.seal_frame(&feedback, 0).unwrap();
+        let announce = center.seal_datagram(&d, 0).unwrap();
+        node.open_frame(&fb, CENTER_ADDRESS, 0).unwrap();
+        node.open_datagram(&announce, CENTER_ADDRESS, 0).unwrap();
+        node.save_seen(true).unwrap();
+        let counters = CounterStore::open(&dir.path().join("node")).unwrap();
+        let mut again = SecureEnd::new(spec(), keys, sensor_address(0), counters);
+        again.remember_in(&node_seen).unwrap();
+        assert!(again.open_frame(&fb, CENTER_ADDRESS, 0).is_ok());
+        assert!(matches!(
+            again.open_datagram(&announce, CENTER_ADDRESS, 0),
+            Err(Refused::Replayed { .. })
+        ));
+        // A file that is not one is refused, naming it.
+        std::fs::write(&node_seen, "junk\n").unwrap();
+        let e = again.remember_in(&node_seen).unwrap_err();
+        assert!(e.contains("node.seen"), "{e}");
     }
 }
