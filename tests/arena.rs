@@ -179,7 +179,7 @@ fn the_library_writes_the_arena_folder_of_the_command_line() {
     let mut out_dir = OutputDir::open(&d.join("lib")).unwrap();
     let listed = arena_files::stage(&mut out_dir, &out, 1.0, (source, &opts.load), true).unwrap();
     // The rate–distortion figure needs the vector floor, which needs OpenBLAS (build.rs).
-    let floor = cfg!(hushfuse_openblas);
+    let floor = cfg!(hushfuse_blas);
     let mut expected = vec![
         "calibration.json",
         "best_per_budget.md",

@@ -79,12 +79,24 @@
 //! When a change is *meant* to move numbers, rerun with `HUSHFUSE_PRINT_GOLDEN=1 cargo test
 //! --release --test golden -- --nocapture`, paste the printed table, and say in the commit
 //! which numbers moved and why.
+//!
+//! The vector rate–distortion floor was found to depend on the machine: the recorded hashes
+//! were OpenBLAS's AVX2 (Haswell/Zen) kernels', and on an AVX-512 machine OpenBLAS takes its
+//! SkylakeX kernels, which moved the floor's last digits (1e-8 relative) and failed this test
+//! on every commit. `build.rs` now links the reference BLAS and LAPACK (no kernel chosen at run
+//! time), and the solver's `AlmostSolved` (reduced accuracy) is taken, so that which points the
+//! floor has no longer depends on the library. `scripts/compare-summaries.py` against the old
+//! binary run with `OPENBLAS_CORETYPE=Haswell` (which reproduces the recorded hashes): in the
+//! five built-ins with a vector floor (default, dormann-fig1, mesh-line, arena-1d, arena-nca)
+//! only `rate_distortion_floor` and the schemes' `floor_mse` moved, by at most 5.5e-7 relative
+//! (rate 0.5 of the 2-D floor, now solved to the reduced accuracy), and the 2-D floor gained its
+//! point at rate 0.25 (which ended `AlmostSolved`); every other built-in kept its hash.
 use std::process::Command;
 
 /// (built-in scenario, trials, FNV-1a 64 of summary.json, its length in bytes).
 const GOLDEN: &[(&str, usize, u64, usize)] = &[
-    ("default", 8, 0xb2027506fb417a2c, 553496),
-    ("dormann-fig1", 8, 0x4795f7cf04b686eb, 5088235),
+    ("default", 8, 0xc76b54cf5af148c7, 553534),
+    ("dormann-fig1", 8, 0x2f2723045d714c5c, 5088273),
     ("zhang-fig4", 8, 0x9c29e5e5306fa2d7, 222239),
     ("zhang-fig5", 8, 0x0126239b2512dc22, 221854),
     ("zhang-table7", 8, 0x583977c3ff48095b, 1066),
@@ -106,14 +118,14 @@ const GOLDEN: &[(&str, usize, u64, usize)] = &[
     ("classic-quantized-kf", 8, 0x443c1caa051be658, 200246),
     ("classic-one-bit-static", 8, 0x365883d266a1abd0, 157990),
     ("classic-one-bit-tracking", 8, 0x651320c915f5ddde, 305630),
-    ("mesh-line", 4, 0x789b03271d8e2996, 445537),
+    ("mesh-line", 4, 0x4db4bd984d329d2d, 445537),
     ("mesh-grid", 2, 0x4976a907be09fd75, 103395),
     ("arena-graph", 4, 0x13768fa9aa3ad7b0, 628310),
     ("arena-graph-rgg", 4, 0xc5eb1fe217a8b21c, 747552),
     ("consensus-energy-ring", 4, 0xe0093e86895aeeb3, 118786),
     ("et-ddf-tree", 4, 0xbe878dcc11201099, 549382),
-    ("arena-1d", 4, 0xcbb4d0e4d04e2586, 810489),
-    ("arena-nca", 4, 0x7d6f5d20dcb128cc, 722424),
+    ("arena-1d", 4, 0xd417d4e453ca7964, 810490),
+    ("arena-nca", 4, 0xdfe858354913d0e7, 722462),
     ("arena-rss", 4, 0xea42c43c4cae5dcd, 123570),
     ("arena-wsn", 4, 0x606437ab2dbb0ad1, 344571),
     ("arena-tobit", 4, 0x00f6653446ba6b85, 910210),

@@ -18,7 +18,7 @@ use hushfuse::stats::rate_distortion::{
 /// installs it): the SDP tests say so and stop where it cannot.
 fn solver_available() -> bool {
     if !hushfuse::stats::rate_distortion::conic::AVAILABLE {
-        eprintln!("skipped: this build has no BLAS/LAPACK (install libopenblas-dev and rebuild)");
+        eprintln!("skipped: this build has no BLAS/LAPACK (install libblas-dev and liblapack-dev, and rebuild)");
     }
     hushfuse::stats::rate_distortion::conic::AVAILABLE
 }

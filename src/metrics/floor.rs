@@ -393,7 +393,7 @@ mod tests {
     /// it must lie below the exact floor (up to the solver's accuracy) and within
     /// [`TANGENT_GAP`] of it, and the tangent path must be taken somewhere.
     #[test]
-    #[cfg_attr(not(hushfuse_openblas), ignore = "no BLAS/LAPACK in this build")]
+    #[cfg_attr(not(hushfuse_blas), ignore = "no BLAS/LAPACK in this build")]
     fn a_floor_read_from_the_curve_is_below_the_exact_floor_and_close() {
         let a = Matrix::from_row_slice(2, 2, &[1.0, 0.5, 0.0, 0.9]);
         let w = Matrix::from_row_slice(2, 2, &[0.3, 0.05, 0.05, 0.2]);

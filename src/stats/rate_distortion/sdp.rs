@@ -396,7 +396,7 @@ mod tests {
 
     /// The slope from the budget's multiplier is the floor's derivative in the rate.
     #[test]
-    #[cfg_attr(not(hushfuse_openblas), ignore = "no BLAS/LAPACK in this build")]
+    #[cfg_attr(not(hushfuse_blas), ignore = "no BLAS/LAPACK in this build")]
     fn the_slope_is_the_derivative_of_the_floor() {
         let a = Matrix::from_row_slice(2, 2, &[1.1, 0.4, -0.2, 0.8]);
         let w = Matrix::from_row_slice(2, 2, &[0.5, 0.1, 0.1, 0.2]);
@@ -440,7 +440,7 @@ mod tests {
     /// The program of the parts (block-diagonal `P`) has the optimum of the whole: a coupling
     /// of 1e-9, which makes the whole one program, moves the floor by no more than that.
     #[test]
-    #[cfg_attr(not(hushfuse_openblas), ignore = "no BLAS/LAPACK in this build")]
+    #[cfg_attr(not(hushfuse_blas), ignore = "no BLAS/LAPACK in this build")]
     fn the_parts_have_the_optimum_of_the_whole() {
         for r in [1.0, 3.0, 8.0] {
             let (a, w) = axes(0.0);
@@ -458,7 +458,7 @@ mod tests {
     /// At the optimum the rate budget is spent: `½ log2 det(A P Aᵀ + W) / det P = R`, computed
     /// from the returned `P` by determinants, not through `Π` as the program does.
     #[test]
-    #[cfg_attr(not(hushfuse_openblas), ignore = "no BLAS/LAPACK in this build")]
+    #[cfg_attr(not(hushfuse_blas), ignore = "no BLAS/LAPACK in this build")]
     fn optimum_spends_the_rate_exactly() {
         let a = Matrix::from_row_slice(2, 2, &[1.1, 0.4, -0.2, 0.8]);
         let w = Matrix::from_row_slice(2, 2, &[0.5, 0.1, 0.1, 0.2]);
