@@ -35,6 +35,8 @@ fn main() {
         println!("cargo:rustc-link-lib=dylib=lapack");
         println!("cargo:rustc-link-lib=dylib=blas");
         println!("cargo:rustc-link-arg=-Wl,-rpath,{lapack}:{blas}");
+        // For dependents' build scripts (python/build.rs), as DEP_HUSHFUSE_BLAS_RPATH.
+        println!("cargo:rpath={lapack}:{blas}");
         println!("cargo:rustc-cfg=hushfuse_blas");
     } else if let Some(dir) = openblas_dir() {
         println!("cargo:rustc-link-search=native={dir}");
