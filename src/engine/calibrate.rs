@@ -250,6 +250,16 @@ struct Evaluator<'a> {
     file: &'a str,
     opts: &'a Options,
     evaluations: usize,
+    /// Pilot runs made, by (scheme entry, knob value's bits): shared by every budget and every
+    /// axis calibrated with this evaluator (a pilot run gives the spend on every axis).
+    pilots: BTreeMap<(usize, u64), Result<SchemeSummary, String>>,
+    /// Runs of the schemes without a knob, by entry.
+    plain: BTreeMap<usize, SchemeSummary>,
+    /// The PCRB and the rate–distortion floor of the whole scenario, computed once.
+    bounds: Option<(
+        Option<crate::metrics::pcrb::Pcrb>,
+        crate::metrics::floor::ScenarioFloor,
+    )>,
     /// Tests: build each pilot run from the scenario text, as before the typed path.
     #[cfg(test)]
     via_text: bool,
@@ -370,27 +380,31 @@ struct Setup<'a> {
     tol: f64,
 }
 
-/// The pilot runs of one scheme entry, cached by knob value; a failure keeps its cause.
+/// The pilot runs of one scheme entry (number `ci` of the list), cached by knob value in the
+/// evaluator; a failure keeps its cause.
 struct Pilot<'a> {
+    ci: usize,
     entry: &'a toml::Table,
     knob: &'static str,
     range: KnobRange,
     trials: Option<usize>,
-    cache: BTreeMap<u64, Result<SchemeSummary, String>>,
 }
 
 impl Pilot<'_> {
     fn eval(&mut self, ev: &mut Evaluator, x: f64) -> Result<SchemeSummary, String> {
         let x = if self.range.integer { x.round() } else { x };
-        let (entry, knob, integer, trials) =
-            (self.entry, self.knob, self.range.integer, self.trials);
-        self.cache
-            .entry(x.to_bits())
-            .or_insert_with(|| {
-                ev.run(&with_knob(entry, knob, x, integer), trials)
-                    .map(|s| s.schemes[0].clone())
-            })
-            .clone()
+        let key = (self.ci, x.to_bits());
+        if let Some(r) = ev.pilots.get(&key) {
+            return r.clone();
+        }
+        let r = ev
+            .run(
+                &with_knob(self.entry, self.knob, x, self.range.integer),
+                self.trials,
+            )
+            .map(|s| s.schemes[0].clone());
+        ev.pilots.insert(key, r.clone());
+        r
     }
 }
 
@@ -405,6 +419,41 @@ pub fn calibrate(
     calibrate_all(&mut ev, &setup)
 }
 
+/// [`calibrate`] on several axes, each with its budgets (`opts.axis` is not used): one outcome
+/// per axis, the same as [`calibrate`] would give for it, but every pilot run, and the floor and
+/// the PCRB, made once for all axes (a pilot run gives the spend on every axis). Each outcome's
+/// `evaluations` counts the pilot runs its axis added.
+pub fn calibrate_axes<'a>(
+    text: &str,
+    file: &'a str,
+    plans: &'a [(Axis, &'a [f64])],
+    opts: &'a Options,
+) -> Result<Vec<Outcome>, String> {
+    let Some(&(axis, budgets)) = plans.first() else {
+        return Ok(Vec::new());
+    };
+    let (mut ev, mut setup) = prepare(text, file, budgets, opts)?;
+    setup.axis = axis;
+    let mut out = Vec::with_capacity(plans.len());
+    for &(axis, budgets) in plans {
+        check_budgets(budgets)?;
+        setup.axis = axis;
+        setup.budgets = budgets;
+        let before = ev.evaluations;
+        let mut o = calibrate_all(&mut ev, &setup)?;
+        o.evaluations = ev.evaluations - before;
+        out.push(o);
+    }
+    Ok(out)
+}
+
+fn check_budgets(budgets: &[f64]) -> Result<(), String> {
+    if budgets.is_empty() || budgets.iter().any(|b| !(b.is_finite() && *b > 0.0)) {
+        return Err("budgets must be positive numbers of bits per step".into());
+    }
+    Ok(())
+}
+
 /// Checks the budgets, applies the caller's trials and seed, validates the whole scenario.
 fn prepare<'a>(
     text: &str,
@@ -412,9 +461,7 @@ fn prepare<'a>(
     budgets: &'a [f64],
     opts: &'a Options,
 ) -> Result<(Evaluator<'a>, Setup<'a>), String> {
-    if budgets.is_empty() || budgets.iter().any(|b| !(b.is_finite() && *b > 0.0)) {
-        return Err("budgets must be positive numbers of bits per step".into());
-    }
+    check_budgets(budgets)?;
     let mut base: toml::Table = toml::from_str(text).map_err(|e| format!("{file}: {e}"))?;
     if let Some(t) = opts.load.trials {
         base.insert("trials".into(), toml::Value::Integer(t as i64));
@@ -450,6 +497,9 @@ fn prepare<'a>(
         file,
         opts,
         evaluations: 0,
+        pilots: BTreeMap::new(),
+        plain: BTreeMap::new(),
+        bounds: None,
         #[cfg(test)]
         via_text: false,
     };
@@ -489,14 +539,14 @@ fn calibrate_entry(
         .knob
         .and_then(|k| knob_range(&kind, s.n_sensors).map(|r| (k.name, r)));
     let Some((knob, range)) = range else {
-        return uncalibrated(ev, s, entry, &label, &kind, reg.knob.map(|k| k.name));
+        return uncalibrated(ev, s, ci, entry, &label, &kind, reg.knob.map(|k| k.name));
     };
     let mut p = Pilot {
+        ci,
         entry,
         knob,
         range,
         trials: s.pilot,
-        cache: BTreeMap::new(),
     };
     let chosen = if range.integer {
         choose_integer(ev, s, &mut p, &label)?
@@ -530,13 +580,20 @@ fn calibrate_entry(
 fn uncalibrated(
     ev: &mut Evaluator,
     s: &Setup,
+    ci: usize,
     entry: &toml::Table,
     label: &str,
     kind: &str,
     knob: Option<&str>,
 ) -> Result<Vec<Calibrated>, String> {
-    let sum = ev.run(entry, None)?;
-    let r = sum.schemes[0].clone();
+    let r = match ev.plain.get(&ci) {
+        Some(r) => r.clone(),
+        None => {
+            let r = ev.run(entry, None)?.schemes[0].clone();
+            ev.plain.insert(ci, r.clone());
+            r
+        }
+    };
     Ok(s.budgets
         .iter()
         .map(|&b| Calibrated {
@@ -686,13 +743,20 @@ fn bisect(
 }
 
 /// Per budget: the summary of every scheme at its knob, and the scenario as run.
-fn assemble(ev: &Evaluator, s: &Setup, per_scheme: &[Vec<Calibrated>]) -> Outcome {
+fn assemble(ev: &mut Evaluator, s: &Setup, per_scheme: &[Vec<Calibrated>]) -> Outcome {
     let mut rows = Vec::new();
     let mut summaries = Vec::new();
     let mut texts = Vec::new();
     let header = results::summarize_schemes(&s.full, &[]);
-    let pcrb = crate::metrics::pcrb::compute(&s.full).ok();
-    let floor = crate::metrics::floor::floor_of(&s.full);
+    let (pcrb, floor) = ev
+        .bounds
+        .get_or_insert_with(|| {
+            (
+                crate::metrics::pcrb::compute(&s.full).ok(),
+                crate::metrics::floor::floor_of(&s.full),
+            )
+        })
+        .clone();
     for b in 0..s.budgets.len() {
         let mut row: Vec<Calibrated> = per_scheme.iter().map(|r| r[b].clone()).collect();
         let tables: Vec<toml::Table> = s

@@ -257,19 +257,20 @@ pub(crate) fn quick_arena() -> Result<(), Failure> {
     let mut msg = arena::quick_description(trials);
     let mut evaluations = 0;
     let mut bound = None;
-    for (axis, budgets) in arena::QUICK_AXES {
-        let opts = calibrate::Options {
-            axis,
-            load,
-            ..Default::default()
-        };
-        let out = calibrate::calibrate(text, &source, budgets, &opts).map_err(Failure::Run)?;
+    let opts = calibrate::Options {
+        load,
+        ..Default::default()
+    };
+    // Every axis from the same pilot runs (one run gives the spend on each).
+    let outcomes = calibrate::calibrate_axes(text, &source, &arena::QUICK_AXES, &opts)
+        .map_err(Failure::Run)?;
+    for out in &outcomes {
         let group = out.summaries[0].group_order[0].clone();
         evaluations += out.evaluations;
-        msg.push_str(&arena::quick_heading(&out, asleep));
-        msg.push_str(&arena::best_rows(&out, &group));
+        msg.push_str(&arena::quick_heading(out, asleep));
+        msg.push_str(&arena::best_rows(out, &group));
         // The bound is the same under every table: printed once, at the end.
-        bound = bound.or_else(|| arena::bound_line(&out, &group));
+        bound = bound.or_else(|| arena::bound_line(out, &group));
     }
     msg.push_str(&format!("\n{}\n", arena::SPEND_LEGEND));
     if let Some(line) = bound {

@@ -102,11 +102,11 @@ fn declared_knob_directions_agree_with_the_measured_ones() {
             };
             let range = knob_range(&kind, s.n_sensors).expect("a declared range");
             let mut p = Pilot {
+                ci,
                 entry,
                 knob: k.name,
                 range,
                 trials: s.pilot,
-                cache: BTreeMap::new(),
             };
             let (a, b) = if range.integer {
                 let lo = p.eval(&mut ev, range.lo).expect("the lower end builds");
@@ -144,4 +144,46 @@ fn a_log_scale_knob_bisects_at_the_geometric_midpoint() {
             assert!(!knob_range(e.kind, 4).unwrap().log);
         }
     }
+}
+
+/// Calibrating several axes from one set of pilot runs (the quick arena) gives, per axis, the
+/// outcome of calibrating that axis alone — knobs, spends, statuses, summaries, texts — with
+/// fewer pilot runs in all (a pilot run gives every axis's spend).
+#[test]
+fn axes_calibrated_together_equal_each_alone_with_fewer_pilot_runs() {
+    let opts = small(1);
+    let plans: [(Axis, &[f64]); 3] = [
+        (Axis::Payload, &[12.0, 48.0]),
+        (Axis::Frame, &[96.0, 192.0]),
+        (Axis::Energy, &[300.0, 390.0]),
+    ];
+    let text = crate::scenario::builtin::get("arena-1d").expect("a built-in");
+    let together = calibrate_axes(text, "arena-1d", &plans, &opts).expect("calibrates");
+    assert_eq!(together.len(), plans.len());
+    let (mut alone_runs, mut together_runs) = (0, 0);
+    for ((axis, budgets), shared) in plans.iter().zip(&together) {
+        let alone = calibrate(
+            text,
+            "arena-1d",
+            budgets,
+            &Options {
+                axis: *axis,
+                ..opts
+            },
+        )
+        .expect("calibrates");
+        let without_runs = |o: &Outcome| {
+            let mut o = o.clone();
+            o.evaluations = 0;
+            fingerprint(&o)
+        };
+        assert_eq!(without_runs(shared), without_runs(&alone), "{axis:?}");
+        alone_runs += alone.evaluations;
+        together_runs += shared.evaluations;
+    }
+    assert!(
+        together_runs * 3 < alone_runs * 2,
+        "{together_runs} pilot runs together, {alone_runs} alone"
+    );
+    assert!(calibrate_axes(text, "arena-1d", &[(Axis::Payload, &[-1.0])], &opts).is_err());
 }
