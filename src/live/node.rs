@@ -460,22 +460,23 @@ impl<'a> Node<'a> {
         let cur = self.current.as_mut().expect("current variant");
         let v = cur.variant;
         let label = &self.exp.curves[self.exp.variants[v].curve].label;
-        // Secured feedback is opened first; feedback that does not verify is not heard.
+        // Secured feedback is opened first; feedback that does not verify is not heard (`None`:
+        // the sensor keeps what it last heard).
         let body = match self.secure.as_mut() {
-            Some(end) if end.secures_downlink() && !d.body.is_empty() => end
-                .open_frame(&d.body, wire::CENTER_ADDRESS, i)
-                .unwrap_or_default(),
-            _ => d.body.clone(),
+            Some(end) if end.secures_downlink() && !d.body.is_empty() => {
+                end.open_frame(&d.body, wire::CENTER_ADDRESS, i).ok()
+            }
+            _ => Some(d.body.clone()),
         };
-        if body.is_empty() != d.body.is_empty() {
-            // Not heard: the sensor keeps what it last heard.
-        } else if let Ok(Some(fb)) =
-            wire::read_feedback(d.flags, &body, i, n, self.exp.system.state_dim())
-        {
-            cur.held = Some(fb);
-        } else if d.flags & wire::STEP_REFERENCE != 0 && d.body.is_empty() {
-            // An innovation reference with nothing for this sensor (it is not activated).
-            cur.held = Some(Feedback::InnovationReference(vec![None; n]));
+        if let Some(body) = body {
+            if let Ok(Some(fb)) =
+                wire::read_feedback(d.flags, &body, i, n, self.exp.system.state_dim())
+            {
+                cur.held = Some(fb);
+            } else if d.flags & wire::STEP_REFERENCE != 0 && body.is_empty() {
+                // An innovation reference with nothing for this sensor (it is not activated).
+                cur.held = Some(Feedback::InnovationReference(vec![None; n]));
+            }
         }
         let schedule = self.exp.variants[v].scheme.schedule();
         let mut out = Vec::new();
