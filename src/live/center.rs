@@ -336,10 +336,7 @@ impl<'a> Center<'a> {
             Some(end) => {
                 // The sender's index picks the key; the MIC then vouches for it.
                 let inner = secure::unsealed_part(octets, end.spec());
-                let Some(i) = inner
-                    .get(4..6)
-                    .map(|s| usize::from(u16::from_le_bytes([s[0], s[1]])))
-                else {
+                let Some(i) = wire::sensor_field(inner) else {
                     self.dropped.corrupt += 1;
                     return Accepted::default();
                 };

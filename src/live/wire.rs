@@ -238,6 +238,14 @@ impl Datagram {
     }
 }
 
+/// The sensor index field of an envelope (octets 4..6), read without any other check: what a
+/// secured receiver needs to pick the key before the MIC vouches for the rest.
+pub fn sensor_field(octets: &[u8]) -> Option<usize> {
+    octets
+        .get(4..6)
+        .map(|s| usize::from(u16::from_le_bytes([s[0], s[1]])))
+}
+
 /// Why a frame's octets were refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum FrameError {
