@@ -72,8 +72,6 @@ struct Worker<'e> {
     scratch: LoopBuffers,
     /// The trial states of a lockstep batch, restarted for each variant of each block.
     states: Vec<crate::metrics::TrialState<'e>>,
-    /// A trial's largest readings ([`note_readings`]).
-    peaks: Vec<f64>,
 }
 
 impl<'e> Worker<'e> {
@@ -82,7 +80,6 @@ impl<'e> Worker<'e> {
             drawers: vec![Drawer::new(exp)],
             scratch: LoopBuffers::new(exp.system.n_sensors()),
             states: Vec::new(),
-            peaks: Vec::new(),
         }
     }
 }
@@ -148,7 +145,7 @@ fn run_block<'e>(
             let drawer = &mut worker.drawers[0];
             drawer.draw(exp, trial);
             run_trial_with(exp, trial, &drawer.data, sums, &mut worker.scratch)?;
-            note_readings(exp, &drawer.data, sums, &mut worker.peaks);
+            note_readings(exp, &drawer.peaks, sums);
             on_trial(1);
         }
         return Ok(true);
@@ -212,26 +209,19 @@ fn run_block<'e>(
         }
     }
     for d in drawn {
-        note_readings(exp, &d.data, sums, &mut worker.peaks);
+        note_readings(exp, &d.peaks, sums);
     }
     on_trial(n);
     Ok(true)
 }
 
-/// One trial's largest readings into every variant's sums
+/// One trial's largest readings (`peaks`, [`Drawer::peaks`]) into every variant's sums
 /// ([`crate::metrics::Sums::reading_peaks`], for [`crate::metrics::precision`]); nothing when
 /// the scenario sends doubles, whose rounding is never coarse.
-pub(crate) fn note_readings(
-    exp: &Experiment,
-    data: &TrialData,
-    sums: &mut [Sums],
-    peaks: &mut Vec<f64>,
-) {
+fn note_readings(exp: &Experiment, peaks: &[f64], sums: &mut [Sums]) {
     if !exp.reals.is_f32() {
         return;
     }
-    peaks.clear();
-    crate::metrics::precision::note_peaks(&data.measurements, peaks);
     for s in sums.iter_mut().take(exp.variants.len()) {
         s.merge_peaks(peaks);
     }

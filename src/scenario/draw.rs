@@ -29,6 +29,12 @@ pub fn draw_trial(exp: &Experiment, trial: usize) -> TrialData {
 pub(crate) struct Drawer {
     /// The trial last drawn.
     pub(crate) data: TrialData,
+    /// Per measurement component (sensors in order): the largest |reading| of the trial last
+    /// drawn, as [`crate::metrics::precision::note_peaks`] finds it, kept while drawing
+    /// rather than found by a second pass over every reading.
+    pub(crate) peaks: Vec<f64>,
+    /// Per sensor: the index of its first component in `peaks`.
+    offsets: Vec<usize>,
     /// Square root of the initial-truth covariance, once per run instead of once per trial.
     x0_sqrt: crate::linalg::Matrix,
     x: Vector,
@@ -56,7 +62,19 @@ impl Drawer {
         let x0_sqrt = crate::model::transition::psd_sqrt(&exp.initial_truth.cov)
             .expect("validated initial truth");
         let zeros = |d: usize| Vector::zeros(d);
+        let offsets: Vec<usize> = sys
+            .sensors
+            .iter()
+            .scan(0, |c, s| {
+                let first = *c;
+                *c += s.meas_dim();
+                Some(first)
+            })
+            .collect();
+        let width = sys.sensors.iter().map(|s| s.meas_dim()).sum();
         Self {
+            peaks: vec![0.0; width],
+            offsets,
             data: TrialData {
                 truth: (0..exp.steps).map(|_| zeros(n)).collect(),
                 measurements: (0..exp.steps)
@@ -98,6 +116,7 @@ impl Drawer {
 
     fn draw_dynamic(&mut self, exp: &Experiment, trial: usize) {
         let sys = &exp.system;
+        self.peaks.fill(0.0);
         let mut rng = trial_rng(exp.seed, trial as u64, 0);
         let normal = |rng: &mut Xoshiro256PlusPlus| -> f64 {
             rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
@@ -132,6 +151,7 @@ impl Drawer {
                     }
                     None => *z = s.sample(&self.x, &mut rng),
                 }
+                note_peak(&mut self.peaks[self.offsets[i]..], z.as_slice());
             }
             self.data.truth[k].copy_from(&self.x);
         }
@@ -157,6 +177,7 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
     let t = &sys.transition;
     let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
     let any_nonlinear = d.linear.iter().any(Option::is_none);
+    d.peaks.fill(0.0);
     for k in 0..exp.steps {
         // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
         let w = normals(&mut rng);
@@ -176,6 +197,9 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
                     let v = normal(&mut rng);
                     let hx: [f64; 1] = mat_vec(h, &x);
                     z[0] = hx[0] + r_sqrt[0] * v;
+                    let p = &mut d.peaks[d.offsets[i]];
+                    *p = p.max(z[0].abs());
+                    continue;
                 }
                 Some(LinearDraw { h, r_sqrt }) => {
                     let (v, rv) = (d.v[i].as_mut_slice(), d.rv[i].as_mut_slice());
@@ -188,8 +212,18 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
                 }
                 None => *zv = sys.sensors[i].sample(&d.x, &mut rng),
             }
+            note_peak(&mut d.peaks[d.offsets[i]..], zv.as_slice());
         }
         d.data.truth[k].as_mut_slice().copy_from_slice(&x);
+    }
+}
+
+/// Raises `peaks[j]` to |z[j]| where that is larger (`max` ignores a NaN, as
+/// [`crate::metrics::precision::note_peaks`] does).
+#[inline(always)]
+fn note_peak(peaks: &mut [f64], z: &[f64]) {
+    for (p, v) in peaks.iter_mut().zip(z) {
+        *p = p.max(v.abs());
     }
 }
 
@@ -210,4 +244,47 @@ fn standard_normals<const N: usize>(rng: &mut Xoshiro256PlusPlus) -> [f64; N] {
 #[inline(always)]
 fn standard_normal(rng: &mut Xoshiro256PlusPlus) -> f64 {
     rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, rng)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::build::load;
+    use crate::scenario::builtin;
+
+    /// A random walk of `n` states, a scalar sensor of the first state and a vector sensor of
+    /// the first two, with readings of every sign.
+    fn walk(n: usize) -> String {
+        let rows: Vec<String> = (0..n)
+            .map(|i| {
+                let row: Vec<&str> = (0..n).map(|j| if i == j { "1.0" } else { "0.0" }).collect();
+                format!("[{}]", row.join(", "))
+            })
+            .collect();
+        let f = rows.join(", ");
+        let zeros = vec!["0.0"; n].join(", ");
+        let ones = vec!["1.0"; n].join(", ");
+        format!(
+            "name = \"t\"\ntrials = 3\nsteps = 7\nseed = 5\n[model]\nkind = \"matrix\"\nF = [{f}]\nQ = [{f}]\n[prior]\nmean = [{zeros}]\ncov_diag = [{ones}]\n[[sensors]]\nobserve = [0]\nR_diag = [4.0]\n[[sensors]]\nobserve = [0, 1]\nR_diag = [1.0, 9.0]\n[[schemes]]\nkind = \"centralized-kf\"\n"
+        )
+    }
+
+    /// The peaks kept while drawing are the ones a pass over the readings finds, for linear
+    /// sensors (scalar and vector) in the fixed-size drawer (2 states) and the dynamic one
+    /// (8 states), and for the RSS sensors of a built-in.
+    #[test]
+    fn peaks_kept_while_drawing_equal_a_pass_over_the_readings() {
+        let (rss, _) = builtin::resolve("arena-rss", false).unwrap();
+        for text in [walk(2), walk(8), rss] {
+            let exp = load(&text, "t").unwrap();
+            let mut drawer = Drawer::new(&exp);
+            for trial in 0..3 {
+                drawer.draw(&exp, trial);
+                let mut expected = Vec::new();
+                crate::metrics::precision::note_peaks(&drawer.data.measurements, &mut expected);
+                assert_eq!(drawer.peaks, expected, "trial {trial}");
+                assert!(drawer.peaks.iter().any(|&p| p > 0.0));
+            }
+        }
+    }
 }
