@@ -35,6 +35,9 @@ pub(crate) struct Drawer {
     pub(crate) peaks: Vec<f64>,
     /// Per sensor: the index of its first component in `peaks`.
     offsets: Vec<usize>,
+    /// Whether `peaks` is kept: only a scenario that sends singles reads it (`peaks` is empty
+    /// otherwise).
+    keep_peaks: bool,
     /// Square root of the initial-truth covariance, once per run instead of once per trial.
     x0_sqrt: crate::linalg::Matrix,
     x: Vector,
@@ -71,10 +74,12 @@ impl Drawer {
                 Some(first)
             })
             .collect();
+        let keep_peaks = exp.reals.is_f32();
         let width = sys.sensors.iter().map(|s| s.meas_dim()).sum();
         Self {
-            peaks: vec![0.0; width],
+            peaks: vec![0.0; if keep_peaks { width } else { 0 }],
             offsets,
+            keep_peaks,
             data: TrialData {
                 truth: (0..exp.steps).map(|_| zeros(n)).collect(),
                 measurements: (0..exp.steps)
@@ -151,7 +156,9 @@ impl Drawer {
                     }
                     None => *z = s.sample(&self.x, &mut rng),
                 }
-                note_peak(&mut self.peaks[self.offsets[i]..], z.as_slice());
+                if self.keep_peaks {
+                    note_peak(&mut self.peaks[self.offsets[i]..], z.as_slice());
+                }
             }
             self.data.truth[k].copy_from(&self.x);
         }
@@ -178,6 +185,7 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
     let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
     let any_nonlinear = d.linear.iter().any(Option::is_none);
     d.peaks.fill(0.0);
+    let keep_peaks = d.keep_peaks;
     for k in 0..exp.steps {
         // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
         let w = normals(&mut rng);
@@ -188,7 +196,8 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
             d.x.as_mut_slice().copy_from_slice(&x);
         }
         let zs = &mut d.data.measurements[k];
-        for (i, (plan, zv)) in d.linear.iter().zip(zs.iter_mut()).enumerate() {
+        let sensors = d.linear.iter().zip(zs.iter_mut()).zip(&d.offsets);
+        for (i, ((plan, zv), &first)) in sensors.enumerate() {
             let z = zv.as_mut_slice();
             match plan {
                 // z = H x + R^{1/2} v (MeasurementModel::sample); a scalar measurement
@@ -197,8 +206,9 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
                     let v = normal(&mut rng);
                     let hx: [f64; 1] = mat_vec(h, &x);
                     z[0] = hx[0] + r_sqrt[0] * v;
-                    let p = &mut d.peaks[d.offsets[i]];
-                    *p = p.max(z[0].abs());
+                    if let Some(p) = d.peaks.get_mut(first).filter(|_| keep_peaks) {
+                        *p = p.max(z[0].abs());
+                    }
                     continue;
                 }
                 Some(LinearDraw { h, r_sqrt }) => {
@@ -212,7 +222,9 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
                 }
                 None => *zv = sys.sensors[i].sample(&d.x, &mut rng),
             }
-            note_peak(&mut d.peaks[d.offsets[i]..], zv.as_slice());
+            if keep_peaks {
+                note_peak(&mut d.peaks[first..], zv.as_slice());
+            }
         }
         d.data.truth[k].as_mut_slice().copy_from_slice(&x);
     }
@@ -222,6 +234,11 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
 /// [`crate::metrics::precision::note_peaks`] does).
 #[inline(always)]
 fn note_peak(peaks: &mut [f64], z: &[f64]) {
+    // A scalar reading (most sensors) without the loop's set-up.
+    if let ([p, ..], [v]) = (&mut *peaks, z) {
+        *p = p.max(v.abs());
+        return;
+    }
     for (p, v) in peaks.iter_mut().zip(z) {
         *p = p.max(v.abs());
     }
@@ -271,7 +288,8 @@ mod tests {
 
     /// The peaks kept while drawing are the ones a pass over the readings finds, for linear
     /// sensors (scalar and vector) in the fixed-size drawer (2 states) and the dynamic one
-    /// (8 states), and for the RSS sensors of a built-in.
+    /// (8 states), and for the RSS sensors of a built-in; none are kept for a scenario that
+    /// sends doubles (nothing reads them).
     #[test]
     fn peaks_kept_while_drawing_equal_a_pass_over_the_readings() {
         let (rss, _) = builtin::resolve("arena-rss", false).unwrap();
@@ -286,5 +304,9 @@ mod tests {
                 assert!(drawer.peaks.iter().any(|&p| p > 0.0));
             }
         }
+        let doubles = load(&format!("reals = \"f64\"\n{}", walk(2)), "t").unwrap();
+        let mut drawer = Drawer::new(&doubles);
+        drawer.draw(&doubles, 0);
+        assert!(drawer.peaks.is_empty());
     }
 }
