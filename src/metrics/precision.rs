@@ -37,12 +37,24 @@ pub fn note_peaks(measurements: &[Vec<Vector>], peaks: &mut Vec<f64>) {
     for step in measurements {
         let mut c = 0;
         for z in step {
-            for v in z.iter() {
-                // `max` ignores a NaN (a recorded hole is not a reading).
-                peaks[c] = peaks[c].max(v.abs());
-                c += 1;
-            }
+            raise_peaks(&mut peaks[c..], z.as_slice());
+            c += z.len();
         }
+    }
+}
+
+/// Raises `peaks[j]` to |z[j]| where that is larger: one reading's components into the peaks
+/// from its sensor's first component on (what [`note_peaks`] does per reading, and what the
+/// drawer does as it draws). `max` ignores a NaN (a recorded hole is not a reading).
+#[inline(always)]
+pub fn raise_peaks(peaks: &mut [f64], z: &[f64]) {
+    // A scalar reading (most sensors) without the loop's set-up.
+    if let ([p, ..], [v]) = (&mut *peaks, z) {
+        *p = p.max(v.abs());
+        return;
+    }
+    for (p, v) in peaks.iter_mut().zip(z) {
+        *p = p.max(v.abs());
     }
 }
 

@@ -3,6 +3,7 @@
 //! runner, the trace, the PCRB and the live driver draw here, so every one of them sees the same
 //! numbers for the same (seed, trial).
 use crate::linalg::Vector;
+use crate::metrics::precision::raise_peaks;
 use crate::scenario::experiment::Experiment;
 use crate::stats::seeding::trial_rng;
 use multiversion::multiversion;
@@ -31,13 +32,11 @@ pub(crate) struct Drawer {
     pub(crate) data: TrialData,
     /// Per measurement component (sensors in order): the largest |reading| of the trial last
     /// drawn, as [`crate::metrics::precision::note_peaks`] finds it, kept while drawing
-    /// rather than found by a second pass over every reading.
+    /// rather than found by a second pass over every reading. Empty when the scenario sends
+    /// doubles: only singles are checked for coarse rounding, so nothing reads it then.
     pub(crate) peaks: Vec<f64>,
     /// Per sensor: the index of its first component in `peaks`.
     offsets: Vec<usize>,
-    /// Whether `peaks` is kept: only a scenario that sends singles reads it (`peaks` is empty
-    /// otherwise).
-    keep_peaks: bool,
     /// Square root of the initial-truth covariance, once per run instead of once per trial.
     x0_sqrt: crate::linalg::Matrix,
     x: Vector,
@@ -79,7 +78,6 @@ impl Drawer {
         Self {
             peaks: vec![0.0; if keep_peaks { width } else { 0 }],
             offsets,
-            keep_peaks,
             data: TrialData {
                 truth: (0..exp.steps).map(|_| zeros(n)).collect(),
                 measurements: (0..exp.steps)
@@ -156,8 +154,8 @@ impl Drawer {
                     }
                     None => *z = s.sample(&self.x, &mut rng),
                 }
-                if self.keep_peaks {
-                    note_peak(&mut self.peaks[self.offsets[i]..], z.as_slice());
+                if let Some(peaks) = self.peaks.get_mut(self.offsets[i]..) {
+                    raise_peaks(peaks, z.as_slice());
                 }
             }
             self.data.truth[k].copy_from(&self.x);
@@ -185,7 +183,6 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
     let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
     let any_nonlinear = d.linear.iter().any(Option::is_none);
     d.peaks.fill(0.0);
-    let keep_peaks = d.keep_peaks;
     for k in 0..exp.steps {
         // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
         let w = normals(&mut rng);
@@ -206,7 +203,7 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
                     let v = normal(&mut rng);
                     let hx: [f64; 1] = mat_vec(h, &x);
                     z[0] = hx[0] + r_sqrt[0] * v;
-                    if let Some(p) = d.peaks.get_mut(first).filter(|_| keep_peaks) {
+                    if let Some(p) = d.peaks.get_mut(first) {
                         *p = p.max(z[0].abs());
                     }
                     continue;
@@ -222,25 +219,11 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
                 }
                 None => *zv = sys.sensors[i].sample(&d.x, &mut rng),
             }
-            if keep_peaks {
-                note_peak(&mut d.peaks[first..], zv.as_slice());
+            if let Some(peaks) = d.peaks.get_mut(first..) {
+                raise_peaks(peaks, zv.as_slice());
             }
         }
         d.data.truth[k].as_mut_slice().copy_from_slice(&x);
-    }
-}
-
-/// Raises `peaks[j]` to |z[j]| where that is larger (`max` ignores a NaN, as
-/// [`crate::metrics::precision::note_peaks`] does).
-#[inline(always)]
-fn note_peak(peaks: &mut [f64], z: &[f64]) {
-    // A scalar reading (most sensors) without the loop's set-up.
-    if let ([p, ..], [v]) = (&mut *peaks, z) {
-        *p = p.max(v.abs());
-        return;
-    }
-    for (p, v) in peaks.iter_mut().zip(z) {
-        *p = p.max(v.abs());
     }
 }
 
