@@ -43,7 +43,7 @@ pub fn note_peaks(measurements: &[Vec<Vector>], peaks: &mut Vec<f64>) {
     }
 }
 
-/// Raises `peaks[j]` to |z[j]| where that is larger: one reading's components into the peaks
+/// Raises `peaks[j]` to `|z[j]|` where that is larger: one reading's components into the peaks
 /// from its sensor's first component on (what [`note_peaks`] does per reading, and what the
 /// drawer does as it draws). `max` ignores a NaN (a recorded hole is not a reading).
 #[inline(always)]
