@@ -329,5 +329,7 @@ impl NetworkNode<InformationPairs> for ConsensusNode {
 }
 
 pub mod lockstep;
+mod mixing;
+mod split;
 #[cfg(test)]
 mod tests;

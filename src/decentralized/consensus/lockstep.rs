@@ -8,9 +8,11 @@
 //! step, each received by every neighbour, and listens its L windows per neighbour.
 //!
 //! Consensus on information of a state of 1 to 6 dimensions (every node's one pair, the
-//! benchmark's case) starts and predicts in fixed size straight from and into the flat buffer
-//! (`start_information`, `predict_information`): `ConsensusNode::start` and `predict`'s
-//! operations in their order on arrays, without the matrices' dispatch and copies.
+//! benchmark's case) runs in two halves ([`super::split`]): the information matrices, the same
+//! in every trial on lossless links, once per run and thread; each trial's vectors in fixed
+//! size. The same operations in their order as the nodes' own, hence the same numbers.
+use super::mixing::{iterate, NodeWeights};
+use super::split::Split;
 use super::{ConsensusNode, Fusion, InformationPairs};
 use crate::filter::Gaussian;
 use crate::linalg::fixed;
@@ -18,23 +20,8 @@ use crate::linalg::Vector;
 use crate::network::graph::NetworkNode;
 use crate::network::topology::tally::NodeCounts;
 use crate::network::topology::Topology;
-use multiversion::multiversion;
 
 use crate::network::topology::tally::Tally;
-
-/// `$f::<N>(args)` for the state dimension `$n` in 1..=6 ([`fixed_information_dim`]).
-macro_rules! for_dim {
-    ($n:expr, $f:ident ( $($arg:expr),* )) => {
-        match $n {
-            1 => $f::<1>($($arg),*),
-            2 => $f::<2>($($arg),*),
-            3 => $f::<3>($($arg),*),
-            4 => $f::<4>($($arg),*),
-            5 => $f::<5>($($arg),*),
-            _ => $f::<6>($($arg),*),
-        }
-    };
-}
 
 /// Whether every link of `net` is lossless: the lock-step loop gives the driver's numbers.
 pub fn applies(net: &Topology) -> bool {
@@ -59,45 +46,36 @@ pub fn run(
         .iter()
         .map(|node| node.neighbours.iter().map(|&(j, _)| j).collect())
         .collect();
-    let weights: Vec<(f64, Vec<(usize, f64)>)> = nodes
+    let weights: Vec<NodeWeights> = nodes
         .iter()
         .map(|node| (node.own_weight, node.neighbours.clone()))
         .collect();
-    let fixed_dim = fixed_information_dim(nodes);
+    let mut split = fixed_information_dim(nodes)
+        .map(|n| SplitOf::new(n, nodes, &weights, measurements, sensors));
     let mut current: Vec<f64> = Vec::new();
     let mut mixed: Vec<f64> = Vec::new();
     for (j, z) in measurements.iter().enumerate() {
         let k = j + 1;
         tally.start_step();
-        let reading = |i: usize| if i < sensors { z.get(i) } else { None };
-        let stride = match fixed_dim {
-            Some(n) => {
-                current.resize(nodes.len() * (n * n + n), 0.0);
-                for_dim!(n, start_information(nodes, &reading, &mut current));
-                n * n + n
-            }
-            None => {
-                for (i, node) in nodes.iter_mut().enumerate() {
-                    node.start(reading(i));
-                }
-                let stride = stride(&nodes[0]);
-                gather(nodes, stride, &mut current);
-                stride
-            }
-        };
         let iterations = nodes[0].iterations;
-        if nodes[0].iterations > 0 {
+        if iterations > 0 {
             let n = nodes[0].prior.1.len();
             let bits = InformationPairs::frame_bits(nodes[0].pair_count(), n);
             for (i, heard) in hearers.iter().enumerate() {
                 tally.broadcast_times(i, heard, bits, iterations as u64);
             }
         }
-        mixed.resize(current.len(), 0.0);
-        iterate(iterations, stride, &weights, &mut current, &mut mixed);
-        let predicted = match fixed_dim {
-            Some(n) => for_dim!(n, predict_information(nodes, &current)),
+        let stepped = match &mut split {
+            Some(split) => split.step(j, nodes, &weights, z),
             None => {
+                let reading = |i: usize| if i < sensors { z.get(i) } else { None };
+                for (i, node) in nodes.iter_mut().enumerate() {
+                    node.start(reading(i));
+                }
+                let stride = stride(&nodes[0]);
+                gather(nodes, stride, &mut current);
+                mixed.resize(current.len(), 0.0);
+                iterate(iterations, stride, &weights, &mut current, &mut mixed);
                 scatter(nodes, stride, &current);
                 nodes
                     .iter_mut()
@@ -105,7 +83,7 @@ pub fn run(
                     .try_for_each(|(i, node)| node.predict().map_err(|e| (i, e)))
             }
         };
-        predicted.map_err(|(i, e)| {
+        stepped.map_err(|(i, e)| {
             format!(
                 "node {}, step {k}, round {iterations}: {e}",
                 net.nodes[i].name
@@ -120,6 +98,53 @@ pub fn run(
     Ok(())
 }
 
+/// [`Split`] of the state dimension 1 to 6, picked at run time.
+enum SplitOf {
+    D1(Split<1>),
+    D2(Split<2>),
+    D3(Split<3>),
+    D4(Split<4>),
+    D5(Split<5>),
+    D6(Split<6>),
+}
+
+impl SplitOf {
+    fn new(
+        n: usize,
+        nodes: &[ConsensusNode],
+        weights: &[NodeWeights],
+        measurements: &[Vec<Vector>],
+        sensors: usize,
+    ) -> Self {
+        let args = (nodes, weights, measurements, sensors);
+        match n {
+            1 => SplitOf::D1(Split::new(args.0, args.1, args.2, args.3)),
+            2 => SplitOf::D2(Split::new(args.0, args.1, args.2, args.3)),
+            3 => SplitOf::D3(Split::new(args.0, args.1, args.2, args.3)),
+            4 => SplitOf::D4(Split::new(args.0, args.1, args.2, args.3)),
+            5 => SplitOf::D5(Split::new(args.0, args.1, args.2, args.3)),
+            _ => SplitOf::D6(Split::new(args.0, args.1, args.2, args.3)),
+        }
+    }
+
+    fn step(
+        &mut self,
+        j: usize,
+        nodes: &mut [ConsensusNode],
+        weights: &[NodeWeights],
+        z: &[Vector],
+    ) -> Result<(), (usize, String)> {
+        match self {
+            SplitOf::D1(s) => s.step(j, nodes, weights, z),
+            SplitOf::D2(s) => s.step(j, nodes, weights, z),
+            SplitOf::D3(s) => s.step(j, nodes, weights, z),
+            SplitOf::D4(s) => s.step(j, nodes, weights, z),
+            SplitOf::D5(s) => s.step(j, nodes, weights, z),
+            SplitOf::D6(s) => s.step(j, nodes, weights, z),
+        }
+    }
+}
+
 /// The state dimension when every node runs consensus on information of a state the fixed-size
 /// step covers (1 to 5, and 6 where [`fixed::gemm_square`] does), else None.
 fn fixed_information_dim(nodes: &[ConsensusNode]) -> Option<usize> {
@@ -128,171 +153,6 @@ fn fixed_information_dim(nodes: &[ConsensusNode]) -> Option<usize> {
         .iter()
         .all(|node| node.fusion == Fusion::Information && node.prior.1.len() == n);
     (information && (1..=6).contains(&n) && fixed::gemm_square_covers(n)).then_some(n)
-}
-
-/// `ConsensusNode::start` of consensus on information for every node, each node's pair into
-/// its row of `flat` (Ω column by column, then q): Ω⁻ + U and q⁻ + Hᵀ R⁻¹ z, or Ω⁻ + 0 and
-/// q⁻ + 0 without a reading, the same sums (`x + y` entry by entry, the product as `gemv`).
-fn start_information<'z, const N: usize>(
-    nodes: &[ConsensusNode],
-    reading: &impl Fn(usize) -> Option<&'z Vector>,
-    flat: &mut [f64],
-) {
-    for (i, (node, row)) in nodes
-        .iter()
-        .zip(flat.chunks_exact_mut(N * N + N))
-        .enumerate()
-    {
-        let (omega, q) = (node.prior.0.as_slice(), node.prior.1.as_slice());
-        let (m, v) = row.split_at_mut(N * N);
-        match (&node.sensor, reading(i)) {
-            (Some((ht_rinv, u)), Some(z)) => {
-                let novel = fixed::mat_vec_cols::<N>(ht_rinv.as_slice(), z.as_slice());
-                add_into(m, omega, u.as_slice());
-                add_into(v, q, &novel);
-            }
-            _ => {
-                add_into(m, omega, &[0.0; 36]);
-                add_into(v, q, &[0.0; 6]);
-            }
-        }
-    }
-}
-
-/// `out = a + b`, entry by entry (as many as `out` has).
-fn add_into(out: &mut [f64], a: &[f64], b: &[f64]) {
-    for ((x, a), b) in out.iter_mut().zip(a).zip(b) {
-        *x = a + b;
-    }
-}
-
-/// `ConsensusNode::predict` of consensus on information for every node from its row of `flat`
-/// (the pair after the L-th iteration), in fixed size: P = Ω⁻¹, x̂ = P q, P⁻ = A P Aᵀ + Q,
-/// x̂⁻ = A x̂, Ω⁻ = (P⁻)⁻¹, q⁻ = Ω⁻ x̂⁻ — the fixed kernels are nalgebra's operations bit for
-/// bit (`linalg::fixed`), so the estimates and priors are the node's own. The failing node and
-/// its message on error.
-fn predict_information<const N: usize>(
-    nodes: &mut [ConsensusNode],
-    flat: &[f64],
-) -> Result<(), (usize, String)> {
-    for (i, (node, row)) in nodes
-        .iter_mut()
-        .zip(flat.chunks_exact(N * N + N))
-        .enumerate()
-    {
-        let fail = |m: &str| (i, m.to_string());
-        let (omega, q) = row.split_at(N * N);
-        let q: &[f64; N] = q.try_into().expect("N reals");
-        let mut cov = [[0.0; N]; N];
-        if !spd_inverse::<N>(omega, cov.as_flattened_mut()) {
-            return Err(fail("the fused information is not positive definite"));
-        }
-        let mean = fixed::mat_vec::<N, N>(cov.as_flattened(), q);
-        let (a, a_t) = (node.model.a.as_slice(), node.work.a_t.as_slice());
-        let (mut ap, mut predicted) = ([[0.0; N]; N], [[0.0; N]; N]);
-        fixed::gemm_square::<N>(ap.as_flattened_mut(), a, cov.as_flattened());
-        fixed::gemm_square::<N>(predicted.as_flattened_mut(), ap.as_flattened(), a_t);
-        let predicted = predicted.as_flattened_mut();
-        for (p, q) in predicted.iter_mut().zip(node.model.q.as_slice()) {
-            *p += q;
-        }
-        let predicted_mean = fixed::mat_vec::<N, N>(a, &mean);
-        let mut omega_pred = [[0.0; N]; N];
-        if !spd_inverse::<N>(predicted, omega_pred.as_flattened_mut()) {
-            return Err(fail("the predicted covariance is singular"));
-        }
-        let q_pred = fixed::mat_vec::<N, N>(omega_pred.as_flattened(), &predicted_mean);
-        node.estimate.cov.copy_from_slice(cov.as_flattened());
-        node.estimate.mean.copy_from_slice(&mean);
-        node.prior.0.copy_from_slice(omega_pred.as_flattened());
-        node.prior.1.copy_from_slice(&q_pred);
-    }
-    Ok(())
-}
-
-/// `linalg::spd_inverse_small_into` of the N x N column-major `a` into `out` (finite, then the
-/// Cholesky factor and the symmetrized inverse from it); false where it errs.
-#[inline(always)]
-fn spd_inverse<const N: usize>(a: &[f64], out: &mut [f64]) -> bool {
-    let mut factor = [[0.0; N]; N];
-    let factor = factor.as_flattened_mut();
-    factor.copy_from_slice(&a[..N * N]);
-    if !fixed::all_finite(factor) || !fixed::cholesky_square::<N>(factor) {
-        return false;
-    }
-    fixed::chol_inverse_sym_square::<N>(factor, out);
-    true
-}
-
-/// `iterations` consensus iterations on `current` (rows of `stride` reals), `mixed` the work
-/// space. The common strides (one pair of a 1- to 4-dimensional state, two for the hybrid) as
-/// fixed-size rows the compiler unrolls, any other in slices: the same sums. Compiled also for
-/// AVX2 and picked at run time (the same IEEE operations on wider vectors, so the same bits).
-#[multiversion(targets("x86_64+avx2"))]
-fn iterate(
-    iterations: usize,
-    stride: usize,
-    weights: &[(f64, Vec<(usize, f64)>)],
-    current: &mut Vec<f64>,
-    mixed: &mut Vec<f64>,
-) {
-    for _ in 0..iterations {
-        match stride {
-            2 => mix::<2>(weights, current, mixed),
-            4 => mix::<4>(weights, current, mixed),
-            6 => mix::<6>(weights, current, mixed),
-            12 => mix::<12>(weights, current, mixed),
-            20 => mix::<20>(weights, current, mixed),
-            24 => mix::<24>(weights, current, mixed),
-            40 => mix::<40>(weights, current, mixed),
-            _ => mix_any(stride, weights, current, mixed),
-        }
-        std::mem::swap(current, mixed);
-    }
-}
-
-/// One consensus iteration of rows of `S` reals: row i of `mixed` is πᵢᵢ times row i of
-/// `current` plus πᵢⱼ times row j for each neighbour j in order (`ConsensusNode::combine`).
-#[inline(always)]
-fn mix<const S: usize>(weights: &[(f64, Vec<(usize, f64)>)], current: &[f64], mixed: &mut [f64]) {
-    let row_of =
-        |n: usize| -> &[f64; S] { current[n * S..(n + 1) * S].try_into().expect("S reals") };
-    for (i, ((own, others), out)) in weights.iter().zip(mixed.chunks_exact_mut(S)).enumerate() {
-        let mut row = [0.0; S];
-        for (x, y) in row.iter_mut().zip(row_of(i)) {
-            *x = y * own;
-        }
-        for &(n, w) in others {
-            for (x, y) in row.iter_mut().zip(row_of(n)) {
-                *x += y * w;
-            }
-        }
-        out.copy_from_slice(&row);
-    }
-}
-
-/// [`mix`] for any row length.
-#[inline(always)]
-fn mix_any(
-    stride: usize,
-    weights: &[(f64, Vec<(usize, f64)>)],
-    current: &[f64],
-    mixed: &mut [f64],
-) {
-    for (i, ((own, others), out)) in weights
-        .iter()
-        .zip(mixed.chunks_exact_mut(stride))
-        .enumerate()
-    {
-        for (x, y) in out.iter_mut().zip(&current[i * stride..(i + 1) * stride]) {
-            *x = y * own;
-        }
-        for &(n, w) in others {
-            for (x, y) in out.iter_mut().zip(&current[n * stride..(n + 1) * stride]) {
-                *x += y * w;
-            }
-        }
-    }
 }
 
 /// Reals of one node's pairs in the flat buffer.

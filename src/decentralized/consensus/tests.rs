@@ -333,3 +333,165 @@ fn the_fixed_size_information_step_is_the_nodes_own_bit_for_bit() {
         assert_eq!(got, want, "state of {d} dimensions");
     }
 }
+
+/// Every node's estimate, bit by bit, after each step of the graph driver on `measurements`
+/// (`[k - 1][i]`; a missing trailing entry is a silent sensor).
+fn driver_bits(t: &Topology, iterations: usize, measurements: &[Vec<Vector>]) -> Vec<Vec<u64>> {
+    let rule = WeightRule::MetropolisHastings;
+    let mut boxed = nodes(t, Fusion::Information, &rule, iterations);
+    let steps = measurements.len();
+    let mut driver = GraphDriver::new(t, ConsensusNode::rounds(iterations), steps, 5, 0);
+    measurements
+        .iter()
+        .enumerate()
+        .map(|(j, z)| {
+            let readings: Vec<Option<&Vector>> = (0..3).map(|i| z.get(i)).collect();
+            driver.step(j + 1, &mut boxed, &readings).unwrap();
+            boxed
+                .iter()
+                .flat_map(|x| gaussian_bits(x.estimate().unwrap()))
+                .collect()
+        })
+        .collect()
+}
+
+fn gaussian_bits(g: &Gaussian) -> Vec<u64> {
+    g.mean
+        .iter()
+        .chain(g.cov.iter())
+        .map(|v| v.to_bits())
+        .collect()
+}
+
+/// Readings of trial `trial` (values shifted per trial), sensor 2 silent at the steps of
+/// `silent`.
+fn trial_readings(trial: usize, steps: usize, silent: &[usize]) -> Vec<Vec<Vector>> {
+    (1..=steps)
+        .map(|k| {
+            let heard = if silent.contains(&k) { 2 } else { 3 };
+            (0..heard)
+                .map(|i| reading(k, i).add_scalar(0.37 * trial as f64))
+                .collect()
+        })
+        .collect()
+}
+
+/// Consensus on information in the lock-step loop computes its matrices once per run and
+/// thread ([`split`]): trials with the same readings present reuse them (a second and a third
+/// trial), a trial with other readings present builds new ones, and one whose matrices are
+/// streamed step by step (no track kept) gives the same numbers; each is the graph driver's
+/// bit for bit.
+#[test]
+fn shared_matrices_give_every_trial_the_drivers_numbers() {
+    let t = ring("kind = \"ideal\"");
+    let rule = WeightRule::MetropolisHastings;
+    let (iterations, steps) = (3, 6);
+    let lockstep_bits = |z: &[Vec<Vector>]| {
+        let mut nodes = unboxed(&t, Fusion::Information, &rule, iterations);
+        let mut got = Vec::new();
+        lockstep::run(&t, z, &mut nodes, &mut |_, est, _| {
+            got.push(
+                est.iter()
+                    .flat_map(|g| gaussian_bits(g))
+                    .collect::<Vec<_>>(),
+            );
+            Ok(())
+        })
+        .unwrap();
+        got
+    };
+    // Trials 0-2 share one track; trial 3 (sensor 2 silent at step 2) needs its own; trial 4
+    // goes back to the first presence (a third track, built again).
+    for (trial, silent) in [
+        (0, vec![]),
+        (1, vec![]),
+        (2, vec![]),
+        (3, vec![2]),
+        (4, vec![]),
+    ] {
+        let z = trial_readings(trial, steps, &silent);
+        assert_eq!(
+            lockstep_bits(&z),
+            driver_bits(&t, iterations, &z),
+            "trial {trial}"
+        );
+    }
+    // Streamed: a track of at most 0 reals is never kept.
+    let z = trial_readings(5, steps, &[1, 4]);
+    let mut nodes = unboxed(&t, Fusion::Information, &rule, iterations);
+    let weights: Vec<mixing::NodeWeights> = nodes
+        .iter()
+        .map(|n| (n.own_weight, n.neighbours.clone()))
+        .collect();
+    let mut split = split::Split::<2>::with_track_limit(&nodes, &weights, &z, 3, 0);
+    let streamed: Vec<Vec<u64>> = z
+        .iter()
+        .enumerate()
+        .map(|(j, zk)| {
+            split.step(j, &mut nodes, &weights, zk).unwrap();
+            nodes
+                .iter()
+                .flat_map(|n| gaussian_bits(&n.estimate))
+                .collect()
+        })
+        .collect();
+    assert_eq!(streamed, driver_bits(&t, iterations, &z));
+}
+
+/// A matrix that is not positive definite depends on the matrices alone: the trial that builds
+/// the track, one that reuses it and one that streams its matrices all stop at the same step
+/// and node with the same message, after recording the same steps.
+#[test]
+fn a_failure_of_the_shared_matrices_stops_every_trial_alike() {
+    let t = ring("kind = \"ideal\"");
+    let rule = WeightRule::MetropolisHastings;
+    let z = trial_readings(0, 5, &[]);
+    // Q = -P⁻ of step 2's prediction is not known in advance; a Q with a negative diagonal
+    // large enough makes P⁻ = A P Aᵀ + Q indefinite at the first prediction.
+    let broken = |nodes: &mut Vec<ConsensusNode>| {
+        for n in nodes.iter_mut() {
+            n.model.q = Matrix::from_diagonal_element(2, 2, -50.0);
+        }
+    };
+    let run = |limit: Option<usize>| -> (usize, String) {
+        let mut nodes = unboxed(&t, Fusion::Information, &rule, 2);
+        broken(&mut nodes);
+        let mut recorded = 0;
+        let outcome = match limit {
+            None => lockstep::run(&t, &z, &mut nodes, &mut |_, _, _| {
+                recorded += 1;
+                Ok(())
+            }),
+            Some(limit) => {
+                let weights: Vec<mixing::NodeWeights> = nodes
+                    .iter()
+                    .map(|n| (n.own_weight, n.neighbours.clone()))
+                    .collect();
+                let mut split = split::Split::<2>::with_track_limit(&nodes, &weights, &z, 3, limit);
+                z.iter()
+                    .enumerate()
+                    .try_for_each(|(j, zk)| {
+                        split.step(j, &mut nodes, &weights, zk)?;
+                        recorded += 1;
+                        Ok::<(), (usize, String)>(())
+                    })
+                    .map_err(|(i, e)| format!("node {}: {e}", t.nodes[i].name))
+            }
+        };
+        (recorded, outcome.unwrap_err())
+    };
+    let (built, reused, streamed) = (run(None), run(None), run(Some(0)));
+    assert_eq!(built, reused);
+    assert_eq!(built.0, 0, "the first prediction fails");
+    assert!(
+        built
+            .1
+            .contains("node s0, step 1, round 2: the predicted covariance is singular"),
+        "{}",
+        built.1
+    );
+    assert_eq!(
+        streamed,
+        (0, "node s0: the predicted covariance is singular".into())
+    );
+}
