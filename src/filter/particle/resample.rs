@@ -55,35 +55,52 @@ pub(super) fn systematic(w: &[f64], v: f64, ends: &mut [usize], anc: &mut [usize
         (bits as usize).min(n)
     };
     let len = n / SEGMENTS;
-    let tail = len * SEGMENTS..n;
-    // Pass 1: each segment's partial sums (the last segment also takes the tail), in lanes.
-    let mut partial = [0.0; SEGMENTS];
-    for k in 0..len {
-        for (s, p) in partial.iter_mut().enumerate() {
-            *p += w[s * len + k];
+    let (body, tail) = w.split_at(len * SEGMENTS);
+    let (ends_body, ends_tail) = ends[..n].split_at_mut(len * SEGMENTS);
+    // The segments as slices of one length, walked by zipped iterators: no bounds checks.
+    let (mut partial, mut offset, mut p) = ([0.0; SEGMENTS], [0.0; SEGMENTS], [0.0; SEGMENTS]);
+    if len > 0 {
+        let [w0, w1, w2, w3] = segments(body, len);
+        // Pass 1: each segment's partial sums (the last segment also takes the tail), in lanes.
+        for (((a, b), c), d) in w0.iter().zip(w1).zip(w2).zip(w3) {
+            partial[0] += a;
+            partial[1] += b;
+            partial[2] += c;
+            partial[3] += d;
         }
     }
-    for &wi in &w[tail.clone()] {
+    for &wi in tail {
         partial[SEGMENTS - 1] += wi;
     }
-    let mut offset = [0.0; SEGMENTS];
     for s in 1..SEGMENTS {
         offset[s] = offset[s - 1] + partial[s - 1];
     }
-    // Pass 2: the ends, the same partial sums recomputed in the same order.
-    let mut p = [0.0; SEGMENTS];
-    for k in 0..len {
-        for s in 0..SEGMENTS {
-            let i = s * len + k;
-            p[s] += w[i];
-            ends[i] = end_of(offset[s] + p[s]);
+    if len > 0 {
+        // Pass 2: the ends, the same partial sums recomputed in the same order.
+        let [w0, w1, w2, w3] = segments(body, len);
+        let [e0, e1, e2, e3] = segments_mut(ends_body, len);
+        let weights = w0.iter().zip(w1).zip(w2).zip(w3);
+        let slots = e0
+            .iter_mut()
+            .zip(e1.iter_mut())
+            .zip(e2.iter_mut())
+            .zip(e3.iter_mut());
+        for ((((a, b), c), d), (((x, y), z), u)) in weights.zip(slots) {
+            p[0] += a;
+            p[1] += b;
+            p[2] += c;
+            p[3] += d;
+            *x = end_of(offset[0] + p[0]);
+            *y = end_of(offset[1] + p[1]);
+            *z = end_of(offset[2] + p[2]);
+            *u = end_of(offset[3] + p[3]);
         }
     }
     // The last segment's partial sum continues through the tail.
     let last = SEGMENTS - 1;
-    for i in tail {
-        p[last] += w[i];
-        ends[i] = end_of(offset[last] + p[last]);
+    for (&wi, e) in tail.iter().zip(ends_tail.iter_mut()) {
+        p[last] += wi;
+        *e = end_of(offset[last] + p[last]);
     }
     let last_positive = w.iter().rposition(|&wi| wi > 0.0).unwrap_or(0);
     ancestors_from_ends(ends, last_positive, anc);
@@ -91,6 +108,24 @@ pub(super) fn systematic(w: &[f64], v: f64, ends: &mut [usize], anc: &mut [usize
 
 /// Independent running sums in [`systematic`].
 const SEGMENTS: usize = 4;
+
+/// The `SEGMENTS` consecutive slices of `len` values that make up `body`.
+#[inline(always)]
+fn segments<T>(body: &[T], len: usize) -> [&[T]; SEGMENTS] {
+    let (a, rest) = body.split_at(len);
+    let (b, rest) = rest.split_at(len);
+    let (c, d) = rest.split_at(len);
+    [a, b, c, d]
+}
+
+/// [`segments`], mutable.
+#[inline(always)]
+fn segments_mut<T>(body: &mut [T], len: usize) -> [&mut [T]; SEGMENTS] {
+    let (a, rest) = body.split_at_mut(len);
+    let (b, rest) = rest.split_at_mut(len);
+    let (c, d) = rest.split_at_mut(len);
+    [a, b, c, d]
+}
 
 /// Sorted ancestors from the ends of the particles' runs of slots (particle `i` owns slots
 /// `ends[i-1]..ends[i]`, ends non-decreasing and at most `n`): the owner of slot `k` is the
@@ -299,6 +334,36 @@ mod tests {
                     "{scheme:?} index {i}: mean count {m} vs n w = {} (se {se})",
                     n * wi
                 );
+            }
+        }
+    }
+
+    /// The segmented sums of `systematic` for any length, a multiple of the segments or not and
+    /// shorter than them: the ancestors are those of the sequential running sum (positions
+    /// `(k + 1 - v) / n` against `C_i`). Weights that are multiples of 2^-10 and `v` a multiple
+    /// of 1/8 keep every sum exact, so any order of the additions gives the same ends.
+    #[test]
+    fn systematic_is_the_sequential_rule_for_any_length() {
+        for n in [1usize, 2, 3, 4, 5, 7, 8, 13, 64, 101] {
+            // Units of 2^-10 (some zero), the last weight taking what makes the sum 1.
+            let mut units: Vec<usize> = (0..n).map(|i| (i * 7 + 3) % 5).collect();
+            units[n - 1] += 1024 - units.iter().sum::<usize>();
+            let w: Vec<f64> = units.iter().map(|&u| u as f64 / 1024.0).collect();
+            for v in [0.0, 0.125, 0.5, 0.875] {
+                let (mut ends, mut anc) = (vec![0; n], vec![0; n + 1]);
+                super::systematic(&w, v, &mut ends, &mut anc);
+                let mut want = Vec::new();
+                let mut c = 0.0;
+                for (i, wi) in w.iter().enumerate() {
+                    c += wi;
+                    let end = ((c * n as f64 + v).floor() as usize).min(n);
+                    while want.len() < end {
+                        want.push(i);
+                    }
+                }
+                let last = w.iter().rposition(|&x| x > 0.0).unwrap();
+                want.resize(n, last);
+                assert_eq!(&anc[..n], &want[..], "n = {n}, v = {v}");
             }
         }
     }
