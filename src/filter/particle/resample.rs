@@ -344,9 +344,11 @@ mod tests {
     /// of 1/8 keep every sum exact, so any order of the additions gives the same ends.
     #[test]
     fn systematic_is_the_sequential_rule_for_any_length() {
-        for n in [1usize, 2, 3, 4, 5, 7, 8, 13, 64, 101] {
-            // Units of 2^-10 (some zero), the last weight taking what makes the sum 1.
-            let mut units: Vec<usize> = (0..n).map(|i| (i * 7 + 3) % 5).collect();
+        for n in [1usize, 2, 3, 4, 5, 7, 8, 13, 64, 101, 255] {
+            // Units of 2^-10, uneven (a fifth of them zero) and of the order of 1/n each, the
+            // last weight taking what makes the sum 1.
+            let scale = 1024 / (4 * n);
+            let mut units: Vec<usize> = (0..n).map(|i| (i * 7 + 3) % 5 * scale).collect();
             units[n - 1] += 1024 - units.iter().sum::<usize>();
             let w: Vec<f64> = units.iter().map(|&u| u as f64 / 1024.0).collect();
             for v in [0.0, 0.125, 0.5, 0.875] {
