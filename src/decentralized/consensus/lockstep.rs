@@ -8,7 +8,7 @@
 //! step, each received by every neighbour, and listens its L windows per neighbour.
 //!
 //! Consensus on information of a state of 1 to 6 dimensions (every node's one pair, the
-//! benchmark's case) runs in two halves ([`super::split`]): the information matrices, the same
+//! benchmark's case) runs in two halves (`consensus::split`): the information matrices, the same
 //! in every trial on lossless links, once per run and thread; each trial's vectors in fixed
 //! size. The same operations in their order as the nodes' own, hence the same numbers.
 use super::mixing::{iterate, NodeWeights};
