@@ -91,12 +91,25 @@
 //! only `rate_distortion_floor` and the schemes' `floor_mse` moved, by at most 5.5e-7 relative
 //! (rate 0.5 of the 2-D floor, now solved to the reduced accuracy), and the 2-D floor gained its
 //! point at rate 0.25 (which ended `AlmostSolved`); every other built-in kept its hash.
+//!
+//! Issue 42 (item 4, the graph paths' cost) took the floor's all-data Kalman steady state in
+//! information form where the readings have more rows than the state (`P = (M⁻¹ + Hᵀ V⁻¹ H)⁻¹`,
+//! n × n inverses instead of the m × m innovation covariance: a 500-sensor mesh spent a second
+//! there). `scripts/compare-builtins.sh` against the summaries of 9e176ac: in the five built-ins
+//! with a vector floor and more reading rows than states (default, dormann-fig1, mesh-line,
+//! arena-1d, arena-nca) only `rate_distortion_floor` and the schemes' `floor_mse` moved: the
+//! all-data error by 1 ulp (1.4e-16 relative), a scheme's `floor_mse` by at most 8.6e-11, the
+//! floor curve by at most 3.1e-5 relative, at its lowest rate (default's 256.0825 -> 256.0904):
+//! the conic solver's output there moves this much when its input moves in the last digits.
+//! arena-graph, arena-graph-rgg and consensus-energy-ring changed only the eigenvalues quoted in
+//! their `rate_distortion_floor_note` (a singular W's zero eigenvalue, 5e-17 -> 9e-17). Every other
+//! built-in kept its hash.
 use std::process::Command;
 
 /// (built-in scenario, trials, FNV-1a 64 of summary.json, its length in bytes).
 const GOLDEN: &[(&str, usize, u64, usize)] = &[
-    ("default", 8, 0xc76b54cf5af148c7, 553534),
-    ("dormann-fig1", 8, 0x2f2723045d714c5c, 5088273),
+    ("default", 8, 0x0e41312dd1ed9bb8, 553531),
+    ("dormann-fig1", 8, 0xbf97b9191afce42a, 5088269),
     ("zhang-fig4", 8, 0x9c29e5e5306fa2d7, 222239),
     ("zhang-fig5", 8, 0x0126239b2512dc22, 221854),
     ("zhang-table7", 8, 0x583977c3ff48095b, 1066),
@@ -118,14 +131,14 @@ const GOLDEN: &[(&str, usize, u64, usize)] = &[
     ("classic-quantized-kf", 8, 0x443c1caa051be658, 200246),
     ("classic-one-bit-static", 8, 0x365883d266a1abd0, 157990),
     ("classic-one-bit-tracking", 8, 0x651320c915f5ddde, 305630),
-    ("mesh-line", 4, 0x4db4bd984d329d2d, 445537),
+    ("mesh-line", 4, 0x406195bfb75d13da, 445529),
     ("mesh-grid", 2, 0x4976a907be09fd75, 103395),
-    ("arena-graph", 4, 0x13768fa9aa3ad7b0, 628310),
-    ("arena-graph-rgg", 4, 0xc5eb1fe217a8b21c, 747552),
-    ("consensus-energy-ring", 4, 0xe0093e86895aeeb3, 118786),
+    ("arena-graph", 4, 0x5da74e7b201390f0, 628310),
+    ("arena-graph-rgg", 4, 0xdee101398130a158, 747552),
+    ("consensus-energy-ring", 4, 0x9fc053ff2ee3e2c3, 118786),
     ("et-ddf-tree", 4, 0xbe878dcc11201099, 549382),
-    ("arena-1d", 4, 0xd417d4e453ca7964, 810490),
-    ("arena-nca", 4, 0xdfe858354913d0e7, 722462),
+    ("arena-1d", 4, 0x7b5d755b2b231cb4, 810470),
+    ("arena-nca", 4, 0xa47b218ea5a9aded, 722459),
     ("arena-rss", 4, 0xea42c43c4cae5dcd, 123570),
     ("arena-wsn", 4, 0x606437ab2dbb0ad1, 344571),
     ("arena-tobit", 4, 0x00f6653446ba6b85, 910210),
