@@ -348,7 +348,7 @@ fn drive<P: Payload + Clone>(
                     .ok_or_else(|| format!("node {} keeps no estimate", t.net.nodes[x].name))
             })
             .collect::<Result<Vec<&Gaussian>, String>>()?;
-        record(j + 1, &estimates, driver.counts())?;
+        record(j + 1, &estimates, driver.counts(), None)?;
     }
     Ok(())
 }

@@ -95,9 +95,15 @@ pub fn run_variant(
         peers,
         &data.measurements,
         (trial, None),
-        &mut |k, estimates, counts| {
+        &mut |k, estimates, counts, factors| {
             failed_at = k;
-            record(&mut obs, k, &data.truth[k - 1], estimates, counts)
+            record(
+                &mut obs,
+                k,
+                &data.truth[k - 1],
+                (estimates, factors),
+                counts,
+            )
         },
     );
     match outcome {
@@ -111,15 +117,16 @@ pub fn run_variant(
 }
 
 /// Step `k` of a decentralized scheme into a trial's metrics: the nodes' estimates against
-/// `truth`, and every node's counters.
+/// `truth` (with their covariances' NEES factors where the loop has them), and every node's
+/// counters.
 pub fn record(
     obs: &mut crate::metrics::TrialObserver,
     k: usize,
     truth: &crate::linalg::Vector,
-    estimates: &[&crate::filter::Gaussian],
+    (estimates, factors): (&[&crate::filter::Gaussian], Option<&[f64]>),
     counts: &[NodeCounts],
 ) -> Result<(), String> {
-    obs.record_estimators(k, truth, estimates, traffic(counts))
+    obs.record_estimators(k, truth, (estimates, factors), traffic(counts))
         .map_err(|e| format!("a node's covariance is not positive definite ({e})"))?;
     obs.record_nodes(k, counts);
     Ok(())

@@ -81,7 +81,7 @@ pub fn run_variant_with(
     if let Some(peers) = exp.variants[v].scheme.peers() {
         let sensors = exp.system.n_sensors();
         let at = (opts.trial, opts.available);
-        return peers::run_steps(exp, v, peers, measurements, at, &mut |k, est, counts| {
+        return peers::run_steps(exp, v, peers, measurements, at, &mut |k, est, counts, _| {
             let (links, bits) = (
                 peers::links(counts, sensors),
                 peers::sensor_bits(counts, sensors),
@@ -148,14 +148,21 @@ pub fn run_variant_into(
         let sensors = exp.system.n_sensors();
         let mut obs = sums.trial(&exp.groups, exp.steady_from);
         let at = (opts.trial, opts.available);
-        peers::run_steps(exp, v, peers, measurements, at, &mut |k, est, counts| {
-            peers::record(&mut obs, k, &truth[k - 1], est, counts)?;
-            let (links, bits) = (
-                peers::links(counts, sensors),
-                peers::sensor_bits(counts, sensors),
-            );
-            f(&peer_step(k, est, counts, (&links, &bits)))
-        })
+        peers::run_steps(
+            exp,
+            v,
+            peers,
+            measurements,
+            at,
+            &mut |k, est, counts, factors| {
+                peers::record(&mut obs, k, &truth[k - 1], (est, factors), counts)?;
+                let (links, bits) = (
+                    peers::links(counts, sensors),
+                    peers::sensor_bits(counts, sensors),
+                );
+                f(&peer_step(k, est, counts, (&links, &bits)))
+            },
+        )
         .map_err(|e| format!("scheme {label}: {e}"))?;
         obs.finish();
         return Ok(());
@@ -196,7 +203,7 @@ fn run_variant(
             peers,
             &data.measurements,
             at,
-            &mut |k, est, counts| {
+            &mut |k, est, counts, _| {
                 f(k, &data.truth[k - 1], est, &peers::links(counts, sensors));
                 Ok(())
             },

@@ -28,9 +28,13 @@ pub fn applies(net: &Topology) -> bool {
     net.links.iter().all(|l| l.channel.is_lossless())
 }
 
-/// Gets step k's estimates of every node and every node's counters of the step (the trial's
-/// recorder, `crate::decentralized::trial::Recorder`).
-pub type Record<'r> = dyn FnMut(usize, &[&Gaussian], &[NodeCounts]) -> Result<(), String> + 'r;
+/// Gets step k's estimates of every node, every node's counters of the step and, where the
+/// loop has them, the Cholesky factors of the estimates' covariances as NEES computes them
+/// (`linalg::fixed::nees_factor`, n² reals a node, node by node), so that the recorder need not
+/// factor again what is the same in every trial (the trial's recorder,
+/// `crate::decentralized::trial::Recorder`).
+pub type Record<'r> =
+    dyn FnMut(usize, &[&Gaussian], &[NodeCounts], Option<&[f64]>) -> Result<(), String> + 'r;
 
 /// Runs `nodes` (one per node of `net`) over every step of `measurements` (`[k - 1][i]`:
 /// sensor i's reading at step k) in lock step, each step's estimates and counters to `record`.
@@ -81,9 +85,10 @@ pub fn run(
                     .iter_mut()
                     .enumerate()
                     .try_for_each(|(i, node)| node.predict().map_err(|e| (i, e)))
+                    .map(|()| None)
             }
         };
-        stepped.map_err(|(i, e)| {
+        let factors = stepped.map_err(|(i, e)| {
             format!(
                 "node {}, step {k}, round {iterations}: {e}",
                 net.nodes[i].name
@@ -93,7 +98,7 @@ pub fn run(
             tally.listen(i, node.windows(k));
         }
         let estimates: Vec<&Gaussian> = nodes.iter().map(|n| &n.estimate).collect();
-        record(k, &estimates, tally.counts())?;
+        record(k, &estimates, tally.counts(), factors)?;
     }
     Ok(())
 }
@@ -133,7 +138,7 @@ impl SplitOf {
         nodes: &mut [ConsensusNode],
         weights: &[NodeWeights],
         z: &[Vector],
-    ) -> Result<(), (usize, String)> {
+    ) -> Result<Option<&[f64]>, (usize, String)> {
         match self {
             SplitOf::D1(s) => s.step(j, nodes, weights, z),
             SplitOf::D2(s) => s.step(j, nodes, weights, z),

@@ -21,7 +21,7 @@
 use super::mixing::{iterate, NodeWeights};
 use super::ConsensusNode;
 use crate::linalg::fixed;
-use crate::linalg::Vector;
+use crate::linalg::{Matrix, Vector};
 use std::cell::RefCell;
 use std::rc::Rc;
 
@@ -72,11 +72,13 @@ impl Inputs {
 }
 
 /// The matrix half of a whole run: per step, per node, P (the estimate's covariance) then Ω⁻ of
-/// the next step, n² reals each, up to the first failure.
+/// the next step, n² reals each, up to the first failure; and per step, per node, the factor of
+/// P that NEES uses (`fixed::nees_factor`), when every node's P has one.
 #[derive(Debug)]
 struct Track {
     inputs: Inputs,
     steps: Vec<f64>,
+    factors: Option<Vec<f64>>,
     /// (step index, node, message) of the first matrix that is not positive definite.
     failure: Option<(usize, usize, &'static str)>,
 }
@@ -157,6 +159,7 @@ impl<const N: usize> Stream<N> {
     /// The whole run's matrix half, up to its first failure.
     fn track(mut self, nodes: &[ConsensusNode], inputs: Inputs) -> Track {
         let mut steps = Vec::with_capacity(inputs.heard.len() * self.out.len());
+        let mut factors = Some(Vec::with_capacity(steps.capacity() / 2));
         let mut failure = None;
         for (j, &heard) in inputs.heard.iter().enumerate() {
             if let Err((i, message)) = self.advance(nodes, &inputs.weights, heard) {
@@ -164,10 +167,23 @@ impl<const N: usize> Stream<N> {
                 break;
             }
             steps.extend_from_slice(&self.out);
+            if let Some(f) = &mut factors {
+                // NEES factors P as it arrives in the estimate: a matrix of its bits.
+                for cov in self.out.chunks_exact(2 * N * N).map(|m| &m[..N * N]) {
+                    match fixed::nees_factor(&Matrix::from_column_slice(N, N, cov)) {
+                        Some(l) => f.extend_from_slice(&l),
+                        None => {
+                            factors = None;
+                            break;
+                        }
+                    }
+                }
+            }
         }
         Track {
             inputs,
             steps,
+            factors,
             failure,
         }
     }
@@ -239,27 +255,34 @@ impl<const N: usize> Split<N> {
 
     /// Step `j + 1` of every node with the step's readings `z`: q = q⁻ + Hᵀ R⁻¹ z (+ 0 without a
     /// reading), the mixes, x̂ = P q, x̂⁻ = A x̂, q⁻ = Ω⁻ x̂⁻, with the step's P and Ω⁻; each
-    /// node's estimate and next prior set. The failing node and its message on error.
+    /// node's estimate and next prior set. Returns the estimates' NEES factors where the track
+    /// has them; the failing node and its message on error.
     pub(super) fn step(
         &mut self,
         j: usize,
         nodes: &mut [ConsensusNode],
         weights: &[NodeWeights],
         z: &[Vector],
-    ) -> Result<(), (usize, String)> {
+    ) -> Result<Option<&[f64]>, (usize, String)> {
         let nn = N * N;
         let per_step = nodes.len() * 2 * nn;
-        let matrices: &[f64] = match &mut self.matrices {
+        let (matrices, factors): (&[f64], Option<&[f64]>) = match &mut self.matrices {
             Matrices::Shared(track) => match track.failure {
                 Some((at, i, message)) if at == j => return Err((i, message.to_string())),
-                _ => &track.steps[j * per_step..(j + 1) * per_step],
+                _ => (
+                    &track.steps[j * per_step..(j + 1) * per_step],
+                    track.factors.as_deref().map(|f| {
+                        let per = nodes.len() * nn;
+                        &f[j * per..(j + 1) * per]
+                    }),
+                ),
             },
             Matrices::Streamed(stream) => {
                 let heard = z.len().min(self.sensors);
                 stream
                     .advance(nodes, weights, heard)
                     .map_err(|(i, m)| (i, m.to_string()))?;
-                &stream.out
+                (&stream.out, None)
             }
         };
         let heard = z.len().min(self.sensors);
@@ -290,7 +313,7 @@ impl<const N: usize> Split<N> {
             node.prior.0.copy_from_slice(next);
             node.prior.1.copy_from_slice(&q_pred);
         }
-        Ok(())
+        Ok(factors)
     }
 }
 

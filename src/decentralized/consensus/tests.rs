@@ -220,7 +220,7 @@ fn the_lock_step_loop_is_the_driver_bit_for_bit() {
         let mut nodes = unboxed(&t, fusion, &rule, 3);
         assert!(lockstep::applies(&t));
         let mut got = Vec::new();
-        lockstep::run(&t, &measurements, &mut nodes, &mut |_, est, counts| {
+        lockstep::run(&t, &measurements, &mut nodes, &mut |_, est, counts, _| {
             got.push((
                 est.iter().map(|g| bits(g)).collect::<Vec<_>>(),
                 counts.to_vec(),
@@ -325,7 +325,7 @@ fn the_fixed_size_information_step_is_the_nodes_own_bit_for_bit() {
         }
         let mut nodes = make();
         let mut got = Vec::new();
-        lockstep::run(&t, &measurements, &mut nodes, &mut |_, est, _| {
+        lockstep::run(&t, &measurements, &mut nodes, &mut |_, est, _, _| {
             got.push(est.iter().map(|g| bits(g)).collect::<Vec<_>>());
             Ok(())
         })
@@ -389,7 +389,12 @@ fn shared_matrices_give_every_trial_the_drivers_numbers() {
     let lockstep_bits = |z: &[Vec<Vector>]| {
         let mut nodes = unboxed(&t, Fusion::Information, &rule, iterations);
         let mut got = Vec::new();
-        lockstep::run(&t, z, &mut nodes, &mut |_, est, _| {
+        lockstep::run(&t, z, &mut nodes, &mut |_, est, _, factors| {
+            // The shared track hands the recorder each estimate's NEES factor.
+            let factors = factors.expect("the track's NEES factors");
+            for (g, f) in est.iter().zip(factors.chunks_exact(4)) {
+                assert_eq!(crate::linalg::fixed::nees_factor(&g.cov).unwrap(), f);
+            }
             got.push(
                 est.iter()
                     .flat_map(|g| gaussian_bits(g))
@@ -458,7 +463,7 @@ fn a_failure_of_the_shared_matrices_stops_every_trial_alike() {
         broken(&mut nodes);
         let mut recorded = 0;
         let outcome = match limit {
-            None => lockstep::run(&t, &z, &mut nodes, &mut |_, _, _| {
+            None => lockstep::run(&t, &z, &mut nodes, &mut |_, _, _, _| {
                 recorded += 1;
                 Ok(())
             }),

@@ -33,13 +33,15 @@ impl TrialState<'_> {
     /// is node i's. The step's values are the means over the nodes (squared error per
     /// component, NEES, trace; the degenerate and covered fields as fractions of the nodes);
     /// each node's squared error and NEES, and the nodes' disagreement, go to its running sums
-    /// ([`Sums::estimators`], [`Sums::disagreement`]).
+    /// ([`Sums::estimators`], [`Sums::disagreement`]). `factors`, where given, are the estimates'
+    /// covariances' Cholesky factors as NEES computes them (`linalg::fixed::nees_factor`, n²
+    /// reals an estimate, in order): the same NEES without factoring again.
     pub fn record_estimators(
         &mut self,
         sums: &mut Sums,
         k: usize,
         truth: &Vector,
-        estimates: &[&Gaussian],
+        (estimates, factors): (&[&Gaussian], Option<&[f64]>),
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
         let (n, m) = (truth.len(), estimates.len());
@@ -59,7 +61,8 @@ impl TrialState<'_> {
             for ((e, x), t) in st.err.iter_mut().zip(est.mean.iter()).zip(truth.iter()) {
                 *e = x - t;
             }
-            let (nees, degen) = match self.nees(&st.err, est, None) {
+            let factor = factors.and_then(|f| f.get(i * n * n..(i + 1) * n * n));
+            let (nees, degen) = match self.nees(&st.err, est, factor) {
                 Ok(v) => v,
                 Err(e) => {
                     self.estimators = Some(st);

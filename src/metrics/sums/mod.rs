@@ -829,7 +829,7 @@ impl TrialObserver<'_> {
         &mut self,
         k: usize,
         truth: &Vector,
-        estimates: &[&Gaussian],
+        estimates: (&[&Gaussian], Option<&[f64]>),
         traffic: Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
         self.state

@@ -235,7 +235,7 @@ fn many_estimators_record_their_mean_and_each_node_by_hand() {
     );
     let mut state = sums.trial_state(&groups, 1);
     state
-        .record_estimators(&mut sums, 1, &truth, &[&a, &b], Traffic::default())
+        .record_estimators(&mut sums, 1, &truth, (&[&a, &b], None), Traffic::default())
         .unwrap();
     state.finish(&mut sums);
     // Squared errors (1, 0) and (0, 4): their mean per component (0.5, 2), total 2.5; NEES 1
@@ -265,7 +265,7 @@ fn many_estimators_record_their_mean_and_each_node_by_hand() {
     let c = Gaussian::new(Vector::from_vec(vec![10.0, 0.0]), Matrix::identity(2, 2));
     let mut state = far.trial_state(&groups, 1);
     state
-        .record_estimators(&mut far, 1, &truth, &[&a, &c], Traffic::default())
+        .record_estimators(&mut far, 1, &truth, (&[&a, &c], None), Traffic::default())
         .unwrap();
     state.finish(&mut far);
     assert_eq!(far.at(0, Layout::NEES_COVERED), 0.5);
@@ -282,7 +282,7 @@ fn many_estimator_sums_merge_like_one_run() {
     let run = |sums: &mut Sums, t: &[Gaussian; 2]| {
         let mut state = sums.trial_state(&groups, 1);
         state
-            .record_estimators(sums, 1, &truth, &[&t[0], &t[1]], Traffic::default())
+            .record_estimators(sums, 1, &truth, (&[&t[0], &t[1]], None), Traffic::default())
             .unwrap();
         state.finish(sums);
     };
@@ -296,4 +296,38 @@ fn many_estimator_sums_merge_like_one_run() {
     }
     assert_eq!(one, merged);
     assert_eq!(one.estimators[1].mse.sum, 0.25 + 4.0 + 9.0 + 1.0);
+}
+
+/// The estimates' NEES factors, where the caller has them (`fixed::nees_factor` of each
+/// covariance, as the lock-step consensus loop keeps them), give the sums of factoring in the
+/// recorder bit for bit; a wrong factor would show (checked: a factor of 2P moves the NEES).
+#[test]
+fn estimators_recorded_with_their_nees_factors_are_the_same_sums() {
+    let groups = vec![("position".to_string(), vec![0])];
+    let truth = Vector::from_vec(vec![0.3, -0.2]);
+    let p = |a: f64, b: f64, c: f64| Matrix::from_row_slice(2, 2, &[a, b, b, c]);
+    let est = [
+        Gaussian::new(Vector::from_vec(vec![1.0, 0.1]), p(1.3, 0.4, 0.9)),
+        Gaussian::new(Vector::from_vec(vec![-0.7, 2.0]), p(2.1, -0.3, 0.5)),
+    ];
+    let factors: Vec<f64> = est
+        .iter()
+        .flat_map(|g| crate::linalg::fixed::nees_factor(&g.cov).unwrap())
+        .collect();
+    let run = |factors: Option<&[f64]>| {
+        let mut sums = Sums::new(1, 1, 2);
+        let mut state = sums.trial_state(&groups, 1);
+        let refs = [&est[0], &est[1]];
+        state
+            .record_estimators(&mut sums, 1, &truth, (&refs, factors), Traffic::default())
+            .unwrap();
+        state.finish(&mut sums);
+        sums
+    };
+    assert_eq!(run(Some(&factors)), run(None));
+    let doubled: Vec<f64> = est
+        .iter()
+        .flat_map(|g| crate::linalg::fixed::nees_factor(&(&g.cov * 2.0)).unwrap())
+        .collect();
+    assert_ne!(run(Some(&doubled)).steady_nees, run(None).steady_nees);
 }
