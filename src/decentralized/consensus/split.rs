@@ -34,14 +34,16 @@ thread_local! {
     static TRACK: RefCell<Option<Rc<Track>>> = const { RefCell::new(None) };
 }
 
-/// Everything the matrix half reads: two trials that agree on it compute the same matrices.
+/// Everything the matrix half reads, the reals as their bits (a zero's sign, or a NaN, tells
+/// two inputs apart as it would the matrices): two trials that agree on it compute the same
+/// matrices.
 #[derive(Debug, PartialEq)]
 struct Inputs {
     n: usize,
     iterations: usize,
-    weights: Vec<NodeWeights>,
+    weights: Vec<(u64, Vec<(usize, u64)>)>,
     /// Per node, column by column: Ω⁻ of the first step, A, Aᵀ, Q, then U if it has a sensor.
-    matrices: Vec<Vec<f64>>,
+    matrices: Vec<Vec<u64>>,
     /// Per step: nodes `0..heard` have a reading (those of them with a sensor add U).
     heard: Vec<usize>,
 }
@@ -51,20 +53,31 @@ impl Inputs {
         let matrices = nodes
             .iter()
             .map(|node| {
-                let mut m = node.prior.0.as_slice().to_vec();
-                m.extend_from_slice(node.model.a.as_slice());
-                m.extend_from_slice(node.work.a_t.as_slice());
-                m.extend_from_slice(node.model.q.as_slice());
-                if let Some((_, u)) = &node.sensor {
-                    m.extend_from_slice(u.as_slice());
-                }
-                m
+                let u = node.sensor.as_ref().map(|(_, u)| u.as_slice());
+                let parts = [
+                    node.prior.0.as_slice(),
+                    node.model.a.as_slice(),
+                    node.work.a_t.as_slice(),
+                    node.model.q.as_slice(),
+                ];
+                parts
+                    .into_iter()
+                    .chain(u)
+                    .flatten()
+                    .map(|x| x.to_bits())
+                    .collect()
             })
             .collect();
         Inputs {
             n,
             iterations: nodes.first().map_or(0, |node| node.iterations),
-            weights: weights.to_vec(),
+            weights: weights
+                .iter()
+                .map(|(own, others)| {
+                    let others = others.iter().map(|&(j, w)| (j, w.to_bits())).collect();
+                    (own.to_bits(), others)
+                })
+                .collect(),
             matrices,
             heard,
         }
@@ -157,12 +170,12 @@ impl<const N: usize> Stream<N> {
     }
 
     /// The whole run's matrix half, up to its first failure.
-    fn track(mut self, nodes: &[ConsensusNode], inputs: Inputs) -> Track {
+    fn track(mut self, nodes: &[ConsensusNode], weights: &[NodeWeights], inputs: Inputs) -> Track {
         let mut steps = Vec::with_capacity(inputs.heard.len() * self.out.len());
         let mut factors = Some(Vec::with_capacity(steps.capacity() / 2));
         let mut failure = None;
         for (j, &heard) in inputs.heard.iter().enumerate() {
-            if let Err((i, message)) = self.advance(nodes, &inputs.weights, heard) {
+            if let Err((i, message)) = self.advance(nodes, weights, heard) {
                 failure = Some((j, i, message));
                 break;
             }
@@ -238,7 +251,7 @@ impl<const N: usize> Split<N> {
             let track = match kept {
                 Some(t) if t.inputs == inputs => t,
                 _ => {
-                    let t = Rc::new(Stream::<N>::new(nodes).track(nodes, inputs));
+                    let t = Rc::new(Stream::<N>::new(nodes).track(nodes, weights, inputs));
                     TRACK.with(|cell| *cell.borrow_mut() = Some(Rc::clone(&t)));
                     t
                 }
@@ -336,4 +349,31 @@ fn spd_inverse<const N: usize>(a: &[f64], out: &mut [f64]) -> bool {
     }
     fixed::chol_inverse_sym_square::<N>(factor, out);
     true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::decentralized::consensus::Fusion;
+    use crate::decentralized::fixture::{model, prior, sensors};
+
+    /// Inputs compare as bits: a Q whose off-diagonal zero is negative is another run (its
+    /// products can differ in the sign of a zero), so it does not take the kept track.
+    #[test]
+    fn inputs_tell_the_sign_of_a_zero_apart() {
+        let s = sensors();
+        let node = |m: crate::decentralized::Model| {
+            let sensor = Some((&s[0].0, &s[0].1));
+            ConsensusNode::new(Fusion::Information, m, &prior(), sensor, 1.0, vec![], 2).unwrap()
+        };
+        let mut signed = model();
+        signed.q[(0, 1)] = -0.0;
+        let weights: Vec<NodeWeights> = vec![(1.0, vec![])];
+        let a = Inputs::of(&[node(model())], &weights, vec![1, 1], 2);
+        let b = Inputs::of(&[node(signed)], &weights, vec![1, 1], 2);
+        assert_eq!(a, Inputs::of(&[node(model())], &weights, vec![1, 1], 2));
+        assert_ne!(a, b);
+        // And a reading missing at one step is another run too.
+        assert_ne!(a, Inputs::of(&[node(model())], &weights, vec![1, 0], 2));
+    }
 }
