@@ -12,7 +12,7 @@
 //! in every trial on lossless links, once per run and thread; each trial's vectors in fixed
 //! size. The same operations in their order as the nodes' own, hence the same numbers.
 use super::mixing::{iterate, NodeWeights};
-use super::split::Split;
+use super::split;
 use super::{ConsensusNode, Fusion, InformationPairs};
 use crate::filter::Gaussian;
 use crate::linalg::fixed;
@@ -55,7 +55,7 @@ pub fn run(
         .map(|node| (node.own_weight, node.neighbours.clone()))
         .collect();
     let mut split = fixed_information_dim(nodes)
-        .map(|n| SplitOf::new(n, nodes, &weights, measurements, sensors));
+        .map(|n| split::for_dimension(n, nodes, &weights, measurements, sensors));
     let mut current: Vec<f64> = Vec::new();
     let mut mixed: Vec<f64> = Vec::new();
     for (j, z) in measurements.iter().enumerate() {
@@ -101,53 +101,6 @@ pub fn run(
         record(k, &estimates, tally.counts(), factors)?;
     }
     Ok(())
-}
-
-/// [`Split`] of the state dimension 1 to 6, picked at run time.
-enum SplitOf {
-    D1(Split<1>),
-    D2(Split<2>),
-    D3(Split<3>),
-    D4(Split<4>),
-    D5(Split<5>),
-    D6(Split<6>),
-}
-
-impl SplitOf {
-    fn new(
-        n: usize,
-        nodes: &[ConsensusNode],
-        weights: &[NodeWeights],
-        measurements: &[Vec<Vector>],
-        sensors: usize,
-    ) -> Self {
-        let args = (nodes, weights, measurements, sensors);
-        match n {
-            1 => SplitOf::D1(Split::new(args.0, args.1, args.2, args.3)),
-            2 => SplitOf::D2(Split::new(args.0, args.1, args.2, args.3)),
-            3 => SplitOf::D3(Split::new(args.0, args.1, args.2, args.3)),
-            4 => SplitOf::D4(Split::new(args.0, args.1, args.2, args.3)),
-            5 => SplitOf::D5(Split::new(args.0, args.1, args.2, args.3)),
-            _ => SplitOf::D6(Split::new(args.0, args.1, args.2, args.3)),
-        }
-    }
-
-    fn step(
-        &mut self,
-        j: usize,
-        nodes: &mut [ConsensusNode],
-        weights: &[NodeWeights],
-        z: &[Vector],
-    ) -> Result<Option<&[f64]>, (usize, String)> {
-        match self {
-            SplitOf::D1(s) => s.step(j, nodes, weights, z),
-            SplitOf::D2(s) => s.step(j, nodes, weights, z),
-            SplitOf::D3(s) => s.step(j, nodes, weights, z),
-            SplitOf::D4(s) => s.step(j, nodes, weights, z),
-            SplitOf::D5(s) => s.step(j, nodes, weights, z),
-            SplitOf::D6(s) => s.step(j, nodes, weights, z),
-        }
-    }
 }
 
 /// The state dimension when every node runs consensus on information of a state the fixed-size

@@ -265,12 +265,44 @@ impl<const N: usize> Split<N> {
             mixed: vec![0.0; nodes.len() * N],
         }
     }
+}
 
+/// One trial's consensus on information in two halves, whatever the state's dimension.
+pub(super) trait Halves {
     /// Step `j + 1` of every node with the step's readings `z`: q = q⁻ + Hᵀ R⁻¹ z (+ 0 without a
     /// reading), the mixes, x̂ = P q, x̂⁻ = A x̂, q⁻ = Ω⁻ x̂⁻, with the step's P and Ω⁻; each
     /// node's estimate and next prior set. Returns the estimates' NEES factors where the track
     /// has them; the failing node and its message on error.
-    pub(super) fn step(
+    fn step(
+        &mut self,
+        j: usize,
+        nodes: &mut [ConsensusNode],
+        weights: &[NodeWeights],
+        z: &[Vector],
+    ) -> Result<Option<&[f64]>, (usize, String)>;
+}
+
+/// [`Split`] of a state of `n` = 1 to 6 dimensions, picked at run time.
+pub(super) fn for_dimension(
+    n: usize,
+    nodes: &[ConsensusNode],
+    weights: &[NodeWeights],
+    measurements: &[Vec<Vector>],
+    sensors: usize,
+) -> Box<dyn Halves> {
+    let (w, z) = (weights, measurements);
+    match n {
+        1 => Box::new(Split::<1>::new(nodes, w, z, sensors)),
+        2 => Box::new(Split::<2>::new(nodes, w, z, sensors)),
+        3 => Box::new(Split::<3>::new(nodes, w, z, sensors)),
+        4 => Box::new(Split::<4>::new(nodes, w, z, sensors)),
+        5 => Box::new(Split::<5>::new(nodes, w, z, sensors)),
+        _ => Box::new(Split::<6>::new(nodes, w, z, sensors)),
+    }
+}
+
+impl<const N: usize> Halves for Split<N> {
+    fn step(
         &mut self,
         j: usize,
         nodes: &mut [ConsensusNode],
@@ -279,6 +311,7 @@ impl<const N: usize> Split<N> {
     ) -> Result<Option<&[f64]>, (usize, String)> {
         let nn = N * N;
         let per_step = nodes.len() * 2 * nn;
+        let heard = z.len().min(self.sensors);
         let (matrices, factors): (&[f64], Option<&[f64]>) = match &mut self.matrices {
             Matrices::Shared(track) => match track.failure {
                 Some((at, i, message)) if at == j => return Err((i, message.to_string())),
@@ -291,14 +324,12 @@ impl<const N: usize> Split<N> {
                 ),
             },
             Matrices::Streamed(stream) => {
-                let heard = z.len().min(self.sensors);
                 stream
                     .advance(nodes, weights, heard)
                     .map_err(|(i, m)| (i, m.to_string()))?;
                 (&stream.out, None)
             }
         };
-        let heard = z.len().min(self.sensors);
         for (i, (node, q)) in nodes.iter().zip(self.q.chunks_exact_mut(N)).enumerate() {
             let prior = node.prior.1.as_slice();
             match (&node.sensor, i < heard) {

@@ -2,6 +2,7 @@
 //! (CI, L → ∞: the Kalman filter with every R multiplied by N; CM, the hybrid and the ICF with
 //! ω = N, L → ∞: the all-data Kalman filter; CI with L = 0 or every broadcast lost: each node's
 //! local Kalman filter; the hybrid with ω = 1 is CI) and its price per edge.
+use super::split::Halves;
 use super::*;
 use crate::decentralized::fixture::{close, model, prior, reading, reference, ring, sensors};
 use crate::decentralized::weights::{WeightRule, Weights};
