@@ -250,3 +250,82 @@ fn fast_trials_apply_a_lossy_link_as_the_generic_loop_does() {
     let exp = build::load(&text, "kfmc").unwrap();
     assert_eq!(check_lossy(&exp, 5), 0);
 }
+
+/// Every trial's steps, in the order a batch reports them.
+struct CollectBatch(Vec<Steps>);
+
+impl BatchSink for CollectBatch {
+    fn step(
+        &mut self,
+        j: usize,
+        k: usize,
+        est: &Gaussian,
+        _factor: Option<&[f64]>,
+        traffic: Traffic,
+    ) -> Result<(), LinalgError> {
+        assert_eq!(k, self.0[j].len() + 1, "trial {j}: steps in order");
+        let (m, c) = bits(est);
+        self.0[j].push((m, c, traffic));
+        Ok(())
+    }
+}
+
+/// A lockstep batch (its trials as the lanes of `linalg::fixed::lanes`, in chunks of four, the
+/// last chunk partly filled) reports for each trial what that trial's fast trial reports
+/// alone, for batches of 1 to 9 trials, on the data of the peers' KF Monte Carlo and on the
+/// all-data variant of the Dormann et al. sweep (several sensors, a 4-state model).
+#[test]
+fn lockstep_batches_of_any_size_give_each_trial_its_own_numbers() {
+    let kfmc = build::load(include_str!("../benches/data/kfmc.toml"), "kfmc").unwrap();
+    let mut dormann = build::load(builtin::get("dormann-fig1").unwrap(), "dormann-fig1").unwrap();
+    dormann.steps = 30;
+    let mut batched = 0;
+    for exp in [&kfmc, &dormann] {
+        let data: Vec<_> = (0..9).map(|t| runner::draw_trial(exp, t)).collect();
+        for v in 0..exp.variants.len() {
+            let Some(fast) = exp.variants[v].scheme.fast_path().filter(|f| f.batches()) else {
+                continue;
+            };
+            let alone: Vec<Steps> = data
+                .iter()
+                .enumerate()
+                .map(|(trial, d)| {
+                    let ns = exp.system.n_sensors();
+                    let (mut coins, _) = seeding::coins(exp.seed, trial, coin_stream(v), ns);
+                    let mut sink = Collect(Vec::new());
+                    let mut cache = TrialCache::new();
+                    fast.run_trial_fast(
+                        &d.measurements,
+                        exp.steps,
+                        None,
+                        &mut coins,
+                        &mut cache,
+                        &mut sink,
+                    )
+                    .expect("a fast trial")
+                    .unwrap();
+                    sink.0
+                })
+                .collect();
+            for size in 1..=9 {
+                let trials: Vec<&[Vec<_>]> = data[..size]
+                    .iter()
+                    .map(|d| d.measurements.as_slice())
+                    .collect();
+                let mut sink = CollectBatch(vec![Vec::new(); size]);
+                fast.run_batch_fast(&trials, exp.steps, &mut TrialCache::new(), &mut sink)
+                    .expect("a batch")
+                    .unwrap();
+                for (j, (got, want)) in sink.0.iter().zip(&alone).enumerate() {
+                    assert!(
+                        got == want,
+                        "{} variant {v}, batch of {size}, trial {j}",
+                        exp.name
+                    );
+                }
+                batched += 1;
+            }
+        }
+    }
+    assert!(batched >= 18, "both scenarios batch ({batched} batches)");
+}

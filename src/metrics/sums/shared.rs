@@ -1,8 +1,11 @@
 //! Recording the trials of a lockstep batch whose estimates share one covariance (the fast
 //! paths of the linear schemes): the same numbers as one trial at a time, with what no trial
 //! changes read once per step.
-use super::{trace, traffic_counts, Sums, TrialState, STACK_WIDTH};
+use super::{
+    trace, traffic_counts, Layout, Sums, TrialState, DIVERGENCE_RUN, PENDING_NEES, STACK_WIDTH,
+};
 use crate::filter::Gaussian;
+use crate::linalg::fixed::lanes::{self, WIDTH};
 use crate::linalg::Vector;
 use crate::network::Traffic;
 use multiversion::multiversion;
@@ -34,6 +37,26 @@ pub fn record_shared(
     let trace = trace(&shared.cov);
     let counts = traffic_counts(traffic);
     sums.add_senders(&traffic, states.len().min(truths.len()) as u64);
+    if let Some(f) = factor.filter(|f| f.len() == n * n) {
+        let step = Step {
+            k,
+            trace,
+            counts,
+            factor: f,
+        };
+        let done = match n {
+            1 => record_lanes::<1>(states, sums, &step, truths, means),
+            2 => record_lanes::<2>(states, sums, &step, truths, means),
+            3 => record_lanes::<3>(states, sums, &step, truths, means),
+            4 => record_lanes::<4>(states, sums, &step, truths, means),
+            5 => record_lanes::<5>(states, sums, &step, truths, means),
+            6 => record_lanes::<6>(states, sums, &step, truths, means),
+            _ => false,
+        };
+        if done {
+            return Ok(());
+        }
+    }
     let trials = states.iter_mut().zip(truths).zip(means.chunks_exact(n));
     let mut trials = trials.peekable();
     while trials.peek().is_some() {
@@ -69,4 +92,135 @@ pub fn record_shared(
         }
     }
     Ok(())
+}
+
+/// What the trials of a step share: the step, the covariance's trace and factor, the traffic's
+/// counts.
+struct Step<'f> {
+    k: usize,
+    trace: f64,
+    counts: [f64; 4],
+    factor: &'f [f64],
+}
+
+/// [`record_shared`] for state dimension N when every field of a step fits on the stack: the
+/// trials in groups of [`WIDTH`], one per lane, their errors and NEES by the lane kernels
+/// ([`lanes::mahalanobis_sq_factored`]: each lane's bits are the scalar kernel's), each trial's
+/// step values as [`TrialState::accumulate`] makes them, and the step's sums and sums of
+/// squares added field by field, trial after trial (the same additions in the same order as
+/// one trial at a time). False, with nothing recorded, when the factor has a zero diagonal or
+/// the row is too wide: the caller then records the general way.
+#[inline(always)]
+#[allow(clippy::needless_range_loop)]
+fn record_lanes<const N: usize>(
+    states: &mut [TrialState],
+    sums: &mut Sums,
+    step: &Step,
+    truths: &[&[Vector]],
+    means: &[f64],
+) -> bool {
+    let w = sums.layout().width();
+    if w > STACK_WIDTH || !lanes::lower_solve::<N>(step.factor, &mut [[1.0; WIDTH]; N]) {
+        return false;
+    }
+    let k = step.k;
+    let trials = states.len().min(truths.len()).min(means.len() / N);
+    let (states, truths) = (&mut states[..trials], &truths[..trials]);
+    let groups = states.chunks_mut(WIDTH).zip(truths.chunks(WIDTH));
+    for (g, (states, truths)) in groups.enumerate() {
+        let means = &means[g * WIDTH * N..];
+        // Lane l: trial l's error (the lanes past the trials repeat the first).
+        let mut err = [[0.0; WIDTH]; N];
+        for l in 0..WIDTH {
+            let j = if l < states.len() { l } else { 0 };
+            let truth = truths[j][k - 1].as_slice();
+            assert_eq!(truth.len(), N, "record: truth and estimate dimensions");
+            for c in 0..N {
+                err[c][l] = means[j * N + c] - truth[c];
+            }
+        }
+        let Some(nees) = lanes::mahalanobis_sq_factored::<N>(&err, step.factor) else {
+            unreachable!("the factor's diagonal was checked");
+        };
+        let mut vals = [[0.0; STACK_WIDTH]; WIDTH];
+        for (l, (state, vals)) in states.iter_mut().zip(&mut vals).enumerate() {
+            let e: [f64; N] = std::array::from_fn(|c| err[c][l]);
+            state.step_values(sums, step, &e, nees[l], &mut vals[..w]);
+        }
+        let row = &mut sums.per_step[(k - 1) * w..k * w];
+        let row_sq = &mut sums.per_step_sq[(k - 1) * w..k * w];
+        for f in 0..w {
+            let (mut r, mut q) = (row[f], row_sq[f]);
+            for vals in &vals[..states.len()] {
+                let v = vals[f];
+                r += v;
+                q += v * v;
+            }
+            row[f] = r;
+            row_sq[f] = q;
+        }
+    }
+    true
+}
+
+impl TrialState<'_> {
+    /// [`TrialState::accumulate`] of a step with error `err` and NEES `nees` (not degenerate),
+    /// except the additions into the step's sums and sums of squares: the step's values are
+    /// left in `vals` (the row's width, zero on entry) for the caller to add.
+    #[inline(always)]
+    fn step_values(
+        &mut self,
+        sums: &mut Sums,
+        step: &Step,
+        err: &[f64],
+        nees: f64,
+        vals: &mut [f64],
+    ) {
+        let total: f64 = err.iter().map(|e| e * e).sum();
+        let flag = |b: bool| f64::from(u8::from(b));
+        let [messages, bits, frame_bits, downlink_bits] = step.counts;
+        vals[Layout::TOTAL_SE] = total;
+        vals[Layout::NEES] = nees;
+        vals[Layout::TRACE] = step.trace;
+        vals[Layout::MESSAGES] = messages;
+        vals[Layout::BITS] = bits;
+        vals[Layout::FRAME_BITS] = frame_bits;
+        vals[Layout::DOWNLINK_BITS] = downlink_bits;
+        vals[Layout::NEES_COVERED] = flag(nees <= self.nees_bound);
+        vals[Layout::NEES_COVERED_95] = flag(nees <= self.nees_bound_95);
+        let steady = step.k >= self.steady_from;
+        for (g, (_, idx)) in self.groups.iter().enumerate() {
+            let se = idx.iter().map(|&j| err[j] * err[j]).sum::<f64>();
+            vals[Layout::FIXED + g] = se;
+            if steady {
+                self.group_acc[g] += se;
+            }
+        }
+        for (run, v) in self.run_acc.iter_mut().zip(vals.iter()) {
+            *run += v;
+        }
+        if !(total.is_finite() && nees.is_finite()) {
+            self.diverged = true;
+        }
+        if nees > self.divergence_bound || nees.is_nan() {
+            self.run += 1;
+            if self.run >= DIVERGENCE_RUN {
+                self.diverged = true;
+            }
+        } else {
+            self.run = 0;
+        }
+        if steady {
+            if self.pending == PENDING_NEES {
+                self.flush_nees(sums);
+            }
+            self.pending_nees[self.pending] = nees;
+            self.pending += 1;
+            self.acc[0] += total;
+            self.acc[1] += step.trace;
+            self.acc[2] += nees;
+            self.acc[3] += messages;
+            self.count += 1;
+        }
+    }
 }

@@ -331,3 +331,110 @@ fn estimators_recorded_with_their_nees_factors_are_the_same_sums() {
         .collect();
     assert_ne!(run(Some(&doubled)).steady_nees, run(None).steady_nees);
 }
+
+/// `record_shared` (a lockstep batch sharing one covariance; its trials as lanes, its step sums
+/// added field by field) gives the sums of recording each trial alone with the factor, bit for
+/// bit: every state dimension it takes in lanes (and 7, which it does not), 1 to 9 trials
+/// (groups of four and a partial group), enough steady steps to flush the pending NEES, and a
+/// trial whose NEES stays beyond the divergence bound.
+#[test]
+fn a_shared_covariance_batch_records_what_its_trials_record_alone() {
+    use crate::linalg::fixed::nees_factor;
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(7);
+    let steps = 45;
+    let traffic = Traffic {
+        messages: 2,
+        bits: 64,
+        frame_bits: 300,
+        ..Traffic::default()
+    };
+    for n in [1usize, 2, 3, 6, 7] {
+        let groups = vec![
+            ("first".to_string(), vec![0]),
+            ("all".to_string(), (0..n).collect()),
+        ];
+        for trials in [1usize, 3, 4, 5, 9] {
+            // Per step: a covariance A A^T + I, and every trial's truth and mean.
+            let covs: Vec<Matrix> = (0..steps)
+                .map(|_| {
+                    let a = Matrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+                    &a * a.transpose() + Matrix::identity(n, n)
+                })
+                .collect();
+            let truths: Vec<Vec<Vector>> = (0..trials)
+                .map(|_| {
+                    (0..steps)
+                        .map(|_| Vector::from_fn(n, |_, _| rng.random_range(-5.0..5.0)))
+                        .collect()
+                })
+                .collect();
+            // Trial 1 is far off for 12 steps in a row: it diverges.
+            let means: Vec<Vec<Vector>> = (0..trials)
+                .map(|j| {
+                    (0..steps)
+                        .map(|k| {
+                            let off = if j == 1 && (10..22).contains(&k) {
+                                1e3
+                            } else {
+                                1.0
+                            };
+                            let noise =
+                                Vector::from_fn(n, |_, _| off * rng.random_range(-1.0..1.0));
+                            &truths[j][k] + noise
+                        })
+                        .collect()
+                })
+                .collect();
+            let mut batch = Sums::new(groups.len(), steps, n);
+            let mut states: Vec<_> = (0..trials).map(|_| batch.trial_state(&groups, 3)).collect();
+            let truth_refs: Vec<&[Vector]> = truths.iter().map(|t| t.as_slice()).collect();
+            for k in 1..=steps {
+                let factor = nees_factor(&covs[k - 1]);
+                let flat: Vec<f64> = means
+                    .iter()
+                    .flat_map(|m| m[k - 1].iter().copied())
+                    .collect();
+                let mut shared = Gaussian::new(Vector::zeros(n), covs[k - 1].clone());
+                let r = record_shared(
+                    &mut states,
+                    &mut batch,
+                    k,
+                    &truth_refs,
+                    &flat,
+                    &mut shared,
+                    factor.as_deref(),
+                    traffic,
+                );
+                r.unwrap();
+            }
+            states.iter_mut().for_each(|s| s.close(&mut batch));
+            let mut alone = Sums::new(groups.len(), steps, n);
+            for j in 0..trials {
+                let mut state = alone.trial_state(&groups, 3);
+                for k in 1..=steps {
+                    let est = Gaussian::new(means[j][k - 1].clone(), covs[k - 1].clone());
+                    match nees_factor(&covs[k - 1]) {
+                        Some(f) => state.record_factored(
+                            &mut alone,
+                            k,
+                            &truths[j][k - 1],
+                            &est,
+                            &f,
+                            traffic,
+                        ),
+                        None => state.record(&mut alone, k, &truths[j][k - 1], &est, traffic),
+                    }
+                    .unwrap();
+                }
+                state.close(&mut alone);
+            }
+            assert!(
+                alone.diverged == usize::from(trials > 1),
+                "n {n}, {trials} trials: trial 1 diverges"
+            );
+            let bits = |s: &Sums| serde_json::to_string(s).unwrap();
+            assert_eq!(bits(&batch), bits(&alone), "n {n}, {trials} trials");
+        }
+    }
+}

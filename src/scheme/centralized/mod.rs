@@ -7,7 +7,6 @@ use crate::filter::{kf, Gaussian};
 use crate::linalg::fixed;
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::link::{as_sent, round_as_sent, Message, Received, Transmission};
-use multiversion::multiversion;
 use nalgebra::{Cholesky, Dyn};
 use rand::{Rng, RngCore};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -15,6 +14,8 @@ use std::sync::Arc;
 use std::sync::RwLock;
 
 mod aggregated;
+mod means;
+use means::advance_means;
 pub mod params;
 
 /// Sensor that forwards its raw measurement with probability `send_probability`.
@@ -517,7 +518,7 @@ struct AllData<'a> {
 
 impl AllData<'_> {
     /// Several trials in lockstep (state dimensions 1..=6, else `None`): at each step every trial's mean by
-    /// the scheduled step's operations ([`scheduled_mean`]; independent recursions, which the
+    /// the scheduled step's operations ([`scheduled_means`]; independent recursions, which the
     /// processor overlaps), the covariance copied from the shared schedule, then every trial's
     /// report. The forwarding coins are not drawn: at rate 1 every measurement is sent
     /// whatever the coin, and the variant's stream serves nothing else. `None` (nothing
@@ -589,49 +590,6 @@ fn all_sent_traffic(sys: &System) -> crate::network::Traffic {
     traffic.senders = crate::network::all_sensors(sys.n_sensors());
     traffic.scheduled = traffic.senders;
     traffic
-}
-
-/// Step `k` of the means `xs` of the batch's `trials` ([`scheduled_mean`] of each). Compiled
-/// also for AVX2 and picked at run time: the same IEEE operations (no FMA contraction), so
-/// the same bits on every x86-64 machine.
-#[multiversion(targets("x86_64+avx2"))]
-fn advance_means<const N: usize>(
-    f: &[f64],
-    linear: &[(usize, Matrix)],
-    step: &ScheduledStep,
-    xs: &mut [[f64; N]],
-    trials: &[&[Vec<Vector>]],
-    k: usize,
-) {
-    for (x, m) in xs.iter_mut().zip(trials) {
-        *x = scheduled_mean(f, linear, step, x, &m[k - 1]);
-    }
-}
-
-/// One scheduled step's mean ([`CentralizedKf::scheduled_step`]) on arrays: from_gaussian's
-/// P^{-1} (F x) by the predicted covariance's factor, plus H_i^T R_i^{-1} z_i of each sensor
-/// in sensor order (add_measurement) as each arrives ([`crate::link::as_sent`]), back by the
-/// fused factor (to_gaussian).
-#[inline(always)]
-#[allow(clippy::assign_op_pattern)]
-fn scheduled_mean<const N: usize>(
-    f: &[f64],
-    linear: &[(usize, Matrix)],
-    step: &ScheduledStep,
-    x: &[f64; N],
-    zs: &[Vector],
-) -> [f64; N] {
-    use crate::linalg::fixed::{chol_solve_array, mat_vec, mat_vec_cols_by};
-    let mut y: [f64; N] = mat_vec(f, x);
-    chol_solve_array(step.pred_chol.l_dirty().as_slice(), &mut y);
-    for ((_, ht_rinv), z) in linear.iter().zip(zs) {
-        let t: [f64; N] = mat_vec_cols_by(ht_rinv.as_slice(), z.as_slice(), as_sent);
-        for (yi, ti) in y.iter_mut().zip(t) {
-            *yi = *yi + ti;
-        }
-    }
-    chol_solve_array(step.fused_chol.l_dirty().as_slice(), &mut y);
-    y
 }
 
 fn measurement(i: usize, msg: &Received) -> Result<Option<&Vector>, SchemeError> {
