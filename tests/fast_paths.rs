@@ -270,8 +270,7 @@ impl BatchSink for CollectBatch {
     }
 }
 
-/// A lockstep batch (its trials as the lanes of `linalg::fixed::lanes`, in chunks of four, the
-/// last chunk partly filled) reports for each trial what that trial's fast trial reports
+/// A lockstep batch (of the runner's four trials, or of any other size) reports for each trial what that trial's fast trial reports
 /// alone, for batches of 1 to 9 trials, on the data of the peers' KF Monte Carlo and on the
 /// all-data variant of the Dormann et al. sweep (several sensors, a 4-state model).
 #[test]

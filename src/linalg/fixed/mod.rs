@@ -10,8 +10,6 @@
 //! module checks it on random and special values.
 use crate::linalg::types::{Matrix, Vector};
 
-pub mod lanes;
-
 /// `y = a x`, bit for bit as `y.gemv(1.0, a, x, 0.0)`.
 pub fn gemv(y: &mut Vector, a: &Matrix, x: &Vector) {
     let (r, c) = a.shape();

@@ -2,10 +2,9 @@
 //! paths of the linear schemes): the same numbers as one trial at a time, with what no trial
 //! changes read once per step.
 use super::{
-    trace, traffic_counts, Layout, Sums, TrialState, DIVERGENCE_RUN, PENDING_NEES, STACK_WIDTH,
+    trace, traffic_counts, Layout, Row, Sums, TrialState, DIVERGENCE_RUN, PENDING_NEES, STACK_WIDTH,
 };
 use crate::filter::Gaussian;
-use crate::linalg::fixed::lanes::{self, WIDTH};
 use crate::linalg::Vector;
 use crate::network::Traffic;
 use multiversion::multiversion;
@@ -45,12 +44,12 @@ pub fn record_shared(
             factor: f,
         };
         let done = match n {
-            1 => record_lanes::<1>(states, sums, &step, truths, means),
-            2 => record_lanes::<2>(states, sums, &step, truths, means),
-            3 => record_lanes::<3>(states, sums, &step, truths, means),
-            4 => record_lanes::<4>(states, sums, &step, truths, means),
-            5 => record_lanes::<5>(states, sums, &step, truths, means),
-            6 => record_lanes::<6>(states, sums, &step, truths, means),
+            1 => record_groups::<1>(states, sums, &step, truths, means),
+            2 => record_groups::<2>(states, sums, &step, truths, means),
+            3 => record_groups::<3>(states, sums, &step, truths, means),
+            4 => record_groups::<4>(states, sums, &step, truths, means),
+            5 => record_groups::<5>(states, sums, &step, truths, means),
+            6 => record_groups::<6>(states, sums, &step, truths, means),
             _ => false,
         };
         if done {
@@ -103,16 +102,18 @@ struct Step<'f> {
     factor: &'f [f64],
 }
 
+/// Trials per group of [`record_groups`].
+const GROUP: usize = 4;
+
 /// [`record_shared`] for state dimension N when every field of a step fits on the stack: the
-/// trials in groups of [`WIDTH`], one per lane, their errors and NEES by the lane kernels
-/// ([`lanes::mahalanobis_sq_factored`]: each lane's bits are the scalar kernel's), each trial's
-/// step values as [`TrialState::accumulate`] makes them, and the step's sums and sums of
-/// squares added field by field, trial after trial (the same additions in the same order as
-/// one trial at a time). False, with nothing recorded, when the factor has a zero diagonal or
-/// the row is too wide: the caller then records the general way.
+/// trials in groups of [`GROUP`], each trial's error, NEES (from the shared factor) and step
+/// values as [`TrialState::accumulate`] makes them, then the step's sums and sums of squares
+/// added field by field, trial after trial, in whole registers (the same additions in the same
+/// order as one trial at a time). False, with nothing recorded, when the factor has a zero
+/// diagonal (no NEES from it) or the row is too wide: the caller then records the general way.
 #[inline(always)]
 #[allow(clippy::needless_range_loop)]
-fn record_lanes<const N: usize>(
+fn record_groups<const N: usize>(
     states: &mut [TrialState],
     sums: &mut Sums,
     step: &Step,
@@ -120,45 +121,40 @@ fn record_lanes<const N: usize>(
     means: &[f64],
 ) -> bool {
     let w = sums.layout().width();
-    if w > STACK_WIDTH || !lanes::lower_solve::<N>(step.factor, &mut [[1.0; WIDTH]; N]) {
+    if w > STACK_WIDTH || (0..N).any(|i| step.factor[i * N + i] == 0.0) {
         return false;
     }
     let k = step.k;
     let trials = states.len().min(truths.len()).min(means.len() / N);
     let (states, truths) = (&mut states[..trials], &truths[..trials]);
-    let groups = states.chunks_mut(WIDTH).zip(truths.chunks(WIDTH));
+    let groups = states.chunks_mut(GROUP).zip(truths.chunks(GROUP));
     for (g, (states, truths)) in groups.enumerate() {
-        let means = &means[g * WIDTH * N..];
-        // Lane l: trial l's error (the lanes past the trials repeat the first).
-        let mut err = [[0.0; WIDTH]; N];
-        for l in 0..WIDTH {
-            let j = if l < states.len() { l } else { 0 };
+        let means = &means[g * GROUP * N..];
+        let mut vals = [[0.0; STACK_WIDTH]; GROUP];
+        for (j, (state, vals)) in states.iter_mut().zip(&mut vals).enumerate() {
             let truth = truths[j][k - 1].as_slice();
             assert_eq!(truth.len(), N, "record: truth and estimate dimensions");
-            for c in 0..N {
-                err[c][l] = means[j * N + c] - truth[c];
-            }
+            let e: [f64; N] = std::array::from_fn(|c| means[j * N + c] - truth[c]);
+            let Some(nees) = crate::linalg::fixed::mahalanobis_sq_factored(&e, step.factor) else {
+                unreachable!("the factor's diagonal was checked");
+            };
+            state.step_values(sums, step, &e, nees, vals);
         }
-        let Some(nees) = lanes::mahalanobis_sq_factored::<N>(&err, step.factor) else {
-            unreachable!("the factor's diagonal was checked");
-        };
-        let mut vals = [[0.0; STACK_WIDTH]; WIDTH];
-        for (l, (state, vals)) in states.iter_mut().zip(&mut vals).enumerate() {
-            let e: [f64; N] = std::array::from_fn(|c| err[c][l]);
-            state.step_values(sums, step, &e, nees[l], &mut vals[..w]);
-        }
+        // The step's row on the stack, full width (whole registers; the entries past `w`
+        // add zeros and are not written back), each trial's values added in trial order.
         let row = &mut sums.per_step[(k - 1) * w..k * w];
         let row_sq = &mut sums.per_step_sq[(k - 1) * w..k * w];
-        for f in 0..w {
-            let (mut r, mut q) = (row[f], row_sq[f]);
-            for vals in &vals[..states.len()] {
-                let v = vals[f];
-                r += v;
-                q += v * v;
+        let (mut r, mut q) = ([0.0; STACK_WIDTH], [0.0; STACK_WIDTH]);
+        r[..w].copy_from_slice(row);
+        q[..w].copy_from_slice(row_sq);
+        for vals in &vals[..states.len()] {
+            for f in 0..STACK_WIDTH {
+                r[f] += vals[f];
+                q[f] += vals[f] * vals[f];
             }
-            row[f] = r;
-            row_sq[f] = q;
         }
+        row.copy_from_slice(&r[..w]);
+        row_sq.copy_from_slice(&q[..w]);
     }
     true
 }
@@ -166,7 +162,8 @@ fn record_lanes<const N: usize>(
 impl TrialState<'_> {
     /// [`TrialState::accumulate`] of a step with error `err` and NEES `nees` (not degenerate),
     /// except the additions into the step's sums and sums of squares: the step's values are
-    /// left in `vals` (the row's width, zero on entry) for the caller to add.
+    /// left in `vals` (zero on entry; the entries past the row's width stay zero) for the caller
+    /// to add.
     #[inline(always)]
     fn step_values(
         &mut self,
@@ -174,7 +171,7 @@ impl TrialState<'_> {
         step: &Step,
         err: &[f64],
         nees: f64,
-        vals: &mut [f64],
+        vals: &mut [f64; STACK_WIDTH],
     ) {
         let total: f64 = err.iter().map(|e| e * e).sum();
         let flag = |b: bool| f64::from(u8::from(b));
@@ -196,8 +193,18 @@ impl TrialState<'_> {
                 self.group_acc[g] += se;
             }
         }
-        for (run, v) in self.run_acc.iter_mut().zip(vals.iter()) {
-            *run += v;
+        match &mut self.run_acc {
+            // Full width, as the caller's row (the entries past the row's width stay zero).
+            Row::Stack(run, _) => {
+                for f in 0..STACK_WIDTH {
+                    run[f] += vals[f];
+                }
+            }
+            Row::Heap(run) => {
+                for (run, v) in run.iter_mut().zip(vals.iter()) {
+                    *run += v;
+                }
+            }
         }
         if !(total.is_finite() && nees.is_finite()) {
             self.diverged = true;

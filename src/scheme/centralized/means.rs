@@ -1,13 +1,18 @@
-//! The all-data centralized KF's mean recursion for a lockstep batch of trials: the trials as
-//! the lanes of [`crate::linalg::fixed::lanes`], the scheduled step's operations on each.
+//! The all-data centralized KF's mean recursion for a lockstep batch of trials: the scheduled
+//! step's operations on each trial's mean, the covariance half shared.
 use super::ScheduledStep;
 use crate::linalg::{Matrix, Vector};
 use crate::link::as_sent;
 use multiversion::multiversion;
 
-/// Step `k` of the means `xs` of the batch's `trials` ([`scheduled_means`]). Compiled
+/// Step `k` of the means `xs` of the batch's `trials` ([`scheduled_mean`] of each). Compiled
 /// also for AVX2 and picked at run time: the same IEEE operations (no FMA contraction), so
 /// the same bits on every x86-64 machine.
+///
+/// The trials stay one after the other (not across the lanes of a vector register): their
+/// division chains then overlap in the out-of-order core with the recording around them,
+/// where a lane layout, tried, cost 4% more time on the peers' KF Monte Carlo for the
+/// transposes in and out of the registers.
 #[multiversion(targets("x86_64+avx2"))]
 pub(super) fn advance_means<const N: usize>(
     f: &[f64],
@@ -17,64 +22,33 @@ pub(super) fn advance_means<const N: usize>(
     trials: &[&[Vec<Vector>]],
     k: usize,
 ) {
-    use crate::linalg::fixed::lanes::WIDTH;
-    for (xs, trials) in xs.chunks_mut(WIDTH).zip(trials.chunks(WIDTH)) {
-        scheduled_means(f, linear, step, xs, trials, k);
+    for (x, m) in xs.iter_mut().zip(trials) {
+        *x = scheduled_mean(f, linear, step, x, &m[k - 1]);
     }
 }
 
-/// One scheduled step's mean ([`super::CentralizedKf::scheduled_step`]) for up to
-/// [`WIDTH`](crate::linalg::fixed::lanes::WIDTH) trials at once: from_gaussian's P^{-1} (F x)
-/// by the predicted covariance's factor, plus H_i^T R_i^{-1} z_i of each sensor in sensor
-/// order (add_measurement) as each arrives ([`crate::link::as_sent`]), back by the fused factor
-/// (to_gaussian). One trial per lane ([`crate::linalg::fixed::lanes`]: each lane's operations
-/// are the scalar kernels', so each trial's bits are its own step's), so that the trials'
-/// divisions by the factors' shared diagonals go through the divider together.
+/// One scheduled step's mean ([`super::CentralizedKf::scheduled_step`]) on arrays:
+/// from_gaussian's P^{-1} (F x) by the predicted covariance's factor, plus H_i^T R_i^{-1} z_i
+/// of each sensor in sensor order (add_measurement) as each arrives ([`as_sent`]), back by the
+/// fused factor (to_gaussian).
 #[inline(always)]
 #[allow(clippy::assign_op_pattern)]
-fn scheduled_means<const N: usize>(
+fn scheduled_mean<const N: usize>(
     f: &[f64],
     linear: &[(usize, Matrix)],
     step: &ScheduledStep,
-    xs: &mut [[f64; N]],
-    trials: &[&[Vec<Vector>]],
-    k: usize,
-) {
-    use crate::linalg::fixed::lanes::{self, Lanes, WIDTH};
-    let x = lanes::gather(xs);
-    let mut y: [Lanes; N] = lanes::mat_vec::<N, N>(f, &x);
-    lanes::chol_solve::<N>(step.pred_chol.l_dirty().as_slice(), &mut y);
-    // Each lane's readings of this step; the lanes past the batch's trials repeat the first.
-    let mut rows: [&[Vector]; WIDTH] = [trials[0][k - 1].as_slice(); WIDTH];
-    for (row, trial) in rows.iter_mut().zip(trials) {
-        *row = trial[k - 1].as_slice();
-    }
-    let mut buf = [[0.0; WIDTH]; 8];
-    let mut heap = Vec::new();
-    for (i, (m, ht_rinv)) in linear.iter().enumerate() {
-        // Sensor i's reading as it arrives, one trial per lane.
-        let z: &mut [Lanes] = match buf.get_mut(..*m) {
-            Some(z) => z,
-            None => {
-                heap.resize(*m, [0.0; WIDTH]);
-                &mut heap
-            }
-        };
-        for (l, row) in rows.iter().enumerate() {
-            for (zj, v) in z.iter_mut().zip(row[i].as_slice()) {
-                zj[l] = as_sent(*v);
-            }
-        }
-        let t: [Lanes; N] = lanes::mat_vec_cols::<N>(ht_rinv.as_slice(), z);
-        for (yc, tc) in y.iter_mut().zip(t) {
-            for l in 0..WIDTH {
-                yc[l] = yc[l] + tc[l];
-            }
+    x: &[f64; N],
+    zs: &[Vector],
+) -> [f64; N] {
+    use crate::linalg::fixed::{chol_solve_array, mat_vec, mat_vec_cols_by};
+    let mut y: [f64; N] = mat_vec(f, x);
+    chol_solve_array(step.pred_chol.l_dirty().as_slice(), &mut y);
+    for ((_, ht_rinv), z) in linear.iter().zip(zs) {
+        let t: [f64; N] = mat_vec_cols_by(ht_rinv.as_slice(), z.as_slice(), as_sent);
+        for (yi, ti) in y.iter_mut().zip(t) {
+            *yi = *yi + ti;
         }
     }
-    lanes::chol_solve::<N>(step.fused_chol.l_dirty().as_slice(), &mut y);
-    // Held in memory as lanes before the rows are written: otherwise the compiler fuses the
-    // last divisions with the scatter and runs them one lane at a time.
-    let y = std::hint::black_box(y);
-    lanes::scatter(&y, xs);
+    chol_solve_array(step.fused_chol.l_dirty().as_slice(), &mut y);
+    y
 }

@@ -518,7 +518,7 @@ struct AllData<'a> {
 
 impl AllData<'_> {
     /// Several trials in lockstep (state dimensions 1..=6, else `None`): at each step every trial's mean by
-    /// the scheduled step's operations ([`scheduled_means`]; independent recursions, which the
+    /// the scheduled step's operations (`means::advance_means`; independent recursions, which the
     /// processor overlaps), the covariance copied from the shared schedule, then every trial's
     /// report. The forwarding coins are not drawn: at rate 1 every measurement is sent
     /// whatever the coin, and the variant's stream serves nothing else. `None` (nothing
