@@ -438,3 +438,28 @@ fn a_shared_covariance_batch_records_what_its_trials_record_alone() {
         }
     }
 }
+
+/// `add_divided` (bins decided four at a time, in chunks of 32, the undecided ones by the
+/// library's log10) counts every `v / divisor` in the bin `exact_bin` gives, with the touched
+/// range around them: values of every kind (bin edges and their neighbours, both ends,
+/// zero, negative, subnormal, infinite, NaN), more than one chunk, a divisor that is not 1.
+#[test]
+fn counting_divided_values_puts_each_in_its_exact_bin() {
+    let divisor = 3.0;
+    let mut values: Vec<f64> = vec![0.0, -2.0, 1e-310, f64::INFINITY, f64::NAN, 1e20, 1e-9];
+    for b in (0..=NeesHistogram::BINS + 1).step_by(7) {
+        let edge = 10f64.powf(NeesHistogram::LO + b as f64 / NeesHistogram::PER_DECADE);
+        values.extend([edge.next_down(), edge, edge.next_up(), edge * 1.01].map(|v| v * divisor));
+    }
+    assert!(values.len() > 100);
+    let mut h = NeesHistogram::new();
+    h.add_divided(&values, divisor);
+    let mut want = NeesHistogram::new();
+    for &v in &values {
+        let b = NeesHistogram::exact_bin(v / divisor);
+        want.counts[b] += 1;
+        want.touch(b, b + 1);
+    }
+    assert_eq!(h.counts, want.counts);
+    assert_eq!(h.touched, want.touched);
+}
