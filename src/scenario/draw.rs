@@ -49,6 +49,17 @@ pub(crate) struct Drawer {
     /// Per sensor, when it is linear: H and R^{1/2} (column-major), read per step without a
     /// virtual call.
     linear: Vec<Option<LinearDraw>>,
+    /// When every sensor is linear and scalar: per sensor its row H and R^{1/2}, for the
+    /// drawer's tight loop (empty otherwise).
+    scalar: Vec<ScalarDraw>,
+}
+
+/// A linear scalar sensor as the tight loop reads it: H's one row (state dimensions up to 6)
+/// and R^{1/2}.
+#[derive(Clone, Copy)]
+struct ScalarDraw {
+    h: [f64; 6],
+    r_sqrt: f64,
 }
 
 /// A linear sensor's matrices as the drawer reads them.
@@ -101,6 +112,7 @@ impl Drawer {
                     })
                 })
                 .collect(),
+            scalar: scalar_plans(exp),
         }
     }
 
@@ -163,6 +175,26 @@ impl Drawer {
     }
 }
 
+/// [`Drawer::scalar`]: every sensor linear and scalar, the state at most 6 wide; else empty.
+fn scalar_plans(exp: &Experiment) -> Vec<ScalarDraw> {
+    let sys = &exp.system;
+    let n = sys.state_dim();
+    let plans: Option<Vec<ScalarDraw>> = sys
+        .sensors
+        .iter()
+        .map(|s| {
+            let l = s.as_linear().filter(|_| s.meas_dim() == 1 && n <= 6)?;
+            let mut h = [0.0; 6];
+            h[..n].copy_from_slice(l.h().as_slice());
+            Some(ScalarDraw {
+                h,
+                r_sqrt: s.noise_sqrt()[(0, 0)],
+            })
+        })
+        .collect();
+    plans.unwrap_or_default()
+}
+
 /// [`Drawer::draw_dynamic`] for state dimension N: the same normal draws in the same order
 /// and the same products (`fixed`'s kernels repeat nalgebra's gemv), with the state on the
 /// stack. Compiled also for AVX2 and picked at run time: the same IEEE operations (no FMA
@@ -181,8 +213,29 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
     let mut x: [f64; N] = std::array::from_fn(|i| mean[i] + a[i]);
     let t = &sys.transition;
     let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
-    let any_nonlinear = d.linear.iter().any(Option::is_none);
     d.peaks.fill(0.0);
+    if !d.scalar.is_empty() {
+        // Every sensor linear and scalar: the loop below without its per-sensor dispatch.
+        let steps = d.data.measurements.iter_mut().zip(&mut d.data.truth);
+        for (zs, truth) in steps.take(exp.steps) {
+            let w = normals(&mut rng);
+            let a: [f64; N] = mat_vec(f, &x);
+            let b: [f64; N] = mat_vec(q_sqrt, &w);
+            x = std::array::from_fn(|i| a[i] + b[i]);
+            for (i, (plan, z)) in d.scalar.iter().zip(zs.iter_mut()).enumerate() {
+                let v = normal(&mut rng);
+                let hx: [f64; 1] = mat_vec(&plan.h[..N], &x);
+                let zi = hx[0] + plan.r_sqrt * v;
+                z.as_mut_slice()[0] = zi;
+                if let Some(p) = d.peaks.get_mut(i) {
+                    *p = p.max(zi.abs());
+                }
+            }
+            truth.as_mut_slice().copy_from_slice(&x);
+        }
+        return;
+    }
+    let any_nonlinear = d.linear.iter().any(Option::is_none);
     for k in 0..exp.steps {
         // x_k = F x_{k-1} + Q^{1/2} w (LinearTransition::sample_next).
         let w = normals(&mut rng);
@@ -291,5 +344,62 @@ mod tests {
         let mut drawer = Drawer::new(&doubles);
         drawer.draw(&doubles, 0);
         assert!(drawer.peaks.is_empty());
+    }
+
+    /// The fixed-size drawer gives the dynamic drawer's numbers bit for bit: truth, readings
+    /// and peaks, for every state dimension it takes, with only scalar linear sensors (its
+    /// tight loop; a model whose F mixes the states and readings of every sign) and with a
+    /// vector sensor among them (its general loop).
+    #[test]
+    fn the_fixed_size_drawer_draws_the_dynamic_drawers_numbers() {
+        let scalar_only = |n: usize| {
+            let f: Vec<String> = (0..n)
+                .map(|i| {
+                    let row: Vec<String> = (0..n)
+                        .map(|j| {
+                            format!(
+                                "{}",
+                                if i == j {
+                                    0.9
+                                } else {
+                                    0.1 / (1 + i + j) as f64
+                                }
+                            )
+                        })
+                        .collect();
+                    format!("[{}]", row.join(", "))
+                })
+                .collect();
+            let zeros = vec!["0.5"; n].join(", ");
+            let ones = vec!["2.0"; n].join(", ");
+            let last = n - 1;
+            format!(
+                "name = \"t\"\ntrials = 3\nsteps = 9\nseed = 11\n[model]\nkind = \"matrix\"\nF = [{f}]\nQ = [{f}]\n[prior]\nmean = [{zeros}]\ncov_diag = [{ones}]\n[[sensors]]\nobserve = [0]\nR_diag = [4.0]\n[[sensors]]\nobserve = [{last}]\nR_diag = [0.25]\n[[sensors]]\nobserve = [0]\nR_diag = [1.0]\n[[schemes]]\nkind = \"centralized-kf\"\n",
+                f = f.join(", ")
+            )
+        };
+        let bits = |d: &TrialData| -> Vec<u64> {
+            let truth = d.truth.iter().flat_map(|v| v.iter().map(|x| x.to_bits()));
+            let readings = d
+                .measurements
+                .iter()
+                .flatten()
+                .flat_map(|v| v.iter().map(|x| x.to_bits()));
+            truth.chain(readings).collect()
+        };
+        let mut texts: Vec<String> = (1..=6).map(scalar_only).collect();
+        texts.push(walk(2));
+        for text in texts {
+            let exp = load(&text, "t").unwrap();
+            let mut fixed = Drawer::new(&exp);
+            let mut dynamic = Drawer::new(&exp);
+            for trial in 0..3 {
+                fixed.draw(&exp, trial);
+                dynamic.draw_dynamic(&exp, trial);
+                assert_eq!(bits(&fixed.data), bits(&dynamic.data), "trial {trial}");
+                assert_eq!(fixed.peaks, dynamic.peaks, "trial {trial}");
+                assert!(fixed.peaks.iter().all(|&p| p > 0.0));
+            }
+        }
     }
 }
