@@ -370,11 +370,11 @@ mod tests {
                     format!("[{}]", row.join(", "))
                 })
                 .collect();
-            let zeros = vec!["0.5"; n].join(", ");
-            let ones = vec!["2.0"; n].join(", ");
+            let mean = vec!["0.5"; n].join(", ");
+            let var = vec!["2.0"; n].join(", ");
             let last = n - 1;
             format!(
-                "name = \"t\"\ntrials = 3\nsteps = 9\nseed = 11\n[model]\nkind = \"matrix\"\nF = [{f}]\nQ = [{f}]\n[prior]\nmean = [{zeros}]\ncov_diag = [{ones}]\n[[sensors]]\nobserve = [0]\nR_diag = [4.0]\n[[sensors]]\nobserve = [{last}]\nR_diag = [0.25]\n[[sensors]]\nobserve = [0]\nR_diag = [1.0]\n[[schemes]]\nkind = \"centralized-kf\"\n",
+                "name = \"t\"\ntrials = 3\nsteps = 9\nseed = 11\n[model]\nkind = \"matrix\"\nF = [{f}]\nQ = [{f}]\n[prior]\nmean = [{mean}]\ncov_diag = [{var}]\n[[sensors]]\nobserve = [0]\nR_diag = [4.0]\n[[sensors]]\nobserve = [{last}]\nR_diag = [0.25]\n[[sensors]]\nobserve = [0]\nR_diag = [1.0]\n[[schemes]]\nkind = \"centralized-kf\"\n",
                 f = f.join(", ")
             )
         };

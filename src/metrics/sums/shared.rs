@@ -29,9 +29,6 @@ pub fn record_shared(
     factor: Option<&[f64]>,
     traffic: Traffic,
 ) -> Result<(), crate::linalg::LinalgError> {
-    /// Trials whose errors and NEES are computed before any is accumulated: their
-    /// Cholesky solves (two dependent divisions each) then overlap.
-    const GROUP: usize = 4;
     let n = shared.mean.len();
     let trace = trace(&shared.cov);
     let counts = traffic_counts(traffic);
@@ -102,7 +99,9 @@ struct Step<'f> {
     factor: &'f [f64],
 }
 
-/// Trials per group of [`record_groups`].
+/// Trials per group: of [`record_groups`], and of the general path of [`record_shared`], whose
+/// groups' errors and NEES are computed before any is accumulated (their Cholesky solves, two
+/// dependent divisions each, then overlap).
 const GROUP: usize = 4;
 
 /// [`record_shared`] for state dimension N when every field of a step fits on the stack: the
