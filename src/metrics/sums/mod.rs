@@ -603,18 +603,7 @@ impl TrialState<'_> {
         trace: f64,
         counts: [f64; 4],
     ) {
-        let total: f64 = err.iter().map(|e| e * e).sum();
-        let flag = |b: bool| f64::from(u8::from(b));
-        let step = StepValues {
-            total,
-            nees,
-            degenerate: flag(degenerate),
-            covered: [
-                flag(nees <= self.nees_bound),
-                flag(nees <= self.nees_bound_95),
-            ],
-            trace,
-        };
+        let step = self.error_step(err, nees, degenerate, trace);
         self.accumulate_step(
             sums,
             k,
@@ -622,6 +611,24 @@ impl TrialState<'_> {
             |idx| idx.iter().map(|&j| err[j] * err[j]).sum::<f64>(),
             counts,
         );
+    }
+
+    /// The step values of one estimate: its error `err` (the squared error summed), its
+    /// NEES and whether that is within the bounds, whether the covariance was degenerate, its
+    /// trace.
+    #[inline(always)]
+    fn error_step(&self, err: &[f64], nees: f64, degenerate: bool, trace: f64) -> StepValues {
+        let flag = |b: bool| f64::from(u8::from(b));
+        StepValues {
+            total: err.iter().map(|e| e * e).sum(),
+            nees,
+            degenerate: flag(degenerate),
+            covered: [
+                flag(nees <= self.nees_bound),
+                flag(nees <= self.nees_bound_95),
+            ],
+            trace,
+        }
     }
 
     /// Adds step `k`'s values (`step`; `group_se(idx)`: the squared error of the components
@@ -635,79 +642,23 @@ impl TrialState<'_> {
         group_se: impl Fn(&[usize]) -> f64,
         counts: [f64; 4],
     ) {
-        let layout = sums.layout();
-        let w = layout.width();
-        let StepValues {
-            total,
-            nees,
-            degenerate,
-            covered,
-            trace,
-        } = *step;
-        // This step's value of every field, at its layout index. ESS is left at +0, which adds
-        // nothing to any of its sums (they start at +0 and only ever add ESS values >= 0); it
-        // is recorded by `record_ess`.
+        let w = sums.layout().width();
         let mut stack = [0.0; STACK_WIDTH];
         let mut heap;
         let vals: &mut [f64] = if w <= STACK_WIDTH {
-            &mut stack[..w]
+            &mut stack
         } else {
             heap = vec![0.0; w];
             &mut heap
         };
-        let [messages, bits, frame_bits, downlink_bits] = counts;
-        vals[Layout::TOTAL_SE] = total;
-        vals[Layout::NEES] = nees;
-        vals[Layout::TRACE] = trace;
-        vals[Layout::MESSAGES] = messages;
-        vals[Layout::BITS] = bits;
-        vals[Layout::FRAME_BITS] = frame_bits;
-        vals[Layout::DOWNLINK_BITS] = downlink_bits;
-        vals[Layout::DEGENERATE] = degenerate;
-        vals[Layout::NEES_COVERED] = covered[0];
-        vals[Layout::NEES_COVERED_95] = covered[1];
-        let steady = k >= self.steady_from;
-        for (g, (_, idx)) in self.groups.iter().enumerate() {
-            let se = group_se(idx);
-            vals[layout.group(g)] = se;
-            if steady {
-                self.group_acc[g] += se;
-            }
-        }
-        // Every per-(trial, step) value goes into the sum, the sum of squares and this
-        // trial's whole-run sum.
+        self.step_values(sums, k, step, group_se, counts, vals);
+        // Every per-(trial, step) value goes into the sum and the sum of squares.
         let row = &mut sums.per_step[(k - 1) * w..k * w];
         let row_sq = &mut sums.per_step_sq[(k - 1) * w..k * w];
-        let run = &mut self.run_acc[..w];
         for f in 0..w {
             let v = vals[f];
             row[f] += v;
             row_sq[f] += v * v;
-            run[f] += v;
-        }
-        // Divergence: a run of NEES beyond the 99.9% quantile, or anything not finite.
-        if !(total.is_finite() && nees.is_finite()) {
-            self.diverged = true;
-        }
-        if nees > self.divergence_bound || nees.is_nan() {
-            self.run += 1;
-            if self.run >= DIVERGENCE_RUN {
-                self.diverged = true;
-            }
-        } else {
-            self.run = 0;
-        }
-        if steady {
-            if self.pending == PENDING_NEES {
-                self.flush_nees(sums);
-            }
-            self.pending_nees[self.pending] = nees;
-            self.pending += 1;
-            self.acc[0] += total;
-            self.acc[1] += trace;
-            self.acc[2] += nees;
-            self.acc[3] += messages;
-            self.count += 1;
         }
     }
 

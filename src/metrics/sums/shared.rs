@@ -2,7 +2,8 @@
 //! paths of the linear schemes): the same numbers as one trial at a time, with what no trial
 //! changes read once per step.
 use super::{
-    trace, traffic_counts, Layout, Row, Sums, TrialState, DIVERGENCE_RUN, PENDING_NEES, STACK_WIDTH,
+    trace, traffic_counts, Layout, Row, StepValues, Sums, TrialState, DIVERGENCE_RUN, PENDING_NEES,
+    STACK_WIDTH,
 };
 use crate::filter::Gaussian;
 use crate::linalg::Vector;
@@ -137,7 +138,9 @@ fn record_groups<const N: usize>(
             let Some(nees) = crate::linalg::fixed::mahalanobis_sq_factored(&e, step.factor) else {
                 unreachable!("the factor's diagonal was checked");
             };
-            state.step_values(sums, step, &e, nees, vals);
+            let values = state.error_step(&e, nees, false, step.trace);
+            let group_se = |idx: &[usize]| idx.iter().map(|&j| e[j] * e[j]).sum::<f64>();
+            state.step_values(sums, k, &values, group_se, step.counts, vals);
         }
         // The step's row on the stack, full width (whole registers; the entries past `w`
         // add zeros and are not written back), each trial's values added in trial order.
@@ -159,52 +162,68 @@ fn record_groups<const N: usize>(
 }
 
 impl TrialState<'_> {
-    /// [`TrialState::accumulate`] of a step with error `err` and NEES `nees` (not degenerate),
-    /// except the additions into the step's sums and sums of squares: the step's values are
-    /// left in `vals` (zero on entry; the entries past the row's width stay zero) for the caller
-    /// to add.
+    /// [`TrialState::accumulate_step`] except the additions into the step's sums and sums of
+    /// squares: step `k`'s value of every field is left in `vals` (zero on entry, the row's
+    /// width or [`STACK_WIDTH`], past the width left zero) for the caller to add, and goes
+    /// into this trial's running sums. A batch adds its trials' values into the step's sums
+    /// together ([`record_shared`]).
     #[inline(always)]
-    fn step_values(
+    pub(super) fn step_values(
         &mut self,
         sums: &mut Sums,
-        step: &Step,
-        err: &[f64],
-        nees: f64,
-        vals: &mut [f64; STACK_WIDTH],
+        k: usize,
+        step: &StepValues,
+        group_se: impl Fn(&[usize]) -> f64,
+        counts: [f64; 4],
+        vals: &mut [f64],
     ) {
-        let total: f64 = err.iter().map(|e| e * e).sum();
-        let flag = |b: bool| f64::from(u8::from(b));
-        let [messages, bits, frame_bits, downlink_bits] = step.counts;
+        let layout = sums.layout();
+        let StepValues {
+            total,
+            nees,
+            degenerate,
+            covered,
+            trace,
+        } = *step;
+        // ESS is left at +0, which adds nothing to any of its sums (they start at +0 and only
+        // ever add ESS values >= 0); it is recorded by `record_ess`.
+        let [messages, bits, frame_bits, downlink_bits] = counts;
         vals[Layout::TOTAL_SE] = total;
         vals[Layout::NEES] = nees;
-        vals[Layout::TRACE] = step.trace;
+        vals[Layout::TRACE] = trace;
         vals[Layout::MESSAGES] = messages;
         vals[Layout::BITS] = bits;
         vals[Layout::FRAME_BITS] = frame_bits;
         vals[Layout::DOWNLINK_BITS] = downlink_bits;
-        vals[Layout::NEES_COVERED] = flag(nees <= self.nees_bound);
-        vals[Layout::NEES_COVERED_95] = flag(nees <= self.nees_bound_95);
-        let steady = step.k >= self.steady_from;
+        vals[Layout::DEGENERATE] = degenerate;
+        vals[Layout::NEES_COVERED] = covered[0];
+        vals[Layout::NEES_COVERED_95] = covered[1];
+        let steady = k >= self.steady_from;
         for (g, (_, idx)) in self.groups.iter().enumerate() {
-            let se = idx.iter().map(|&j| err[j] * err[j]).sum::<f64>();
-            vals[Layout::FIXED + g] = se;
+            let se = group_se(idx);
+            vals[layout.group(g)] = se;
             if steady {
                 self.group_acc[g] += se;
             }
         }
-        match &mut self.run_acc {
-            // Full width, as the caller's row (the entries past the row's width stay zero).
-            Row::Stack(run, _) => {
+        // This trial's whole-run sums: in whole registers when the row is on the stack (its
+        // entries past the width add zeros to zeros).
+        match (
+            &mut self.run_acc,
+            <&mut [f64; STACK_WIDTH]>::try_from(&mut *vals),
+        ) {
+            (Row::Stack(run, _), Ok(vals)) => {
                 for f in 0..STACK_WIDTH {
                     run[f] += vals[f];
                 }
             }
-            Row::Heap(run) => {
+            (run, _) => {
                 for (run, v) in run.iter_mut().zip(vals.iter()) {
                     *run += v;
                 }
             }
         }
+        // Divergence: a run of NEES beyond the 99.9% quantile, or anything not finite.
         if !(total.is_finite() && nees.is_finite()) {
             self.diverged = true;
         }
@@ -223,7 +242,7 @@ impl TrialState<'_> {
             self.pending_nees[self.pending] = nees;
             self.pending += 1;
             self.acc[0] += total;
-            self.acc[1] += step.trace;
+            self.acc[1] += trace;
             self.acc[2] += nees;
             self.acc[3] += messages;
             self.count += 1;
