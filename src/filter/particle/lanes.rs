@@ -15,38 +15,82 @@ pub(super) fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
     }
 }
 
-/// `y = a x`.
-#[multiversion(targets("x86_64+avx2"))]
-pub(super) fn scale_into(a: f64, x: &[f64], y: &mut [f64]) {
-    for (yi, xi) in y.iter_mut().zip(x) {
-        *yi = a * xi;
-    }
-}
-
 /// `w_i *= inv_s` and `l_i = (l_i - m) - ln_s`: the weights and log-weights after dividing
 /// by their sum. `(l - m)` first: exact for the particles that matter (Sterbenz), so
 /// normalized log-weights keep full relative precision even when the raw ones are ~1e3.
+/// Returns `sum_i w_i^2` of the new weights, summed as [`dot_lanes`] sums (the same lanes in
+/// the same order, so the same bits): the effective sample size without a pass of its own.
 #[multiversion(targets("x86_64+avx2"))]
-pub(super) fn normalize_in_place(w: &mut [f64], l: &mut [f64], inv_s: f64, m: f64, ln_s: f64) {
+pub(super) fn normalize_in_place(
+    w: &mut [f64],
+    l: &mut [f64],
+    inv_s: f64,
+    m: f64,
+    ln_s: f64,
+) -> f64 {
+    let mut acc = [0.0; LANES];
+    let mut wc = w.chunks_exact_mut(LANES);
+    let mut lc = l.chunks_exact_mut(LANES);
+    for (w, l) in (&mut wc).zip(&mut lc) {
+        for k in 0..LANES {
+            w[k] *= inv_s;
+            l[k] = (l[k] - m) - ln_s;
+            acc[k] += w[k] * w[k];
+        }
+    }
+    let (w, l) = (wc.into_remainder(), lc.into_remainder());
     for (w, l) in w.iter_mut().zip(l.iter_mut()) {
         *w *= inv_s;
         *l = (*l - m) - ln_s;
     }
+    let tail: f64 = w.iter().map(|a| a * a).sum();
+    reduce_lanes(acc) + tail
 }
 
-/// `y = x + a`.
-#[multiversion(targets("x86_64+avx2"))]
-pub(super) fn shift_into(a: f64, x: &[f64], y: &mut [f64]) {
-    for (yi, xi) in y.iter_mut().zip(x) {
-        *yi = xi + a;
-    }
-}
+/// Particles per block of [`combine_rows`]: a block of every array it touches stays in L1.
+const ROW_BLOCK: usize = 256;
 
-/// `z = x * y` elementwise.
+/// `out_i = sum_t a_t x_t` for each row `i` of a component-major array of `n` particles, where
+/// the terms of row `i` are `rows[i]` ((component of `xs`, coefficient), the first one scaled
+/// into the row, the others added; an empty list starts the row at 0) followed by
+/// `extra[i]` ((component of `ys`, coefficient), added). Each element sees the same
+/// operations in the same order as one scaling (`y = a x`) and one [`axpy`] per term over
+/// whole rows, so the same bits, but block by block: one pass over the particles instead of one
+/// per term. The propagation `x' = F x + L z` of a cloud.
 #[multiversion(targets("x86_64+avx2"))]
-pub(super) fn mul_into(x: &[f64], y: &[f64], z: &mut [f64]) {
-    for ((zi, xi), yi) in z.iter_mut().zip(x).zip(y) {
-        *zi = xi * yi;
+pub(super) fn combine_rows(
+    rows: &[Vec<(usize, f64)>],
+    xs: &[f64],
+    extra: &[Vec<(usize, f64)>],
+    ys: &[f64],
+    n: usize,
+    out: &mut [f64],
+) {
+    for start in (0..n).step_by(ROW_BLOCK) {
+        let end = (start + ROW_BLOCK).min(n);
+        // Row `j`'s part of the block.
+        let part = |j: usize| j * n + start..j * n + end;
+        for (i, (terms, added)) in rows.iter().zip(extra).enumerate() {
+            let y = &mut out[part(i)];
+            match terms.split_first() {
+                None => y.fill(0.0),
+                Some((&(j, c), rest)) => {
+                    for (yi, xi) in y.iter_mut().zip(&xs[part(j)]) {
+                        *yi = c * xi;
+                    }
+                    for &(j, c) in rest {
+                        for (yi, xi) in y.iter_mut().zip(&xs[part(j)]) {
+                            *yi += c * xi;
+                        }
+                    }
+                }
+            }
+            for &(j, c) in added {
+                for (yi, xi) in y.iter_mut().zip(&ys[part(j)]) {
+                    *yi += c * xi;
+                }
+            }
+        }
     }
 }
 
@@ -106,6 +150,86 @@ pub(super) fn dot_lanes(x: &[f64], y: &[f64]) -> f64 {
         .map(|(a, b)| a * b)
         .sum();
     reduce_lanes(acc) + tail
+}
+
+/// `acc[k] += a[k] * x[k]`: one block of lanes of [`dot_lanes`].
+#[inline(always)]
+fn add_products(acc: &mut [f64; LANES], a: &[f64; LANES], x: &[f64; LANES]) {
+    for k in 0..LANES {
+        acc[k] += a[k] * x[k];
+    }
+}
+
+/// `acc[k] += a[k] * (x[k] + shift)`: one block of lanes of [`dot_lanes`] with `x` centred.
+#[inline(always)]
+fn add_centered_products(acc: &mut [f64; LANES], a: &[f64; LANES], x: &[f64; LANES], shift: f64) {
+    for k in 0..LANES {
+        acc[k] += a[k] * (x[k] + shift);
+    }
+}
+
+/// `[sum_i w_i x_c[i] for each of the C slices x_c]`: [`dot_lanes`] of `w` with each (the
+/// same lanes in the same order, so the same bits), in one pass over `w`. The weighted mean
+/// of a cloud's components.
+///
+/// # Panics
+/// If a slice is shorter than `w`.
+#[multiversion(targets("x86_64+avx2"))]
+pub(super) fn dots_with<const C: usize>(w: &[f64], xs: [&[f64]; C]) -> [f64; C] {
+    let n = w.len();
+    let (wb, wt) = w.as_chunks::<LANES>();
+    let xs = xs.map(|x| x[..n].as_chunks::<LANES>());
+    let mut acc = [[0.0; LANES]; C];
+    for (i, wc) in wb.iter().enumerate() {
+        for c in 0..C {
+            add_products(&mut acc[c], wc, &xs[c].0[i]);
+        }
+    }
+    let mut out = [0.0; C];
+    for c in 0..C {
+        let tail: f64 = wt.iter().zip(xs[c].1).map(|(a, b)| a * b).sum();
+        out[c] = reduce_lanes(acc[c]) + tail;
+    }
+    out
+}
+
+/// Row `j` of a weighted covariance in one pass: with `a_c = x_c + shift_c` (centred
+/// components, `shift_c = -mean_c`) and `t = w a_j`, returns `[sum_i t_i a_c[i] for each c]`,
+/// summed as [`dot_lanes`] sums. The same operations in the same order as centring every
+/// component into a buffer, forming `t` in another and taking [`dot_lanes`] of the two, so the
+/// same bits, without writing either buffer.
+///
+/// # Panics
+/// If a slice is shorter than `w`.
+#[multiversion(targets("x86_64+avx2"))]
+pub(super) fn centered_dots<const C: usize>(
+    w: &[f64],
+    (xj, shift_j): (&[f64], f64),
+    xs: [&[f64]; C],
+    shifts: [f64; C],
+) -> [f64; C] {
+    let n = w.len();
+    let (wb, wt) = w.as_chunks::<LANES>();
+    let (jb, jt) = xj[..n].as_chunks::<LANES>();
+    let xs = xs.map(|x| x[..n].as_chunks::<LANES>());
+    let mut acc = [[0.0; LANES]; C];
+    for (i, (wc, jc)) in wb.iter().zip(jb).enumerate() {
+        let t: [f64; LANES] = std::array::from_fn(|k| wc[k] * (jc[k] + shift_j));
+        for c in 0..C {
+            add_centered_products(&mut acc[c], &t, &xs[c].0[i], shifts[c]);
+        }
+    }
+    let mut out = [0.0; C];
+    for c in 0..C {
+        let tail: f64 = wt
+            .iter()
+            .zip(jt)
+            .zip(xs[c].1)
+            .map(|((w, xj), xc)| (w * (xj + shift_j)) * (xc + shifts[c]))
+            .sum();
+        out[c] = reduce_lanes(acc[c]) + tail;
+    }
+    out
 }
 
 /// `out_i = exp(l_i - m)`, returning `sum_i out_i`.
@@ -177,6 +301,74 @@ mod tests {
     use super::super::test_support::rng;
     use super::*;
     use rand::Rng;
+
+    /// The fused passes give the bits of the passes they replace: [`dot_lanes`] of the weights
+    /// with each component (the mean), the squares summed by [`dot_lanes`] (the ESS), and the
+    /// covariance row as "centre each component into a buffer, multiply by the weights into
+    /// another, [`dot_lanes`] the two". Lengths around the lane width and its multiples, and
+    /// values with large, tiny, negative and zero entries, so any change of order shows.
+    #[test]
+    fn fused_passes_give_the_bits_of_the_separate_passes() {
+        let mut r = rng(11);
+        for n in [1, 5, 7, 8, 9, 15, 16, 17, 31, 64, 67, 1000, 1003] {
+            // Weights: uniform, with zeros, no huge ones (they would swamp the sums).
+            let raw: Vec<f64> = (0..n)
+                .map(|i| if i % 5 == 2 { 0.0 } else { r.random() })
+                .collect();
+            let mut draw = |scale: f64| -> Vec<f64> {
+                (0..n)
+                    .map(|i| match i % 11 {
+                        3 => 0.0,
+                        7 => -scale * 1e8 * r.random::<f64>(),
+                        _ => scale * (r.random::<f64>() - 0.3),
+                    })
+                    .collect()
+            };
+            let xs: Vec<Vec<f64>> = (0..4).map(|c| draw(10f64.powi(c))).collect();
+            let shifts = [0.3, -1.7e3, 0.0, 2.5e-4];
+
+            // Normalization: the same weights and log-weights, and dot_lanes(w, w).
+            let (mut w, mut l) = (raw.clone(), draw(5.0));
+            let (mut w2, mut l2) = (w.clone(), l.clone());
+            let sum_sq = normalize_in_place(&mut w, &mut l, 0.37, -2.0, 0.11);
+            for (w, l) in w2.iter_mut().zip(l2.iter_mut()) {
+                *w *= 0.37;
+                *l = (*l + 2.0) - 0.11;
+            }
+            assert_eq!(w, w2);
+            assert_eq!(l, l2);
+            assert_eq!(sum_sq.to_bits(), dot_lanes(&w, &w).to_bits(), "n = {n}");
+
+            let dots = dots_with(&w, [&xs[0][..], &xs[1], &xs[2], &xs[3]]);
+            for c in 0..4 {
+                assert_eq!(
+                    dots[c].to_bits(),
+                    dot_lanes(&w, &xs[c]).to_bits(),
+                    "n = {n}"
+                );
+            }
+            assert_eq!(dots_with(&w, [&xs[2][..]])[0], dots[2]);
+
+            let centred: Vec<Vec<f64>> = (0..4)
+                .map(|c| xs[c].iter().map(|x| x + shifts[c]).collect())
+                .collect();
+            for j in 0..4 {
+                let t: Vec<f64> = w.iter().zip(&centred[j]).map(|(w, a)| w * a).collect();
+                let row = centered_dots(
+                    &w,
+                    (&xs[j], shifts[j]),
+                    [&xs[0][..], &xs[1], &xs[2], &xs[3]],
+                    shifts,
+                );
+                for c in 0..4 {
+                    let want = dot_lanes(&t, &centred[c]);
+                    assert_eq!(row[c].to_bits(), want.to_bits(), "n = {n}, ({j}, {c})");
+                }
+                let one = centered_dots(&w, (&xs[j], shifts[j]), [&xs[1][..]], [shifts[1]]);
+                assert_eq!(one[0].to_bits(), row[1].to_bits());
+            }
+        }
+    }
 
     #[test]
     fn vectorized_exp_matches_libm() {

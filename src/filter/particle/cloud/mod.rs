@@ -5,8 +5,8 @@
 //! (`lanes`) and the resampling algorithms (`resample`) it calls, so this file reads as the
 //! filter's steps and nothing else.
 use super::lanes::{
-    axpy, dot_lanes, exp_shifted_into, gather, max_lanes, mul_into, normalize_in_place, scale_into,
-    shift_into,
+    axpy, centered_dots, combine_rows, dot_lanes, dots_with, exp_shifted_into, gather, max_lanes,
+    normalize_in_place,
 };
 use super::resample::{cumulative_in_place, merge, residual, sorted_uniforms, systematic};
 use super::{ParticleError, ResamplePolicy, Resampling};
@@ -73,6 +73,15 @@ impl SqrtColumns {
     }
 }
 
+/// Components per pass of the fused weighted sums (`lanes::dots_with`,
+/// `lanes::centered_dots`): four sets of lane accumulators fit the vector registers.
+const GROUP: usize = 4;
+
+/// Components `k0..k0 + C` of the component-major `states` of `n` particles.
+fn components<const C: usize>(states: &[f64], n: usize, k0: usize) -> [&[f64]; C] {
+    std::array::from_fn(|c| &states[(k0 + c) * n..(k0 + c + 1) * n])
+}
+
 /// Linear-Gaussian transition `x' = F x + w`, `w ~ N(0, Q)`, prepared for propagating a cloud:
 /// the nonzero entries of `F` per row and a square root of `Q` (`Q` may be singular). Built
 /// once per model, so the per-step propagation does no factorization and no allocation.
@@ -82,6 +91,9 @@ pub struct ParticleTransition {
     /// For each row `i` of `F`: (column, coefficient) of its nonzero entries.
     rows: Vec<Vec<(usize, f64)>>,
     noise: SqrtColumns,
+    /// For each row `i`: (kept column of the square root, coefficient) of its nonzero noise
+    /// entries, in column order — the noise terms [`ParticleCloud::propagate`] adds to row `i`.
+    noise_rows: Vec<Vec<(usize, f64)>>,
 }
 
 impl ParticleTransition {
@@ -101,10 +113,18 @@ impl ParticleTransition {
             what: "process noise Q",
             source,
         })?;
+        let noise = SqrtColumns::new(&q_sqrt);
+        let mut noise_rows = vec![Vec::new(); dim];
+        for (c, column) in noise.columns.iter().enumerate() {
+            for &(row, coef) in column {
+                noise_rows[row].push((c, coef));
+            }
+        }
         Ok(Self {
             dim,
             rows,
-            noise: SqrtColumns::new(&q_sqrt),
+            noise,
+            noise_rows,
         })
     }
 
@@ -169,14 +189,20 @@ pub struct ParticleCloud {
     log_weights: Vec<f64>,
     /// Normalized weights when `normalized`; resampling reuses it for cumulative sums.
     weights: Vec<f64>,
-    /// `n` standard normals per noise column; sorted uniforms for multinomial resampling.
+    /// `n` standard normals (initialization); sorted uniforms for multinomial resampling.
     noise: Vec<f64>,
+    /// `n` standard normals per kept noise column of the transition (grown on the first
+    /// propagation).
+    draws: Vec<f64>,
     /// Ancestor indices of the last resampling; one extra slot for the branch-free scatter.
     ancestors: Vec<usize>,
     /// Copies per particle (residual resampling).
     counts: Vec<usize>,
     /// Whether `weights` holds the normalized `exp(log_weights)`.
     normalized: bool,
+    /// `sum w_i^2` of the normalized weights, as [`normalize`](Self::normalize) found it
+    /// (`None` until then, and after anything else sets the weights).
+    sum_sq: Option<f64>,
 }
 
 impl ParticleCloud {
@@ -195,9 +221,11 @@ impl ParticleCloud {
             log_weights: vec![-(n as f64).ln(); n],
             weights: vec![inv_n; n],
             noise: vec![0.0; n],
+            draws: Vec::new(),
             ancestors: (0..=n).collect(),
             counts: vec![0; n],
             normalized: true,
+            sum_sq: None,
         })
     }
 
@@ -350,9 +378,10 @@ impl ParticleCloud {
         &self.ancestors[..self.n]
     }
 
-    /// Propagates every particle through `x' = F x + w` (Zheng et al. (2014), (A1.3)): `F x` as one
-    /// `axpy` per nonzero entry of `F` over whole components, then one block of normal draws
-    /// per column of the square root of `Q`. Weights are unchanged (bootstrap proposal).
+    /// Propagates every particle through `x' = F x + w` (Zheng et al. (2014), (A1.3)): one
+    /// block of `n` normal draws per kept column of the square root `L` of `Q`, then each
+    /// component as `sum_j F_ij x_j + sum_c L_ic z_c` over its nonzero entries, in one pass over
+    /// the particles (`lanes::combine_rows`). Weights are unchanged (bootstrap proposal).
     pub fn propagate<R: Rng + ?Sized>(
         &mut self,
         transition: &ParticleTransition,
@@ -360,21 +389,21 @@ impl ParticleCloud {
     ) -> Result<(), ParticleError> {
         self.check_dim("transition", transition.dim)?;
         let n = self.n;
-        for (i, row) in transition.rows.iter().enumerate() {
-            let out = &mut self.spare[i * n..(i + 1) * n];
-            match row.split_first() {
-                None => out.fill(0.0),
-                Some((&(j0, a0), rest)) => {
-                    scale_into(a0, &self.states[j0 * n..(j0 + 1) * n], out);
-                    for &(j, a) in rest {
-                        axpy(a, &self.states[j * n..(j + 1) * n], out);
-                    }
-                }
-            }
+        let columns = &transition.noise.columns;
+        if self.draws.len() < columns.len() * n {
+            self.draws.resize(columns.len() * n, 0.0);
         }
-        transition
-            .noise
-            .add_noise(&mut self.spare, n, &mut self.noise, rng);
+        for z in self.draws.chunks_exact_mut(n).take(columns.len()) {
+            fill_standard_normal(z, rng);
+        }
+        combine_rows(
+            &transition.rows,
+            &self.states,
+            &transition.noise_rows,
+            &self.draws,
+            n,
+            &mut self.spare,
+        );
         std::mem::swap(&mut self.states, &mut self.spare);
         Ok(())
     }
@@ -401,7 +430,13 @@ impl ParticleCloud {
             return Err(ParticleError::DegenerateWeights);
         }
         let ln_s = s.ln();
-        normalize_in_place(&mut self.weights, &mut self.log_weights, 1.0 / s, m, ln_s);
+        self.sum_sq = Some(normalize_in_place(
+            &mut self.weights,
+            &mut self.log_weights,
+            1.0 / s,
+            m,
+            ln_s,
+        ));
         self.normalized = true;
         Ok(m + ln_s)
     }
@@ -424,15 +459,27 @@ impl ParticleCloud {
     /// carries all the weight.
     pub fn ess(&mut self) -> Result<f64, ParticleError> {
         self.ensure_normalized()?;
-        Ok(1.0 / dot_lanes(&self.weights, &self.weights))
+        let sum_sq = match self.sum_sq {
+            Some(s) => s,
+            None => *self.sum_sq.insert(dot_lanes(&self.weights, &self.weights)),
+        };
+        Ok(1.0 / sum_sq)
     }
 
     /// Weighted mean, written into `out` (length `dim`) without allocating.
     pub fn mean_into(&mut self, out: &mut [f64]) -> Result<(), ParticleError> {
         self.check_dim("mean output", out.len())?;
         self.ensure_normalized()?;
-        for (j, o) in out.iter_mut().enumerate() {
-            *o = dot_lanes(&self.weights, self.component(j));
+        let (w, n, dim) = (&self.weights[..], self.n, self.dim);
+        for k0 in (0..dim).step_by(GROUP) {
+            let o = &mut out[k0..(k0 + GROUP).min(dim)];
+            let states = &self.states;
+            match o.len() {
+                1 => o.copy_from_slice(&dots_with(w, components::<1>(states, n, k0))),
+                2 => o.copy_from_slice(&dots_with(w, components::<2>(states, n, k0))),
+                3 => o.copy_from_slice(&dots_with(w, components::<3>(states, n, k0))),
+                _ => o.copy_from_slice(&dots_with(w, components::<GROUP>(states, n, k0))),
+            }
         }
         Ok(())
     }
@@ -465,25 +512,50 @@ impl ParticleCloud {
         self.check_dim("estimate covariance rows", out.cov.nrows())?;
         self.check_dim("estimate covariance columns", out.cov.ncols())?;
         self.mean_into(out.mean.as_mut_slice())?;
-        // Centered components a_j = x_j - m_j into the spare buffer, then for each row j the
-        // weighted t = w a_j into the noise buffer, and entry (j, k) = sum t a_k: two flops per
-        // particle and entry instead of five for sum w (x_j - m_j)(x_k - m_k).
-        let n = self.n;
-        for j in 0..self.dim {
-            shift_into(
-                -out.mean[j],
-                &self.states[j * n..(j + 1) * n],
-                &mut self.spare[j * n..(j + 1) * n],
-            );
-        }
-        let t = &mut self.noise[..n];
-        for j in 0..self.dim {
-            let aj = &self.spare[j * n..(j + 1) * n];
-            mul_into(&self.weights, aj, t);
-            for k in j..self.dim {
-                let c = dot_lanes(t, &self.spare[k * n..(k + 1) * n]);
-                out.cov[(j, k)] = c;
-                out.cov[(k, j)] = c;
+        // Entry (j, k) = sum_i t_i a_k[i] with a_k = x_k - m_k and t = w a_j: two flops per
+        // particle and entry instead of five for sum w (x_j - m_j)(x_k - m_k); one pass over
+        // the particles per row and group of up to GROUP entries (`lanes::centered_dots`).
+        let (w, n, dim) = (&self.weights[..], self.n, self.dim);
+        let states = &self.states;
+        let mean = &out.mean;
+        for j in 0..dim {
+            let row = (&states[j * n..(j + 1) * n], -mean[j]);
+            for k0 in (j..dim).step_by(GROUP) {
+                let len = (dim - k0).min(GROUP);
+                let mut c = [0.0; GROUP];
+                let shifts = |c: usize| -mean[k0 + c];
+                match len {
+                    1 => c[..1].copy_from_slice(&centered_dots(
+                        w,
+                        row,
+                        components::<1>(states, n, k0),
+                        std::array::from_fn(shifts),
+                    )),
+                    2 => c[..2].copy_from_slice(&centered_dots(
+                        w,
+                        row,
+                        components::<2>(states, n, k0),
+                        std::array::from_fn(shifts),
+                    )),
+                    3 => c[..3].copy_from_slice(&centered_dots(
+                        w,
+                        row,
+                        components::<3>(states, n, k0),
+                        std::array::from_fn(shifts),
+                    )),
+                    _ => {
+                        c = centered_dots(
+                            w,
+                            row,
+                            components::<GROUP>(states, n, k0),
+                            std::array::from_fn(shifts),
+                        )
+                    }
+                }
+                for (k, &v) in (k0..k0 + len).zip(&c) {
+                    out.cov[(j, k)] = v;
+                    out.cov[(k, j)] = v;
+                }
             }
         }
         Ok(())
@@ -521,6 +593,8 @@ impl ParticleCloud {
         rng: &mut R,
     ) -> Result<(), ParticleError> {
         self.ensure_normalized()?;
+        // The schemes below overwrite the weights: the cached sum of squares goes with them.
+        self.sum_sq = None;
         let n = self.n;
         let anc = &mut self.ancestors;
         // The schemes overwrite the normalized weights with cumulative sums: they are not
@@ -563,6 +637,7 @@ impl ParticleCloud {
     }
 
     fn set_equal_weights(&mut self) {
+        self.sum_sq = None;
         let n = self.n as f64;
         self.log_weights.fill(-n.ln());
         self.weights.fill(1.0 / n);

@@ -347,6 +347,65 @@ fn run_a_few_steps(seed: u64, scheme: Resampling) -> (Vec<u64>, Vec<u64>) {
     (states, weights)
 }
 
+/// `propagate` gives the bits of the term-by-term rule: for each row, `F`'s first nonzero
+/// entry scaled into it, the others added, then `L z` added column by column, the normals
+/// drawn one block of `n` per kept column in column order. A full-rank `Q` (several noise
+/// terms per row), an `F` with an empty row and one with three terms, and sizes around the
+/// block of `lanes::combine_rows`.
+#[test]
+fn propagation_is_the_term_by_term_rule_bit_for_bit() {
+    let f = matrix_from_rows(&[
+        vec![1.0, 0.5, 0.0],
+        vec![0.0, 0.0, 0.0],
+        vec![-0.3, 0.7, 1.1],
+    ]);
+    let q = matrix_from_rows(&[
+        vec![2.0, 0.3, 0.1],
+        vec![0.3, 1.0, -0.2],
+        vec![0.1, -0.2, 0.5],
+    ]);
+    let model = LinearTransition::new(f.clone(), q).unwrap();
+    let t = ParticleTransition::new(&model).unwrap();
+    assert_eq!(t.noise_rank(), 3);
+    let prior = Gaussian::new(
+        Vector::from_vec(vec![1.0, -2.0, 3.0]),
+        Matrix::identity(3, 3),
+    );
+    for n in [1, 7, 255, 256, 257, 1000] {
+        let mut c = ParticleCloud::from_gaussian(n, &prior, &mut rng(5)).unwrap();
+        let x: Vec<Vec<f64>> = (0..3).map(|j| c.component(j).to_vec()).collect();
+        c.propagate(&t, &mut rng(6)).unwrap();
+
+        let mut want = vec![vec![0.0; n]; 3];
+        for (i, row) in want.iter_mut().enumerate() {
+            let terms: Vec<(usize, f64)> = (0..3)
+                .filter(|&j| f[(i, j)] != 0.0)
+                .map(|j| (j, f[(i, j)]))
+                .collect();
+            for (k, &(j, a)) in terms.iter().enumerate() {
+                for (y, xj) in row.iter_mut().zip(&x[j]) {
+                    *y = if k == 0 { a * xj } else { *y + a * xj };
+                }
+            }
+        }
+        let mut r = rng(6);
+        let mut z = vec![0.0; n];
+        for column in &t.noise.columns {
+            fill_standard_normal(&mut z, &mut r);
+            for &(row, coef) in column {
+                for (y, zi) in want[row].iter_mut().zip(&z) {
+                    *y += coef * zi;
+                }
+            }
+        }
+        for (j, w) in want.iter().enumerate() {
+            let got: Vec<u64> = c.component(j).iter().map(|v| v.to_bits()).collect();
+            let w: Vec<u64> = w.iter().map(|v| v.to_bits()).collect();
+            assert_eq!(got, w, "n = {n}, component {j}");
+        }
+    }
+}
+
 #[test]
 fn same_seed_gives_bit_identical_clouds() {
     for scheme in ALL_SCHEMES {
