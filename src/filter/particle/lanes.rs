@@ -193,43 +193,112 @@ pub(super) fn dots_with<const C: usize>(w: &[f64], xs: [&[f64]; C]) -> [f64; C] 
     out
 }
 
-/// Row `j` of a weighted covariance in one pass: with `a_c = x_c + shift_c` (centred
-/// components, `shift_c = -mean_c`) and `t = w a_j`, returns `[sum_i t_i a_c[i] for each c]`,
-/// summed as [`dot_lanes`] sums. The same operations in the same order as centring every
-/// component into a buffer, forming `t` in another and taking [`dot_lanes`] of the two, so the
-/// same bits, without writing either buffer.
+/// Entries per pass of the fused weighted sums ([`dots_with`] and the rows of
+/// [`weighted_covariance`]): four sets of lane accumulators fit the vector registers.
+pub(super) const GROUP: usize = 4;
+
+/// The lane accumulators of up to [`GROUP`] entries of a covariance row.
+pub(super) type LaneSums = [[f64; LANES]; GROUP];
+
+/// Particles per block of [`weighted_covariance`] (a multiple of `LANES`): a block of every
+/// component stays in L1 while each covariance row passes over it.
+const COV_BLOCK: usize = 512;
+
+/// The weighted covariance `sum_i w_i (x_i - m)(x_i - m)^T` of the component-major `states`
+/// (`w.len()` particles, `mean.len()` components) into `cov` (row-major or column-major: it is
+/// symmetric). Entry `(j, k)` is `sum_i t_i a_k[i]` with the centred components
+/// `a_k = x_k + (-m_k)` and `t = w a_j`, its products summed in the lanes and the order of
+/// [`dot_lanes`]: the bits of centring every component into a buffer, forming `t` in another
+/// and taking [`dot_lanes`] of the two, without writing either buffer. Each row runs over the
+/// particles in groups of up to [`GROUP`] entries, block by block, so a component is read
+/// from memory once rather than once per entry. `acc` is scratch (kept by the caller so that
+/// nothing is allocated per call once it has grown).
 ///
 /// # Panics
-/// If a slice is shorter than `w`.
+/// If `states` holds fewer than `mean.len() * w.len()` values or `cov` fewer than `mean.len()^2`.
 #[multiversion(targets("x86_64+avx2"))]
-pub(super) fn centered_dots<const C: usize>(
+pub(super) fn weighted_covariance(
+    w: &[f64],
+    states: &[f64],
+    mean: &[f64],
+    acc: &mut Vec<LaneSums>,
+    cov: &mut [f64],
+) {
+    let (n, dim) = (w.len(), mean.len());
+    let component = |j: usize| &states[j * n..(j + 1) * n];
+    // (row j, first column k0, entries) of each group on or right of the diagonal.
+    let groups = (0..dim).flat_map(|j| {
+        (j..dim)
+            .step_by(GROUP)
+            .map(move |k0| (j, k0, (dim - k0).min(GROUP)))
+    });
+    acc.clear();
+    acc.resize(groups.clone().count(), [[0.0; LANES]; GROUP]);
+    let body = n - n % LANES;
+    for start in (0..body).step_by(COV_BLOCK) {
+        let part = start..(start + COV_BLOCK).min(body);
+        let w = &w[part.clone()];
+        for (a, (j, k0, len)) in acc.iter_mut().zip(groups.clone()) {
+            let row = (&component(j)[part.clone()], -mean[j]);
+            let xs = |c: usize| &component(k0 + c)[part.clone()];
+            let shifts = |c: usize| -mean[k0 + c];
+            match len {
+                1 => add_row_block::<1>(a, w, row, [xs(0)], [shifts(0)]),
+                2 => add_row_block::<2>(a, w, row, [xs(0), xs(1)], [shifts(0), shifts(1)]),
+                3 => add_row_block::<3>(
+                    a,
+                    w,
+                    row,
+                    [xs(0), xs(1), xs(2)],
+                    [shifts(0), shifts(1), shifts(2)],
+                ),
+                _ => add_row_block::<GROUP>(
+                    a,
+                    w,
+                    row,
+                    std::array::from_fn(xs),
+                    std::array::from_fn(shifts),
+                ),
+            }
+        }
+    }
+    for (a, (j, k0, len)) in acc.iter().zip(groups) {
+        let (xj, sj) = (component(j), -mean[j]);
+        for (c, lanes) in a.iter().enumerate().take(len) {
+            let (k, xk, sk) = (k0 + c, component(k0 + c), -mean[k0 + c]);
+            let tail: f64 = (body..n)
+                .map(|i| (w[i] * (xj[i] + sj)) * (xk[i] + sk))
+                .sum();
+            let v = reduce_lanes(*lanes) + tail;
+            cov[j * dim + k] = v;
+            cov[k * dim + j] = v;
+        }
+    }
+}
+
+/// One block of [`weighted_covariance`]: `acc[c][k] += t * (x_c + shift_c)` with
+/// `t = w (x_j + shift_j)`, lane `k` taking the particles `k mod LANES` (whole chunks only).
+#[inline(always)]
+fn add_row_block<const C: usize>(
+    acc: &mut LaneSums,
     w: &[f64],
     (xj, shift_j): (&[f64], f64),
     xs: [&[f64]; C],
     shifts: [f64; C],
-) -> [f64; C] {
-    let n = w.len();
-    let (wb, wt) = w.as_chunks::<LANES>();
-    let (jb, jt) = xj[..n].as_chunks::<LANES>();
-    let xs = xs.map(|x| x[..n].as_chunks::<LANES>());
-    let mut acc = [[0.0; LANES]; C];
+) {
+    let (wb, _) = w.as_chunks::<LANES>();
+    let (jb, _) = xj.as_chunks::<LANES>();
+    let xs = xs.map(|x| x.as_chunks::<LANES>().0);
+    // Sums in a local copy, which lives in registers (through `acc` they would make a round
+    // trip through memory every chunk).
+    let mut sums: [[f64; LANES]; C] = std::array::from_fn(|c| acc[c]);
     for (i, (wc, jc)) in wb.iter().zip(jb).enumerate() {
         let t: [f64; LANES] = std::array::from_fn(|k| wc[k] * (jc[k] + shift_j));
         for c in 0..C {
-            add_centered_products(&mut acc[c], &t, &xs[c].0[i], shifts[c]);
+            add_centered_products(&mut sums[c], &t, &xs[c][i], shifts[c]);
         }
     }
-    let mut out = [0.0; C];
-    for c in 0..C {
-        let tail: f64 = wt
-            .iter()
-            .zip(jt)
-            .zip(xs[c].1)
-            .map(|((w, xj), xc)| (w * (xj + shift_j)) * (xc + shifts[c]))
-            .sum();
-        out[c] = reduce_lanes(acc[c]) + tail;
-    }
-    out
+    acc[..C].copy_from_slice(&sums);
 }
 
 /// `out_i = exp(l_i - m)`, returning `sum_i out_i`.
@@ -325,7 +394,6 @@ mod tests {
                     .collect()
             };
             let xs: Vec<Vec<f64>> = (0..4).map(|c| draw(10f64.powi(c))).collect();
-            let shifts = [0.3, -1.7e3, 0.0, 2.5e-4];
 
             // Normalization: the same weights and log-weights, and dot_lanes(w, w).
             let (mut w, mut l) = (raw.clone(), draw(5.0));
@@ -348,24 +416,46 @@ mod tests {
                 );
             }
             assert_eq!(dots_with(&w, [&xs[2][..]])[0], dots[2]);
-
-            let centred: Vec<Vec<f64>> = (0..4)
-                .map(|c| xs[c].iter().map(|x| x + shifts[c]).collect())
+        }
+        // The covariance: every state dimension up to two groups of entries, and lengths
+        // around the lane width and the block.
+        for n in [1, 7, 8, 9, 511, 512, 513, 1029] {
+            let w: Vec<f64> = (0..n)
+                .map(|i| if i % 5 == 2 { 0.0 } else { r.random() })
                 .collect();
-            for j in 0..4 {
-                let t: Vec<f64> = w.iter().zip(&centred[j]).map(|(w, a)| w * a).collect();
-                let row = centered_dots(
-                    &w,
-                    (&xs[j], shifts[j]),
-                    [&xs[0][..], &xs[1], &xs[2], &xs[3]],
-                    shifts,
-                );
-                for c in 0..4 {
-                    let want = dot_lanes(&t, &centred[c]);
-                    assert_eq!(row[c].to_bits(), want.to_bits(), "n = {n}, ({j}, {c})");
+            for dim in 1..=6 {
+                let states: Vec<f64> = (0..dim * n)
+                    .map(|i| match i % 13 {
+                        4 => 0.0,
+                        9 => -1e6 * r.random::<f64>(),
+                        _ => 10f64.powi((i / n) as i32 - 2) * (r.random::<f64>() - 0.4),
+                    })
+                    .collect();
+                let mean: Vec<f64> = (0..dim).map(|j| 0.7 * j as f64 - 1.3).collect();
+                let centred: Vec<Vec<f64>> = (0..dim)
+                    .map(|c| {
+                        states[c * n..(c + 1) * n]
+                            .iter()
+                            .map(|x| x + -mean[c])
+                            .collect()
+                    })
+                    .collect();
+                let mut cov = vec![f64::NAN; dim * dim];
+                weighted_covariance(&w, &states, &mean, &mut Vec::new(), &mut cov);
+                for j in 0..dim {
+                    let t: Vec<f64> = w.iter().zip(&centred[j]).map(|(w, a)| w * a).collect();
+                    for k in 0..dim {
+                        let want = dot_lanes(&t, &centred[k]);
+                        let (a, b) = (j.min(k), j.max(k));
+                        // The upper triangle is computed; the lower one mirrors it.
+                        let want = if j <= k { want } else { cov[a * dim + b] };
+                        assert_eq!(
+                            cov[j * dim + k].to_bits(),
+                            want.to_bits(),
+                            "n = {n}, dim = {dim}, ({j}, {k})"
+                        );
+                    }
                 }
-                let one = centered_dots(&w, (&xs[j], shifts[j]), [&xs[1][..]], [shifts[1]]);
-                assert_eq!(one[0].to_bits(), row[1].to_bits());
             }
         }
     }

@@ -5,8 +5,8 @@
 //! (`lanes`) and the resampling algorithms (`resample`) it calls, so this file reads as the
 //! filter's steps and nothing else.
 use super::lanes::{
-    axpy, centered_dots, combine_rows, dot_lanes, dots_with, exp_shifted_into, gather, max_lanes,
-    normalize_in_place,
+    axpy, combine_rows, dot_lanes, dots_with, exp_shifted_into, gather, max_lanes,
+    normalize_in_place, weighted_covariance, LaneSums, GROUP,
 };
 use super::resample::{cumulative_in_place, merge, residual, sorted_uniforms, systematic};
 use super::{ParticleError, ResamplePolicy, Resampling};
@@ -72,10 +72,6 @@ impl SqrtColumns {
         }
     }
 }
-
-/// Components per pass of the fused weighted sums (`lanes::dots_with`,
-/// `lanes::centered_dots`): four sets of lane accumulators fit the vector registers.
-const GROUP: usize = 4;
 
 /// Components `k0..k0 + C` of the component-major `states` of `n` particles.
 fn components<const C: usize>(states: &[f64], n: usize, k0: usize) -> [&[f64]; C] {
@@ -194,6 +190,8 @@ pub struct ParticleCloud {
     /// `n` standard normals per kept noise column of the transition (grown on the first
     /// propagation).
     draws: Vec<f64>,
+    /// Lane accumulators of the covariance (`lanes::weighted_covariance`).
+    cov_sums: Vec<LaneSums>,
     /// Ancestor indices of the last resampling; one extra slot for the branch-free scatter.
     ancestors: Vec<usize>,
     /// Copies per particle (residual resampling).
@@ -222,6 +220,7 @@ impl ParticleCloud {
             weights: vec![inv_n; n],
             noise: vec![0.0; n],
             draws: Vec::new(),
+            cov_sums: Vec::new(),
             ancestors: (0..=n).collect(),
             counts: vec![0; n],
             normalized: true,
@@ -512,52 +511,13 @@ impl ParticleCloud {
         self.check_dim("estimate covariance rows", out.cov.nrows())?;
         self.check_dim("estimate covariance columns", out.cov.ncols())?;
         self.mean_into(out.mean.as_mut_slice())?;
-        // Entry (j, k) = sum_i t_i a_k[i] with a_k = x_k - m_k and t = w a_j: two flops per
-        // particle and entry instead of five for sum w (x_j - m_j)(x_k - m_k); one pass over
-        // the particles per row and group of up to GROUP entries (`lanes::centered_dots`).
-        let (w, n, dim) = (&self.weights[..], self.n, self.dim);
-        let states = &self.states;
-        let mean = &out.mean;
-        for j in 0..dim {
-            let row = (&states[j * n..(j + 1) * n], -mean[j]);
-            for k0 in (j..dim).step_by(GROUP) {
-                let len = (dim - k0).min(GROUP);
-                let mut c = [0.0; GROUP];
-                let shifts = |c: usize| -mean[k0 + c];
-                match len {
-                    1 => c[..1].copy_from_slice(&centered_dots(
-                        w,
-                        row,
-                        components::<1>(states, n, k0),
-                        std::array::from_fn(shifts),
-                    )),
-                    2 => c[..2].copy_from_slice(&centered_dots(
-                        w,
-                        row,
-                        components::<2>(states, n, k0),
-                        std::array::from_fn(shifts),
-                    )),
-                    3 => c[..3].copy_from_slice(&centered_dots(
-                        w,
-                        row,
-                        components::<3>(states, n, k0),
-                        std::array::from_fn(shifts),
-                    )),
-                    _ => {
-                        c = centered_dots(
-                            w,
-                            row,
-                            components::<GROUP>(states, n, k0),
-                            std::array::from_fn(shifts),
-                        )
-                    }
-                }
-                for (k, &v) in (k0..k0 + len).zip(&c) {
-                    out.cov[(j, k)] = v;
-                    out.cov[(k, j)] = v;
-                }
-            }
-        }
+        weighted_covariance(
+            &self.weights,
+            &self.states,
+            out.mean.as_slice(),
+            &mut self.cov_sums,
+            out.cov.as_mut_slice(),
+        );
         Ok(())
     }
 
