@@ -1,6 +1,9 @@
-//! The vectorized slice loops the particle cloud is made of: `axpy`-style updates, the
-//! gather of resampled states, lane-parallel reductions (maximum, dot product) with a fixed
-//! summation order, and the branch-free exponential of the weight normalization. The loops are
+//! The vectorized slice loops the particle cloud is made of: `axpy`-style updates and the
+//! propagation `F x + L z` in one blocked pass, the gather of resampled states, lane-parallel
+//! reductions (maximum, dot product, the weighted mean and covariance, the ESS's sum of squares
+//! inside the normalization) with a fixed summation order, and the branch-free exponential of
+//! the weight normalization. The fused loops give the bits of the separate passes they replace
+//! (the same operations per element, the same lanes, the same order). The loops are
 //! plain loops over slices, compiled also for AVX2 and picked at run time (`multiversion`):
 //! the same IEEE operations in the same order on wider registers, so results are bit-identical
 //! on every x86-64 machine. Separate from `cloud` because they are the hot inner loops, written
@@ -168,6 +171,27 @@ fn add_centered_products(acc: &mut [f64; LANES], a: &[f64; LANES], x: &[f64; LAN
     }
 }
 
+/// The weighted mean `sum_i w_i x_i` of the component-major `states` (`w.len()` particles,
+/// `out.len()` components) into `out`: [`dots_with`] over groups of up to [`GROUP`]
+/// components, so the bits of one [`dot_lanes`] per component in a fraction of the passes.
+pub(super) fn weighted_mean(w: &[f64], states: &[f64], out: &mut [f64]) {
+    let (n, dim) = (w.len(), out.len());
+    for k0 in (0..dim).step_by(GROUP) {
+        let o = &mut out[k0..(k0 + GROUP).min(dim)];
+        match o.len() {
+            1 => o.copy_from_slice(&dots_with(w, components::<1>(states, n, k0))),
+            2 => o.copy_from_slice(&dots_with(w, components::<2>(states, n, k0))),
+            3 => o.copy_from_slice(&dots_with(w, components::<3>(states, n, k0))),
+            _ => o.copy_from_slice(&dots_with(w, components::<GROUP>(states, n, k0))),
+        }
+    }
+}
+
+/// Components `k0..k0 + C` of the component-major `states` of `n` particles.
+fn components<const C: usize>(states: &[f64], n: usize, k0: usize) -> [&[f64]; C] {
+    std::array::from_fn(|c| &states[(k0 + c) * n..(k0 + c + 1) * n])
+}
+
 /// `[sum_i w_i x_c[i] for each of the C slices x_c]`: [`dot_lanes`] of `w` with each (the
 /// same lanes in the same order, so the same bits), in one pass over `w`. The weighted mean
 /// of a cloud's components.
@@ -175,7 +199,7 @@ fn add_centered_products(acc: &mut [f64; LANES], a: &[f64; LANES], x: &[f64; LAN
 /// # Panics
 /// If a slice is shorter than `w`.
 #[multiversion(targets("x86_64+avx2"))]
-pub(super) fn dots_with<const C: usize>(w: &[f64], xs: [&[f64]; C]) -> [f64; C] {
+fn dots_with<const C: usize>(w: &[f64], xs: [&[f64]; C]) -> [f64; C] {
     let n = w.len();
     let (wb, wt) = w.as_chunks::<LANES>();
     let xs = xs.map(|x| x[..n].as_chunks::<LANES>());
@@ -193,9 +217,9 @@ pub(super) fn dots_with<const C: usize>(w: &[f64], xs: [&[f64]; C]) -> [f64; C] 
     out
 }
 
-/// Entries per pass of the fused weighted sums ([`dots_with`] and the rows of
+/// Entries per pass of the fused weighted sums ([`weighted_mean`] and the rows of
 /// [`weighted_covariance`]): four sets of lane accumulators fit the vector registers.
-pub(super) const GROUP: usize = 4;
+const GROUP: usize = 4;
 
 /// The lane accumulators of up to [`GROUP`] entries of a covariance row.
 pub(super) type LaneSums = [[f64; LANES]; GROUP];
@@ -417,8 +441,8 @@ mod tests {
             }
             assert_eq!(dots_with(&w, [&xs[2][..]])[0], dots[2]);
         }
-        // The covariance: every state dimension up to two groups of entries, and lengths
-        // around the lane width and the block.
+        // The mean and the covariance: every state dimension up to two groups of entries, and
+        // lengths around the lane width and the block.
         for n in [1, 7, 8, 9, 511, 512, 513, 1029] {
             let w: Vec<f64> = (0..n)
                 .map(|i| if i % 5 == 2 { 0.0 } else { r.random() })
@@ -431,6 +455,16 @@ mod tests {
                         _ => 10f64.powi((i / n) as i32 - 2) * (r.random::<f64>() - 0.4),
                     })
                     .collect();
+                let mut means = vec![f64::NAN; dim];
+                weighted_mean(&w, &states, &mut means);
+                for (j, m) in means.iter().enumerate() {
+                    let want = dot_lanes(&w, &states[j * n..(j + 1) * n]);
+                    assert_eq!(
+                        m.to_bits(),
+                        want.to_bits(),
+                        "n = {n}, dim = {dim}, mean {j}"
+                    );
+                }
                 let mean: Vec<f64> = (0..dim).map(|j| 0.7 * j as f64 - 1.3).collect();
                 let centred: Vec<Vec<f64>> = (0..dim)
                     .map(|c| {

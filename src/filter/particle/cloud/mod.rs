@@ -5,8 +5,8 @@
 //! (`lanes`) and the resampling algorithms (`resample`) it calls, so this file reads as the
 //! filter's steps and nothing else.
 use super::lanes::{
-    axpy, combine_rows, dot_lanes, dots_with, exp_shifted_into, gather, max_lanes,
-    normalize_in_place, weighted_covariance, LaneSums, GROUP,
+    axpy, combine_rows, dot_lanes, exp_shifted_into, gather, max_lanes, normalize_in_place,
+    weighted_covariance, weighted_mean, LaneSums,
 };
 use super::resample::{cumulative_in_place, merge, residual, sorted_uniforms, systematic};
 use super::{ParticleError, ResamplePolicy, Resampling};
@@ -71,11 +71,6 @@ impl SqrtColumns {
             }
         }
     }
-}
-
-/// Components `k0..k0 + C` of the component-major `states` of `n` particles.
-fn components<const C: usize>(states: &[f64], n: usize, k0: usize) -> [&[f64]; C] {
-    std::array::from_fn(|c| &states[(k0 + c) * n..(k0 + c + 1) * n])
 }
 
 /// Linear-Gaussian transition `x' = F x + w`, `w ~ N(0, Q)`, prepared for propagating a cloud:
@@ -205,7 +200,8 @@ pub struct ParticleCloud {
 
 impl ParticleCloud {
     /// A cloud of `n` particles at the origin of a `dim`-dimensional space, equally weighted.
-    /// All buffers are allocated here and never again.
+    /// All buffers are allocated here (the noise draws and the covariance's sums at their first
+    /// use) and never again.
     pub fn new(dim: usize, n: usize) -> Result<Self, ParticleError> {
         if dim == 0 || n == 0 {
             return Err(ParticleError::Empty);
@@ -469,17 +465,7 @@ impl ParticleCloud {
     pub fn mean_into(&mut self, out: &mut [f64]) -> Result<(), ParticleError> {
         self.check_dim("mean output", out.len())?;
         self.ensure_normalized()?;
-        let (w, n, dim) = (&self.weights[..], self.n, self.dim);
-        for k0 in (0..dim).step_by(GROUP) {
-            let o = &mut out[k0..(k0 + GROUP).min(dim)];
-            let states = &self.states;
-            match o.len() {
-                1 => o.copy_from_slice(&dots_with(w, components::<1>(states, n, k0))),
-                2 => o.copy_from_slice(&dots_with(w, components::<2>(states, n, k0))),
-                3 => o.copy_from_slice(&dots_with(w, components::<3>(states, n, k0))),
-                _ => o.copy_from_slice(&dots_with(w, components::<GROUP>(states, n, k0))),
-            }
-        }
+        weighted_mean(&self.weights, &self.states, out);
         Ok(())
     }
 
