@@ -35,15 +35,17 @@ pub(super) fn cumulative_in_place(w: &mut [f64]) -> Result<(f64, usize), Particl
 /// `N_{i-1}..N_i` — `floor(n w_i)` or `ceil(n w_i)` of them. The ends `N_i` go to `ends`, and
 /// [`ancestors_from_ends`] turns them into ancestors. If rounding leaves `n C_n + v` a hair
 /// below `n`, the last slots go to the last particle with positive weight.
-/// `anc` has `n + 1` slots so a run may start at `n`.
+/// `anc` has `n + 1` slots so a run may start at `n`. `w` is left holding the running sums.
 ///
 /// The running sum is the slow part: one chain of dependent additions, 4 cycles each. It is
 /// computed as [`SEGMENTS`] chains in parallel, one per contiguous segment, each segment's
 /// partial sums added to its offset (the rounded sum of the totals before it): the last
 /// cumulative sum of a segment is then exactly the next segment's offset, so the `C_i` never
-/// decrease and no run overlaps another.
+/// decrease and no run overlaps another. The sums go back into `w` in that pass, and the ends
+/// come from them in a pass of their own, which vectorizes (in the summing pass they were
+/// four scalar chains).
 #[multiversion(targets("x86_64+avx2"))]
-pub(super) fn systematic(w: &[f64], v: f64, ends: &mut [usize], anc: &mut [usize]) {
+pub(super) fn systematic(w: &mut [f64], v: f64, ends: &mut [usize], anc: &mut [usize]) {
     let n = w.len();
     let nf = n as f64;
     // floor(n C_i + v) for n C_i + v in [0, 2^52): adding 2^52 to the (integral) floor leaves
@@ -54,9 +56,9 @@ pub(super) fn systematic(w: &[f64], v: f64, ends: &mut [usize], anc: &mut [usize
         let bits = ((c * nf + v).floor() + TWO_52).to_bits() & ((1u64 << 52) - 1);
         (bits as usize).min(n)
     };
+    let last_positive = w.iter().rposition(|&wi| wi > 0.0).unwrap_or(0);
     let len = n / SEGMENTS;
-    let (body, tail) = w.split_at(len * SEGMENTS);
-    let (ends_body, ends_tail) = ends[..n].split_at_mut(len * SEGMENTS);
+    let (body, tail) = w.split_at_mut(len * SEGMENTS);
     // The segments as slices of one length, walked by zipped iterators: no bounds checks.
     let (mut partial, mut offset, mut p) = ([0.0; SEGMENTS], [0.0; SEGMENTS], [0.0; SEGMENTS]);
     if len > 0 {
@@ -69,40 +71,41 @@ pub(super) fn systematic(w: &[f64], v: f64, ends: &mut [usize], anc: &mut [usize
             partial[3] += d;
         }
     }
-    for &wi in tail {
+    for wi in tail.iter() {
         partial[SEGMENTS - 1] += wi;
     }
     for s in 1..SEGMENTS {
         offset[s] = offset[s - 1] + partial[s - 1];
     }
     if len > 0 {
-        // Pass 2: the ends, the same partial sums recomputed in the same order.
-        let [w0, w1, w2, w3] = segments(body, len);
-        let [e0, e1, e2, e3] = segments_mut(ends_body, len);
-        let weights = w0.iter().zip(w1).zip(w2).zip(w3);
-        let slots = e0
+        // Pass 2: the running sums C_i, the same partial sums recomputed in the same order.
+        let [w0, w1, w2, w3] = segments_mut(body, len);
+        let weights = w0
             .iter_mut()
-            .zip(e1.iter_mut())
-            .zip(e2.iter_mut())
-            .zip(e3.iter_mut());
-        for ((((a, b), c), d), (((x, y), z), u)) in weights.zip(slots) {
-            p[0] += a;
-            p[1] += b;
-            p[2] += c;
-            p[3] += d;
-            *x = end_of(offset[0] + p[0]);
-            *y = end_of(offset[1] + p[1]);
-            *z = end_of(offset[2] + p[2]);
-            *u = end_of(offset[3] + p[3]);
+            .zip(w1.iter_mut())
+            .zip(w2.iter_mut())
+            .zip(w3.iter_mut());
+        for (((a, b), c), d) in weights {
+            p[0] += *a;
+            p[1] += *b;
+            p[2] += *c;
+            p[3] += *d;
+            *a = offset[0] + p[0];
+            *b = offset[1] + p[1];
+            *c = offset[2] + p[2];
+            *d = offset[3] + p[3];
         }
     }
     // The last segment's partial sum continues through the tail.
     let last = SEGMENTS - 1;
-    for (&wi, e) in tail.iter().zip(ends_tail.iter_mut()) {
-        p[last] += wi;
-        *e = end_of(offset[last] + p[last]);
+    for wi in tail.iter_mut() {
+        p[last] += *wi;
+        *wi = offset[last] + p[last];
     }
-    let last_positive = w.iter().rposition(|&wi| wi > 0.0).unwrap_or(0);
+    // Pass 3: the ends.
+    for (e, &c) in ends[..n].iter_mut().zip(w.iter()) {
+        *e = end_of(c);
+    }
     ancestors_from_ends(ends, last_positive, anc);
 }
 
@@ -353,7 +356,7 @@ mod tests {
             let w: Vec<f64> = units.iter().map(|&u| u as f64 / 1024.0).collect();
             for v in [0.0, 0.125, 0.5, 0.875] {
                 let (mut ends, mut anc) = (vec![0; n], vec![0; n + 1]);
-                super::systematic(&w, v, &mut ends, &mut anc);
+                super::systematic(&mut w.clone(), v, &mut ends, &mut anc);
                 let mut want = Vec::new();
                 let mut c = 0.0;
                 for (i, wi) in w.iter().enumerate() {
@@ -368,6 +371,27 @@ mod tests {
                 assert_eq!(&anc[..n], &want[..], "n = {n}, v = {v}");
             }
         }
+    }
+
+    /// Equal weights `1/k` rarely sum to exactly 1: where they fall short, `n C_n + v` stays a
+    /// hair below `n` at `v = 0` and the last slot must still go to a particle with weight,
+    /// not to the zero-weight particles after them.
+    #[test]
+    fn systematic_never_hands_a_slot_to_trailing_zero_weights() {
+        let mut short = 0;
+        for k in 3..200 {
+            let mut w = vec![1.0 / k as f64; k];
+            short += usize::from(w.iter().sum::<f64>() < 1.0);
+            w.extend([0.0; 3]);
+            let n = w.len();
+            let (mut ends, mut anc) = (vec![0; n], vec![0; n + 1]);
+            super::systematic(&mut w.clone(), 0.0, &mut ends, &mut anc);
+            assert!(anc[..n].iter().all(|&a| a < k), "k = {k}: {:?}", &anc[..n]);
+        }
+        assert!(
+            short > 0,
+            "no sum fell short of 1: the case is not exercised"
+        );
     }
 
     #[test]

@@ -547,7 +547,7 @@ impl ParticleCloud {
         // needed after this step.
         match scheme {
             Resampling::Systematic => {
-                systematic(&self.weights, rng.random(), &mut self.counts, anc)
+                systematic(&mut self.weights, rng.random(), &mut self.counts, anc)
             }
             Resampling::Stratified => {
                 let (total, last) = cumulative_in_place(&mut self.weights)?;
