@@ -3,8 +3,9 @@
 //! processes the same data with coin flips from a stream of its own (common random numbers).
 //! Trials run in parallel in fixed blocks whose sums are merged in block order, so results are
 //! bit-identical for any number of threads.
+use crate::linalg::quad::F64x4;
 use crate::linalg::Vector;
-use crate::metrics::{Sums, TrialFailure};
+use crate::metrics::{QuadTrials, Sums, TrialFailure};
 use crate::network;
 use crate::scenario::experiment::Experiment;
 pub use crate::scenario::limits::{WINDOW_MAX_BYTES, WINDOW_PER_THREAD};
@@ -69,6 +70,8 @@ pub use crate::scenario::draw::{draw_trial, TrialData};
 /// when the variants run blocks in lockstep, else one) and the variants' work space.
 struct Worker<'e> {
     drawers: Vec<Drawer>,
+    /// A block drawn side by side ([`run_quad_block`]).
+    quad: crate::scenario::draw::QuadData,
     scratch: LoopBuffers,
     /// The trial states of a lockstep batch, restarted for each variant of each block.
     states: Vec<crate::metrics::TrialState<'e>>,
@@ -78,6 +81,7 @@ impl<'e> Worker<'e> {
     fn new(exp: &Experiment) -> Self {
         Self {
             drawers: vec![Drawer::new(exp)],
+            quad: Default::default(),
             scratch: LoopBuffers::new(exp.system.n_sensors()),
             states: Vec::new(),
         }
@@ -154,6 +158,17 @@ fn run_block<'e>(
         return Ok(false);
     }
     let n = trials.len();
+    if n == F64x4::LANES
+        && exp
+            .variants
+            .iter()
+            .all(|v| v.scheme.fast_path().is_some_and(|f| f.quads()))
+        && worker.drawers[0].draws_quads(exp)
+    {
+        run_quad_block(exp, trials, sums, worker)?;
+        on_trial(n);
+        return Ok(true);
+    }
     while worker.drawers.len() < n {
         worker.drawers.push(Drawer::new(exp));
     }
@@ -213,6 +228,108 @@ fn run_block<'e>(
     }
     on_trial(n);
     Ok(true)
+}
+
+/// [`run_block`] for a block of four trials drawn side by side ([`Drawer::draw_quad`]) and
+/// run by every variant's [`LockstepFastPath::run_quad_fast`], recorded by
+/// [`QuadTrials`]. A variant that declines the block, or whose fast path or recording fails,
+/// runs the block's trials one at a time from the block's start (the numbers of the batch, or
+/// the failure the one-at-a-time loop reports).
+///
+/// [`LockstepFastPath::run_quad_fast`]: crate::scheme::fast_path::LockstepFastPath::run_quad_fast
+fn run_quad_block<'e>(
+    exp: &'e Experiment,
+    trials: std::ops::Range<usize>,
+    sums: &mut [Sums],
+    worker: &mut Worker<'e>,
+) -> Result<(), RunError> {
+    worker.drawers[0].draw_quad(exp, trials.start, &mut worker.quad);
+    let mut drawn = false;
+    for (v, s) in sums.iter_mut().enumerate().take(exp.variants.len()) {
+        let outcome = QuadTrials::new(s, exp.steady_from).and_then(|mut lanes| {
+            let fast = exp.variants[v].scheme.fast_path()?;
+            let mut recorder = QuadRecorder {
+                security: exp.security,
+                groups: &exp.groups,
+                sums: s,
+                truth: &worker.quad.truth,
+                n: worker.quad.n,
+                lanes: &mut lanes,
+            };
+            let outcome = fast.run_quad_fast(&worker.quad, exp.steps, &mut recorder);
+            if let Some(Ok(())) = outcome {
+                while worker.states.len() < F64x4::LANES {
+                    worker
+                        .states
+                        .push(s.trial_state(&exp.groups, exp.steady_from));
+                }
+                lanes.close(s, &mut worker.states[..F64x4::LANES]);
+            }
+            outcome
+        });
+        if let Some(Ok(())) = outcome {
+            continue;
+        }
+        // One trial at a time (after clearing what a failed block recorded).
+        if outcome.is_some() {
+            s.clear();
+        }
+        if !drawn {
+            while worker.drawers.len() < trials.len() {
+                worker.drawers.push(Drawer::new(exp));
+            }
+            for (d, trial) in worker.drawers.iter_mut().zip(trials.clone()) {
+                d.draw(exp, trial);
+            }
+            drawn = true;
+        }
+        for (d, trial) in worker.drawers.iter().zip(trials.clone()) {
+            run_variant(exp, trial, v, &d.data, s, &mut worker.scratch)?;
+        }
+    }
+    note_readings(exp, &worker.quad.peaks, sums);
+    Ok(())
+}
+
+/// The sink of a block drawn side by side: the four trials' steps into the variant's block
+/// sums ([`QuadTrials::record`]).
+struct QuadRecorder<'a> {
+    /// What securing the frames adds to each step's traffic (the fast paths price none).
+    security: crate::link::security::SecuritySpec,
+    groups: &'a [(String, Vec<usize>)],
+    sums: &'a mut Sums,
+    /// The block's truths ([`crate::scenario::draw::QuadData::truth`]) and state dimension.
+    truth: &'a [F64x4],
+    n: usize,
+    lanes: &'a mut QuadTrials,
+}
+
+impl crate::scheme::fast_path::QuadSink for QuadRecorder<'_> {
+    fn step_quad(
+        &mut self,
+        k: usize,
+        means: &[F64x4],
+        cov: &crate::linalg::Matrix,
+        factor: Option<&[f64]>,
+        mut traffic: network::Traffic,
+    ) -> Result<(), crate::linalg::LinalgError> {
+        traffic.secure(&self.security, traffic.star_frames());
+        let truth = &self.truth[(k - 1) * self.n..k * self.n];
+        let recorded = self.lanes.record(
+            self.sums,
+            self.groups,
+            k,
+            truth,
+            means,
+            cov,
+            factor,
+            traffic,
+        );
+        // Not side by side (no usable factor): the runner reruns the trials one at a time.
+        recorded
+            .then_some(())
+            .ok_or(crate::linalg::LinalgError::NotPositiveDefinite)
+    }
 }
 
 /// One trial's largest readings (`peaks`, [`Drawer::peaks`]) into every variant's sums

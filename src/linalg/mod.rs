@@ -1,6 +1,7 @@
 //! Small dense linear-algebra helpers shared by every filter: symmetrization, SPD checks and
 //! Cholesky-based inverses with errors instead of panics.
 pub mod fixed;
+pub mod quad;
 mod types;
 
 use nalgebra::{Cholesky, Dyn};

@@ -2,9 +2,11 @@
 //! sensor's z_k^i, all from the trial's data stream ([`crate::stats::seeding::trial_rng`]). The
 //! runner, the trace, the PCRB and the live driver draw here, so every one of them sees the same
 //! numbers for the same (seed, trial).
+use crate::linalg::quad::F64x4;
 use crate::linalg::Vector;
 use crate::metrics::precision::raise_peaks;
 use crate::scenario::experiment::Experiment;
+pub use crate::scheme::fast_path::QuadData;
 use crate::stats::seeding::trial_rng;
 use multiversion::multiversion;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -206,33 +208,22 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
     let mut rng = trial_rng(exp.seed, trial as u64, 0);
     let normal = standard_normal;
     let normals = standard_normals::<N>;
-    let arr = |v: &Vector| -> [f64; N] { v.as_slice().try_into().expect("state dimension") };
-    // x_0 = mean + S n_0.
-    let a: [f64; N] = mat_vec(d.x0_sqrt.as_slice(), &normals(&mut rng));
-    let mean = arr(&exp.initial_truth.mean);
-    let mut x: [f64; N] = std::array::from_fn(|i| mean[i] + a[i]);
+    let mut x: [f64; N] = initial_state(d, exp, &mut rng);
     let t = &sys.transition;
     let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
     d.peaks.fill(0.0);
     if !d.scalar.is_empty() {
         // Every sensor linear and scalar: the loop below without its per-sensor dispatch.
-        let steps = d.data.measurements.iter_mut().zip(&mut d.data.truth);
-        for (zs, truth) in steps.take(exp.steps) {
-            let w = normals(&mut rng);
-            let a: [f64; N] = mat_vec(f, &x);
-            let b: [f64; N] = mat_vec(q_sqrt, &w);
-            x = std::array::from_fn(|i| a[i] + b[i]);
-            for (i, (plan, z)) in d.scalar.iter().zip(zs.iter_mut()).enumerate() {
-                let v = normal(&mut rng);
-                let hx: [f64; 1] = mat_vec(&plan.h[..N], &x);
-                let zi = hx[0] + plan.r_sqrt * v;
-                z.as_mut_slice()[0] = zi;
-                if let Some(p) = d.peaks.get_mut(i) {
-                    *p = p.max(zi.abs());
-                }
+        let (data, peaks) = (&mut d.data, &mut d.peaks);
+        scalar_steps(&d.scalar, exp, x, &mut rng, |k, x, i, zi| {
+            data.measurements[k][i].as_mut_slice()[0] = zi;
+            if let Some(p) = peaks.get_mut(i) {
+                *p = p.max(zi.abs());
             }
-            truth.as_mut_slice().copy_from_slice(&x);
-        }
+            if i + 1 == data.measurements[k].len() {
+                data.truth[k].as_mut_slice().copy_from_slice(x);
+            }
+        });
         return;
     }
     let any_nonlinear = d.linear.iter().any(Option::is_none);
@@ -277,6 +268,116 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
             }
         }
         d.data.truth[k].as_mut_slice().copy_from_slice(&x);
+    }
+}
+
+/// x_0 = mean + S n_0 (S: the initial truth's square root), the trial's first N draws.
+#[inline(always)]
+fn initial_state<const N: usize>(
+    d: &Drawer,
+    exp: &Experiment,
+    rng: &mut Xoshiro256PlusPlus,
+) -> [f64; N] {
+    let a: [f64; N] =
+        crate::linalg::fixed::mat_vec(d.x0_sqrt.as_slice(), &standard_normals::<N>(rng));
+    let mean: &[f64; N] = exp
+        .initial_truth
+        .mean
+        .as_slice()
+        .try_into()
+        .expect("state dimension");
+    std::array::from_fn(|i| mean[i] + a[i])
+}
+
+/// The steps of a trial whose sensors are all linear and scalar (`plans`, [`Drawer::scalar`]),
+/// from x_0 = `x`: x_k = F x_{k-1} + Q^{1/2} w, then z_k^i = H_i x_k + R_i^{1/2} v of each
+/// sensor in order, each handed to `put(k - 1, x_k, i, z_k^i)` (the same draws and products
+/// as the general loop of [`draw_fixed`]).
+#[inline(always)]
+fn scalar_steps<const N: usize>(
+    plans: &[ScalarDraw],
+    exp: &Experiment,
+    mut x: [f64; N],
+    rng: &mut Xoshiro256PlusPlus,
+    mut put: impl FnMut(usize, &[f64; N], usize, f64),
+) {
+    use crate::linalg::fixed::mat_vec;
+    let t = &exp.system.transition;
+    let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
+    for k in 0..exp.steps {
+        let w = standard_normals::<N>(rng);
+        let a: [f64; N] = mat_vec(f, &x);
+        let b: [f64; N] = mat_vec(q_sqrt, &w);
+        x = std::array::from_fn(|i| a[i] + b[i]);
+        for (i, plan) in plans.iter().enumerate() {
+            let v = standard_normal(rng);
+            let hx: [f64; 1] = mat_vec(&plan.h[..N], &x);
+            put(k, &x, i, hx[0] + plan.r_sqrt * v);
+        }
+    }
+}
+
+impl Drawer {
+    /// Whether [`Drawer::draw_quad`] takes this experiment's trials.
+    pub(crate) fn draws_quads(&self, exp: &Experiment) -> bool {
+        !self.scalar.is_empty() && (1..=6).contains(&exp.system.state_dim())
+    }
+
+    /// Draws trials `first..first + 4` into `quad`, lane j trial `first + j` (see
+    /// [`QuadData`]); false, with nothing drawn, when [`Drawer::draws_quads`] is false.
+    pub(crate) fn draw_quad(
+        &mut self,
+        exp: &Experiment,
+        first: usize,
+        quad: &mut QuadData,
+    ) -> bool {
+        if !self.draws_quads(exp) {
+            return false;
+        }
+        let (n, sensors) = (exp.system.state_dim(), self.scalar.len());
+        quad.n = n;
+        quad.sensors = sensors;
+        quad.truth.resize(exp.steps * n, F64x4::default());
+        quad.readings.resize(exp.steps * sensors, F64x4::default());
+        quad.peaks.clear();
+        quad.peaks.resize(self.peaks.len(), 0.0);
+        match n {
+            1 => draw_quad_fixed::<1>(self, exp, first, quad),
+            2 => draw_quad_fixed::<2>(self, exp, first, quad),
+            3 => draw_quad_fixed::<3>(self, exp, first, quad),
+            4 => draw_quad_fixed::<4>(self, exp, first, quad),
+            5 => draw_quad_fixed::<5>(self, exp, first, quad),
+            _ => draw_quad_fixed::<6>(self, exp, first, quad),
+        }
+        true
+    }
+}
+
+/// [`Drawer::draw_quad`] for state dimension N: each trial's [`draw_fixed`] draws, written
+/// into its lane. Compiled also for AVX2 and picked at run time (the same IEEE operations).
+#[multiversion(targets("x86_64+avx2"))]
+fn draw_quad_fixed<const N: usize>(
+    d: &Drawer,
+    exp: &Experiment,
+    first: usize,
+    quad: &mut QuadData,
+) {
+    let sensors = quad.sensors;
+    for j in 0..F64x4::LANES {
+        let mut rng = trial_rng(exp.seed, (first + j) as u64, 0);
+        let x = initial_state::<N>(d, exp, &mut rng);
+        let (truth, readings, peaks) = (&mut quad.truth, &mut quad.readings, &mut quad.peaks);
+        scalar_steps(&d.scalar, exp, x, &mut rng, |k, x, i, zi| {
+            readings[k * sensors + i].0[j] = zi;
+            if let Some(p) = peaks.get_mut(i) {
+                *p = p.max(zi.abs());
+            }
+            if i + 1 == sensors {
+                for (t, v) in truth[k * N..(k + 1) * N].iter_mut().zip(x) {
+                    t.0[j] = *v;
+                }
+            }
+        });
     }
 }
 

@@ -2,7 +2,8 @@
 //! without the generic per-step loop of [`crate::engine::trial`], with the same numbers. A
 //! scheme author never needs it; a [`Scheme`] offers it through [`Scheme::fast_path`].
 use crate::filter::Gaussian;
-use crate::linalg::{LinalgError, Vector};
+use crate::linalg::quad::F64x4;
+use crate::linalg::{LinalgError, Matrix, Vector};
 use crate::network::channel::FateTable;
 #[cfg(doc)]
 use crate::scheme::Scheme;
@@ -58,6 +59,61 @@ pub trait LockstepFastPath: Send + Sync {
         let _ = (trials, steps, cache, sink);
         None
     }
+    /// Whether [`LockstepFastPath::run_quad_fast`] may take a block drawn side by side.
+    fn quads(&self) -> bool {
+        false
+    }
+    /// Runs the four trials of a runner block drawn side by side (`quad`, lane j: trial j),
+    /// reporting each step of the four at once to `sink`: lane j is what
+    /// [`LockstepFastPath::run_batch_fast`] gives trial j. The same conditions as a batch (no
+    /// coins drawn). `None` (nothing reported): not for this data; the runner then draws the
+    /// trials one by one and runs them as a batch or one at a time.
+    fn run_quad_fast(
+        &self,
+        quad: &QuadData,
+        steps: usize,
+        sink: &mut dyn QuadSink,
+    ) -> Option<Result<(), FastTrialError>> {
+        let _ = (quad, steps, sink);
+        None
+    }
+}
+
+/// Four trials of a runner block drawn side by side for a lockstep fast path
+/// ([`LockstepFastPath::run_quad_fast`], drawn by the runner's drawer): lane j of every entry is
+/// trial j's number, the very number the runner's drawer gives that trial alone. Only for scenarios
+/// whose sensors are all linear and scalar and whose state has at most 6 components.
+#[derive(Default)]
+pub struct QuadData {
+    /// State components.
+    pub n: usize,
+    /// Sensors (one reading each per step).
+    pub sensors: usize,
+    /// x_k's component c: `truth[(k - 1) * n + c]`.
+    pub truth: Vec<F64x4>,
+    /// z_k^i: `readings[(k - 1) * sensors + i]`.
+    pub readings: Vec<F64x4>,
+    /// Per sensor, the largest |reading| of the four trials ; empty when
+    /// the scenario sends doubles.
+    pub peaks: Vec<f64>,
+}
+
+/// Receives the steps of a [`LockstepFastPath::run_quad_fast`] block: the four trials' step at
+/// once.
+pub trait QuadSink {
+    /// Step `k` (1-based) of the four trials: their means (component c: `means[c]`, lane j:
+    /// trial j), the covariance they share with its Cholesky factor as
+    /// [`crate::linalg::fixed::nees_factor`] makes it (when the scheme has it), and the step's
+    /// traffic (each trial's). An error when the sink cannot record the step side by side:
+    /// the runner then runs the block's trials one at a time.
+    fn step_quad(
+        &mut self,
+        k: usize,
+        means: &[F64x4],
+        cov: &Matrix,
+        factor: Option<&[f64]>,
+        traffic: crate::network::Traffic,
+    ) -> Result<(), LinalgError>;
 }
 
 /// The packets a lossy link loses in one trial, as a fast path applies them: a packet that

@@ -349,9 +349,9 @@ impl<const N: usize> Halves for Split<N> {
         {
             let (cov, next) = m.split_at(nn);
             let q: &[f64; N] = q.try_into().expect("N reals");
-            let mean = fixed::mat_vec::<N, N>(cov, q);
-            let predicted_mean = fixed::mat_vec::<N, N>(node.model.a.as_slice(), &mean);
-            let q_pred = fixed::mat_vec::<N, N>(next, &predicted_mean);
+            let mean = fixed::mat_vec::<N, N, _>(cov, q);
+            let predicted_mean = fixed::mat_vec::<N, N, _>(node.model.a.as_slice(), &mean);
+            let q_pred = fixed::mat_vec::<N, N, _>(next, &predicted_mean);
             node.estimate.cov.copy_from_slice(cov);
             node.estimate.mean.copy_from_slice(&mean);
             node.prior.0.copy_from_slice(next);

@@ -8,6 +8,7 @@
 //! the left operand. The kernels below perform the same operations in the same order (Rust
 //! never fuses a multiply and an add), so every bit is the same; the property test in this
 //! module checks it on random and special values.
+use crate::linalg::quad::Real;
 use crate::linalg::types::{Matrix, Vector};
 
 /// `y = a x`, bit for bit as `y.gemv(1.0, a, x, 0.0)`.
@@ -27,42 +28,42 @@ pub fn gemv(y: &mut Vector, a: &Matrix, x: &Vector) {
     };
     let (ys, as_, xs) = (y.as_mut_slice(), a.as_slice(), x.as_slice());
     match shape {
-        9 => gemv_fixed::<1, 1>(ys, as_, xs),
-        10 => gemv_fixed::<1, 2>(ys, as_, xs),
-        11 => gemv_fixed::<1, 3>(ys, as_, xs),
-        12 => gemv_fixed::<1, 4>(ys, as_, xs),
-        13 => gemv_fixed::<1, 5>(ys, as_, xs),
-        14 => gemv_fixed::<1, 6>(ys, as_, xs),
-        17 => gemv_fixed::<2, 1>(ys, as_, xs),
-        18 => gemv_fixed::<2, 2>(ys, as_, xs),
-        19 => gemv_fixed::<2, 3>(ys, as_, xs),
-        20 => gemv_fixed::<2, 4>(ys, as_, xs),
-        21 => gemv_fixed::<2, 5>(ys, as_, xs),
-        22 => gemv_fixed::<2, 6>(ys, as_, xs),
-        25 => gemv_fixed::<3, 1>(ys, as_, xs),
-        26 => gemv_fixed::<3, 2>(ys, as_, xs),
-        27 => gemv_fixed::<3, 3>(ys, as_, xs),
-        28 => gemv_fixed::<3, 4>(ys, as_, xs),
-        29 => gemv_fixed::<3, 5>(ys, as_, xs),
-        30 => gemv_fixed::<3, 6>(ys, as_, xs),
-        33 => gemv_fixed::<4, 1>(ys, as_, xs),
-        34 => gemv_fixed::<4, 2>(ys, as_, xs),
-        35 => gemv_fixed::<4, 3>(ys, as_, xs),
-        36 => gemv_fixed::<4, 4>(ys, as_, xs),
-        37 => gemv_fixed::<4, 5>(ys, as_, xs),
-        38 => gemv_fixed::<4, 6>(ys, as_, xs),
-        41 => gemv_fixed::<5, 1>(ys, as_, xs),
-        42 => gemv_fixed::<5, 2>(ys, as_, xs),
-        43 => gemv_fixed::<5, 3>(ys, as_, xs),
-        44 => gemv_fixed::<5, 4>(ys, as_, xs),
-        45 => gemv_fixed::<5, 5>(ys, as_, xs),
-        46 => gemv_fixed::<5, 6>(ys, as_, xs),
-        49 => gemv_fixed::<6, 1>(ys, as_, xs),
-        50 => gemv_fixed::<6, 2>(ys, as_, xs),
-        51 => gemv_fixed::<6, 3>(ys, as_, xs),
-        52 => gemv_fixed::<6, 4>(ys, as_, xs),
-        53 => gemv_fixed::<6, 5>(ys, as_, xs),
-        54 => gemv_fixed::<6, 6>(ys, as_, xs),
+        9 => gemv_fixed::<1, 1, _>(ys, as_, xs),
+        10 => gemv_fixed::<1, 2, _>(ys, as_, xs),
+        11 => gemv_fixed::<1, 3, _>(ys, as_, xs),
+        12 => gemv_fixed::<1, 4, _>(ys, as_, xs),
+        13 => gemv_fixed::<1, 5, _>(ys, as_, xs),
+        14 => gemv_fixed::<1, 6, _>(ys, as_, xs),
+        17 => gemv_fixed::<2, 1, _>(ys, as_, xs),
+        18 => gemv_fixed::<2, 2, _>(ys, as_, xs),
+        19 => gemv_fixed::<2, 3, _>(ys, as_, xs),
+        20 => gemv_fixed::<2, 4, _>(ys, as_, xs),
+        21 => gemv_fixed::<2, 5, _>(ys, as_, xs),
+        22 => gemv_fixed::<2, 6, _>(ys, as_, xs),
+        25 => gemv_fixed::<3, 1, _>(ys, as_, xs),
+        26 => gemv_fixed::<3, 2, _>(ys, as_, xs),
+        27 => gemv_fixed::<3, 3, _>(ys, as_, xs),
+        28 => gemv_fixed::<3, 4, _>(ys, as_, xs),
+        29 => gemv_fixed::<3, 5, _>(ys, as_, xs),
+        30 => gemv_fixed::<3, 6, _>(ys, as_, xs),
+        33 => gemv_fixed::<4, 1, _>(ys, as_, xs),
+        34 => gemv_fixed::<4, 2, _>(ys, as_, xs),
+        35 => gemv_fixed::<4, 3, _>(ys, as_, xs),
+        36 => gemv_fixed::<4, 4, _>(ys, as_, xs),
+        37 => gemv_fixed::<4, 5, _>(ys, as_, xs),
+        38 => gemv_fixed::<4, 6, _>(ys, as_, xs),
+        41 => gemv_fixed::<5, 1, _>(ys, as_, xs),
+        42 => gemv_fixed::<5, 2, _>(ys, as_, xs),
+        43 => gemv_fixed::<5, 3, _>(ys, as_, xs),
+        44 => gemv_fixed::<5, 4, _>(ys, as_, xs),
+        45 => gemv_fixed::<5, 5, _>(ys, as_, xs),
+        46 => gemv_fixed::<5, 6, _>(ys, as_, xs),
+        49 => gemv_fixed::<6, 1, _>(ys, as_, xs),
+        50 => gemv_fixed::<6, 2, _>(ys, as_, xs),
+        51 => gemv_fixed::<6, 3, _>(ys, as_, xs),
+        52 => gemv_fixed::<6, 4, _>(ys, as_, xs),
+        53 => gemv_fixed::<6, 5, _>(ys, as_, xs),
+        54 => gemv_fixed::<6, 6, _>(ys, as_, xs),
         _ => y.gemv(1.0, a, x, 0.0),
     }
 }
@@ -72,21 +73,21 @@ pub fn gemv(y: &mut Vector, a: &Matrix, x: &Vector) {
 /// which decides the payload when both are NaN.
 #[inline(always)]
 #[allow(clippy::assign_op_pattern)]
-fn gemv_fixed<const R: usize, const C: usize>(y: &mut [f64], a: &[f64], x: &[f64]) {
-    let (y, a, x): (&mut [f64; R], &[f64], &[f64; C]) = (
+fn gemv_fixed<const R: usize, const C: usize, T: Real>(y: &mut [T], a: &[f64], x: &[T]) {
+    let (y, a, x): (&mut [T; R], &[f64], &[T; C]) = (
         y.try_into().expect("R rows"),
         &a[..R * C],
         x.try_into().expect("C columns"),
     );
-    let mut acc = [0.0; R];
+    let mut acc = [T::ZERO; R];
     for r in 0..R {
-        acc[r] = a[r] * x[0];
+        acc[r] = T::scaled(a[r], x[0]);
     }
     for j in 1..C {
         let xj = x[j];
         let col = &a[j * R..(j + 1) * R];
         for r in 0..R {
-            acc[r] = col[r] * xj + acc[r];
+            acc[r] = T::scaled(col[r], xj) + acc[r];
         }
     }
     *y = acc;
@@ -95,9 +96,9 @@ fn gemv_fixed<const R: usize, const C: usize>(y: &mut [f64], a: &[f64], x: &[f64
 /// `a x` for an R x C column-major `a` on arrays: [`gemv`]'s operations (nalgebra's order),
 /// for callers that keep their small vectors on the stack.
 #[inline(always)]
-pub fn mat_vec<const R: usize, const C: usize>(a: &[f64], x: &[f64; C]) -> [f64; R] {
-    let mut y = [0.0; R];
-    gemv_fixed::<R, C>(&mut y, a, x);
+pub fn mat_vec<const R: usize, const C: usize, T: Real>(a: &[f64], x: &[T; C]) -> [T; R] {
+    let mut y = [T::ZERO; R];
+    gemv_fixed::<R, C, T>(&mut y, a, x);
     y
 }
 
@@ -128,21 +129,25 @@ pub fn mat_vec_cols<const R: usize>(a: &[f64], x: &[f64]) -> [f64; R] {
 /// without a copy): the same operations on the mapped entries.
 #[inline(always)]
 #[allow(clippy::assign_op_pattern)]
-pub fn mat_vec_cols_by<const R: usize>(a: &[f64], x: &[f64], map: impl Fn(f64) -> f64) -> [f64; R] {
-    let mut acc = [0.0; R];
+pub fn mat_vec_cols_by<const R: usize, T: Real>(
+    a: &[f64],
+    x: &[T],
+    map: impl Fn(T) -> T,
+) -> [T; R] {
+    let mut acc = [T::ZERO; R];
     let Some((&x0, rest)) = x.split_first() else {
         return acc;
     };
     let a = &a[..R * x.len()];
     let x0 = map(x0);
     for r in 0..R {
-        acc[r] = a[r] * x0;
+        acc[r] = T::scaled(a[r], x0);
     }
     for (j, &xj) in rest.iter().enumerate() {
         let xj = map(xj);
         let col = &a[(j + 1) * R..(j + 2) * R];
         for r in 0..R {
-            acc[r] = col[r] * xj + acc[r];
+            acc[r] = T::scaled(col[r], xj) + acc[r];
         }
     }
     acc
@@ -171,8 +176,8 @@ pub fn mat_vec_dyn(y: &mut [f64], a: &[f64], x: &[f64]) {
 /// `b <- P^{-1} b` with the (dirty) column-major Cholesky factor `l` of an N x N P:
 /// [`chol_solve`]'s operations on an array.
 #[inline(always)]
-pub fn chol_solve_array<const N: usize>(l: &[f64], b: &mut [f64; N]) {
-    chol_solve_fixed::<N>(l, b);
+pub fn chol_solve_array<const N: usize, T: Real>(l: &[f64], b: &mut [T; N]) {
+    chol_solve_fixed::<N, T>(l, b);
 }
 
 /// `x <- a x` through the buffer `tmp` (no allocation), bit for bit as `a * &x`.
@@ -205,21 +210,28 @@ pub fn chol_solve(chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>, b: &mut Vector)
     assert_eq!(l.nrows(), b.len(), "chol_solve: dimensions mismatch");
     with_dim!(
         b.len(),
-        chol_solve_fixed(l.as_slice(), b.as_mut_slice()),
+        chol_solve_f64(l.as_slice(), b.as_mut_slice()),
         chol.solve_mut(b)
     )
 }
 
+/// [`chol_solve_fixed`] on one trial's numbers (for `with_dim!`, which names N only).
 #[inline(always)]
-fn chol_solve_fixed<const N: usize>(l: &[f64], b: &mut [f64]) {
-    let (l, b): (&[f64], &mut [f64; N]) = (&l[..N * N], b.try_into().expect("N rows"));
-    lower_solve_fixed::<N>(l, b);
+fn chol_solve_f64<const N: usize>(l: &[f64], b: &mut [f64]) {
+    chol_solve_fixed::<N, f64>(l, b);
+}
+
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+fn chol_solve_fixed<const N: usize, T: Real>(l: &[f64], b: &mut [T]) {
+    let (l, b): (&[f64], &mut [T; N]) = (&l[..N * N], b.try_into().expect("N rows"));
+    lower_solve_fixed::<N, T>(l, b);
     for i in (0..N).rev() {
-        let mut dot = 0.0;
+        let mut dot = T::ZERO;
         for j in i + 1..N {
-            dot += l[i * N + j] * b[j];
+            dot = dot + T::scaled(l[i * N + j], b[j]);
         }
-        b[i] = (b[i] - dot) / l[i * N + i];
+        b[i] = (b[i] - dot).over(l[i * N + i]);
     }
 }
 
@@ -228,16 +240,16 @@ fn chol_solve_fixed<const N: usize>(l: &[f64], b: &mut [f64]) {
 /// (as the checked version does; then `b` is partly solved).
 #[inline(always)]
 #[allow(clippy::assign_op_pattern)]
-fn lower_solve_fixed<const N: usize>(l: &[f64], b: &mut [f64; N]) -> bool {
+fn lower_solve_fixed<const N: usize, T: Real>(l: &[f64], b: &mut [T; N]) -> bool {
     for i in 0..N {
         let d = l[i * N + i];
         if d == 0.0 {
             return false;
         }
-        let coeff = b[i] / d;
+        let coeff = b[i].over(d);
         b[i] = coeff;
         for j in i + 1..N {
-            b[j] = -coeff * l[i * N + j] + b[j];
+            b[j] = (-coeff).times(l[i * N + j]) + b[j];
         }
     }
     true
@@ -301,7 +313,7 @@ fn mahalanobis_fixed<const N: usize>(e: &[f64], p: &[f64]) -> Option<Option<f64>
         return Some(None);
     }
     let mut w: [f64; N] = e.try_into().expect("N rows");
-    if !lower_solve_fixed::<N>(m, &mut w) {
+    if !lower_solve_fixed::<N, _>(m, &mut w) {
         return Some(None);
     }
     let mut s = 0.0;
@@ -337,13 +349,21 @@ pub fn mahalanobis_sq_factored(e: &[f64], factor: &[f64]) -> Option<f64> {
 
 #[inline(always)]
 fn mahalanobis_from_factor<const N: usize>(e: &[f64], l: &[f64]) -> Option<f64> {
-    let mut w: [f64; N] = e.try_into().ok()?;
-    if !lower_solve_fixed::<N>(l, &mut w) {
+    mahalanobis_factored_array::<N, f64>(e.try_into().ok()?, l)
+}
+
+/// [`mahalanobis_sq_factored`] of N numbers: one trial's error, or four trials' in lanes
+/// ([`crate::linalg::quad::F64x4`]). `None` at a zero diagonal of the factor.
+#[inline(always)]
+#[allow(clippy::assign_op_pattern)]
+pub fn mahalanobis_factored_array<const N: usize, T: Real>(e: [T; N], l: &[f64]) -> Option<T> {
+    let mut w = e;
+    if !lower_solve_fixed::<N, T>(&l[..N * N], &mut w) {
         return None;
     }
-    let mut s = 0.0;
+    let mut s = T::ZERO;
     for v in w {
-        s += v * v;
+        s = s + v * v;
     }
     Some(s)
 }
@@ -458,7 +478,7 @@ pub fn gemm(y: &mut Matrix, a: &Matrix, b: &Matrix) {
         ($nn:literal) => {{
             let (a, b) = (a.as_slice(), b.as_slice());
             for (j, col) in y.as_mut_slice().chunks_exact_mut($nn).enumerate() {
-                gemv_fixed::<$nn, $nn>(col, a, &b[j * $nn..(j + 1) * $nn]);
+                gemv_fixed::<$nn, $nn, _>(col, a, &b[j * $nn..(j + 1) * $nn]);
             }
         }};
     }
@@ -533,7 +553,7 @@ pub fn chol_solve_matrix(chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>, b: &mut 
     macro_rules! columns {
         ($nn:literal) => {{
             for col in b.as_mut_slice().chunks_exact_mut($nn) {
-                chol_solve_fixed::<$nn>(l.as_slice(), col);
+                chol_solve_fixed::<$nn, _>(l.as_slice(), col);
             }
         }};
     }
@@ -616,7 +636,7 @@ pub fn gemv_square(y: &mut [f64], a: &Matrix, x: &[f64]) {
 
 #[inline(always)]
 fn gemv_fixed_square<const N: usize>(y: &mut [f64], a: &[f64], x: &[f64]) {
-    gemv_fixed::<N, N>(y, a, x)
+    gemv_fixed::<N, N, _>(y, a, x)
 }
 
 impl PackedLu {
@@ -659,7 +679,7 @@ pub fn lower_solve(l: &Matrix, b: &mut Vector) -> bool {
     macro_rules! fixed {
         ($nn:literal) => {{
             let b: &mut [f64; $nn] = b.as_mut_slice().try_into().expect("n rows");
-            lower_solve_fixed::<$nn>(l.as_slice(), b)
+            lower_solve_fixed::<$nn, _>(l.as_slice(), b)
         }};
     }
     match n {
@@ -691,7 +711,7 @@ pub fn gemm_square<const N: usize>(y: &mut [f64], a: &[f64], b: &[f64]) {
     let (y, a, b) = (&mut y[..N * N], &a[..N * N], &b[..N * N]);
     if N < 6 {
         for (col, bj) in y.chunks_exact_mut(N).zip(b.chunks_exact(N)) {
-            gemv_fixed::<N, N>(col, a, bj);
+            gemv_fixed::<N, N, _>(col, a, bj);
         }
     } else {
         assert!(

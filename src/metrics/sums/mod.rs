@@ -5,6 +5,7 @@
 //! the sums of a variant, their recording during a trial and their merging.
 mod estimators;
 mod nees;
+mod quad;
 mod row;
 mod shared;
 #[cfg(test)]
@@ -16,6 +17,7 @@ use crate::network::Traffic;
 pub use estimators::EstimatorStat;
 use estimators::EstimatorState;
 pub use nees::*;
+pub use quad::{QuadTrials, QUAD};
 pub use row::*;
 pub use shared::record_shared;
 

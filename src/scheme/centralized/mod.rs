@@ -1,10 +1,13 @@
 //! Baselines: the centralized Kalman filter that receives raw measurements — all of them (the
 //! bound every scheme is measured against), or each with probability `rate` (Dormann et al.
 //! Section V: a measurement not sent is lost for good).
-use super::fast_path::{BatchSink, FastTrialError, LockstepFastPath, Losses, TrialCache};
+use super::fast_path::{
+    BatchSink, FastTrialError, LockstepFastPath, Losses, QuadData, QuadSink, TrialCache,
+};
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use crate::filter::{kf, Gaussian};
 use crate::linalg::fixed;
+use crate::linalg::quad::F64x4;
 use crate::linalg::{cholesky, symmetrize, Matrix, Vector};
 use crate::link::{as_sent, round_as_sent, Message, Received, Transmission};
 use nalgebra::{Cholesky, Dyn};
@@ -15,7 +18,7 @@ use std::sync::RwLock;
 
 mod aggregated;
 mod means;
-use means::advance_means;
+use means::{advance_means, advance_quad};
 pub mod params;
 
 /// Sensor that forwards its raw measurement with probability `send_probability`.
@@ -238,7 +241,7 @@ impl CentralizedKf {
         let (f, p) = (t.f().as_slice(), self.est.cov.as_slice());
         let x: &[f64; N] = self.est.mean.as_slice().try_into().expect("N entries");
         // kf::predict: F x, and F P F^T + Q symmetrized.
-        let mut y: [f64; N] = fixed::mat_vec::<N, N>(f, x);
+        let mut y: [f64; N] = fixed::mat_vec::<N, N, _>(f, x);
         let mut fp = [0.0; 36];
         fixed::gemm_square::<N>(&mut fp, f, p);
         let mut m = [0.0; 36];
@@ -247,7 +250,7 @@ impl CentralizedKf {
         fixed::symmetrize_square::<N>(&mut m);
         // Information::from_gaussian: y = P^{-1} x, Y = P^{-1} symmetrized.
         cholesky_square::<N>(&mut m, "covariance")?;
-        fixed::chol_solve_array::<N>(&m, &mut y);
+        fixed::chol_solve_array::<N, _>(&m, &mut y);
         let mut info = [0.0; 36];
         fixed::chol_inverse_sym_square::<N>(&m, &mut info);
         // add_measurement of each arrived measurement, in sensor order.
@@ -263,7 +266,7 @@ impl CentralizedKf {
         }
         // Information::to_gaussian.
         cholesky_square::<N>(&mut info, "information matrix")?;
-        fixed::chol_solve_array::<N>(&info, &mut y);
+        fixed::chol_solve_array::<N, _>(&info, &mut y);
         self.est.mean.copy_from_slice(&y);
         fixed::chol_inverse_sym_square::<N>(&info, self.est.cov.as_mut_slice());
         Ok(())
@@ -578,6 +581,34 @@ impl AllData<'_> {
     }
 }
 
+impl CentralizedScheme {
+    /// [`LockstepFastPath::run_quad_fast`] for state dimension N (checked by the caller): the
+    /// means of [`AllData::batch`] in lanes, step after step, each step's four reported at
+    /// once. `None` (nothing reported) when the schedule does not reach `steps`.
+    fn quad_steps<const N: usize>(
+        &self,
+        quad: &QuadData,
+        steps: usize,
+        sink: &mut dyn QuadSink,
+    ) -> Option<Result<(), FastTrialError>> {
+        let (sys, linear) = (&self.system, self.linear.as_ref()?);
+        let sched = self.schedule.as_ref()?.through(sys, steps)?;
+        let traffic = all_sent_traffic(sys);
+        let f = sys.transition.f().as_slice();
+        let x0: &[f64; N] = sys.prior.mean.as_slice().try_into().ok()?;
+        let mut x: [F64x4; N] = x0.map(F64x4::splat);
+        let s = quad.sensors;
+        for (k, step) in (1..=steps).zip(&sched.steps) {
+            x = advance_quad(f, linear, step, &x, &quad.readings[(k - 1) * s..k * s]);
+            let factor = step.nees_factor.as_deref();
+            if let Err(source) = sink.step_quad(k, &x, &step.cov, factor, traffic) {
+                return Some(Err(FastTrialError::Sink { k, source }));
+            }
+        }
+        Some(Ok(()))
+    }
+}
+
 /// What network::deliver counts when every sensor sends its measurement.
 fn all_sent_traffic(sys: &System) -> crate::network::Traffic {
     let mut traffic = crate::network::Traffic::default();
@@ -700,6 +731,40 @@ impl LockstepFastPath for CentralizedScheme {
             est,
         };
         all.batch_any(trials, steps, sink)
+    }
+
+    /// The all-data KF (rate 1, linear scalar sensors, state dimensions 1..=6) on a block drawn
+    /// side by side: the batch's operations on the four trials' lanes.
+    fn quads(&self) -> bool {
+        self.schedule.is_some()
+    }
+
+    fn run_quad_fast(
+        &self,
+        quad: &QuadData,
+        steps: usize,
+        sink: &mut dyn QuadSink,
+    ) -> Option<Result<(), FastTrialError>> {
+        self.schedule.as_ref()?;
+        let linear = self.linear.as_ref()?;
+        let readings = quad.readings.get(..steps * quad.sensors)?;
+        let fits = quad.sensors == linear.len()
+            && linear.iter().all(|(m, _)| *m == 1)
+            && quad.truth.len() >= steps * quad.n
+            // What `covers` checks: every reading finite as it arrives.
+            && readings.iter().all(|z| z.map(as_sent).all_finite());
+        if !fits || quad.n != self.system.state_dim() {
+            return None;
+        }
+        match quad.n {
+            1 => self.quad_steps::<1>(quad, steps, sink),
+            2 => self.quad_steps::<2>(quad, steps, sink),
+            3 => self.quad_steps::<3>(quad, steps, sink),
+            4 => self.quad_steps::<4>(quad, steps, sink),
+            5 => self.quad_steps::<5>(quad, steps, sink),
+            6 => self.quad_steps::<6>(quad, steps, sink),
+            _ => None,
+        }
     }
 
     /// The generic loop's [`ForwardingSensor`] coins and [`CentralizedKf`] steps without the
