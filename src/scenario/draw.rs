@@ -290,9 +290,7 @@ fn initial_state<const N: usize>(
 }
 
 /// The steps of a trial whose sensors are all linear and scalar (`plans`, [`Drawer::scalar`]),
-/// from x_0 = `x`: x_k = F x_{k-1} + Q^{1/2} w, then z_k^i = H_i x_k + R_i^{1/2} v of each
-/// sensor in order, each handed to `put(k - 1, x_k, i, z_k^i)` (the same draws and products
-/// as the general loop of [`draw_fixed`]).
+/// from x_0 = `x`: each step's [`scalar_step`] in turn.
 #[inline(always)]
 fn scalar_steps<const N: usize>(
     plans: &[ScalarDraw],
@@ -301,19 +299,34 @@ fn scalar_steps<const N: usize>(
     rng: &mut Xoshiro256PlusPlus,
     mut put: impl FnMut(usize, &[f64; N], usize, f64),
 ) {
-    use crate::linalg::fixed::mat_vec;
     let t = &exp.system.transition;
     let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
     for k in 0..exp.steps {
-        let w = standard_normals::<N>(rng);
-        let a: [f64; N] = mat_vec(f, &x);
-        let b: [f64; N] = mat_vec(q_sqrt, &w);
-        x = std::array::from_fn(|i| a[i] + b[i]);
-        for (i, plan) in plans.iter().enumerate() {
-            let v = standard_normal(rng);
-            let hx: [f64; 1] = mat_vec(&plan.h[..N], &x);
-            put(k, &x, i, hx[0] + plan.r_sqrt * v);
-        }
+        scalar_step(plans, (f, q_sqrt), &mut x, rng, |x, i, z| put(k, x, i, z));
+    }
+}
+
+/// One step of a trial whose sensors are all linear and scalar (`plans`): x_k = F x_{k-1} +
+/// Q^{1/2} w (`fq`: F and Q^{1/2}, column-major), then z_k^i = H_i x_k + R_i^{1/2} v of each
+/// sensor in order, each handed to `put(x_k, i, z_k^i)`: the same draws and products as the
+/// general loop of [`draw_fixed`].
+#[inline(always)]
+fn scalar_step<const N: usize>(
+    plans: &[ScalarDraw],
+    (f, q_sqrt): (&[f64], &[f64]),
+    x: &mut [f64; N],
+    rng: &mut Xoshiro256PlusPlus,
+    mut put: impl FnMut(&[f64; N], usize, f64),
+) {
+    use crate::linalg::fixed::mat_vec;
+    let w = standard_normals::<N>(rng);
+    let a: [f64; N] = mat_vec(f, x);
+    let b: [f64; N] = mat_vec(q_sqrt, &w);
+    *x = std::array::from_fn(|i| a[i] + b[i]);
+    for (i, plan) in plans.iter().enumerate() {
+        let v = standard_normal(rng);
+        let hx: [f64; 1] = mat_vec(&plan.h[..N], x);
+        put(x, i, hx[0] + plan.r_sqrt * v);
     }
 }
 
@@ -362,22 +375,31 @@ fn draw_quad_fixed<const N: usize>(
     first: usize,
     quad: &mut QuadData,
 ) {
+    const LANES: usize = F64x4::LANES;
     let sensors = quad.sensors;
-    for j in 0..F64x4::LANES {
-        let mut rng = trial_rng(exp.seed, (first + j) as u64, 0);
-        let x = initial_state::<N>(d, exp, &mut rng);
-        let (truth, readings, peaks) = (&mut quad.truth, &mut quad.readings, &mut quad.peaks);
-        scalar_steps(&d.scalar, exp, x, &mut rng, |k, x, i, zi| {
-            readings[k * sensors + i].0[j] = zi;
-            if let Some(p) = peaks.get_mut(i) {
-                *p = p.max(zi.abs());
-            }
-            if i + 1 == sensors {
-                for (t, v) in truth[k * N..(k + 1) * N].iter_mut().zip(x) {
-                    t.0[j] = *v;
+    let t = &exp.system.transition;
+    let fq = (t.f().as_slice(), t.q_sqrt().as_slice());
+    // The four trials step by step in turn (each from its own stream, in its own order of
+    // draws): four independent chains of draws in flight instead of one.
+    let mut rngs: [Xoshiro256PlusPlus; LANES] =
+        std::array::from_fn(|j| trial_rng(exp.seed, (first + j) as u64, 0));
+    let mut xs: [[f64; N]; LANES] = std::array::from_fn(|j| initial_state(d, exp, &mut rngs[j]));
+    let (truth, readings, peaks) = (&mut quad.truth, &mut quad.readings, &mut quad.peaks);
+    for k in 0..exp.steps {
+        for (j, (x, lane_rng)) in xs.iter_mut().zip(&mut rngs).enumerate() {
+            // The stream in a local for the step (its state can then stay in registers).
+            let mut rng = lane_rng.clone();
+            scalar_step(&d.scalar, fq, x, &mut rng, |_, i, zi| {
+                readings[k * sensors + i].0[j] = zi;
+                if let Some(p) = peaks.get_mut(i) {
+                    *p = p.max(zi.abs());
                 }
+            });
+            *lane_rng = rng;
+            for (t, v) in truth[k * N..(k + 1) * N].iter_mut().zip(x.iter()) {
+                t.0[j] = *v;
             }
-        });
+        }
     }
 }
 
