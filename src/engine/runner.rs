@@ -70,8 +70,10 @@ pub use crate::scenario::draw::{draw_trial, TrialData};
 /// when the variants run blocks in lockstep, else one) and the variants' work space.
 struct Worker<'e> {
     drawers: Vec<Drawer>,
-    /// A block drawn side by side ([`run_quad_block`]).
+    /// A block drawn side by side ([`run_quad_block`]) and its trials' running sums (`None`
+    /// inside: the rows do not fit [`QuadTrials`]).
     quad: crate::scenario::draw::QuadData,
+    lanes: Option<Option<QuadTrials>>,
     scratch: LoopBuffers,
     /// The trial states of a lockstep batch, restarted for each variant of each block.
     states: Vec<crate::metrics::TrialState<'e>>,
@@ -82,6 +84,7 @@ impl<'e> Worker<'e> {
         Self {
             drawers: vec![Drawer::new(exp)],
             quad: Default::default(),
+            lanes: None,
             scratch: LoopBuffers::new(exp.system.n_sensors()),
             states: Vec::new(),
         }
@@ -163,7 +166,7 @@ fn run_block<'e>(
             .variants
             .iter()
             .all(|v| v.scheme.fast_path().is_some_and(|f| f.quads()))
-        && worker.drawers[0].draws_quads(exp)
+        && worker.drawers[0].start_quad(exp, trials.start, &mut worker.quad)
     {
         run_quad_block(exp, trials, sums, worker)?;
         on_trial(n);
@@ -230,11 +233,11 @@ fn run_block<'e>(
     Ok(true)
 }
 
-/// [`run_block`] for a block of four trials drawn side by side ([`Drawer::draw_quad`]) and
-/// run by every variant's [`LockstepFastPath::run_quad_fast`], recorded by
-/// [`QuadTrials`]. A variant that declines the block, or whose fast path or recording fails,
-/// runs the block's trials one at a time from the block's start (the numbers of the batch, or
-/// the failure the one-at-a-time loop reports).
+/// [`run_block`] for a block of four trials drawn side by side, a step at a time (started by
+/// [`Drawer::start_quad`]), and run by every variant's [`LockstepFastPath::run_quad_fast`],
+/// recorded by [`QuadTrials`]. A variant that declines the block, or whose fast path or
+/// recording fails, runs the block's trials one at a time from the block's start (the numbers
+/// of the batch, or the failure the one-at-a-time loop reports).
 ///
 /// [`LockstepFastPath::run_quad_fast`]: crate::scheme::fast_path::LockstepFastPath::run_quad_fast
 fn run_quad_block<'e>(
@@ -243,27 +246,33 @@ fn run_quad_block<'e>(
     sums: &mut [Sums],
     worker: &mut Worker<'e>,
 ) -> Result<(), RunError> {
-    worker.drawers[0].draw_quad(exp, trials.start, &mut worker.quad);
+    let Worker {
+        drawers,
+        quad,
+        lanes,
+        states,
+        scratch,
+    } = worker;
     let mut drawn = false;
     for (v, s) in sums.iter_mut().enumerate().take(exp.variants.len()) {
-        let outcome = QuadTrials::new(s, exp.steady_from).and_then(|mut lanes| {
-            let fast = exp.variants[v].scheme.fast_path()?;
-            let mut recorder = QuadRecorder {
-                security: exp.security,
-                groups: &exp.groups,
+        let outcome = exp.variants[v].scheme.fast_path().and_then(|fast| {
+            let lanes = lanes
+                .get_or_insert_with(|| QuadTrials::new(s, exp.steady_from))
+                .as_mut()?;
+            lanes.restart(s, exp.steady_from);
+            let mut run = QuadRun {
+                exp,
+                drawer: &drawers[0],
+                quad,
                 sums: s,
-                truth: &worker.quad.truth,
-                n: worker.quad.n,
-                lanes: &mut lanes,
+                lanes,
             };
-            let outcome = fast.run_quad_fast(&worker.quad, exp.steps, &mut recorder);
+            let outcome = fast.run_quad_fast(&mut run, exp.steps);
             if let Some(Ok(())) = outcome {
-                while worker.states.len() < F64x4::LANES {
-                    worker
-                        .states
-                        .push(s.trial_state(&exp.groups, exp.steady_from));
+                while states.len() < F64x4::LANES {
+                    states.push(s.trial_state(&exp.groups, exp.steady_from));
                 }
-                lanes.close(s, &mut worker.states[..F64x4::LANES]);
+                lanes.close(s, &mut states[..F64x4::LANES]);
             }
             outcome
         });
@@ -275,36 +284,50 @@ fn run_quad_block<'e>(
             s.clear();
         }
         if !drawn {
-            while worker.drawers.len() < trials.len() {
-                worker.drawers.push(Drawer::new(exp));
+            while drawers.len() < trials.len() {
+                drawers.push(Drawer::new(exp));
             }
-            for (d, trial) in worker.drawers.iter_mut().zip(trials.clone()) {
+            for (d, trial) in drawers.iter_mut().zip(trials.clone()) {
                 d.draw(exp, trial);
             }
             drawn = true;
         }
-        for (d, trial) in worker.drawers.iter().zip(trials.clone()) {
-            run_variant(exp, trial, v, &d.data, s, &mut worker.scratch)?;
+        for (d, trial) in drawers.iter().zip(trials.clone()) {
+            run_variant(exp, trial, v, &d.data, s, scratch)?;
         }
     }
-    note_readings(exp, &worker.quad.peaks, sums);
+    // Every step drawn (a variant may have stopped early), for the peaks of every reading.
+    while quad.drawn < exp.steps {
+        drawers[0].draw_quad_step(exp, quad);
+    }
+    note_readings(exp, &quad.peaks, sums);
     Ok(())
 }
 
-/// The sink of a block drawn side by side: the four trials' steps into the variant's block
-/// sums ([`QuadTrials::record`]).
-struct QuadRecorder<'a> {
-    /// What securing the frames adds to each step's traffic (the fast paths price none).
-    security: crate::link::security::SecuritySpec,
-    groups: &'a [(String, Vec<usize>)],
+/// A block of four trials run side by side ([`crate::scheme::fast_path::QuadBlock`]): the steps
+/// drawn as the fast path asks for them, each step's estimates recorded into the variant's
+/// block sums ([`QuadTrials::record`]).
+struct QuadRun<'a> {
+    exp: &'a Experiment,
+    drawer: &'a Drawer,
+    quad: &'a mut crate::scenario::draw::QuadData,
     sums: &'a mut Sums,
-    /// The block's truths ([`crate::scenario::draw::QuadData::truth`]) and state dimension.
-    truth: &'a [F64x4],
-    n: usize,
     lanes: &'a mut QuadTrials,
 }
 
-impl crate::scheme::fast_path::QuadSink for QuadRecorder<'_> {
+impl crate::scheme::fast_path::QuadBlock for QuadRun<'_> {
+    fn shape(&self) -> (usize, usize) {
+        (self.quad.n, self.quad.sensors)
+    }
+
+    fn readings(&mut self, k: usize) -> &[F64x4] {
+        while self.quad.drawn < k.min(self.exp.steps) {
+            self.drawer.draw_quad_step(self.exp, self.quad);
+        }
+        let s = self.quad.sensors;
+        &self.quad.readings[(k - 1) * s..k * s]
+    }
+
     fn step_quad(
         &mut self,
         k: usize,
@@ -313,18 +336,13 @@ impl crate::scheme::fast_path::QuadSink for QuadRecorder<'_> {
         factor: Option<&[f64]>,
         mut traffic: network::Traffic,
     ) -> Result<(), crate::linalg::LinalgError> {
-        traffic.secure(&self.security, traffic.star_frames());
-        let truth = &self.truth[(k - 1) * self.n..k * self.n];
-        let recorded = self.lanes.record(
-            self.sums,
-            self.groups,
-            k,
-            truth,
-            means,
-            cov,
-            factor,
-            traffic,
-        );
+        traffic.secure(&self.exp.security, traffic.star_frames());
+        let n = self.quad.n;
+        let truth = &self.quad.truth[(k - 1) * n..k * n];
+        let groups = &self.exp.groups;
+        let recorded = self
+            .lanes
+            .record(self.sums, groups, k, truth, means, cov, factor, traffic);
         // Not side by side (no usable factor): the runner reruns the trials one at a time.
         recorded
             .then_some(())

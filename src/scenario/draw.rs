@@ -6,7 +6,6 @@ use crate::linalg::quad::F64x4;
 use crate::linalg::Vector;
 use crate::metrics::precision::raise_peaks;
 use crate::scenario::experiment::Experiment;
-pub use crate::scheme::fast_path::QuadData;
 use crate::stats::seeding::trial_rng;
 use multiversion::multiversion;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -330,75 +329,117 @@ fn scalar_step<const N: usize>(
     }
 }
 
+/// Four trials of a runner block drawn side by side, a step at a time, for a lockstep fast
+/// path ([`crate::scheme::fast_path::QuadBlock`]): lane j of every entry is trial j's number,
+/// the very number [`Drawer::draw`] gives that trial. Only for scenarios whose sensors are all
+/// linear and scalar and whose state has at most 6 components ([`Drawer::draws_quads`]).
+#[derive(Default)]
+pub struct QuadData {
+    /// State components.
+    pub n: usize,
+    /// Sensors (one reading each per step).
+    pub sensors: usize,
+    /// Steps drawn so far.
+    pub drawn: usize,
+    /// x_k's component c: `truth[(k - 1) * n + c]`.
+    pub truth: Vec<F64x4>,
+    /// z_k^i: `readings[(k - 1) * sensors + i]`.
+    pub readings: Vec<F64x4>,
+    /// Per sensor, the largest |reading| of the four trials so far ([`Drawer::peaks`]);
+    /// empty when the scenario sends doubles.
+    pub peaks: Vec<f64>,
+    /// Each trial's stream and state x_{drawn} (its first n entries).
+    rngs: Vec<Xoshiro256PlusPlus>,
+    states: [[f64; 6]; F64x4::LANES],
+}
+
 impl Drawer {
-    /// Whether [`Drawer::draw_quad`] takes this experiment's trials.
+    /// Whether [`Drawer::start_quad`] takes this experiment's trials.
     pub(crate) fn draws_quads(&self, exp: &Experiment) -> bool {
         !self.scalar.is_empty() && (1..=6).contains(&exp.system.state_dim())
     }
 
-    /// Draws trials `first..first + 4` into `quad`, lane j trial `first + j` (see
-    /// [`QuadData`]); false, with nothing drawn, when [`Drawer::draws_quads`] is false.
-    pub(crate) fn draw_quad(
-        &mut self,
-        exp: &Experiment,
-        first: usize,
-        quad: &mut QuadData,
-    ) -> bool {
+    /// Starts trials `first..first + 4` in `quad` (lane j: trial `first + j`): each trial's
+    /// stream and x_0; the steps are drawn by [`Drawer::draw_quad_step`]. False, with nothing
+    /// started, when [`Drawer::draws_quads`] is false.
+    pub(crate) fn start_quad(&self, exp: &Experiment, first: usize, quad: &mut QuadData) -> bool {
         if !self.draws_quads(exp) {
             return false;
         }
-        let (n, sensors) = (exp.system.state_dim(), self.scalar.len());
+        let n = exp.system.state_dim();
         quad.n = n;
-        quad.sensors = sensors;
+        quad.sensors = self.scalar.len();
+        quad.drawn = 0;
         quad.truth.resize(exp.steps * n, F64x4::default());
-        quad.readings.resize(exp.steps * sensors, F64x4::default());
+        quad.readings
+            .resize(exp.steps * quad.sensors, F64x4::default());
         quad.peaks.clear();
         quad.peaks.resize(self.peaks.len(), 0.0);
-        match n {
-            1 => draw_quad_fixed::<1>(self, exp, first, quad),
-            2 => draw_quad_fixed::<2>(self, exp, first, quad),
-            3 => draw_quad_fixed::<3>(self, exp, first, quad),
-            4 => draw_quad_fixed::<4>(self, exp, first, quad),
-            5 => draw_quad_fixed::<5>(self, exp, first, quad),
-            _ => draw_quad_fixed::<6>(self, exp, first, quad),
+        quad.rngs.clear();
+        for (j, state) in quad.states.iter_mut().enumerate() {
+            let mut rng = trial_rng(exp.seed, (first + j) as u64, 0);
+            *state = match n {
+                1 => widen(initial_state::<1>(self, exp, &mut rng)),
+                2 => widen(initial_state::<2>(self, exp, &mut rng)),
+                3 => widen(initial_state::<3>(self, exp, &mut rng)),
+                4 => widen(initial_state::<4>(self, exp, &mut rng)),
+                5 => widen(initial_state::<5>(self, exp, &mut rng)),
+                _ => widen(initial_state::<6>(self, exp, &mut rng)),
+            };
+            quad.rngs.push(rng);
         }
         true
     }
+
+    /// Draws the next step of the four trials started by [`Drawer::start_quad`] (nothing once
+    /// every step is drawn).
+    pub(crate) fn draw_quad_step(&self, exp: &Experiment, quad: &mut QuadData) {
+        if quad.drawn >= exp.steps || quad.rngs.len() != F64x4::LANES {
+            return;
+        }
+        match quad.n {
+            1 => draw_quad_fixed::<1>(self, exp, quad),
+            2 => draw_quad_fixed::<2>(self, exp, quad),
+            3 => draw_quad_fixed::<3>(self, exp, quad),
+            4 => draw_quad_fixed::<4>(self, exp, quad),
+            5 => draw_quad_fixed::<5>(self, exp, quad),
+            _ => draw_quad_fixed::<6>(self, exp, quad),
+        }
+        quad.drawn += 1;
+    }
 }
 
-/// [`Drawer::draw_quad`] for state dimension N: each trial's [`draw_fixed`] draws, written
-/// into its lane. Compiled also for AVX2 and picked at run time (the same IEEE operations).
+/// A state of N components in the 6 of [`QuadData`]'s states.
+fn widen<const N: usize>(x: [f64; N]) -> [f64; 6] {
+    let mut w = [0.0; 6];
+    w[..N].copy_from_slice(&x);
+    w
+}
+
+/// [`Drawer::draw_quad_step`] for state dimension N: each trial's step as [`draw_fixed`] draws
+/// it, written into its lane. Compiled also for AVX2 and picked at run time (the same IEEE
+/// operations).
 #[multiversion(targets("x86_64+avx2"))]
-fn draw_quad_fixed<const N: usize>(
-    d: &Drawer,
-    exp: &Experiment,
-    first: usize,
-    quad: &mut QuadData,
-) {
-    const LANES: usize = F64x4::LANES;
-    let sensors = quad.sensors;
+fn draw_quad_fixed<const N: usize>(d: &Drawer, exp: &Experiment, quad: &mut QuadData) {
+    let (k, sensors) = (quad.drawn, quad.sensors);
     let t = &exp.system.transition;
     let fq = (t.f().as_slice(), t.q_sqrt().as_slice());
-    // The four trials step by step in turn (each from its own stream, in its own order of
-    // draws): four independent chains of draws in flight instead of one.
-    let mut rngs: [Xoshiro256PlusPlus; LANES] =
-        std::array::from_fn(|j| trial_rng(exp.seed, (first + j) as u64, 0));
-    let mut xs: [[f64; N]; LANES] = std::array::from_fn(|j| initial_state(d, exp, &mut rngs[j]));
     let (truth, readings, peaks) = (&mut quad.truth, &mut quad.readings, &mut quad.peaks);
-    for k in 0..exp.steps {
-        for (j, (x, lane_rng)) in xs.iter_mut().zip(&mut rngs).enumerate() {
-            // The stream in a local for the step (its state can then stay in registers).
-            let mut rng = lane_rng.clone();
-            scalar_step(&d.scalar, fq, x, &mut rng, |_, i, zi| {
-                readings[k * sensors + i].0[j] = zi;
-                if let Some(p) = peaks.get_mut(i) {
-                    *p = p.max(zi.abs());
-                }
-            });
-            *lane_rng = rng;
-            for (t, v) in truth[k * N..(k + 1) * N].iter_mut().zip(x.iter()) {
-                t.0[j] = *v;
+    let lanes = quad.states.iter_mut().zip(&mut quad.rngs);
+    for (j, (state, lane_rng)) in lanes.enumerate() {
+        // The stream and the state in locals for the step (in registers, not memory).
+        let mut rng = lane_rng.clone();
+        let mut x: [f64; N] = std::array::from_fn(|c| state[c]);
+        scalar_step(&d.scalar, fq, &mut x, &mut rng, |_, i, zi| {
+            readings[k * sensors + i].0[j] = zi;
+            if let Some(p) = peaks.get_mut(i) {
+                *p = p.max(zi.abs());
             }
+        });
+        *lane_rng = rng;
+        state[..N].copy_from_slice(&x);
+        for (t, v) in truth[k * N..(k + 1) * N].iter_mut().zip(x) {
+            t.0[j] = v;
         }
     }
 }

@@ -63,49 +63,38 @@ pub trait LockstepFastPath: Send + Sync {
     fn quads(&self) -> bool {
         false
     }
-    /// Runs the four trials of a runner block drawn side by side (`quad`, lane j: trial j),
-    /// reporting each step of the four at once to `sink`: lane j is what
+    /// Runs the four trials of a runner block side by side (`block`, lane j: trial j),
+    /// reporting each step of the four at once to it: lane j is what
     /// [`LockstepFastPath::run_batch_fast`] gives trial j. The same conditions as a batch (no
-    /// coins drawn). `None` (nothing reported): not for this data; the runner then draws the
-    /// trials one by one and runs them as a batch or one at a time.
+    /// coins drawn). `None` (nothing reported): not for this block; after an error the runner
+    /// runs the trials one at a time, so that the run fails with the error the one-at-a-time
+    /// loop reports.
     fn run_quad_fast(
         &self,
-        quad: &QuadData,
+        block: &mut dyn QuadBlock,
         steps: usize,
-        sink: &mut dyn QuadSink,
     ) -> Option<Result<(), FastTrialError>> {
-        let _ = (quad, steps, sink);
+        let _ = (block, steps);
         None
     }
 }
 
-/// Four trials of a runner block drawn side by side for a lockstep fast path
-/// ([`LockstepFastPath::run_quad_fast`], drawn by the runner's drawer): lane j of every entry is
-/// trial j's number, the very number the runner's drawer gives that trial alone. Only for scenarios
-/// whose sensors are all linear and scalar and whose state has at most 6 components.
-#[derive(Default)]
-pub struct QuadData {
-    /// State components.
-    pub n: usize,
-    /// Sensors (one reading each per step).
-    pub sensors: usize,
-    /// x_k's component c: `truth[(k - 1) * n + c]`.
-    pub truth: Vec<F64x4>,
-    /// z_k^i: `readings[(k - 1) * sensors + i]`.
-    pub readings: Vec<F64x4>,
-    /// Per sensor, the largest |reading| of the four trials ; empty when
-    /// the scenario sends doubles.
-    pub peaks: Vec<f64>,
-}
+/// The runner's side of a block of four trials run side by side
+/// ([`LockstepFastPath::run_quad_fast`]; lane j of every [`F64x4`]: trial j): it hands out each
+/// step's readings, drawn when first asked for (so that drawing the next step overlaps the
+/// dependent divisions of this one), and records each step's estimates.
+pub trait QuadBlock {
+    /// The state's components and the sensors, each sensor linear and scalar.
+    fn shape(&self) -> (usize, usize);
 
-/// Receives the steps of a [`LockstepFastPath::run_quad_fast`] block: the four trials' step at
-/// once.
-pub trait QuadSink {
-    /// Step `k` (1-based) of the four trials: their means (component c: `means[c]`, lane j:
-    /// trial j), the covariance they share with its Cholesky factor as
-    /// [`crate::linalg::fixed::nees_factor`] makes it (when the scheme has it), and the step's
-    /// traffic (each trial's). An error when the sink cannot record the step side by side:
-    /// the runner then runs the block's trials one at a time.
+    /// z_k^i of the four trials at step `k` (1-based), sensors in order: each the number the
+    /// runner's drawer gives that trial alone.
+    fn readings(&mut self, k: usize) -> &[F64x4];
+
+    /// Step `k` of the four trials: their means (component c: `means[c]`), the covariance they
+    /// share with its Cholesky factor as [`crate::linalg::fixed::nees_factor`] makes it (when
+    /// the scheme has it), and the step's traffic (each trial's). An error when the step
+    /// cannot be recorded side by side: the runner then runs the block's trials one at a time.
     fn step_quad(
         &mut self,
         k: usize,

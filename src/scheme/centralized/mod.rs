@@ -2,7 +2,7 @@
 //! bound every scheme is measured against), or each with probability `rate` (Dormann et al.
 //! Section V: a measurement not sent is lost for good).
 use super::fast_path::{
-    BatchSink, FastTrialError, LockstepFastPath, Losses, QuadData, QuadSink, TrialCache,
+    BatchSink, FastTrialError, LockstepFastPath, Losses, QuadBlock, TrialCache,
 };
 use super::{FusionCenter, Scheme, SchemeError, SchemeInstance, SensorNode, System};
 use crate::filter::{kf, Gaussian};
@@ -584,12 +584,13 @@ impl AllData<'_> {
 impl CentralizedScheme {
     /// [`LockstepFastPath::run_quad_fast`] for state dimension N (checked by the caller): the
     /// means of [`AllData::batch`] in lanes, step after step, each step's four reported at
-    /// once. `None` (nothing reported) when the schedule does not reach `steps`.
+    /// once. `None` (nothing reported) when the schedule does not reach `steps`. A reading
+    /// that is not finite as it arrives (what `covers` refuses) ends the block in an error:
+    /// the trials then run one at a time, where the generic center reports it.
     fn quad_steps<const N: usize>(
         &self,
-        quad: &QuadData,
+        block: &mut dyn QuadBlock,
         steps: usize,
-        sink: &mut dyn QuadSink,
     ) -> Option<Result<(), FastTrialError>> {
         let (sys, linear) = (&self.system, self.linear.as_ref()?);
         let sched = self.schedule.as_ref()?.through(sys, steps)?;
@@ -597,11 +598,15 @@ impl CentralizedScheme {
         let f = sys.transition.f().as_slice();
         let x0: &[f64; N] = sys.prior.mean.as_slice().try_into().ok()?;
         let mut x: [F64x4; N] = x0.map(F64x4::splat);
-        let s = quad.sensors;
         for (k, step) in (1..=steps).zip(&sched.steps) {
-            x = advance_quad(f, linear, step, &x, &quad.readings[(k - 1) * s..k * s]);
+            let zs = block.readings(k);
+            if !zs.iter().all(|z| z.map(as_sent).all_finite()) {
+                let source = crate::linalg::LinalgError::NonFinite;
+                return Some(Err(FastTrialError::Sink { k, source }));
+            }
+            x = advance_quad(f, linear, step, &x, zs);
             let factor = step.nees_factor.as_deref();
-            if let Err(source) = sink.step_quad(k, &x, &step.cov, factor, traffic) {
+            if let Err(source) = block.step_quad(k, &x, &step.cov, factor, traffic) {
                 return Some(Err(FastTrialError::Sink { k, source }));
             }
         }
@@ -741,28 +746,25 @@ impl LockstepFastPath for CentralizedScheme {
 
     fn run_quad_fast(
         &self,
-        quad: &QuadData,
+        block: &mut dyn QuadBlock,
         steps: usize,
-        sink: &mut dyn QuadSink,
     ) -> Option<Result<(), FastTrialError>> {
         self.schedule.as_ref()?;
         let linear = self.linear.as_ref()?;
-        let readings = quad.readings.get(..steps * quad.sensors)?;
-        let fits = quad.sensors == linear.len()
-            && linear.iter().all(|(m, _)| *m == 1)
-            && quad.truth.len() >= steps * quad.n
-            // What `covers` checks: every reading finite as it arrives.
-            && readings.iter().all(|z| z.map(as_sent).all_finite());
-        if !fits || quad.n != self.system.state_dim() {
+        let (n, sensors) = block.shape();
+        if sensors != linear.len()
+            || linear.iter().any(|(m, _)| *m != 1)
+            || n != self.system.state_dim()
+        {
             return None;
         }
-        match quad.n {
-            1 => self.quad_steps::<1>(quad, steps, sink),
-            2 => self.quad_steps::<2>(quad, steps, sink),
-            3 => self.quad_steps::<3>(quad, steps, sink),
-            4 => self.quad_steps::<4>(quad, steps, sink),
-            5 => self.quad_steps::<5>(quad, steps, sink),
-            6 => self.quad_steps::<6>(quad, steps, sink),
+        match n {
+            1 => self.quad_steps::<1>(block, steps),
+            2 => self.quad_steps::<2>(block, steps),
+            3 => self.quad_steps::<3>(block, steps),
+            4 => self.quad_steps::<4>(block, steps),
+            5 => self.quad_steps::<5>(block, steps),
+            6 => self.quad_steps::<6>(block, steps),
             _ => None,
         }
     }
