@@ -328,3 +328,59 @@ fn lockstep_batches_of_any_size_give_each_trial_its_own_numbers() {
     }
     assert!(batched >= 18, "both scenarios batch ({batched} batches)");
 }
+
+/// The runner's blocks of four run side by side (drawn into lanes, the all-data KF's means and
+/// the recording four trials at a time) give the sums of running each trial alone and folding
+/// the blocks in order, serialized bit for bit: the peers' KF Monte Carlo with a short last
+/// block, a 3-state model with three groups, steady state from step 4 and two all-data variants,
+/// the same with readings sent as doubles, and a model whose readings overflow a single (every
+/// trial fails, as the one-at-a-time loop reports it).
+#[test]
+fn blocks_side_by_side_give_the_sums_of_each_trial_alone() {
+    let three = |extra: &str, r: &str| {
+        format!(
+            "{extra}name = \"t\"\ntrials = 11\nsteps = 25\nseed = 9\nsteady_state_from = 4\n\
+             [model]\nkind = \"matrix\"\nF = [[0.9, 0.2, 0.0], [0.0, 0.95, 0.1], [0.05, 0.0, 0.8]]\n\
+             Q = [[1.0, 0.1, 0.0], [0.1, 0.5, 0.0], [0.0, 0.0, 0.2]]\n\
+             [prior]\nmean = [0.0, 1.0, -1.0]\ncov_diag = [1.0, 2.0, 0.5]\n\
+             [groups]\na = [0]\nb = [1, 2]\nall = [0, 1, 2]\n\
+             [[sensors]]\nobserve = [0]\nR_diag = [{r}]\n[[sensors]]\nobserve = [2]\nR_diag = [0.5]\n\
+             [[schemes]]\nkind = \"centralized-kf\"\nlabel = \"first\"\n\
+             [[schemes]]\nkind = \"centralized-kf\"\nlabel = \"second\"\n"
+        )
+    };
+    let mut kfmc = build::load(include_str!("../benches/data/kfmc.toml"), "kfmc").unwrap();
+    kfmc.trials = 14;
+    let cases = [
+        kfmc,
+        build::load(&three("", "2.0"), "t").unwrap(),
+        build::load(&three("reals = \"f64\"\n", "2.0"), "t").unwrap(),
+        build::load(&three("", "1e78"), "t").unwrap(),
+    ];
+    for exp in &cases {
+        let opts = runner::RunOptions { threads: 1 };
+        let run = runner::run(exp, opts, &|_| {}).unwrap();
+        let mut folded = runner::empty_sums(exp);
+        for b in 0..runner::n_blocks(exp.trials) {
+            let mut block = runner::empty_sums(exp);
+            for trial in runner::block_trials(b, exp.trials) {
+                let data = runner::draw_trial(exp, trial);
+                runner::run_trial_on(exp, trial, &data, &mut block).unwrap();
+                if exp.reals.is_f32() {
+                    let mut peaks = Vec::new();
+                    hushfuse::metrics::precision::note_peaks(&data.measurements, &mut peaks);
+                    block.iter_mut().for_each(|s| s.merge_peaks(&peaks));
+                }
+            }
+            runner::fold_block(&mut folded, &block);
+        }
+        let json = |s: &[hushfuse::metrics::Sums]| serde_json::to_string(s).unwrap();
+        assert_eq!(json(&run), json(&folded), "{}", exp.name);
+    }
+    let overflow = runner::run(&cases[3], runner::RunOptions { threads: 1 }, &|_| {}).unwrap();
+    assert!(
+        overflow.iter().all(|s| s.failure.is_some()),
+        "readings beyond a single fail"
+    );
+    assert!(cases[1].reals.is_f32() && !cases[2].reals.is_f32());
+}

@@ -469,6 +469,34 @@ mod tests {
     use crate::scenario::build::load;
     use crate::scenario::builtin;
 
+    /// A model of `n` states whose F mixes them, with three linear scalar sensors.
+    fn scalar_only(n: usize) -> String {
+        let f: Vec<String> = (0..n)
+            .map(|i| {
+                let row: Vec<String> = (0..n)
+                    .map(|j| {
+                        format!(
+                            "{}",
+                            if i == j {
+                                0.9
+                            } else {
+                                0.1 / (1 + i + j) as f64
+                            }
+                        )
+                    })
+                    .collect();
+                format!("[{}]", row.join(", "))
+            })
+            .collect();
+        let mean = vec!["0.5"; n].join(", ");
+        let var = vec!["2.0"; n].join(", ");
+        let last = n - 1;
+        format!(
+                "name = \"t\"\ntrials = 3\nsteps = 9\nseed = 11\n[model]\nkind = \"matrix\"\nF = [{f}]\nQ = [{f}]\n[prior]\nmean = [{mean}]\ncov_diag = [{var}]\n[[sensors]]\nobserve = [0]\nR_diag = [4.0]\n[[sensors]]\nobserve = [{last}]\nR_diag = [0.25]\n[[sensors]]\nobserve = [0]\nR_diag = [1.0]\n[[schemes]]\nkind = \"centralized-kf\"\n",
+                f = f.join(", ")
+            )
+    }
+
     /// A random walk of `n` states, a scalar sensor of the first state and a vector sensor of
     /// the first two, with readings of every sign.
     fn walk(n: usize) -> String {
@@ -510,38 +538,58 @@ mod tests {
         assert!(drawer.peaks.is_empty());
     }
 
+    /// A block drawn side by side holds in lane j, step after step, the truth, readings of
+    /// trial `first + j` as `Drawer::draw` draws that trial alone, and the peaks of the four;
+    /// for every state dimension it takes, with readings of every sign, and nothing for a
+    /// vector sensor or a state wider than 6.
+    #[test]
+    fn a_block_drawn_side_by_side_holds_each_trial_in_its_lane() {
+        let mut texts: Vec<String> = (1..=6).map(scalar_only).collect();
+        texts.push(format!("reals = \"f64\"\n{}", scalar_only(2)));
+        for text in &texts {
+            let exp = load(text, "t").unwrap();
+            let n = exp.system.state_dim();
+            let mut alone = Drawer::new(&exp);
+            let quads = Drawer::new(&exp);
+            let mut quad = QuadData::default();
+            for first in [0, 5] {
+                assert!(quads.start_quad(&exp, first, &mut quad));
+                for _ in 0..exp.steps + 2 {
+                    quads.draw_quad_step(&exp, &mut quad);
+                }
+                assert_eq!(quad.drawn, exp.steps);
+                let mut peaks = vec![0.0; alone.peaks.len()];
+                for j in 0..4 {
+                    alone.draw(&exp, first + j);
+                    for k in 0..exp.steps {
+                        for c in 0..n {
+                            let (got, want) = (quad.truth[k * n + c].0[j], alone.data.truth[k][c]);
+                            assert_eq!(got.to_bits(), want.to_bits(), "trial {}", first + j);
+                        }
+                        for (i, z) in alone.data.measurements[k].iter().enumerate() {
+                            let got = quad.readings[k * quad.sensors + i].0[j];
+                            assert_eq!(got.to_bits(), z[0].to_bits(), "trial {}", first + j);
+                        }
+                    }
+                    for (p, q) in peaks.iter_mut().zip(&alone.peaks) {
+                        *p = f64::max(*p, *q);
+                    }
+                }
+                assert_eq!(quad.peaks, peaks);
+            }
+        }
+        for text in [walk(2), walk(8)] {
+            let exp = load(&text, "t").unwrap();
+            assert!(!Drawer::new(&exp).start_quad(&exp, 0, &mut QuadData::default()));
+        }
+    }
+
     /// The fixed-size drawer gives the dynamic drawer's numbers bit for bit: truth, readings
     /// and peaks, for every state dimension it takes, with only scalar linear sensors (its
     /// tight loop; a model whose F mixes the states and readings of every sign) and with a
     /// vector sensor among them (its general loop).
     #[test]
     fn the_fixed_size_drawer_draws_the_dynamic_drawers_numbers() {
-        let scalar_only = |n: usize| {
-            let f: Vec<String> = (0..n)
-                .map(|i| {
-                    let row: Vec<String> = (0..n)
-                        .map(|j| {
-                            format!(
-                                "{}",
-                                if i == j {
-                                    0.9
-                                } else {
-                                    0.1 / (1 + i + j) as f64
-                                }
-                            )
-                        })
-                        .collect();
-                    format!("[{}]", row.join(", "))
-                })
-                .collect();
-            let mean = vec!["0.5"; n].join(", ");
-            let var = vec!["2.0"; n].join(", ");
-            let last = n - 1;
-            format!(
-                "name = \"t\"\ntrials = 3\nsteps = 9\nseed = 11\n[model]\nkind = \"matrix\"\nF = [{f}]\nQ = [{f}]\n[prior]\nmean = [{mean}]\ncov_diag = [{var}]\n[[sensors]]\nobserve = [0]\nR_diag = [4.0]\n[[sensors]]\nobserve = [{last}]\nR_diag = [0.25]\n[[sensors]]\nobserve = [0]\nR_diag = [1.0]\n[[schemes]]\nkind = \"centralized-kf\"\n",
-                f = f.join(", ")
-            )
-        };
         let bits = |d: &TrialData| -> Vec<u64> {
             let truth = d.truth.iter().flat_map(|v| v.iter().map(|x| x.to_bits()));
             let readings = d

@@ -463,3 +463,148 @@ fn counting_divided_values_puts_each_in_its_exact_bin() {
     assert_eq!(h.counts, want.counts);
     assert_eq!(h.touched, want.touched);
 }
+
+/// Four trials recorded side by side (`QuadTrials`, lane j: trial j) give the sums of
+/// recording each trial alone, serialized bit for bit: state dimensions 1 to 6, two groups,
+/// steady state from step 3, 45 steps (more steady NEES than one flush of a trial), one trial
+/// that diverges and one with a NaN mean at one step. A factor with a zero diagonal, a
+/// missing factor and a state of 7 are refused with nothing recorded.
+#[test]
+fn four_trials_side_by_side_record_what_each_records_alone() {
+    use crate::linalg::fixed::nees_factor;
+    use crate::linalg::quad::F64x4;
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(11);
+    let steps = 45;
+    let traffic = Traffic {
+        messages: 3,
+        bits: 96,
+        frame_bits: 500,
+        downlink_bits: 7,
+        ..Traffic::default()
+    };
+    for n in 1..=6usize {
+        let groups = vec![
+            ("first".to_string(), vec![0]),
+            ("all".to_string(), (0..n).collect()),
+        ];
+        let covs: Vec<Matrix> = (0..steps)
+            .map(|_| {
+                let a = Matrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+                &a * a.transpose() + Matrix::identity(n, n)
+            })
+            .collect();
+        let truths: Vec<Vec<Vector>> = (0..4)
+            .map(|_| {
+                (0..steps)
+                    .map(|_| Vector::from_fn(n, |_, _| rng.random_range(-5.0..5.0)))
+                    .collect()
+            })
+            .collect();
+        // Trial 2 is far off for 12 steps in a row (it diverges); trial 3 has a NaN at step 30.
+        let means: Vec<Vec<Vector>> = (0..4)
+            .map(|j| {
+                (0..steps)
+                    .map(|k| {
+                        let off = if j == 2 && (10..22).contains(&k) {
+                            1e3
+                        } else {
+                            1.0
+                        };
+                        let mut m = &truths[j][k]
+                            + Vector::from_fn(n, |_, _| off * rng.random_range(-1.0..1.0));
+                        if j == 3 && k == 29 {
+                            m[0] = f64::NAN;
+                        }
+                        m
+                    })
+                    .collect()
+            })
+            .collect();
+        let side = |v: &[Vector], c: usize| F64x4(std::array::from_fn(|j| v[j][c]));
+        let mut quad = Sums::new(groups.len(), steps, n);
+        let mut lanes = QuadTrials::new(&quad, 3).unwrap();
+        for k in 1..=steps {
+            let factor = nees_factor(&covs[k - 1]).unwrap();
+            let t: Vec<Vector> = truths.iter().map(|t| t[k - 1].clone()).collect();
+            let m: Vec<Vector> = means.iter().map(|m| m[k - 1].clone()).collect();
+            let truth: Vec<F64x4> = (0..n).map(|c| side(&t, c)).collect();
+            let mean: Vec<F64x4> = (0..n).map(|c| side(&m, c)).collect();
+            let cov = &covs[k - 1];
+            assert!(lanes.record(
+                &mut quad,
+                &groups,
+                k,
+                &truth,
+                &mean,
+                cov,
+                Some(&factor),
+                traffic
+            ));
+            if k == 7 {
+                // Refused, nothing recorded: a zero diagonal, no factor, a factor too short.
+                let mut zero = factor.clone();
+                zero[(n - 1) * n + n - 1] = 0.0;
+                let before = serde_json::to_string(&quad).unwrap();
+                assert!(!lanes.record(
+                    &mut quad,
+                    &groups,
+                    k,
+                    &truth,
+                    &mean,
+                    cov,
+                    Some(&zero),
+                    traffic
+                ));
+                assert!(!lanes.record(&mut quad, &groups, k, &truth, &mean, cov, None, traffic));
+                assert!(!lanes.record(
+                    &mut quad,
+                    &groups,
+                    k,
+                    &truth,
+                    &mean,
+                    cov,
+                    Some(&factor[1..]),
+                    traffic
+                ));
+                assert_eq!(serde_json::to_string(&quad).unwrap(), before);
+            }
+        }
+        let mut states: Vec<_> = (0..4).map(|_| quad.trial_state(&groups, 3)).collect();
+        lanes.close(&mut quad, &mut states);
+        let mut alone = Sums::new(groups.len(), steps, n);
+        for j in 0..4 {
+            let mut state = alone.trial_state(&groups, 3);
+            for k in 1..=steps {
+                let est = Gaussian::new(means[j][k - 1].clone(), covs[k - 1].clone());
+                let f = nees_factor(&covs[k - 1]).unwrap();
+                state
+                    .record_factored(&mut alone, k, &truths[j][k - 1], &est, &f, traffic)
+                    .unwrap();
+            }
+            state.close(&mut alone);
+        }
+        assert_eq!(alone.diverged, 2, "n {n}: trials 2 and 3 diverge");
+        let bits = |s: &Sums| serde_json::to_string(s).unwrap();
+        assert_eq!(bits(&quad), bits(&alone), "n {n}");
+        assert_eq!(quad.nees_hist, alone.nees_hist, "n {n}");
+    }
+    let wide = Sums::new(1, 3, 7);
+    let mut lanes = QuadTrials::new(&wide, 1).unwrap();
+    let seven = vec![F64x4::splat(1.0); 7];
+    let mut wide = wide;
+    let eye = Matrix::identity(7, 7);
+    let groups = vec![("all".to_string(), (0..7).collect())];
+    let factor = vec![1.0; 49];
+    assert!(!lanes.record(
+        &mut wide,
+        &groups,
+        1,
+        &seven,
+        &seven,
+        &eye,
+        Some(&factor),
+        traffic
+    ));
+    assert!(QuadTrials::new(&Sums::new(STACK_WIDTH, 3, 2), 1).is_none());
+}
