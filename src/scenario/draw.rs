@@ -334,20 +334,20 @@ fn scalar_step<const N: usize>(
 /// the very number [`Drawer::draw`] gives that trial. Only for scenarios whose sensors are all
 /// linear and scalar and whose state has at most 6 components ([`Drawer::draws_quads`]).
 #[derive(Default)]
-pub struct QuadData {
+pub(crate) struct QuadData {
     /// State components.
-    pub n: usize,
+    pub(crate) n: usize,
     /// Sensors (one reading each per step).
-    pub sensors: usize,
+    pub(crate) sensors: usize,
     /// Steps drawn so far.
-    pub drawn: usize,
+    pub(crate) drawn: usize,
     /// x_k's component c: `truth[(k - 1) * n + c]`.
-    pub truth: Vec<F64x4>,
+    pub(crate) truth: Vec<F64x4>,
     /// z_k^i: `readings[(k - 1) * sensors + i]`.
-    pub readings: Vec<F64x4>,
+    pub(crate) readings: Vec<F64x4>,
     /// Per sensor, the largest |reading| of the four trials so far ([`Drawer::peaks`]);
     /// empty when the scenario sends doubles.
-    pub peaks: Vec<f64>,
+    pub(crate) peaks: Vec<f64>,
     /// Each trial's stream and state x_{drawn} (its first n entries).
     rngs: Vec<Xoshiro256PlusPlus>,
     states: [[f64; 6]; F64x4::LANES],

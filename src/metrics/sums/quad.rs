@@ -38,7 +38,7 @@ pub struct QuadTrials {
 
 impl QuadTrials {
     /// The state of four new trials adding into `sums`; `None` when a row does not fit the
-    /// stack ([`STACK_WIDTH`]): those record one trial at a time.
+    /// stack (16 fields): those record one trial at a time.
     pub fn new(sums: &Sums, steady_from: usize) -> Option<Self> {
         if sums.layout().width() > STACK_WIDTH {
             return None;
