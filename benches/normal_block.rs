@@ -15,6 +15,7 @@
 //! 0.85.
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use hushfuse::stats::normal_block::fill_standard_normal;
+use hushfuse::stats::normal_lanes::NormalLanes;
 use rand::{RngCore, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -41,6 +42,16 @@ fn bench(cr: &mut Criterion) {
             bn.iter(|| {
                 fill_standard_normal(&mut out, &mut rng);
                 black_box(&mut out);
+            })
+        });
+        // Four streams side by side (the runner's blocks of the all-data KF): a quarter of
+        // the calls, four draws each.
+        let mut lanes = NormalLanes::seeded([1, 2, 3, 4]).expect("lanes agree with the crates");
+        let mut quads = vec![hushfuse::linalg::quad::F64x4::default(); n / 4];
+        g.bench_function(BenchmarkId::new("normal_lanes", n), |bn| {
+            bn.iter(|| {
+                lanes.fill(&mut quads);
+                black_box(&mut quads);
             })
         });
         g.bench_function(BenchmarkId::new("raw_u64", n), |bn| {

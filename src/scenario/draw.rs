@@ -6,7 +6,8 @@ use crate::linalg::quad::F64x4;
 use crate::linalg::Vector;
 use crate::metrics::precision::raise_peaks;
 use crate::scenario::experiment::Experiment;
-use crate::stats::seeding::trial_rng;
+use crate::stats::normal_lanes::NormalLanes;
+use crate::stats::seeding::{trial_rng, trial_seed};
 use multiversion::multiversion;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
@@ -348,9 +349,11 @@ pub(crate) struct QuadData {
     /// Per sensor, the largest |reading| of the four trials so far ([`Drawer::peaks`]);
     /// empty when the scenario sends doubles.
     pub(crate) peaks: Vec<f64>,
-    /// Each trial's stream and state x_{drawn} (its first n entries).
-    rngs: Vec<Xoshiro256PlusPlus>,
-    states: [[f64; 6]; F64x4::LANES],
+    /// Every normal draw of the four trials, in each stream's order: x_0's n, then per step
+    /// the state's n and one per sensor (drawn at the start, in one pass).
+    noise: Vec<F64x4>,
+    /// The four trials' states x_{drawn} (the first n entries), side by side.
+    states: [F64x4; 6],
 }
 
 impl Drawer {
@@ -366,35 +369,39 @@ impl Drawer {
         if !self.draws_quads(exp) {
             return false;
         }
+        let seeds = std::array::from_fn(|j| trial_seed(exp.seed, (first + j) as u64, 0));
+        let Some(mut normals) = NormalLanes::seeded(seeds) else {
+            return false;
+        };
         let n = exp.system.state_dim();
         quad.n = n;
         quad.sensors = self.scalar.len();
         quad.drawn = 0;
+        quad.noise
+            .resize(n + exp.steps * (n + quad.sensors), F64x4::default());
+        normals.fill(&mut quad.noise);
         quad.truth.resize(exp.steps * n, F64x4::default());
         quad.readings
             .resize(exp.steps * quad.sensors, F64x4::default());
         quad.peaks.clear();
         quad.peaks.resize(self.peaks.len(), 0.0);
-        quad.rngs.clear();
-        for (j, state) in quad.states.iter_mut().enumerate() {
-            let mut rng = trial_rng(exp.seed, (first + j) as u64, 0);
-            *state = match n {
-                1 => widen(initial_state::<1>(self, exp, &mut rng)),
-                2 => widen(initial_state::<2>(self, exp, &mut rng)),
-                3 => widen(initial_state::<3>(self, exp, &mut rng)),
-                4 => widen(initial_state::<4>(self, exp, &mut rng)),
-                5 => widen(initial_state::<5>(self, exp, &mut rng)),
-                _ => widen(initial_state::<6>(self, exp, &mut rng)),
-            };
-            quad.rngs.push(rng);
-        }
+        quad.states = match n {
+            1 => quad_initial::<1>(self, exp, &quad.noise),
+            2 => quad_initial::<2>(self, exp, &quad.noise),
+            3 => quad_initial::<3>(self, exp, &quad.noise),
+            4 => quad_initial::<4>(self, exp, &quad.noise),
+            5 => quad_initial::<5>(self, exp, &quad.noise),
+            _ => quad_initial::<6>(self, exp, &quad.noise),
+        };
         true
     }
 
     /// Draws the next step of the four trials started by [`Drawer::start_quad`] (nothing once
     /// every step is drawn).
     pub(crate) fn draw_quad_step(&self, exp: &Experiment, quad: &mut QuadData) {
-        if quad.drawn >= exp.steps || quad.rngs.len() != F64x4::LANES {
+        if quad.drawn >= exp.steps
+            || quad.noise.len() != quad.n + exp.steps * (quad.n + quad.sensors)
+        {
             return;
         }
         match quad.n {
@@ -409,39 +416,51 @@ impl Drawer {
     }
 }
 
-/// A state of N components in the 6 of [`QuadData`]'s states.
-fn widen<const N: usize>(x: [f64; N]) -> [f64; 6] {
-    let mut w = [0.0; 6];
-    w[..N].copy_from_slice(&x);
-    w
+/// [`initial_state`] of the four trials side by side: x_0 = mean + S n_0, n_0 the first N
+/// draws of each stream (`noise`'s first N; in the first N of the 6 entries).
+fn quad_initial<const N: usize>(d: &Drawer, exp: &Experiment, noise: &[F64x4]) -> [F64x4; 6] {
+    let n0: &[F64x4; N] = noise[..N].try_into().expect("N draws");
+    let a: [F64x4; N] = crate::linalg::fixed::mat_vec(d.x0_sqrt.as_slice(), n0);
+    let mean = exp.initial_truth.mean.as_slice();
+    std::array::from_fn(|c| {
+        if c < N {
+            F64x4::splat(mean[c]) + a[c]
+        } else {
+            F64x4::default()
+        }
+    })
 }
 
-/// [`Drawer::draw_quad_step`] for state dimension N: each trial's step as [`draw_fixed`] draws
-/// it, written into its lane. Compiled also for AVX2 and picked at run time (the same IEEE
-/// operations).
+/// [`Drawer::draw_quad_step`] for state dimension N: [`scalar_step`]'s draws and products on
+/// the four trials' lanes (each lane's draws from its own stream, in its order). Compiled also
+/// for AVX2 and picked at run time (the same IEEE operations).
 #[multiversion(targets("x86_64+avx2"))]
 fn draw_quad_fixed<const N: usize>(d: &Drawer, exp: &Experiment, quad: &mut QuadData) {
+    use crate::linalg::fixed::mat_vec;
+    use crate::linalg::quad::Real;
     let (k, sensors) = (quad.drawn, quad.sensors);
     let t = &exp.system.transition;
-    let fq = (t.f().as_slice(), t.q_sqrt().as_slice());
-    let (truth, readings, peaks) = (&mut quad.truth, &mut quad.readings, &mut quad.peaks);
-    let lanes = quad.states.iter_mut().zip(&mut quad.rngs);
-    for (j, (state, lane_rng)) in lanes.enumerate() {
-        // The stream and the state in locals for the step (in registers, not memory).
-        let mut rng = lane_rng.clone();
-        let mut x: [f64; N] = std::array::from_fn(|c| state[c]);
-        scalar_step(&d.scalar, fq, &mut x, &mut rng, |_, i, zi| {
-            readings[k * sensors + i].0[j] = zi;
-            if let Some(p) = peaks.get_mut(i) {
-                *p = p.max(zi.abs());
+    let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
+    let x: [F64x4; N] = std::array::from_fn(|c| quad.states[c]);
+    // This step's draws: the state's N, then one per sensor.
+    let first = N + k * (N + sensors);
+    let noise = &quad.noise[first..first + N + sensors];
+    let w: &[F64x4; N] = noise[..N].try_into().expect("N draws");
+    let a: [F64x4; N] = mat_vec(f, &x);
+    let b: [F64x4; N] = mat_vec(q_sqrt, w);
+    let x: [F64x4; N] = std::array::from_fn(|c| a[c] + b[c]);
+    for (i, (plan, &v)) in d.scalar.iter().zip(&noise[N..]).enumerate() {
+        let hx: [F64x4; 1] = mat_vec(&plan.h[..N], &x);
+        let z = hx[0] + F64x4::scaled(plan.r_sqrt, v);
+        quad.readings[k * sensors + i] = z;
+        if let Some(p) = quad.peaks.get_mut(i) {
+            for zj in z.0 {
+                *p = p.max(zj.abs());
             }
-        });
-        *lane_rng = rng;
-        state[..N].copy_from_slice(&x);
-        for (t, v) in truth[k * N..(k + 1) * N].iter_mut().zip(x) {
-            t.0[j] = v;
         }
     }
+    quad.states[..N].copy_from_slice(&x);
+    quad.truth[k * N..(k + 1) * N].copy_from_slice(&x);
 }
 
 /// N standard normal draws in order: a function, not a closure, so that it is inlined into

@@ -7,6 +7,7 @@ pub mod chi2;
 pub mod lloyd_max;
 pub mod normal;
 pub mod normal_block;
+pub mod normal_lanes;
 pub mod quadform;
 pub mod quadform2d;
 pub mod rate_distortion;

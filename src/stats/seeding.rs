@@ -99,7 +99,7 @@ pub fn message_key(key: usize, m: u64) -> usize {
     }
 }
 
-fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
+pub(crate) fn trial_seed(seed: u64, trial: u64, stream: u64) -> u64 {
     splitmix64(splitmix64(splitmix64(seed) ^ trial) ^ stream)
 }
 
