@@ -34,6 +34,10 @@ pub struct QuadTrials {
     count: usize,
     /// Every steady-state NEES of the four trials, for the histogram at the end.
     nees: Vec<f64>,
+    /// The traffic of the last steps recorded and how many trial-steps had it, not yet in
+    /// [`Sums::sensors`] (integer counts: adding them a run of steps at a time changes
+    /// nothing).
+    senders: Option<(Traffic, u64)>,
 }
 
 impl QuadTrials {
@@ -53,6 +57,7 @@ impl QuadTrials {
             diverged: [false; QUAD],
             count: 0,
             nees: Vec::new(),
+            senders: None,
         })
     }
 
@@ -107,7 +112,15 @@ impl QuadTrials {
             _ => false,
         };
         if done {
-            sums.add_senders(&traffic, QUAD as u64);
+            match &mut self.senders {
+                Some((last, count)) if *last == traffic => *count += QUAD as u64,
+                pending => {
+                    if let Some((last, count)) = pending.take() {
+                        sums.add_senders(&last, count);
+                    }
+                    *pending = Some((traffic, QUAD as u64));
+                }
+            }
         }
         done
     }
@@ -117,6 +130,9 @@ impl QuadTrials {
     /// alone closes. The steady-state NEES go into the histogram together (its counts are
     /// integers: the order they are added in changes nothing).
     pub fn close(&mut self, sums: &mut Sums, states: &mut [TrialState]) {
+        if let Some((last, count)) = self.senders.take() {
+            sums.add_senders(&last, count);
+        }
         let n = sums.state_dim.max(1) as f64;
         sums.nees_hist.add_divided(&self.nees, n);
         for (j, state) in states.iter_mut().enumerate().take(QUAD) {

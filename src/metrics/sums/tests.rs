@@ -481,6 +481,8 @@ fn four_trials_side_by_side_record_what_each_records_alone() {
         bits: 96,
         frame_bits: 500,
         downlink_bits: 7,
+        scheduled: 0b101,
+        senders: 0b100,
         ..Traffic::default()
     };
     for n in 1..=6usize {
@@ -585,6 +587,10 @@ fn four_trials_side_by_side_record_what_each_records_alone() {
             state.close(&mut alone);
         }
         assert_eq!(alone.diverged, 2, "n {n}: trials 2 and 3 diverge");
+        assert_eq!(
+            alone.sensors,
+            [[4 * steps as u64, 0], [0, 0], [4 * steps as u64; 2]]
+        );
         let bits = |s: &Sums| serde_json::to_string(s).unwrap();
         assert_eq!(bits(&quad), bits(&alone), "n {n}");
         assert_eq!(quad.nees_hist, alone.nees_hist, "n {n}");
