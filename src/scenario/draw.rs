@@ -208,22 +208,33 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
     let mut rng = trial_rng(exp.seed, trial as u64, 0);
     let normal = standard_normal;
     let normals = standard_normals::<N>;
-    let mut x: [f64; N] = initial_state(d, exp, &mut rng);
+    let arr = |v: &Vector| -> [f64; N] { v.as_slice().try_into().expect("state dimension") };
+    // x_0 = mean + S n_0.
+    let a: [f64; N] = mat_vec(d.x0_sqrt.as_slice(), &normals(&mut rng));
+    let mean = arr(&exp.initial_truth.mean);
+    let mut x: [f64; N] = std::array::from_fn(|i| mean[i] + a[i]);
     let t = &sys.transition;
     let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
     d.peaks.fill(0.0);
     if !d.scalar.is_empty() {
         // Every sensor linear and scalar: the loop below without its per-sensor dispatch.
-        let (data, peaks) = (&mut d.data, &mut d.peaks);
-        scalar_steps(&d.scalar, exp, x, &mut rng, |k, x, i, zi| {
-            data.measurements[k][i].as_mut_slice()[0] = zi;
-            if let Some(p) = peaks.get_mut(i) {
-                *p = p.max(zi.abs());
+        let steps = d.data.measurements.iter_mut().zip(&mut d.data.truth);
+        for (zs, truth) in steps.take(exp.steps) {
+            let w = normals(&mut rng);
+            let a: [f64; N] = mat_vec(f, &x);
+            let b: [f64; N] = mat_vec(q_sqrt, &w);
+            x = std::array::from_fn(|i| a[i] + b[i]);
+            for (i, (plan, z)) in d.scalar.iter().zip(zs.iter_mut()).enumerate() {
+                let v = normal(&mut rng);
+                let hx: [f64; 1] = mat_vec(&plan.h[..N], &x);
+                let zi = hx[0] + plan.r_sqrt * v;
+                z.as_mut_slice()[0] = zi;
+                if let Some(p) = d.peaks.get_mut(i) {
+                    *p = p.max(zi.abs());
+                }
             }
-            if i + 1 == data.measurements[k].len() {
-                data.truth[k].as_mut_slice().copy_from_slice(x);
-            }
-        });
+            truth.as_mut_slice().copy_from_slice(&x);
+        }
         return;
     }
     let any_nonlinear = d.linear.iter().any(Option::is_none);
@@ -268,65 +279,6 @@ fn draw_fixed<const N: usize>(d: &mut Drawer, exp: &Experiment, trial: usize) {
             }
         }
         d.data.truth[k].as_mut_slice().copy_from_slice(&x);
-    }
-}
-
-/// x_0 = mean + S n_0 (S: the initial truth's square root), the trial's first N draws.
-#[inline(always)]
-fn initial_state<const N: usize>(
-    d: &Drawer,
-    exp: &Experiment,
-    rng: &mut Xoshiro256PlusPlus,
-) -> [f64; N] {
-    let a: [f64; N] =
-        crate::linalg::fixed::mat_vec(d.x0_sqrt.as_slice(), &standard_normals::<N>(rng));
-    let mean: &[f64; N] = exp
-        .initial_truth
-        .mean
-        .as_slice()
-        .try_into()
-        .expect("state dimension");
-    std::array::from_fn(|i| mean[i] + a[i])
-}
-
-/// The steps of a trial whose sensors are all linear and scalar (`plans`, [`Drawer::scalar`]),
-/// from x_0 = `x`: each step's [`scalar_step`] in turn.
-#[inline(always)]
-fn scalar_steps<const N: usize>(
-    plans: &[ScalarDraw],
-    exp: &Experiment,
-    mut x: [f64; N],
-    rng: &mut Xoshiro256PlusPlus,
-    mut put: impl FnMut(usize, &[f64; N], usize, f64),
-) {
-    let t = &exp.system.transition;
-    let (f, q_sqrt) = (t.f().as_slice(), t.q_sqrt().as_slice());
-    for k in 0..exp.steps {
-        scalar_step(plans, (f, q_sqrt), &mut x, rng, |x, i, z| put(k, x, i, z));
-    }
-}
-
-/// One step of a trial whose sensors are all linear and scalar (`plans`): x_k = F x_{k-1} +
-/// Q^{1/2} w (`fq`: F and Q^{1/2}, column-major), then z_k^i = H_i x_k + R_i^{1/2} v of each
-/// sensor in order, each handed to `put(x_k, i, z_k^i)`: the same draws and products as the
-/// general loop of [`draw_fixed`].
-#[inline(always)]
-fn scalar_step<const N: usize>(
-    plans: &[ScalarDraw],
-    (f, q_sqrt): (&[f64], &[f64]),
-    x: &mut [f64; N],
-    rng: &mut Xoshiro256PlusPlus,
-    mut put: impl FnMut(&[f64; N], usize, f64),
-) {
-    use crate::linalg::fixed::mat_vec;
-    let w = standard_normals::<N>(rng);
-    let a: [f64; N] = mat_vec(f, x);
-    let b: [f64; N] = mat_vec(q_sqrt, &w);
-    *x = std::array::from_fn(|i| a[i] + b[i]);
-    for (i, plan) in plans.iter().enumerate() {
-        let v = standard_normal(rng);
-        let hx: [f64; 1] = mat_vec(&plan.h[..N], x);
-        put(x, i, hx[0] + plan.r_sqrt * v);
     }
 }
 
@@ -416,7 +368,7 @@ impl Drawer {
     }
 }
 
-/// [`initial_state`] of the four trials side by side: x_0 = mean + S n_0, n_0 the first N
+/// x_0 of the four trials side by side, as [`draw_fixed`] makes each: x_0 = mean + S n_0, n_0 the first N
 /// draws of each stream (`noise`'s first N; in the first N of the 6 entries).
 fn quad_initial<const N: usize>(d: &Drawer, exp: &Experiment, noise: &[F64x4]) -> [F64x4; 6] {
     let n0: &[F64x4; N] = noise[..N].try_into().expect("N draws");
@@ -431,7 +383,7 @@ fn quad_initial<const N: usize>(d: &Drawer, exp: &Experiment, noise: &[F64x4]) -
     })
 }
 
-/// [`Drawer::draw_quad_step`] for state dimension N: [`scalar_step`]'s draws and products on
+/// [`Drawer::draw_quad_step`] for state dimension N: [`draw_fixed`]'s draws and products on
 /// the four trials' lanes (each lane's draws from its own stream, in its order). Compiled also
 /// for AVX2 and picked at run time (the same IEEE operations).
 #[multiversion(targets("x86_64+avx2"))]

@@ -81,8 +81,8 @@ pub trait LockstepFastPath: Send + Sync {
 
 /// The runner's side of a block of four trials run side by side
 /// ([`LockstepFastPath::run_quad_fast`]; lane j of every [`F64x4`]: trial j): it hands out each
-/// step's readings, drawn when first asked for (so that drawing the next step overlaps the
-/// dependent divisions of this one), and records each step's estimates.
+/// step's readings (their arithmetic done when first asked for, on normals drawn for the whole
+/// block at its start) and records each step's estimates.
 pub trait QuadBlock {
     /// The state's components and the sensors, each sensor linear and scalar.
     fn shape(&self) -> (usize, usize);
