@@ -4,6 +4,9 @@
 //!   256-layer ziggurat, what the filters call today);
 //! * `fill_standard_normal` — `hushfuse::stats::normal_block` (1024-layer ziggurat, one
 //!   `u64` per draw on the fast path, 99.57% of draws);
+//! * `normal_lanes` — `hushfuse::stats::normal_lanes::NormalLanes::fill`: rand_distr's draws on
+//!   four streams at once (the runner's blocks of four trials side by side), a quarter of the
+//!   calls, four draws each;
 //! * `raw_u64` — a loop that only stores `next_u64` (the floor: the generator itself).
 //!
 //! Throughput is per draw. The generator is seeded once per benchmark and runs on, so every
@@ -12,7 +15,7 @@
 //! Measured on the shared 2-core development machine (AMD EPYC, x86-64 baseline target,
 //! i.e. SSE2), one thread, criterion medians in ns per draw over two runs, n = 1,000 / 10,000:
 //! rand_distr 2.59-2.65 / 2.58-2.59, fill_standard_normal 1.31 / 1.30, raw_u64 0.85-0.86 /
-//! 0.85.
+//! 0.85. On 2026-12-08 (the same machine): rand_distr 2.60, normal_lanes 2.39 / 2.23.
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use hushfuse::stats::normal_block::fill_standard_normal;
 use hushfuse::stats::normal_lanes::NormalLanes;
