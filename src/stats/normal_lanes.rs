@@ -191,22 +191,14 @@ unsafe fn fill_avx2(lanes: &mut NormalLanes, out: &mut [F64x4]) {
 /// xoshiro256++'s step on four streams (`s[w][j]`: word w of stream j): the word of each.
 #[inline(always)]
 fn step(s: &mut [[u64; LANES]; 4]) -> [u64; LANES] {
-    let [s0, s1, s2, s3] = s;
-    let mut out = [0; LANES];
-    for j in 0..LANES {
-        out[j] = s0[j]
-            .wrapping_add(s3[j])
-            .rotate_left(23)
-            .wrapping_add(s0[j]);
-        let t = s1[j] << 17;
-        s2[j] ^= s0[j];
-        s3[j] ^= s1[j];
-        s1[j] ^= s2[j];
-        s0[j] ^= s3[j];
-        s2[j] ^= t;
-        s3[j] = s3[j].rotate_left(45);
-    }
-    out
+    std::array::from_fn(|j| {
+        let mut lane = Lane(std::array::from_fn(|w| s[w][j]));
+        let word = lane.next_u64();
+        for (w, v) in lane.0.into_iter().enumerate() {
+            s[w][j] = v;
+        }
+        word
+    })
 }
 
 /// The lanes of a draw that the fast path did not accept (`fast[j]` false): each rewound to
