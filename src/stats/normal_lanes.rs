@@ -63,12 +63,6 @@ impl NormalLanes {
         Self { s, x }
     }
 
-    /// One word of every stream (xoshiro256++'s step, lane by lane).
-    #[inline(always)]
-    fn next_words(&mut self) -> [u64; LANES] {
-        step(&mut self.s)
-    }
-
     /// One standard normal draw of every stream: lane j is `StandardNormal.sample` of stream j
     /// (of many, [`NormalLanes::fill`] is faster).
     pub fn normals(&mut self) -> F64x4 {
@@ -342,7 +336,7 @@ fn agrees_with_the_crates(make: impl Fn([u64; LANES]) -> NormalLanes) -> bool {
                 }
             }
         }
-        let words = lanes.next_words();
+        let words = step(&mut lanes.s);
         if words
             .iter()
             .zip(&mut crates)

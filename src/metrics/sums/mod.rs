@@ -17,7 +17,7 @@ use crate::network::Traffic;
 pub use estimators::EstimatorStat;
 use estimators::EstimatorState;
 pub use nees::*;
-pub use quad::{QuadTrials, QUAD};
+pub use quad::QuadTrials;
 pub use row::*;
 pub use shared::record_shared;
 

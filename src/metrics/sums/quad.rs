@@ -14,7 +14,7 @@ use crate::network::Traffic;
 use multiversion::multiversion;
 
 /// Trials recorded side by side: the lanes of an [`F64x4`].
-pub const QUAD: usize = 4;
+const QUAD: usize = F64x4::LANES;
 
 /// What four [`TrialState`]s carry from step to step, in lanes (lane j: trial j of the block).
 pub struct QuadTrials {
